@@ -8,3 +8,8 @@ pub mod error;
 pub mod io;
 
 pub use error::{Error, Result};
+pub mod spatial;
+pub mod m3c2;
+pub mod params;
+pub mod sampling;
+pub mod info;

@@ -1,1 +1,211 @@
-fn main() {}
+//! The `talus` binary: argument parsing, error printing and exit codes over the library.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Args, Parser, Subcommand};
+
+use talus::params::UserParams;
+
+#[derive(Parser)]
+#[command(
+    name = "talus",
+    version,
+    about = "Change events and their volumes between two terrain surveys (M3C2, out-of-core tiles)"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Compare two epochs: M3C2 distances, change events and their volumes.
+    Compare(CompareArgs),
+    /// Point count, bounds, format, CRS, point spacing and derived parameters of point clouds.
+    Info {
+        /// Point clouds (LAS/LAZ, text, PLY).
+        #[arg(required = true)]
+        files: Vec<PathBuf>,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Write a synthetic pair of epochs with exact ground truth (truth.json).
+    Synth(SynthArgs),
+    /// Serve the web viewer for a comparison result on 127.0.0.1.
+    View {
+        /// A directory written by `talus compare`.
+        dir: PathBuf,
+        /// Port (0 picks a free one).
+        #[arg(long, default_value_t = 8080)]
+        port: u16,
+        /// Address to bind (default loopback only).
+        #[arg(long, default_value = "127.0.0.1")]
+        bind: std::net::IpAddr,
+    },
+    /// Synthesize the cliff scene, compare it and print the events beside the truth.
+    Demo {
+        /// Where to write the scene and the result.
+        #[arg(long, default_value = "talus-demo")]
+        out: PathBuf,
+        /// Serve the viewer on the result afterwards.
+        #[arg(long)]
+        view: bool,
+    },
+}
+
+#[derive(Args)]
+struct CompareArgs {
+    /// The earlier epoch (C1).
+    before: PathBuf,
+    /// The later epoch (C2).
+    after: PathBuf,
+    /// Output directory.
+    #[arg(long)]
+    out: PathBuf,
+    /// TOML file with parameters (flags override it).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Core points file (any supported cloud format); default: C1 thinned by --core-spacing.
+    #[arg(long, conflicts_with = "core_spacing")]
+    core_points: Option<PathBuf>,
+    #[arg(long)]
+    core_spacing: Option<f64>,
+    #[arg(long)]
+    normal_radius: Option<f64>,
+    #[arg(long)]
+    cyl_radius: Option<f64>,
+    #[arg(long)]
+    cyl_halflen: Option<f64>,
+    #[arg(long)]
+    reg_error: Option<f64>,
+    /// Fewer points than this in either cylinder → no distance.
+    #[arg(long)]
+    min_points: Option<u32>,
+    /// auto | up | X,Y,Z | toward:X,Y,Z
+    #[arg(long)]
+    orientation: Option<String>,
+    /// Significance threshold τ on |distance|.
+    #[arg(long)]
+    threshold: Option<f64>,
+    #[arg(long)]
+    smooth_k: Option<u32>,
+    #[arg(long)]
+    smooth_sigma: Option<f64>,
+    /// DBSCAN neighbourhood radius.
+    #[arg(long)]
+    eps: Option<f64>,
+    /// DBSCAN minimum points.
+    #[arg(long)]
+    cluster_min_points: Option<u32>,
+    /// Memory budget, e.g. 2GiB.
+    #[arg(long)]
+    memory: Option<String>,
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Continue an interrupted run in DIR.
+    #[arg(long, conflicts_with = "force")]
+    resume: bool,
+    /// Start over, replacing what DIR holds.
+    #[arg(long)]
+    force: bool,
+    /// Use this PLY surface for C1 instead of the local reconstruction.
+    #[arg(long)]
+    before_mesh: Option<PathBuf>,
+    /// Use this PLY surface for C2 instead of the local reconstruction.
+    #[arg(long)]
+    after_mesh: Option<PathBuf>,
+}
+
+#[derive(Args)]
+struct SynthArgs {
+    /// hill | cube | spheres | cubes | cliff | stable | large
+    scene: String,
+    #[arg(long)]
+    out: PathBuf,
+    /// Points per epoch (default: per scene).
+    #[arg(long)]
+    points: Option<u64>,
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Noise standard deviation.
+    #[arg(long)]
+    noise: Option<f64>,
+    /// Rotate the scene about the vertical axis (degrees).
+    #[arg(long, default_value_t = 0.0)]
+    rotate: f64,
+    /// Density of epoch 2 relative to epoch 1.
+    #[arg(long, default_value_t = 1.0)]
+    density2: f64,
+    /// Write uncompressed LAS instead of LAZ.
+    #[arg(long)]
+    las: bool,
+}
+
+impl CompareArgs {
+    fn user_params(&self) -> UserParams {
+        UserParams {
+            core_spacing: self.core_spacing,
+            normal_radius: self.normal_radius,
+            cyl_radius: self.cyl_radius,
+            cyl_halflen: self.cyl_halflen,
+            reg_error: self.reg_error,
+            min_points: self.min_points,
+            orientation: self.orientation.clone(),
+            threshold: self.threshold,
+            smooth_k: self.smooth_k,
+            smooth_sigma: self.smooth_sigma,
+            eps: self.eps,
+            cluster_min_points: self.cluster_min_points,
+            memory: self.memory.clone(),
+            threads: self.threads,
+        }
+    }
+}
+
+fn run(cli: Cli) -> talus::Result<()> {
+    match cli.command {
+        Command::Compare(a) => {
+            let opts = talus::pipeline::CompareOptions {
+                user: a.user_params(),
+                before: a.before,
+                after: a.after,
+                out: a.out,
+                config: a.config,
+                core_points: a.core_points,
+                resume: a.resume,
+                force: a.force,
+                before_mesh: a.before_mesh,
+                after_mesh: a.after_mesh,
+            };
+            let summary = talus::pipeline::compare(&opts)?;
+            eprintln!("{}", summary.one_line());
+            Ok(())
+        }
+        Command::Info { files, json } => talus::info::print(&files, json),
+        Command::Synth(s) => talus::commands::synth(
+            &s.scene,
+            &s.out,
+            s.points,
+            s.seed,
+            s.noise,
+            s.rotate,
+            s.density2,
+            !s.las,
+        ),
+        Command::View { dir, port, bind } => talus::commands::view(&dir, bind, port),
+        Command::Demo { out, view } => talus::commands::demo(&out, view),
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("talus: error: {e}");
+            ExitCode::from(e.exit_code() as u8)
+        }
+    }
+}

@@ -1,0 +1,95 @@
+//! `talus info`: what talus sees in a point cloud and the parameters it would derive for it.
+
+use std::path::{Path, PathBuf};
+
+use serde::Serialize;
+
+use crate::error::Result;
+use crate::io::{self, Bounds, CloudFormat};
+use crate::params::{Params, UserParams};
+use crate::sampling::{self, Spacing};
+
+/// The report for one file.
+#[derive(Debug, Serialize)]
+pub struct CloudReport {
+    pub path: PathBuf,
+    pub format: CloudFormat,
+    pub format_detail: String,
+    pub points: u64,
+    pub bounds: Bounds,
+    pub crs: String,
+    pub crs_wkt: Option<String>,
+    pub spacing: Spacing,
+    pub derived: Params,
+}
+
+/// Inspect one cloud (reads it once or twice; never holds more than a window of it).
+pub fn inspect(path: &Path) -> Result<CloudReport> {
+    let reader = io::open(path)?;
+    let info = reader.info().clone();
+    drop(reader);
+    let spacing = sampling::measure(path)?;
+    let derived = Params::resolve(&UserParams::default(), spacing.spacing)?;
+    Ok(CloudReport {
+        path: path.to_path_buf(),
+        format: info.format,
+        format_detail: info.format_detail,
+        points: info.point_count,
+        bounds: info.bounds,
+        crs: info.crs.describe(),
+        crs_wkt: info.crs.wkt,
+        spacing,
+        derived,
+    })
+}
+
+/// Print reports for `files` to stdout, as text or JSON.
+pub fn print(files: &[PathBuf], json: bool) -> Result<()> {
+    let mut reports = Vec::new();
+    for f in files {
+        reports.push(inspect(f)?);
+    }
+    if json {
+        let s = serde_json::to_string_pretty(&reports)
+            .map_err(|e| crate::Error::Internal(e.to_string()))?;
+        println!("{s}");
+        return Ok(());
+    }
+    for r in &reports {
+        let b = &r.bounds;
+        let p = &r.derived;
+        println!("{}", r.path.display());
+        println!("  format         {}", r.format_detail);
+        println!("  points         {}", r.points);
+        println!(
+            "  bounds         x {:.3} .. {:.3}  y {:.3} .. {:.3}  z {:.3} .. {:.3}",
+            b.min[0], b.max[0], b.min[1], b.max[1], b.min[2], b.max[2]
+        );
+        println!("  crs            {}", r.crs);
+        println!(
+            "  point spacing  {:.4} ({}, {} points)",
+            r.spacing.spacing, r.spacing.method, r.spacing.measured_points
+        );
+        println!("  derived parameters:");
+        for (name, v, src) in [
+            ("core_spacing", p.core_spacing.value, &p.core_spacing.source),
+            ("normal_radius", p.normal_radius.value, &p.normal_radius.source),
+            ("cyl_radius", p.cyl_radius.value, &p.cyl_radius.source),
+            ("cyl_halflen", p.cyl_halflen.value, &p.cyl_halflen.source),
+            ("threshold", p.threshold.value, &p.threshold.source),
+            ("smooth_sigma", p.smooth_sigma.value, &p.smooth_sigma.source),
+            ("eps", p.eps.value, &p.eps.source),
+        ] {
+            println!("    {name:<14} {v:<10.4} {src}");
+        }
+        println!(
+            "    {:<14} {:<10} {}",
+            "smooth_k", p.smooth_k.value, p.smooth_k.source
+        );
+        println!(
+            "    {:<14} {:<10} {}",
+            "cluster_min", p.cluster_min_points.value, p.cluster_min_points.source
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,335 @@
+//! Parameters of a comparison: what the user gave (flags over config file) and what talus derives
+//! from the data, each recorded with where it came from (written to summary.json).
+//!
+//! Derivation rules, all from the measured point spacing `s` of C1 (median nearest-neighbour
+//! distance, see [`crate::sampling`]):
+//!
+//! | parameter | rule | why |
+//! |---|---|---|
+//! | core_spacing | 2 s | cylinders (radius 3 s) of neighbouring core points overlap a little: no gaps, few repeats |
+//! | normal_radius | 4 s | ≈ 50 points in the disc: a stable plane fit that still follows a metre-scale scar at 0.1 m spacing |
+//! | cyl_radius | 3 s | ≈ 28 points per cylinder and epoch, about the 30 Lague et al. recommend for a stable mean |
+//! | cyl_halflen | 10 × cyl_radius | reaches changes of ≈ 30 s along the normal without catching far surfaces |
+//! | reg_error | 0 | unknown unless the user measured it |
+//! | min_points | 1 | SPEC.md §1 default |
+//! | threshold τ | s / 2 | below half a point spacing no surface change is resolvable |
+//! | smooth_k | 30 | the paper's value |
+//! | smooth_sigma | 2 × core_spacing | the k = 30 neighbours reach ≈ 3 core spacings; weights fall off over that reach |
+//! | eps | 2.5 × core_spacing | joins neighbouring core points (also diagonal ones, √2 × spacing) with room for a missing one |
+//! | cluster_min_points | 10 | the paper's value |
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+use crate::m3c2::{M3c2Params, Orientation};
+
+/// Values the user set, by flag or config file; `None` = derive.
+#[derive(Debug, Clone, Default, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct UserParams {
+    pub core_spacing: Option<f64>,
+    pub normal_radius: Option<f64>,
+    pub cyl_radius: Option<f64>,
+    pub cyl_halflen: Option<f64>,
+    pub reg_error: Option<f64>,
+    pub min_points: Option<u32>,
+    pub orientation: Option<String>,
+    pub threshold: Option<f64>,
+    pub smooth_k: Option<u32>,
+    pub smooth_sigma: Option<f64>,
+    pub eps: Option<f64>,
+    pub cluster_min_points: Option<u32>,
+    pub memory: Option<String>,
+    pub threads: Option<usize>,
+}
+
+impl UserParams {
+    /// Read a TOML config file (same names as the flags, with underscores).
+    pub fn from_toml_file(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| Error::input(path, format!("cannot read config: {e}")))?;
+        toml::from_str(&text).map_err(|e| {
+            Error::input(
+                path,
+                format!("bad config: {}", e.to_string().replace('\n', " ")),
+            )
+        })
+    }
+
+    /// `self` (flags) over `base` (config file).
+    pub fn over(self, base: UserParams) -> UserParams {
+        UserParams {
+            core_spacing: self.core_spacing.or(base.core_spacing),
+            normal_radius: self.normal_radius.or(base.normal_radius),
+            cyl_radius: self.cyl_radius.or(base.cyl_radius),
+            cyl_halflen: self.cyl_halflen.or(base.cyl_halflen),
+            reg_error: self.reg_error.or(base.reg_error),
+            min_points: self.min_points.or(base.min_points),
+            orientation: self.orientation.or(base.orientation),
+            threshold: self.threshold.or(base.threshold),
+            smooth_k: self.smooth_k.or(base.smooth_k),
+            smooth_sigma: self.smooth_sigma.or(base.smooth_sigma),
+            eps: self.eps.or(base.eps),
+            cluster_min_points: self.cluster_min_points.or(base.cluster_min_points),
+            memory: self.memory.or(base.memory),
+            threads: self.threads.or(base.threads),
+        }
+    }
+}
+
+/// One resolved parameter and where it came from.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct Resolved<T> {
+    pub value: T,
+    /// "user" (flag or config file) or "derived: <rule>" or "default".
+    pub source: String,
+}
+
+/// Every parameter of a run, resolved.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct Params {
+    /// Measured median nearest-neighbour distance of C1 the rules start from.
+    pub point_spacing: f64,
+    pub core_spacing: Resolved<f64>,
+    pub normal_radius: Resolved<f64>,
+    pub cyl_radius: Resolved<f64>,
+    pub cyl_halflen: Resolved<f64>,
+    pub reg_error: Resolved<f64>,
+    pub min_points: Resolved<u32>,
+    pub orientation: Resolved<String>,
+    pub threshold: Resolved<f64>,
+    pub smooth_k: Resolved<u32>,
+    pub smooth_sigma: Resolved<f64>,
+    pub eps: Resolved<f64>,
+    pub cluster_min_points: Resolved<u32>,
+    pub memory_bytes: Resolved<u64>,
+    pub threads: Resolved<usize>,
+}
+
+fn pick<T: Copy>(user: Option<T>, derived: T, rule: &str) -> Resolved<T> {
+    match user {
+        Some(v) => Resolved {
+            value: v,
+            source: "user".into(),
+        },
+        None => Resolved {
+            value: derived,
+            source: rule.into(),
+        },
+    }
+}
+
+fn positive(name: &str, v: Option<f64>) -> Result<()> {
+    match v {
+        Some(x) if !(x > 0.0 && x.is_finite()) => Err(Error::Usage(format!(
+            "--{}: must be a positive number, got {x}",
+            name.replace('_', "-")
+        ))),
+        _ => Ok(()),
+    }
+}
+
+/// Default memory budget (SPEC.md §3).
+pub const DEFAULT_MEMORY: u64 = 2 << 30;
+
+/// Parse a size like `2GiB`, `512MiB`, `1.5G`, `800M`, `4096` (bytes).
+pub fn parse_size(s: &str) -> Result<u64> {
+    let t = s.trim();
+    let split = t
+        .find(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .unwrap_or(t.len());
+    let (num, unit) = t.split_at(split);
+    let bad = || Error::Usage(format!("--memory: cannot read '{s}' as a size (e.g. 2GiB, 512MiB)"));
+    let n: f64 = num.parse().map_err(|_| bad())?;
+    let mul = match unit.trim().to_ascii_lowercase().as_str() {
+        "" | "b" => 1.0,
+        "k" | "kb" | "kib" => 1024.0,
+        "m" | "mb" | "mib" => 1024.0 * 1024.0,
+        "g" | "gb" | "gib" => 1024.0 * 1024.0 * 1024.0,
+        "t" | "tb" | "tib" => 1024.0_f64.powi(4),
+        _ => return Err(bad()),
+    };
+    let bytes = n * mul;
+    if !(bytes >= 64.0 * 1024.0 * 1024.0) {
+        return Err(Error::Usage(format!(
+            "--memory: {s} is too small; talus needs at least 64MiB"
+        )));
+    }
+    Ok(bytes as u64)
+}
+
+impl Params {
+    /// Resolve every parameter from the user's values and the measured spacing `s`.
+    pub fn resolve(user: &UserParams, s: f64) -> Result<Params> {
+        for (name, v) in [
+            ("core_spacing", user.core_spacing),
+            ("normal_radius", user.normal_radius),
+            ("cyl_radius", user.cyl_radius),
+            ("cyl_halflen", user.cyl_halflen),
+            ("smooth_sigma", user.smooth_sigma),
+            ("eps", user.eps),
+        ] {
+            positive(name, v)?;
+        }
+        if let Some(x) = user.reg_error {
+            if !(x >= 0.0 && x.is_finite()) {
+                return Err(Error::Usage(format!(
+                    "--reg-error: must be zero or positive, got {x}"
+                )));
+            }
+        }
+        if let Some(x) = user.threshold {
+            if !(x >= 0.0 && x.is_finite()) {
+                return Err(Error::Usage(format!(
+                    "--threshold: must be zero or positive, got {x}"
+                )));
+            }
+        }
+        for (name, v) in [
+            ("smooth-k", user.smooth_k),
+            ("cluster-min-points", user.cluster_min_points),
+        ] {
+            if v == Some(0) {
+                return Err(Error::Usage(format!("--{name}: must be at least 1")));
+            }
+        }
+        if user.threads == Some(0) {
+            return Err(Error::Usage("--threads: must be at least 1".into()));
+        }
+        let orientation = user.orientation.clone().unwrap_or_else(|| "auto".into());
+        orientation.parse::<Orientation>().map_err(Error::Usage)?;
+        if !(s > 0.0 && s.is_finite()) {
+            return Err(Error::Internal(format!("point spacing {s} is not positive")));
+        }
+        let core_spacing = pick(user.core_spacing, 2.0 * s, "derived: 2 × point spacing");
+        let c = core_spacing.value;
+        let cyl_radius = pick(user.cyl_radius, 3.0 * s, "derived: 3 × point spacing");
+        let memory = match &user.memory {
+            Some(m) => Resolved {
+                value: parse_size(m)?,
+                source: "user".into(),
+            },
+            None => Resolved {
+                value: DEFAULT_MEMORY,
+                source: "default: 2GiB".into(),
+            },
+        };
+        let threads_default = std::thread::available_parallelism()
+            .map(|n| n.get())
+            .unwrap_or(1);
+        Ok(Params {
+            point_spacing: s,
+            normal_radius: pick(user.normal_radius, 4.0 * s, "derived: 4 × point spacing"),
+            cyl_halflen: pick(
+                user.cyl_halflen,
+                10.0 * cyl_radius.value,
+                "derived: 10 × cyl_radius",
+            ),
+            cyl_radius,
+            reg_error: pick(user.reg_error, 0.0, "default: 0 (not measured)"),
+            min_points: pick(user.min_points, 1, "default: 1 (SPEC.md §1)"),
+            orientation: Resolved {
+                source: if user.orientation.is_some() {
+                    "user".into()
+                } else {
+                    "default: auto".into()
+                },
+                value: orientation,
+            },
+            threshold: pick(user.threshold, 0.5 * s, "derived: point spacing / 2"),
+            smooth_k: pick(user.smooth_k, 30, "default: 30 (the paper's value)"),
+            smooth_sigma: pick(user.smooth_sigma, 2.0 * c, "derived: 2 × core_spacing"),
+            eps: pick(user.eps, 2.5 * c, "derived: 2.5 × core_spacing"),
+            cluster_min_points: pick(
+                user.cluster_min_points,
+                10,
+                "default: 10 (the paper's value)",
+            ),
+            core_spacing,
+            memory_bytes: memory,
+            threads: pick(user.threads, threads_default, "default: available cores"),
+        })
+    }
+
+    /// The M3C2 part.
+    pub fn m3c2(&self) -> M3c2Params {
+        M3c2Params {
+            normal_radius: self.normal_radius.value,
+            cyl_radius: self.cyl_radius.value,
+            cyl_halflen: self.cyl_halflen.value,
+            reg_error: self.reg_error.value,
+            min_points: self.min_points.value,
+            orientation: self
+                .orientation
+                .value
+                .parse()
+                .expect("validated in resolve"),
+        }
+    }
+
+    /// How far around a tile's square its points must reach so that every neighbourhood used for
+    /// the core points it owns is complete (SPEC.md §3).
+    pub fn halo(&self) -> f64 {
+        let cyl = (self.cyl_radius.value.powi(2) + self.cyl_halflen.value.powi(2)).sqrt();
+        // The DSM test of `auto` orientation looks up to 4 × normal_radius away.
+        let orient = 4.0 * self.normal_radius.value;
+        let margin = 2.0 * self.core_spacing.value;
+        self.normal_radius
+            .value
+            .max(cyl)
+            .max(orient)
+            .max(self.eps.value)
+            + margin
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sizes() {
+        assert_eq!(parse_size("2GiB").unwrap(), 2 << 30);
+        assert_eq!(parse_size("512MiB").unwrap(), 512 << 20);
+        assert_eq!(parse_size("1.5G").unwrap(), 3 << 29);
+        assert!(parse_size("abc").is_err());
+        assert!(parse_size("1MiB").is_err());
+    }
+
+    #[test]
+    fn derivation_and_overrides() {
+        let user = UserParams {
+            cyl_radius: Some(0.5),
+            ..Default::default()
+        };
+        let p = Params::resolve(&user, 0.1).unwrap();
+        assert_eq!(p.cyl_radius.value, 0.5);
+        assert_eq!(p.cyl_radius.source, "user");
+        assert!((p.normal_radius.value - 0.4).abs() < 1e-12);
+        assert!((p.cyl_halflen.value - 5.0).abs() < 1e-12);
+        assert!(p.normal_radius.source.starts_with("derived"));
+        let bad = UserParams {
+            normal_radius: Some(-1.0),
+            ..Default::default()
+        };
+        assert!(matches!(
+            Params::resolve(&bad, 0.1),
+            Err(Error::Usage(m)) if m.contains("--normal-radius")
+        ));
+    }
+
+    #[test]
+    fn flags_over_config() {
+        let cfg: UserParams = toml::from_str("cyl_radius = 2.0\neps = 3.0").unwrap();
+        let flags = UserParams {
+            cyl_radius: Some(1.0),
+            ..Default::default()
+        };
+        let m = flags.over(cfg);
+        assert_eq!(m.cyl_radius, Some(1.0));
+        assert_eq!(m.eps, Some(3.0));
+        assert!(toml::from_str::<UserParams>("bogus = 1").is_err());
+    }
+}

@@ -1,0 +1,269 @@
+//! `talus compare`: the whole run, stage by stage (SPEC.md §3).
+//!
+//! 1. check the inputs (headers, counts, overlap) and resolve the parameters;
+//! 2. pass 1: stream each epoch into tiles with halos on disk ([`tiles`]);
+//! 3. pass 2: per tile, normals and M3C2 for the core points it owns ([`m3c2_pass`]), a reader
+//!    thread decoding the next tile while the current one is computed (bounded channel);
+//! 4. outputs: m3c2.laz in a canonical order, summary.json ([`outputs`]).
+//!
+//! Every unit (an epoch's tiling, a tile's M3C2) is an immutable file recorded in the manifest
+//! with the hash of what it was made from, so `--resume` redoes only what is missing or stale.
+
+pub mod m3c2_pass;
+pub mod outputs;
+pub mod tiles;
+pub mod workdir;
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use serde::Serialize;
+
+use crate::error::{Error, Result};
+use crate::io::{self, CloudInfo};
+use crate::params::{Params, UserParams};
+use crate::sampling;
+use workdir::WorkDir;
+
+/// Everything `compare` needs.
+#[derive(Debug, Clone, Default)]
+pub struct CompareOptions {
+    pub before: PathBuf,
+    pub after: PathBuf,
+    pub out: PathBuf,
+    pub config: Option<PathBuf>,
+    pub core_points: Option<PathBuf>,
+    pub user: UserParams,
+    pub resume: bool,
+    pub force: bool,
+    pub before_mesh: Option<PathBuf>,
+    pub after_mesh: Option<PathBuf>,
+    /// Force the tile side (tests of tiling invariance); None = plan from the memory budget.
+    pub tile_size: Option<f64>,
+}
+
+/// One input as summary.json reports it.
+#[derive(Debug, Clone, Serialize)]
+pub struct InputSummary {
+    pub path: PathBuf,
+    pub format: String,
+    pub points: u64,
+    pub bounds: io::Bounds,
+    pub crs: String,
+}
+
+impl InputSummary {
+    fn of(info: &CloudInfo) -> Self {
+        InputSummary {
+            path: info.path.clone(),
+            format: info.format_detail.clone(),
+            points: info.point_count,
+            bounds: info.bounds,
+            crs: info.crs.describe(),
+        }
+    }
+}
+
+/// Wall time of one stage.
+#[derive(Debug, Clone, Serialize)]
+pub struct StageTime {
+    pub stage: String,
+    pub seconds: f64,
+    /// True when the stage's units were all found done (`--resume`).
+    pub reused: bool,
+}
+
+/// What summary.json holds.
+#[derive(Debug, Clone, Serialize)]
+pub struct Summary {
+    pub tool: String,
+    pub version: String,
+    pub inputs: Vec<InputSummary>,
+    pub core_points_file: Option<PathBuf>,
+    pub spacing: sampling::Spacing,
+    pub parameters: Params,
+    pub tiles: usize,
+    pub tile_size: f64,
+    pub core_points: u64,
+    pub computed_points: u64,
+    pub significant_points: u64,
+    pub stages: Vec<StageTime>,
+}
+
+impl Summary {
+    /// One line for the terminal.
+    pub fn one_line(&self) -> String {
+        format!(
+            "talus: {} core points, {} with a distance, {} significant; {} tile(s); results in {}",
+            self.core_points,
+            self.computed_points,
+            self.significant_points,
+            self.tiles,
+            self.inputs
+                .first()
+                .map(|_| "the output directory")
+                .unwrap_or("")
+        )
+    }
+}
+
+/// Run a comparison. On failure nothing is left under a final output name, and a DIR this run
+/// created is removed unless finished units are worth resuming (interruption, I/O failure).
+pub fn compare(opts: &CompareOptions) -> Result<Summary> {
+    let config = match &opts.config {
+        Some(p) => UserParams::from_toml_file(p)?,
+        None => UserParams::default(),
+    };
+    let user = opts.user.clone().over(config);
+    // Inputs: headers first, so that bad input fails before anything is written.
+    let before = io::open(&opts.before)?.info().clone();
+    let after = io::open(&opts.after)?.info().clone();
+    if !before.bounds.overlaps_xy(&after.bounds) {
+        return Err(Error::Epochs(format!(
+            "{} and {}: the epochs do not overlap (x {:.3}..{:.3}, y {:.3}..{:.3} vs x {:.3}..{:.3}, y {:.3}..{:.3})",
+            opts.before.display(),
+            opts.after.display(),
+            before.bounds.min[0],
+            before.bounds.max[0],
+            before.bounds.min[1],
+            before.bounds.max[1],
+            after.bounds.min[0],
+            after.bounds.max[0],
+            after.bounds.min[1],
+            after.bounds.max[1],
+        )));
+    }
+    let cores_info = match &opts.core_points {
+        Some(p) => Some(io::open(p)?.info().clone()),
+        None => None,
+    };
+    for mesh in [&opts.before_mesh, &opts.after_mesh].into_iter().flatten() {
+        if !mesh.is_file() {
+            return Err(Error::input(mesh, "no such mesh file"));
+        }
+    }
+    // Validate the user's values before measuring anything.
+    Params::resolve(&user, 1.0)?;
+    let t0 = Instant::now();
+    let spacing = sampling::measure(&opts.before)?;
+    let params = Params::resolve(&user, spacing.spacing)?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(params.threads.value)
+        .build()
+        .map_err(|e| Error::Internal(format!("thread pool: {e}")))?;
+    let key = run_key(opts, &params)?;
+    let mut wd = WorkDir::prepare(&opts.out, &key, opts.resume, opts.force)?;
+    let result = pool.install(|| {
+        run_stages(
+            opts,
+            &mut wd,
+            &before,
+            &after,
+            cores_info.as_ref(),
+            spacing,
+            params,
+            t0,
+        )
+    });
+    match result {
+        Ok(s) => Ok(s),
+        Err(e) => {
+            // Bad input found while streaming: nothing worth keeping.
+            if matches!(e, Error::Input { .. } | Error::Usage(_) | Error::Epochs(_)) {
+                wd.discard_if_created();
+            }
+            Err(e)
+        }
+    }
+}
+
+/// The hash of everything a run's results depend on (inputs' identity and parameters).
+fn run_key(opts: &CompareOptions, params: &Params) -> Result<String> {
+    let mut h = talus_tiling::Fnv64::new();
+    for p in [Some(&opts.before), Some(&opts.after), opts.core_points.as_ref()]
+        .into_iter()
+        .flatten()
+    {
+        h.write_str(&file_identity(p)?);
+    }
+    h.write_str(&serde_json::to_string(params).unwrap_or_default());
+    Ok(h.hex())
+}
+
+/// Path, size and modification time: a changed file invalidates what was made from it.
+pub fn file_identity(p: &Path) -> Result<String> {
+    let m = std::fs::metadata(p).map_err(|e| Error::input(p, e.to_string()))?;
+    let mtime = m
+        .modified()
+        .ok()
+        .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+        .map(|d| d.as_nanos())
+        .unwrap_or(0);
+    let canon = std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
+    Ok(format!("{}|{}|{}", canon.display(), m.len(), mtime))
+}
+
+#[allow(clippy::too_many_arguments)]
+fn run_stages(
+    opts: &CompareOptions,
+    wd: &mut WorkDir,
+    before: &CloudInfo,
+    after: &CloudInfo,
+    cores: Option<&CloudInfo>,
+    spacing: sampling::Spacing,
+    params: Params,
+    t0: Instant,
+) -> Result<Summary> {
+    let mut stages = vec![StageTime {
+        stage: "inputs and parameters".into(),
+        seconds: t0.elapsed().as_secs_f64(),
+        reused: false,
+    }];
+    let layout = tiles::Layout::plan(before, after, cores, &params, opts.tile_size)?;
+    let t = Instant::now();
+    let tiled = tiles::tile_epochs(wd, &layout, opts, &params)?;
+    stages.push(StageTime {
+        stage: "pass 1: tiling".into(),
+        seconds: t.elapsed().as_secs_f64(),
+        reused: tiled.reused,
+    });
+    let t = Instant::now();
+    let user_cores = match &opts.core_points {
+        Some(p) => Some(m3c2_pass::UserCores::load(p, &layout)?),
+        None => None,
+    };
+    let m3c2 = m3c2_pass::run(wd, &layout, &tiled, &params, user_cores.as_ref())?;
+    stages.push(StageTime {
+        stage: "pass 2: normals and M3C2".into(),
+        seconds: t.elapsed().as_secs_f64(),
+        reused: m3c2.reused,
+    });
+    let t = Instant::now();
+    let written =
+        outputs::write_m3c2_laz(wd, &m3c2, &before.crs, layout.anchor, &|_| (f64::NAN, 0))?;
+    stages.push(StageTime {
+        stage: "m3c2.laz".into(),
+        seconds: t.elapsed().as_secs_f64(),
+        reused: false,
+    });
+    let mut inputs = vec![InputSummary::of(before), InputSummary::of(after)];
+    if let Some(c) = cores {
+        inputs.push(InputSummary::of(c));
+    }
+    let summary = Summary {
+        tool: "talus".into(),
+        version: env!("CARGO_PKG_VERSION").into(),
+        inputs,
+        core_points_file: opts.core_points.clone(),
+        spacing,
+        parameters: params,
+        tiles: layout.grid.len(),
+        tile_size: layout.grid.tile_size(),
+        core_points: written.core_points,
+        computed_points: written.computed,
+        significant_points: written.significant,
+        stages,
+    };
+    outputs::write_summary(wd, &summary)?;
+    Ok(summary)
+}

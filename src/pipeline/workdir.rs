@@ -1,0 +1,125 @@
+//! The output directory of a run and its work area (`DIR/.talus/`): tiles, per-tile results and
+//! the resume manifest (tantivy's model: immutable unit files plus a manifest replaced
+//! atomically; a unit counts as done only once the manifest names it with the hash of what it
+//! was made from).
+
+use std::path::{Path, PathBuf};
+
+use talus_tiling::Manifest;
+
+use crate::error::{Error, Result};
+
+/// Names of the final outputs `compare` writes into DIR (removed by `--force`).
+pub const OUTPUTS: &[&str] = &[
+    "m3c2.laz",
+    "events.geojson",
+    "events.csv",
+    "summary.json",
+    "view.json",
+    "terrain.bin",
+    "meshes",
+];
+
+/// The directories and manifest of one run.
+pub struct WorkDir {
+    pub out: PathBuf,
+    pub work: PathBuf,
+    pub manifest_path: PathBuf,
+    pub manifest: Manifest,
+    /// True when this run created DIR (so a failed run removes it again).
+    pub created_out: bool,
+}
+
+fn io_out(path: &Path) -> impl FnOnce(std::io::Error) -> Error + '_ {
+    move |e| Error::output(path, e)
+}
+
+impl WorkDir {
+    /// Prepare DIR for a run keyed by `key_hash` (inputs and parameters).
+    /// - a fresh or empty DIR is used as is;
+    /// - `force` removes a previous result and work area first;
+    /// - `resume` keeps the work area; units whose inputs changed are redone by their stage;
+    /// - otherwise a DIR that already holds files is refused (nothing is overwritten silently).
+    pub fn prepare(out: &Path, key_hash: &str, resume: bool, force: bool) -> Result<WorkDir> {
+        let existed = out.exists();
+        if existed && !out.is_dir() {
+            return Err(Error::Usage(format!(
+                "{}: --out exists and is not a directory",
+                out.display()
+            )));
+        }
+        let work = out.join(".talus");
+        if existed && !resume && !force {
+            let mut entries = std::fs::read_dir(out).map_err(io_out(out))?;
+            if entries.next().is_some() {
+                return Err(Error::Usage(format!(
+                    "{}: the output directory is not empty; use --resume to continue a run there or --force to replace it",
+                    out.display()
+                )));
+            }
+        }
+        if force {
+            for name in OUTPUTS {
+                let p = out.join(name);
+                if p.is_dir() {
+                    std::fs::remove_dir_all(&p).map_err(io_out(&p))?;
+                } else if p.exists() {
+                    std::fs::remove_file(&p).map_err(io_out(&p))?;
+                }
+            }
+            if work.exists() {
+                std::fs::remove_dir_all(&work).map_err(io_out(&work))?;
+            }
+        }
+        std::fs::create_dir_all(&work).map_err(io_out(&work))?;
+        // Probe writability now, before hours of work.
+        let probe = work.join(".probe");
+        std::fs::write(&probe, b"ok").map_err(io_out(&work))?;
+        let _ = std::fs::remove_file(&probe);
+        let manifest_path = work.join("manifest.json");
+        let mut manifest = if resume && manifest_path.exists() {
+            match Manifest::load(&manifest_path) {
+                Ok(m) => m,
+                // An unreadable manifest only costs the redo of its units.
+                Err(_) => Manifest::new(key_hash),
+            }
+        } else {
+            Manifest::new(key_hash)
+        };
+        manifest.key_hash = key_hash.to_string();
+        Ok(WorkDir {
+            out: out.to_path_buf(),
+            work,
+            manifest_path,
+            manifest,
+            created_out: !existed,
+        })
+    }
+
+    /// A sub-directory of the work area, created.
+    pub fn sub(&self, name: &str) -> Result<PathBuf> {
+        let p = self.work.join(name);
+        std::fs::create_dir_all(&p).map_err(io_out(&p))?;
+        Ok(p)
+    }
+
+    /// Record `unit` as done (made from `inputs_hash`, stored in `file`) and save the manifest.
+    pub fn done(&mut self, unit: &str, file: &str, inputs_hash: &str) -> Result<()> {
+        self.manifest.mark_done(unit, file, inputs_hash);
+        self.manifest
+            .save(&self.manifest_path)
+            .map_err(|e| Error::Internal(format!("saving the manifest: {e}")))
+    }
+
+    /// Is `unit` done from exactly `inputs_hash`?
+    pub fn is_done(&self, unit: &str, inputs_hash: &str) -> bool {
+        self.manifest.is_done(unit, inputs_hash)
+    }
+
+    /// After a failure: remove DIR again if this run created it and nothing is worth resuming.
+    pub fn discard_if_created(&self) {
+        if self.created_out {
+            let _ = std::fs::remove_dir_all(&self.out);
+        }
+    }
+}

@@ -1,0 +1,130 @@
+//! Measured point spacing: the median nearest-neighbour distance of a cloud, the length every
+//! derived parameter starts from (see [`crate::params`]).
+//!
+//! A cloud of up to [`WHOLE`] points is measured whole. A larger one is measured in a square
+//! window at the centre of its footprint, sized from the mean density to hold about
+//! [`WINDOW_TARGET`] points (grown when it falls on a hole, shrunk when it is denser than
+//! expected): each try is one streaming pass, so memory stays bounded whatever the file's size
+//! and point order. Only points in the inner half of the window are measured, so that their
+//! nearest neighbour is inside the window.
+
+use std::path::Path;
+
+use crate::error::{Error, Result};
+use crate::io::{self, Bounds, Point3};
+use crate::spatial::{median_nn_distance, Index};
+
+/// Clouds up to this many points are measured whole.
+pub const WHOLE: u64 = 400_000;
+/// Points a window aims for.
+pub const WINDOW_TARGET: f64 = 40_000.0;
+
+/// The measured spacing and how it was measured.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Spacing {
+    pub spacing: f64,
+    /// Points whose nearest-neighbour distance entered the median.
+    pub measured_points: usize,
+    pub method: String,
+}
+
+/// Measure the point spacing of the cloud at `path`.
+pub fn measure(path: &Path) -> Result<Spacing> {
+    let mut reader = io::open(path)?;
+    let info = reader.info().clone();
+    let no_spacing = || {
+        Error::input(
+            path,
+            "cannot measure a point spacing: all points coincide or there are fewer than two",
+        )
+    };
+    if info.point_count <= WHOLE {
+        let mut all = Vec::with_capacity(info.point_count as usize);
+        let mut buf = Vec::new();
+        while reader.fill(&mut buf, 1 << 16)? > 0 {
+            all.extend_from_slice(&buf);
+        }
+        let s = median_nn_distance(&all).filter(|s| *s > 0.0).ok_or_else(no_spacing)?;
+        return Ok(Spacing {
+            spacing: s,
+            measured_points: all.len(),
+            method: "median nearest-neighbour distance over all points".into(),
+        });
+    }
+    drop(reader);
+    let b = info.bounds;
+    let (cx, cy) = ((b.min[0] + b.max[0]) / 2.0, (b.min[1] + b.max[1]) / 2.0);
+    let area = footprint_area(&b);
+    let density = info.point_count as f64 / area;
+    let mut half = 0.5 * (WINDOW_TARGET / density).sqrt();
+    let max_half = 0.5 * (b.max[0] - b.min[0]).max(b.max[1] - b.min[1]) + 1.0;
+    for _ in 0..12 {
+        let pts = window(path, cx, cy, half, 8 * WINDOW_TARGET as usize)?;
+        match pts {
+            None => half /= 2.0, // denser than expected: shrink
+            Some(pts) if pts.len() < 1000 && half < max_half => half *= 3.0,
+            Some(pts) => {
+                let inner: Vec<usize> = (0..pts.len())
+                    .filter(|&i| {
+                        (pts[i][0] - cx).abs() <= half / 2.0 && (pts[i][1] - cy).abs() <= half / 2.0
+                    })
+                    .collect();
+                let index = Index::new(&pts, [cx, cy, pts[0][2]]);
+                let mut d: Vec<f64> = inner
+                    .iter()
+                    .filter_map(|&i| {
+                        let q = index.points()[i];
+                        index.nearest(&q, 2).get(1).map(|x| x.1.sqrt())
+                    })
+                    .collect();
+                if d.is_empty() {
+                    return Err(no_spacing());
+                }
+                let mid = d.len() / 2;
+                let s = *d.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1;
+                if !(s > 0.0) {
+                    return Err(no_spacing());
+                }
+                return Ok(Spacing {
+                    spacing: s,
+                    measured_points: d.len(),
+                    method: format!(
+                        "median nearest-neighbour distance in a {:.3} × {:.3} window at the footprint's centre",
+                        2.0 * half,
+                        2.0 * half
+                    ),
+                });
+            }
+        }
+    }
+    Err(no_spacing())
+}
+
+/// Area of the footprint: the two largest extents (a vertical wall has no XY area).
+fn footprint_area(b: &Bounds) -> f64 {
+    let mut e = [
+        b.max[0] - b.min[0],
+        b.max[1] - b.min[1],
+        b.max[2] - b.min[2],
+    ];
+    e.sort_by(|a, b| b.total_cmp(a));
+    (e[0] * e[1]).max(1e-12)
+}
+
+/// The points within the XY window, or None when more than `cap` fall in it.
+fn window(path: &Path, cx: f64, cy: f64, half: f64, cap: usize) -> Result<Option<Vec<Point3>>> {
+    let mut reader = io::open(path)?;
+    let mut buf = Vec::new();
+    let mut out = Vec::new();
+    while reader.fill(&mut buf, 1 << 16)? > 0 {
+        for p in &buf {
+            if (p[0] - cx).abs() <= half && (p[1] - cy).abs() <= half {
+                out.push(*p);
+                if out.len() > cap {
+                    return Ok(None);
+                }
+            }
+        }
+    }
+    Ok(Some(out))
+}
