@@ -1,1 +1,322 @@
-//! placeholder
+//! LAS 1.2–1.4 and LAZ reader (any point format), streamed in chunks.
+//!
+//! Decoding uses the `las` crate (0.11): [`las::Reader::fill_points`] fills one reused
+//! [`las::PointData`] per chunk and only the x/y/z columns are swept (no `Point` is ever
+//! materialised), which is what keeps 120M-point epochs cheap. LAZ is decompressed with the
+//! crate's parallel (rayon, chunk-table based) decompressor.
+//!
+//! `las::Reader` is not `Send` (it boxes its backend without a `Send` bound) while
+//! [`PointReader`] must be, so the `las::Reader` lives on its own thread and hands decoded
+//! chunks of `[f64; 3]` over a bounded channel (capacity 2: back-pressure bounds memory to a few
+//! chunks). A side effect is that decoding overlaps with the consumer's work.
+//!
+//! Checks up front: a readable header, at least one point, finite scale/offset, and for
+//! uncompressed LAS that the file is long enough for the number of points the header promises
+//! (LAS 1.4 R15 §2.4: point data starts at `offset_to_point_data`, `point_data_record_length`
+//! bytes each). A truncated LAZ is only found while decompressing and is reported as a read
+//! error naming the point index reached.
+//!
+//! CRS: the WKT (LASF_Projection 2112) and GeoTIFF (34735/34736/34737) (E)VLRs are copied
+//! verbatim; the EPSG code is decoded from the GeoKeyDirectory (ProjectedCSTypeGeoKey 3072, else
+//! GeographicTypeGeoKey 2048; GeoTIFF 1.0 §2.7 / OGC 19-008r4).
+
+use std::fs::File;
+use std::io::{BufReader, Seek};
+use std::path::{Path, PathBuf};
+
+use crossbeam_channel::{bounded, Receiver, Sender};
+
+use super::{
+    check_finite, open_file, Bounds, CloudFormat, CloudInfo, Crs, Point3, PointReader, RawVlr,
+};
+use crate::error::{Error, Result};
+
+/// Points decoded per `fill_points` call: several LAZ chunks (usually 50 000 points each), so
+/// the parallel decompressor has work for every core, yet only ~6 MB of coordinates per chunk.
+const CHUNK: u64 = 250_000;
+
+/// GeoTIFF key ids (GeoTIFF 1.0 §6.2): projected CRS and geographic CRS.
+const PROJECTED_CS_TYPE_GEO_KEY: u16 = 3072;
+const GEOGRAPHIC_TYPE_GEO_KEY: u16 = 2048;
+
+/// A streaming LAS/LAZ reader; see the module doc.
+pub struct LasReader {
+    info: CloudInfo,
+    rx: Receiver<Result<Vec<Point3>>>,
+    recycle: Sender<Vec<Point3>>,
+    current: Vec<Point3>,
+    pos: usize,
+    delivered: u64,
+    finished: bool,
+}
+
+impl LasReader {
+    /// Open `path` (which starts with `LASF`), check its header and start the decoding thread.
+    pub fn open(path: &Path) -> Result<Self> {
+        let file = open_file(path)?;
+        let file_len = file
+            .metadata()
+            .map_err(|e| Error::input(path, format!("cannot read: {e}")))?
+            .len();
+        let mut read = BufReader::new(file);
+        let raw = las::raw::Header::read_from(&mut read)
+            .map_err(|e| Error::input(path, format!("unreadable LAS header: {e}")))?;
+        let promised = if raw.number_of_point_records > 0 {
+            u64::from(raw.number_of_point_records)
+        } else {
+            raw.large_file.map_or(0, |l| l.number_of_point_records)
+        };
+        let compressed = raw.point_data_record_format & 0xC0 != 0;
+        if !compressed {
+            // Uncompressed points are fixed-size records, so truncation shows in the file size.
+            let needed = u64::from(raw.offset_to_point_data)
+                + promised * u64::from(raw.point_data_record_length);
+            if file_len < needed {
+                let held = file_len.saturating_sub(u64::from(raw.offset_to_point_data))
+                    / u64::from(raw.point_data_record_length.max(1));
+                return Err(Error::input(
+                    path,
+                    format!(
+                        "truncated LAS file: the header promises {promised} points but the file \
+                         holds only {held} ({file_len} of {needed} bytes)"
+                    ),
+                ));
+            }
+        }
+        read.rewind()
+            .map_err(|e| Error::input(path, format!("cannot read: {e}")))?;
+        let header = las::Header::new(&mut read)
+            .map_err(|e| Error::input(path, format!("unreadable LAS header: {e}")))?;
+        let point_count = header.number_of_points();
+        if point_count == 0 {
+            return Err(Error::input(path, "contains no points"));
+        }
+        let t = header.transforms();
+        if [t.x, t.y, t.z]
+            .iter()
+            .any(|t| !t.scale.is_finite() || !t.offset.is_finite() || t.scale == 0.0)
+        {
+            return Err(Error::input(
+                path,
+                "LAS header has a zero, NaN or infinite scale or offset",
+            ));
+        }
+        let is_laz = header.point_format().is_compressed
+            || header
+                .vlrs()
+                .iter()
+                .any(|v| v.user_id.eq_ignore_ascii_case("laszip encoded") && v.record_id == 22204);
+        let kind = if is_laz { "LAZ" } else { "LAS" };
+        let v = header.version();
+        let hb = header.bounds();
+        let info = CloudInfo {
+            path: path.to_path_buf(),
+            format: if is_laz {
+                CloudFormat::Laz
+            } else {
+                CloudFormat::Las
+            },
+            format_detail: format!(
+                "{kind} {}.{} point format {}",
+                v.major,
+                v.minor,
+                raw.point_data_record_format & 0x3F
+            ),
+            point_count,
+            bounds: Bounds {
+                min: [hb.min.x, hb.min.y, hb.min.z],
+                max: [hb.max.x, hb.max.y, hb.max.z],
+            },
+            crs: crs_from_header(&header),
+        };
+        drop(read);
+
+        let (tx, rx) = bounded(2);
+        let (recycle, recycle_rx) = bounded(4);
+        let (ready_tx, ready_rx) = bounded(1);
+        let owned = path.to_path_buf();
+        std::thread::Builder::new()
+            .name("talus-las-reader".into())
+            .spawn(move || decode(owned, kind, point_count, ready_tx, tx, recycle_rx))
+            .map_err(|e| Error::Internal(format!("cannot start the LAS reader thread: {e}")))?;
+        match ready_rx.recv() {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => return Err(e),
+            Err(_) => return Err(Error::Internal("the LAS reader thread died".into())),
+        }
+        Ok(LasReader {
+            info,
+            rx,
+            recycle,
+            current: Vec::new(),
+            pos: 0,
+            delivered: 0,
+            finished: false,
+        })
+    }
+}
+
+/// The decoding thread: open the `las::Reader`, report readiness, then stream chunks until the
+/// end, an error, or the consumer hanging up.
+fn decode(
+    path: PathBuf,
+    kind: &'static str,
+    total: u64,
+    ready: Sender<Result<()>>,
+    tx: Sender<Result<Vec<Point3>>>,
+    recycle: Receiver<Vec<Point3>>,
+) {
+    let opened = File::open(&path)
+        .map_err(|e| Error::input(&path, format!("cannot open: {e}")))
+        .and_then(|f| {
+            las::Reader::new(BufReader::with_capacity(1 << 20, f))
+                .map_err(|e| Error::input(&path, format!("truncated or corrupt {kind} file: {e}")))
+        });
+    let mut reader = match opened {
+        Ok(r) => {
+            if ready.send(Ok(())).is_err() {
+                return;
+            }
+            r
+        }
+        Err(e) => {
+            let _ = ready.send(Err(e));
+            return;
+        }
+    };
+    let mut pd = las::PointDataBuilder::new()
+        .for_header(reader.header())
+        .build();
+    let mut index = 0u64;
+    loop {
+        let n = match reader.fill_points(CHUNK, &mut pd) {
+            Ok(n) => n,
+            Err(e) => {
+                let _ = tx.send(Err(Error::input(
+                    &path,
+                    format!(
+                        "truncated or corrupt {kind} data: read failed after {index} of {total} \
+                         points: {e}"
+                    ),
+                )));
+                return;
+            }
+        };
+        if n == 0 {
+            return;
+        }
+        let mut chunk = recycle.try_recv().unwrap_or_default();
+        chunk.clear();
+        chunk.reserve(pd.len());
+        chunk.extend(pd.x().zip(pd.y()).zip(pd.z()).map(|((x, y), z)| [x, y, z]));
+        for (i, p) in chunk.iter().enumerate() {
+            if let Err(e) = check_finite(&path, index + i as u64, p) {
+                let _ = tx.send(Err(e));
+                return;
+            }
+        }
+        index += n;
+        if tx.send(Ok(chunk)).is_err() {
+            return; // the consumer dropped the reader
+        }
+    }
+}
+
+impl PointReader for LasReader {
+    fn info(&self) -> &CloudInfo {
+        &self.info
+    }
+
+    fn fill(&mut self, buf: &mut Vec<Point3>, max: usize) -> Result<usize> {
+        buf.clear();
+        while buf.len() < max {
+            if self.pos == self.current.len() {
+                if self.finished {
+                    break;
+                }
+                let used = std::mem::take(&mut self.current);
+                if used.capacity() > 0 {
+                    let _ = self.recycle.try_send(used);
+                }
+                self.pos = 0;
+                match self.rx.recv() {
+                    Ok(Ok(chunk)) => self.current = chunk,
+                    Ok(Err(e)) => {
+                        self.finished = true;
+                        return Err(e);
+                    }
+                    Err(_) => {
+                        self.finished = true;
+                        if self.delivered != self.info.point_count {
+                            return Err(Error::input(
+                                &self.info.path,
+                                format!(
+                                    "truncated: read {} of the {} points the header promises",
+                                    self.delivered, self.info.point_count
+                                ),
+                            ));
+                        }
+                    }
+                }
+                continue;
+            }
+            let take = (max - buf.len()).min(self.current.len() - self.pos);
+            buf.extend_from_slice(&self.current[self.pos..self.pos + take]);
+            self.pos += take;
+            self.delivered += take as u64;
+        }
+        Ok(buf.len())
+    }
+}
+
+/// The CRS records of a LAS header: (E)VLRs copied verbatim, WKT text and EPSG code decoded.
+pub(crate) fn crs_from_header(header: &las::Header) -> Crs {
+    let mut crs = Crs::default();
+    for v in header.all_vlrs() {
+        let is_projection = v.user_id.eq_ignore_ascii_case("LASF_Projection");
+        if !is_projection || !matches!(v.record_id, 2112 | 34735..=34737) {
+            continue;
+        }
+        crs.vlrs.push(RawVlr {
+            user_id: v.user_id.clone(),
+            record_id: v.record_id,
+            description: v.description.clone(),
+            data: v.data.clone(),
+        });
+        match v.record_id {
+            2112 if crs.wkt.is_none() => {
+                // The WKT record is a null-terminated string (LAS 1.4 R15 §2.5.5).
+                let end = v.data.iter().position(|&b| b == 0).unwrap_or(v.data.len());
+                let text = String::from_utf8_lossy(&v.data[..end]).trim().to_string();
+                if !text.is_empty() {
+                    crs.wkt = Some(text);
+                }
+            }
+            34735 if crs.epsg.is_none() => crs.epsg = epsg_from_geokeys(&v.data),
+            _ => {}
+        }
+    }
+    crs
+}
+
+/// The EPSG code in a GeoKeyDirectory record (LASF_Projection 34735): ProjectedCSTypeGeoKey
+/// (3072), else GeographicTypeGeoKey (2048), when stored inline and in the EPSG range
+/// 1024..=32766 (32767 = user-defined, 0 = undefined).
+pub fn epsg_from_geokeys(data: &[u8]) -> Option<u32> {
+    let words: Vec<u16> = data
+        .chunks_exact(2)
+        .map(|c| u16::from_le_bytes([c[0], c[1]]))
+        .collect();
+    // Header: KeyDirectoryVersion, KeyRevision, MinorRevision, NumberOfKeys; then 4 u16 per key:
+    // KeyID, TIFFTagLocation (0 = value inline), Count, Value_Offset.
+    let n_keys = usize::from(*words.get(3)?);
+    let keys: Vec<&[u16]> = words[4..].chunks_exact(4).take(n_keys).collect();
+    let find = |id: u16| {
+        keys.iter()
+            .find(|k| k[0] == id && k[1] == 0)
+            .map(|k| k[3])
+            .filter(|v| (1024..=32766).contains(v))
+            .map(u32::from)
+    };
+    find(PROJECTED_CS_TYPE_GEO_KEY).or_else(|| find(GEOGRAPHIC_TYPE_GEO_KEY))
+}

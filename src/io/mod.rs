@@ -6,9 +6,10 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::error::Result;
+use crate::error::{Error, Result};
 
 pub mod las;
+pub mod las_out;
 pub mod ply;
 pub mod text;
 
@@ -124,8 +125,64 @@ pub trait PointReader: Send {
 /// magic `ply`) and falling back to text. A missing file, a file that is not a point cloud and
 /// a cloud with zero points are errors naming the file.
 pub fn open(path: &Path) -> Result<Box<dyn PointReader>> {
-    let _ = path;
-    Err(crate::Error::Internal("io::open not yet implemented".into()))
+    let mut magic = [0u8; 4];
+    let n = read_prefix(path, &mut magic)?;
+    let magic = &magic[..n];
+    if magic == b"LASF" {
+        Ok(Box::new(las::LasReader::open(path)?))
+    } else if magic.starts_with(b"ply") && matches!(magic.get(3), Some(b'\n' | b'\r')) {
+        Ok(Box::new(ply::PlyReader::open(path)?))
+    } else {
+        Ok(Box::new(text::TextReader::open(path)?))
+    }
+}
+
+/// Read up to `buf.len()` leading bytes of `path`; a missing or unreadable file is an input error.
+fn read_prefix(path: &Path, buf: &mut [u8]) -> Result<usize> {
+    use std::io::Read;
+    let mut f = open_file(path)?;
+    let mut n = 0;
+    while n < buf.len() {
+        match f.read(&mut buf[n..]) {
+            Ok(0) => break,
+            Ok(k) => n += k,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(Error::input(path, format!("cannot read: {e}"))),
+        }
+    }
+    Ok(n)
+}
+
+/// Open a file for reading, turning "not found" and friends into one clear input error.
+pub(crate) fn open_file(path: &Path) -> Result<std::fs::File> {
+    match std::fs::File::open(path) {
+        Ok(f) => {
+            if f.metadata().map(|m| m.is_dir()).unwrap_or(false) {
+                return Err(Error::input(path, "is a directory, not a point cloud"));
+            }
+            Ok(f)
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            Err(Error::input(path, "file not found"))
+        }
+        Err(e) => Err(Error::input(path, format!("cannot open: {e}"))),
+    }
+}
+
+/// The check every reader applies to every point: a NaN or infinite coordinate is an input
+/// error naming the (0-based) point index, because it would poison bounds, tiling and kd-trees.
+pub(crate) fn check_finite(path: &Path, index: u64, p: &Point3) -> Result<()> {
+    if p.iter().all(|v| v.is_finite()) {
+        Ok(())
+    } else {
+        Err(Error::input(
+            path,
+            format!(
+                "point {index} has a NaN or infinite coordinate ({}, {}, {})",
+                p[0], p[1], p[2]
+            ),
+        ))
+    }
 }
 
 /// Read a whole (small) cloud into memory. For tests, core-point files and the viewer; large

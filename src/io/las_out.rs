@@ -1,0 +1,398 @@
+//! Streaming LAS 1.4 / LAZ writer for result points with extra-bytes dimensions (`m3c2.laz`).
+//!
+//! Layout (ASPRS LAS 1.4 R15):
+//! - point format 6 (30-byte base record, §2.6.7), except when the input CRS is GeoTIFF only:
+//!   then point format 0 (§2.6.1). Formats 6–10 must carry the CRS as WKT (§2.4, global
+//!   encoding bit 4), and `las` 0.11 sets the WKT bit for every extended format; GeoTIFF records
+//!   under that bit would be ignored by readers that honour it (PDAL). Format 0 keeps the
+//!   GeoTIFF records valid and copied verbatim, since we have no EPSG database to turn them into
+//!   WKT.
+//! - each record is the base record followed by the extra bytes of the dimensions, in order,
+//!   little-endian;
+//! - an Extra Bytes VLR (user id `LASF_Spec`, record id 4, §2.5.5 / Table 24) with one 192-byte
+//!   descriptor per dimension, written here because `las` does not write it;
+//! - scale 0.001 (millimetres) on all axes with an offset near `origin_hint` (rounded to a whole
+//!   kilometre) so that UTM-sized coordinates keep millimetre precision in the i32 records;
+//! - the input CRS copied: the WKT VLR when the input had WKT (with the WKT bit), otherwise the
+//!   GeoTIFF VLRs verbatim. Records over 65 535 bytes go to EVLRs.
+//!
+//! The file is written to `<path>.tmp` and renamed onto `path` by [`ResultWriter::finish`]; a
+//! writer dropped before `finish` (an error, a panic, an interrupt) deletes the temporary file,
+//! so nothing half-written is ever left under the final name (SPEC.md §2).
+
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+
+use super::Crs;
+use crate::error::{Error, Result};
+
+/// Storage type of an extra dimension (LAS 1.4 R15 Table 25 data_type codes in [`ExtraType::code`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ExtraType {
+    U8,
+    U32,
+    I32,
+    F32,
+    F64,
+}
+
+impl ExtraType {
+    /// Bytes per value.
+    pub fn size(self) -> usize {
+        match self {
+            ExtraType::U8 => 1,
+            ExtraType::U32 | ExtraType::I32 | ExtraType::F32 => 4,
+            ExtraType::F64 => 8,
+        }
+    }
+
+    /// The `data_type` code of the Extra Bytes descriptor.
+    pub fn code(self) -> u8 {
+        match self {
+            ExtraType::U8 => 1,
+            ExtraType::U32 => 5,
+            ExtraType::I32 => 6,
+            ExtraType::F32 => 9,
+            ExtraType::F64 => 10,
+        }
+    }
+}
+
+/// One extra dimension appended to every point record.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ExtraDim {
+    /// At most 32 bytes (LAS descriptor field), unique within a file.
+    pub name: &'static str,
+    pub ty: ExtraType,
+    /// At most 32 bytes.
+    pub description: &'static str,
+}
+
+/// Points buffered before each hand-over to the `las` writer (LAZ compresses in chunks).
+const BATCH: usize = 65_536;
+
+/// Coordinate scale: millimetres.
+pub const SCALE: f64 = 0.001;
+
+/// A streaming LAS/LAZ writer of result points; see the module doc.
+pub struct ResultWriter {
+    path: PathBuf,
+    tmp: PathBuf,
+    writer: Option<las::Writer<BufWriter<File>>>,
+    batch: las::PointData,
+    buffered: usize,
+    dims: Vec<ExtraDim>,
+    base_len: usize,
+    record_len: usize,
+    extended: bool,
+    offset: [f64; 3],
+    count: u64,
+}
+
+impl ResultWriter {
+    /// Writes to `<path>.tmp` then renames on finish. LAZ when path ends with .laz.
+    pub fn create(
+        path: &Path,
+        crs: &Crs,
+        dims: &[ExtraDim],
+        origin_hint: [f64; 3],
+    ) -> Result<Self> {
+        let mut seen = std::collections::HashSet::new();
+        for d in dims {
+            if d.name.is_empty() || d.name.len() > 32 || d.description.len() > 32 {
+                return Err(Error::Internal(format!(
+                    "extra dimension '{}': name must be 1..=32 bytes, description at most 32",
+                    d.name
+                )));
+            }
+            if !seen.insert(d.name) {
+                return Err(Error::Internal(format!(
+                    "extra dimension '{}' given twice",
+                    d.name
+                )));
+            }
+        }
+        let compress = path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("laz"));
+        let mut tmp_name = path.as_os_str().to_owned();
+        tmp_name.push(".tmp");
+        let tmp = PathBuf::from(tmp_name);
+
+        let has_wkt = crs.vlrs.iter().any(|v| v.record_id == 2112) || crs.wkt.is_some();
+        let has_geotiff = crs
+            .vlrs
+            .iter()
+            .any(|v| (34735..=34737).contains(&v.record_id));
+        // See the module doc: GeoTIFF-only CRS -> point format 0, otherwise 6.
+        let extended = has_wkt || !has_geotiff;
+        let extra: usize = dims.iter().map(|d| d.ty.size()).sum();
+        let mut format = las::point::Format::new(if extended { 6 } else { 0 })
+            .map_err(|e| Error::Internal(e.to_string()))?;
+        format.extra_bytes = u16::try_from(extra)
+            .map_err(|_| Error::Internal("too many extra bytes per point".into()))?;
+        format.is_compressed = compress;
+        let base_len = usize::from(format.len()) - extra;
+
+        let offset = origin_hint.map(|v| {
+            if v.is_finite() {
+                (v / 1000.0).round() * 1000.0
+            } else {
+                0.0
+            }
+        });
+        let transforms = las::Vector {
+            x: las::Transform {
+                scale: SCALE,
+                offset: offset[0],
+            },
+            y: las::Transform {
+                scale: SCALE,
+                offset: offset[1],
+            },
+            z: las::Transform {
+                scale: SCALE,
+                offset: offset[2],
+            },
+        };
+
+        let mut builder = las::Builder::from((1, 4));
+        builder.point_format = format;
+        builder.transforms = transforms;
+        builder.system_identifier = "talus".into();
+        builder.generating_software = format!("talus {}", env!("CARGO_PKG_VERSION"));
+        builder.vlrs.push(las::Vlr {
+            user_id: "LASF_Spec".into(),
+            record_id: 4,
+            description: "Extra Bytes Record".into(),
+            data: extra_bytes_descriptors(dims),
+        });
+        let mut crs_vlrs: Vec<las::Vlr> = Vec::new();
+        if has_wkt {
+            if let Some(v) = crs.vlrs.iter().find(|v| v.record_id == 2112) {
+                crs_vlrs.push(to_las_vlr(v));
+            } else if let Some(w) = &crs.wkt {
+                let mut data = w.as_bytes().to_vec();
+                data.push(0);
+                crs_vlrs.push(las::Vlr {
+                    user_id: "LASF_Projection".into(),
+                    record_id: 2112,
+                    description: "OGC WKT".into(),
+                    data,
+                });
+            }
+            builder.has_wkt_crs = true;
+        } else {
+            crs_vlrs.extend(
+                crs.vlrs
+                    .iter()
+                    .filter(|v| (34735..=34737).contains(&v.record_id))
+                    .map(to_las_vlr),
+            );
+        }
+        for v in crs_vlrs {
+            if v.data.len() > usize::from(u16::MAX) {
+                builder.evlrs.push(v);
+            } else {
+                builder.vlrs.push(v);
+            }
+        }
+        let header = builder
+            .into_header()
+            .map_err(|e| Error::Internal(format!("LAS header for {}: {e}", path.display())))?;
+        let batch = las::PointDataBuilder::new().for_header(&header).build();
+        let record_len = batch.record_len();
+
+        let file = File::create(&tmp).map_err(|e| Error::output(path, e))?;
+        let writer = match las::Writer::new(BufWriter::with_capacity(1 << 20, file), header) {
+            Ok(w) => w,
+            Err(e) => {
+                let _ = std::fs::remove_file(&tmp);
+                return Err(Error::output(path, to_io(e)));
+            }
+        };
+        Ok(ResultWriter {
+            path: path.to_path_buf(),
+            tmp,
+            writer: Some(writer),
+            batch,
+            buffered: 0,
+            dims: dims.to_vec(),
+            base_len,
+            record_len,
+            extended,
+            offset,
+            count: 0,
+        })
+    }
+
+    /// The LAS point format used (6, or 0 for a GeoTIFF CRS; see the module doc).
+    pub fn point_format(&self) -> u8 {
+        if self.extended {
+            6
+        } else {
+            0
+        }
+    }
+
+    /// Append one point. `extra.len()` must equal the number of dims; each value is converted
+    /// to its dim's type (integers rounded to nearest; NaN is allowed for floats only).
+    pub fn write(&mut self, xyz: [f64; 3], extra: &[f64]) -> Result<()> {
+        if extra.len() != self.dims.len() {
+            return Err(Error::Internal(format!(
+                "{} extra values for {} dimensions",
+                extra.len(),
+                self.dims.len()
+            )));
+        }
+        let mut raw = [0i32; 3];
+        for k in 0..3 {
+            let v = ((xyz[k] - self.offset[k]) / SCALE).round();
+            if !(v >= f64::from(i32::MIN) && v <= f64::from(i32::MAX)) {
+                return Err(Error::output(
+                    &self.path,
+                    std::io::Error::new(
+                        std::io::ErrorKind::InvalidInput,
+                        format!(
+                            "coordinate {} cannot be stored at millimetre scale around offset {}",
+                            xyz[k], self.offset[k]
+                        ),
+                    ),
+                ));
+            }
+            raw[k] = v as i32;
+        }
+        let start = self.buffered * self.record_len;
+        let bytes = &mut self.batch.resize_for(self.buffered + 1)[start..];
+        bytes[..self.record_len].fill(0);
+        for k in 0..3 {
+            bytes[4 * k..4 * k + 4].copy_from_slice(&raw[k].to_le_bytes());
+        }
+        // Return number 1 of 1 (a return number of 0 is invalid in LAS 1.4).
+        if self.extended {
+            bytes[14] = 0x11;
+        } else {
+            bytes[14] = 0b0000_1001;
+        }
+        let mut at = self.base_len;
+        for (d, &v) in self.dims.iter().zip(extra) {
+            let out = &mut bytes[at..at + d.ty.size()];
+            match d.ty {
+                ExtraType::F32 => out.copy_from_slice(&(v as f32).to_le_bytes()),
+                ExtraType::F64 => out.copy_from_slice(&v.to_le_bytes()),
+                ExtraType::U8 => out.copy_from_slice(&[int_value(d, v, 0.0, 255.0)? as u8]),
+                ExtraType::U32 => out.copy_from_slice(
+                    &(int_value(d, v, 0.0, f64::from(u32::MAX))? as u32).to_le_bytes(),
+                ),
+                ExtraType::I32 => out.copy_from_slice(
+                    &(int_value(d, v, f64::from(i32::MIN), f64::from(i32::MAX))? as i32)
+                        .to_le_bytes(),
+                ),
+            }
+            at += d.ty.size();
+        }
+        self.buffered += 1;
+        if self.buffered == BATCH {
+            self.flush_batch()?;
+        }
+        Ok(())
+    }
+
+    fn flush_batch(&mut self) -> Result<()> {
+        if self.buffered == 0 {
+            return Ok(());
+        }
+        let w = self
+            .writer
+            .as_mut()
+            .ok_or_else(|| Error::Internal("write after finish".into()))?;
+        w.write_points(&self.batch)
+            .map_err(|e| Error::output(&self.path, to_io(e)))?;
+        self.count += self.buffered as u64;
+        self.buffered = 0;
+        self.batch.resize_for(0);
+        Ok(())
+    }
+
+    /// Write the remaining points, complete the header, and rename `<path>.tmp` onto `path`.
+    /// Returns the number of points written.
+    pub fn finish(mut self) -> Result<u64> {
+        self.flush_batch()?;
+        let mut w = self
+            .writer
+            .take()
+            .ok_or_else(|| Error::Internal("finish called twice".into()))?;
+        // `close` explicitly: `las::Writer`'s own Drop/into_inner would panic on a failing close.
+        if let Err(e) = w.close() {
+            std::mem::forget(w);
+            return Err(Error::output(&self.path, to_io(e)));
+        }
+        let file = w
+            .into_inner()
+            .map_err(|e| Error::output(&self.path, to_io(e)))?
+            .into_inner()
+            .map_err(|e| Error::output(&self.path, e.into_error()))?;
+        file.sync_all().map_err(|e| Error::output(&self.path, e))?;
+        drop(file);
+        std::fs::rename(&self.tmp, &self.path).map_err(|e| Error::output(&self.path, e))?;
+        Ok(self.count)
+    }
+}
+
+impl Drop for ResultWriter {
+    /// Not finished: discard the temporary file.
+    fn drop(&mut self) {
+        if let Some(mut w) = self.writer.take() {
+            if w.close().is_err() {
+                // Its Drop would retry `close` and panic; leaking the handle is the lesser evil
+                // on a failure path that is about to delete the file anyway.
+                std::mem::forget(w);
+            }
+            let _ = std::fs::remove_file(&self.tmp);
+        }
+    }
+}
+
+/// An integer value of dim `d`, rounded; NaN or out of `[lo, hi]` is a bug of the caller.
+fn int_value(d: &ExtraDim, v: f64, lo: f64, hi: f64) -> Result<f64> {
+    let r = v.round();
+    if r >= lo && r <= hi {
+        Ok(r)
+    } else {
+        Err(Error::Internal(format!(
+            "value {v} does not fit the {:?} extra dimension '{}'",
+            d.ty, d.name
+        )))
+    }
+}
+
+/// The Extra Bytes VLR payload: one 192-byte descriptor per dim (LAS 1.4 R15 Table 24):
+/// reserved[2], data_type, options, name[32], unused[4], no_data[24], deprecated[16], min[24],
+/// deprecated[16], max[24], deprecated[16], scale[24], deprecated[16], offset[24],
+/// deprecated[16], description[32]. options = 0: no no_data/min/max/scale/offset.
+pub fn extra_bytes_descriptors(dims: &[ExtraDim]) -> Vec<u8> {
+    let mut data = vec![0u8; 192 * dims.len()];
+    for (d, rec) in dims.iter().zip(data.chunks_exact_mut(192)) {
+        rec[2] = d.ty.code();
+        rec[4..4 + d.name.len()].copy_from_slice(d.name.as_bytes());
+        rec[160..160 + d.description.len()].copy_from_slice(d.description.as_bytes());
+    }
+    data
+}
+
+fn to_las_vlr(v: &super::RawVlr) -> las::Vlr {
+    las::Vlr {
+        user_id: v.user_id.clone(),
+        record_id: v.record_id,
+        description: v.description.clone(),
+        data: v.data.clone(),
+    }
+}
+
+fn to_io(e: las::Error) -> std::io::Error {
+    match e {
+        las::Error::Io(e) => e,
+        other => std::io::Error::other(other.to_string()),
+    }
+}
