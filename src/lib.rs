@@ -13,3 +13,5 @@ pub mod m3c2;
 pub mod params;
 pub mod sampling;
 pub mod info;
+pub mod pipeline;
+pub mod commands;

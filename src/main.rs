@@ -116,6 +116,9 @@ struct CompareArgs {
     /// Use this PLY surface for C2 instead of the local reconstruction.
     #[arg(long)]
     after_mesh: Option<PathBuf>,
+    /// Tile side (for testing tiling invariance; default: planned from --memory).
+    #[arg(long, hide = true)]
+    tile_size: Option<f64>,
 }
 
 #[derive(Args)]
@@ -178,6 +181,7 @@ fn run(cli: Cli) -> talus::Result<()> {
                 force: a.force,
                 before_mesh: a.before_mesh,
                 after_mesh: a.after_mesh,
+                tile_size: a.tile_size,
             };
             let summary = talus::pipeline::compare(&opts)?;
             eprintln!("{}", summary.one_line());

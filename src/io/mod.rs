@@ -11,6 +11,7 @@ use crate::error::{Error, Result};
 pub mod las;
 pub mod las_out;
 pub mod ply;
+pub mod result_table;
 pub mod text;
 
 /// One point in global coordinates.

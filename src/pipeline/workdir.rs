@@ -105,7 +105,14 @@ impl WorkDir {
 
     /// Record `unit` as done (made from `inputs_hash`, stored in `file`) and save the manifest.
     pub fn done(&mut self, unit: &str, file: &str, inputs_hash: &str) -> Result<()> {
-        self.manifest.mark_done(unit, file, inputs_hash);
+        self.manifest.record(
+            unit,
+            talus_tiling::manifest::UnitEntry {
+                file: file.to_string(),
+                checksum: String::new(),
+                inputs_hash: inputs_hash.to_string(),
+            },
+        );
         self.manifest
             .save(&self.manifest_path)
             .map_err(|e| Error::Internal(format!("saving the manifest: {e}")))
