@@ -1,1 +1,113 @@
-fn main(){}
+//! Criterion benches of the inner loops: neighbourhood queries on a rough 1M-point surface and
+//! M3C2 per core point (chained cylinder query against the circumscribed-sphere query).
+//!
+//! `cargo bench --bench neighbourhood`
+
+use std::hint::black_box;
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use talus::io::Point3;
+use talus::m3c2::{self, cylinder, M3c2Params, Orientation};
+use talus::spatial::Index;
+
+struct Rng(u64);
+impl Rng {
+    fn uniform(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9E3779B97F4A7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58476D1CE4E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D049BB133111EB);
+        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// A rough surface over 100 m × 100 m: a few octaves of waves plus 5 mm noise.
+fn surface(n: usize, seed: u64) -> Vec<Point3> {
+    let mut r = Rng(seed);
+    (0..n)
+        .map(|_| {
+            let (x, y) = (r.uniform() * 100.0, r.uniform() * 100.0);
+            let z = 2.0 * (x / 13.0).sin() * (y / 17.0).cos()
+                + 0.3 * (x / 2.1).sin() * (y / 1.7).sin()
+                + 0.05 * (x / 0.31).cos()
+                + 0.005 * (r.uniform() - 0.5);
+            [x, y, z]
+        })
+        .collect()
+}
+
+fn benches(c: &mut Criterion) {
+    let before = surface(1_000_000, 1);
+    let after = surface(1_000_000, 2);
+    let b = Index::new(&before, [50.0, 50.0, 0.0]);
+    let a = Index::new(&after, [50.0, 50.0, 0.0]);
+    // 1000 core points in Morton-like (row) order, as the pipeline queries them.
+    let mut cores: Vec<Point3> = before
+        .iter()
+        .step_by(1000)
+        .map(|p| b.to_local(p))
+        .collect();
+    cores.sort_by(|p, q| (p[1] as i64, p[0] as i64).cmp(&(q[1] as i64, q[0] as i64)));
+    let params = M3c2Params {
+        normal_radius: 1.0,
+        cyl_radius: 0.5,
+        cyl_halflen: 3.0,
+        reg_error: 0.0,
+        min_points: 1,
+        orientation: Orientation::Up,
+    };
+    let normals = m3c2::normals(&b, &cores, &params);
+
+    let mut g = c.benchmark_group("neighbourhood");
+    g.bench_function("sphere r=1.0, 1000 queries", |bench| {
+        bench.iter(|| {
+            let mut n = 0usize;
+            for q in &cores {
+                b.for_each_within(q, 1.0, |_, _| n += 1);
+            }
+            black_box(n)
+        })
+    });
+    g.bench_function("knn k=30, 1000 queries", |bench| {
+        bench.iter(|| {
+            for q in &cores {
+                black_box(b.nearest(q, 30));
+            }
+        })
+    });
+    g.finish();
+
+    let mut g = c.benchmark_group("m3c2 per core point");
+    g.bench_function("normal r=1.0, 1000 cores", |bench| {
+        bench.iter(|| {
+            for q in &cores {
+                black_box(m3c2::normals::normal_at(&b, q, 1.0));
+            }
+        })
+    });
+    let mut s = cylinder::Scratch::default();
+    g.bench_function("cylinder chained r=0.5 h=3, 1000 cores x 2 epochs", |bench| {
+        bench.iter(|| {
+            for (q, n) in cores.iter().zip(&normals) {
+                black_box(cylinder::cylinder_stats(&b, q, n, 0.5, 3.0, &mut s));
+                black_box(cylinder::cylinder_stats(&a, q, n, 0.5, 3.0, &mut s));
+            }
+        })
+    });
+    g.bench_function("cylinder sphere r=0.5 h=3, 1000 cores x 2 epochs", |bench| {
+        bench.iter(|| {
+            for (q, n) in cores.iter().zip(&normals) {
+                black_box(cylinder::cylinder_stats_sphere(&b, q, n, 0.5, 3.0, &mut s));
+                black_box(cylinder::cylinder_stats_sphere(&a, q, n, 0.5, 3.0, &mut s));
+            }
+        })
+    });
+    g.finish();
+}
+
+criterion_group! {
+    name = group;
+    config = Criterion::default().sample_size(10);
+    targets = benches
+}
+criterion_main!(group);

@@ -12,6 +12,7 @@
 pub mod m3c2_pass;
 pub mod outputs;
 pub mod tiles;
+pub mod view_export;
 pub mod workdir;
 
 use std::path::{Path, PathBuf};
@@ -241,8 +242,16 @@ fn run_stages(
     let t = Instant::now();
     let written =
         outputs::write_m3c2_laz(wd, &m3c2, &before.crs, layout.anchor, &|_| (f64::NAN, 0))?;
+    view_export::write(
+        wd,
+        &m3c2,
+        written.core_points,
+        &before.crs,
+        layout.anchor,
+        &[],
+    )?;
     stages.push(StageTime {
-        stage: "m3c2.laz".into(),
+        stage: "m3c2.laz and viewer files".into(),
         seconds: t.elapsed().as_secs_f64(),
         reused: false,
     });
