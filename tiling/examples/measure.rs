@@ -119,11 +119,24 @@ fn main() {
         ],
     );
     let density = split_n as f64 / (bounds.extent()[0] * bounds.extent()[1]);
-    for budget in [256u64 << 20, 32 << 20] {
+    let las = WriteOptions {
+        quantise: Some(Quantisation {
+            scale: SCALE,
+            offset: OFFSET,
+        }),
+        ..WriteOptions::default()
+    };
+    for (budget, opts) in [
+        (256u64 << 20, WriteOptions::default()),
+        (32 << 20, WriteOptions::default()),
+        (256 << 20, las),
+    ] {
         // A tile budget giving ~16 tiles, a 2 m halo.
         let grid = TileGrid::plan(bounds, density, 2.0, 4 << 30, 1000).expect("plan");
         let split_dir = dir.join("split");
-        let mut s = TileSplitter::new(&split_dir, grid, 2.0, budget).expect("splitter");
+        let mut s = TileSplitter::new(&split_dir, grid, 2.0, budget)
+            .expect("splitter")
+            .with_options(opts);
         let mut rng = Rng(2);
         let t0 = Instant::now();
         let mut gen = 0.0;
@@ -147,8 +160,9 @@ fn main() {
             .map(|m| m.len())
             .sum();
         println!(
-            "split {split_n} points, budget {} MiB: {} tiles ({}x{}, side {:.1} m), {} stored points (halo dup {:.3}), push {:.2} s ({:.1} Mpt/s), finish {:.2} s, total {:.1} Mpt/s, {:.2} B/stored pt",
+            "split {split_n} points, budget {} MiB, quantised {}: {} tiles ({}x{}, side {:.1} m), {} stored points (halo dup {:.3}), push {:.2} s ({:.1} Mpt/s), finish {:.2} s, total {:.1} Mpt/s, {:.2} B/stored pt",
             budget >> 20,
+            opts.quantise.is_some(),
             tiles.len(),
             grid.cols(),
             grid.rows(),

@@ -262,8 +262,20 @@ pub(crate) fn encode(cols: &TileColumns, opts: &WriteOptions) -> Result<Vec<u8>,
         return Err(p);
     }
     let n = cols.len();
-    // (name, kind, quantisation (scale, offset, base), raw little-endian bytes)
-    type Spec = (String, u8, Option<(f64, f64, i64)>, Vec<u8>);
+    // (name, kind, flags, quantisation (scale, offset, base), prepared bytes)
+    type Spec = (String, u8, u8, Option<(f64, f64, i64)>, Vec<u8>);
+    let flags = |kind: u8| {
+        let on = if kind == KIND_F64 {
+            opts.shuffle_f64
+        } else {
+            opts.shuffle_int
+        };
+        if on && kind != KIND_U8 {
+            FLAG_SHUFFLE
+        } else {
+            0
+        }
+    };
     let mut specs: Vec<Spec> = Vec::new();
     for (axis, (name, v)) in [("x", &cols.x), ("y", &cols.y), ("z", &cols.z)]
         .into_iter()
@@ -271,26 +283,34 @@ pub(crate) fn encode(cols: &TileColumns, opts: &WriteOptions) -> Result<Vec<u8>,
     {
         let quant = opts
             .quantise
-            .and_then(|q| quantise(v, q.scale[axis], q.offset[axis]));
+            .and_then(|q| quantise(v, q.scale[axis], q.offset[axis]).map(|d| (q, d)));
         match quant {
-            Some((base, deltas)) => {
-                let raw: Vec<u8> = deltas.iter().flat_map(|d| d.to_le_bytes()).collect();
-                let q = opts.quantise.map(|q| (q.scale[axis], q.offset[axis], base));
-                specs.push((name.into(), KIND_QUANT, q, raw));
+            Some((q, (base, deltas))) => {
+                let f = flags(KIND_QUANT);
+                let raw = le_bytes(deltas.iter().map(|d| d.to_le_bytes()), f != 0);
+                let quant = Some((q.scale[axis], q.offset[axis], base));
+                specs.push((name.into(), KIND_QUANT, f, quant, raw));
             }
             None => {
-                let raw: Vec<u8> = v.iter().flat_map(|d| d.to_le_bytes()).collect();
-                specs.push((name.into(), KIND_F64, None, raw));
+                let f = flags(KIND_F64);
+                let raw = le_bytes(v.iter().map(|d| d.to_le_bytes()), f != 0);
+                specs.push((name.into(), KIND_F64, f, None, raw));
             }
         }
     }
     for c in &cols.extra {
         let (kind, raw) = match &c.data {
-            ColumnData::F64(v) => (KIND_F64, v.iter().flat_map(|d| d.to_le_bytes()).collect()),
-            ColumnData::U32(v) => (KIND_U32, v.iter().flat_map(|d| d.to_le_bytes()).collect()),
+            ColumnData::F64(v) => {
+                let f = flags(KIND_F64) != 0;
+                (KIND_F64, le_bytes(v.iter().map(|d| d.to_le_bytes()), f))
+            }
+            ColumnData::U32(v) => {
+                let f = flags(KIND_U32) != 0;
+                (KIND_U32, le_bytes(v.iter().map(|d| d.to_le_bytes()), f))
+            }
             ColumnData::U8(v) => (KIND_U8, v.clone()),
         };
-        specs.push((c.name.clone(), kind, None, raw));
+        specs.push((c.name.clone(), kind, flags(kind), None, raw));
     }
 
     let mut payload = Vec::new();
@@ -304,29 +324,13 @@ pub(crate) fn encode(cols: &TileColumns, opts: &WriteOptions) -> Result<Vec<u8>,
     for v in b.min.iter().chain(b.max.iter()) {
         header.extend_from_slice(&v.to_le_bytes());
     }
-    for (name, kind, quant, raw) in &specs {
-        let width = kind_width(*kind);
-        let shuffled = if *kind == KIND_F64 {
-            opts.shuffle_f64
-        } else {
-            opts.shuffle_int
-        };
-        let flags = if shuffled && width > 1 {
-            FLAG_SHUFFLE
-        } else {
-            0
-        };
-        let prepared = if flags & FLAG_SHUFFLE != 0 {
-            shuffle(raw, width)
-        } else {
-            raw.clone()
-        };
-        let stored = zstd::bulk::compress(&prepared, opts.level)
+    for (name, kind, flags, quant, prepared) in &specs {
+        let stored = zstd::bulk::compress(prepared, opts.level)
             .map_err(|e| format!("zstd compression failed: {e}"))?;
         header.extend_from_slice(&(name.len() as u16).to_le_bytes());
         header.extend_from_slice(name.as_bytes());
         header.push(*kind);
-        header.push(flags);
+        header.push(*flags);
         if let Some((scale, offset, base)) = quant {
             header.extend_from_slice(&scale.to_le_bytes());
             header.extend_from_slice(&offset.to_le_bytes());
@@ -380,16 +384,28 @@ fn kind_width(kind: u8) -> usize {
     }
 }
 
-/// Blosc-style byte shuffle: byte `b` of value `i` goes to `b·n + i`.
-fn shuffle(raw: &[u8], width: usize) -> Vec<u8> {
-    let n = raw.len() / width;
-    let mut out = vec![0u8; raw.len()];
-    for (i, value) in raw.chunks_exact(width).enumerate() {
-        for (b, &byte) in value.iter().enumerate() {
-            out[b * n + i] = byte;
+/// The little-endian bytes of `values`, byte-shuffled Blosc-style when `shuffle` (byte `b` of
+/// value `i` goes to `b·n + i`).
+fn le_bytes<const W: usize>(
+    values: impl ExactSizeIterator<Item = [u8; W]>,
+    shuffle: bool,
+) -> Vec<u8> {
+    let n = values.len();
+    if shuffle {
+        let mut out = vec![0u8; n * W];
+        for (i, value) in values.enumerate() {
+            for (b, &byte) in value.iter().enumerate() {
+                out[b * n + i] = byte;
+            }
         }
+        out
+    } else {
+        let mut out = Vec::with_capacity(n * W);
+        for value in values {
+            out.extend_from_slice(&value);
+        }
+        out
     }
-    out
 }
 
 fn unshuffle(shuffled: &[u8], width: usize) -> Vec<u8> {

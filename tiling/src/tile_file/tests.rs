@@ -231,3 +231,20 @@ fn inconsistent_columns_are_rejected_and_leave_nothing() {
     assert!(!path.exists());
     assert!(matches!(read_tile(&path), Err(Error::Io { .. })));
 }
+
+/// A crash during a rewrite (simulated by a half-written temporary left behind) leaves the
+/// previous tile intact, and the next write succeeds over the leftover.
+#[test]
+fn crash_leftover_tmp_leaves_previous_tile_intact() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("t.tile");
+    let old = sample(100);
+    write_tile(&path, &old).unwrap();
+    let new = sample(300);
+    let bytes = encode(&new, &WriteOptions::default()).unwrap();
+    std::fs::write(crate::atomic::tmp_path(&path), &bytes[..bytes.len() / 3]).unwrap();
+    assert_bit_exact(&old, &read_tile(&path).unwrap());
+    write_tile(&path, &new).unwrap();
+    assert_bit_exact(&new, &read_tile(&path).unwrap());
+    assert!(!crate::atomic::tmp_path(&path).exists());
+}
