@@ -120,6 +120,8 @@ impl TileSplitter {
     }
 
     /// Route points to their tiles (in order), flushing buffers to segments when over budget.
+    /// Points outside the grid go where [`TileGrid::owner`] clamps them (NaN x or y counts as the
+    /// grid's min edge); callers should drop non-finite points before pushing.
     pub fn push(&mut self, points: &[[f64; 3]]) -> Result<()> {
         let rows = self.grid.rows() as usize;
         for p in points {

@@ -199,11 +199,18 @@ fn any_flipped_byte_or_truncation_is_corrupt() {
             expect_corrupt(&bad, &format!("byte {i} ^ {mask:#x}"));
         }
     }
+    let header_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
     for len in 0..bytes.len() {
         std::fs::write(&bad, &bytes[..len]).unwrap();
         expect_corrupt(&bad, &format!("truncated to {len}"));
-        if len >= 16 {
-            assert!(read_tile_header(&bad).is_err() || len >= 100);
+        // The header alone is readable exactly when it is complete.
+        match read_tile_header(&bad) {
+            Err(Error::Corrupt { .. }) => assert!(len < header_len, "header cut at {len}"),
+            Ok(h) => {
+                assert!(len >= header_len);
+                assert_eq!(h.point_count, 40);
+            }
+            Err(e) => panic!("unexpected {e}"),
         }
     }
     let mut longer = bytes.clone();
