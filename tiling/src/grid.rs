@@ -16,7 +16,7 @@ use crate::error::{Error, Result};
 use std::fmt;
 
 /// An axis-aligned XY rectangle (closed).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct BoundsXY {
     pub min: [f64; 2],
     pub max: [f64; 2],
@@ -41,7 +41,7 @@ impl BoundsXY {
 
 /// A tile's position in the grid. Ordered column-major (by `col`, then `row`), which is also the
 /// lexicographic order of [`TileId::name`] while indices stay below 10 000.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize)]
 pub struct TileId {
     pub col: u32,
     pub row: u32,
@@ -61,7 +61,8 @@ impl fmt::Display for TileId {
 }
 
 /// A grid of `cols × rows` square tiles of side `tile_size` starting at `origin` (min corner).
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// Serializable for summaries and manifests; rebuild one with [`TileGrid::new`], which validates.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct TileGrid {
     origin: [f64; 2],
     tile_size: f64,
