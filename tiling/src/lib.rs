@@ -1,1 +1,33 @@
-pub fn placeholder() {}
+//! talus-tiling: out-of-core spatial tiles with halos, for talus (SPEC.md §3).
+//!
+//! A 120M-point epoch does not fit in a 2 GiB budget together with its kd-trees, so talus cuts
+//! both epochs into the same grid of square XY tiles, each stored on disk with a halo wide enough
+//! for every neighbourhood computed inside it, and processes one tile at a time. Every finished unit
+//! is an immutable file plus an entry in a manifest replaced atomically, so a run killed with
+//! SIGKILL resumes where it stopped.
+//!
+//! Modules: [`grid`] (tile geometry and planning), [`tile_file`] (compact checksummed tile files),
+//! [`splitter`] (stream points into tiles with bounded memory), [`manifest`] (resume state),
+//! [`atomic`] (crash-safe file replacement) and [`hash`] (stable 64-bit keys).
+//!
+//! This crate does not depend on the root `talus` crate; its [`Error`] carries the path and the
+//! problem so the caller can map it onto `talus::Error`.
+
+pub mod atomic;
+pub mod error;
+pub mod grid;
+pub mod hash;
+pub mod manifest;
+pub mod splitter;
+pub mod tile_file;
+
+pub use atomic::{atomic_write, atomic_write_with};
+pub use error::{Error, Result};
+pub use grid::{BoundsXY, TileGrid, TileId};
+pub use hash::{hash64, Fnv64};
+pub use manifest::{file_checksum, Manifest, UnitEntry};
+pub use splitter::{tile_path, TileSplitter, OWNED_COLUMN};
+pub use tile_file::{
+    read_tile, read_tile_header, write_tile, write_tile_with, Bounds3, Column, ColumnData,
+    Quantisation, TileColumns, TileHeader, WriteOptions,
+};
