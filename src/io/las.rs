@@ -83,6 +83,20 @@ impl LasReader {
                 ));
             }
         }
+        if let Some(evlr) = raw.evlr.filter(|e| e.number_of_evlrs > 0) {
+            // EVLRs follow the point data (LAS 1.4), so a cut file loses them first.
+            if evlr.start_of_first_evlr >= file_len {
+                return Err(Error::input(
+                    path,
+                    format!(
+                        "truncated {} file: its extended VLRs start at byte {} but the file has \
+                         only {file_len} bytes",
+                        if compressed { "LAZ" } else { "LAS" },
+                        evlr.start_of_first_evlr
+                    ),
+                ));
+            }
+        }
         read.rewind()
             .map_err(|e| Error::input(path, format!("cannot read: {e}")))?;
         let header = las::Header::new(&mut read)

@@ -162,12 +162,14 @@ impl ResultWriter {
         builder.transforms = transforms;
         builder.system_identifier = "talus".into();
         builder.generating_software = format!("talus {}", env!("CARGO_PKG_VERSION"));
-        builder.vlrs.push(las::Vlr {
-            user_id: "LASF_Spec".into(),
-            record_id: 4,
-            description: "Extra Bytes Record".into(),
-            data: extra_bytes_descriptors(dims),
-        });
+        if !dims.is_empty() {
+            builder.vlrs.push(las::Vlr {
+                user_id: "LASF_Spec".into(),
+                record_id: 4,
+                description: "Extra Bytes Record".into(),
+                data: extra_bytes_descriptors(dims),
+            });
+        }
         let mut crs_vlrs: Vec<las::Vlr> = Vec::new();
         if has_wkt {
             if let Some(v) = crs.vlrs.iter().find(|v| v.record_id == 2112) {
@@ -307,6 +309,8 @@ impl ResultWriter {
             .writer
             .as_mut()
             .ok_or_else(|| Error::Internal("write after finish".into()))?;
+        // A write that failed half-way may have grown the batch by a record: trim it.
+        self.batch.resize_for(self.buffered);
         w.write_points(&self.batch)
             .map_err(|e| Error::output(&self.path, to_io(e)))?;
         self.count += self.buffered as u64;

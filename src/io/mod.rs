@@ -34,9 +34,9 @@ impl Bounds {
     }
     /// Extend to contain `p`.
     pub fn grow(&mut self, p: &Point3) {
-        for k in 0..3 {
-            self.min[k] = self.min[k].min(p[k]);
-            self.max[k] = self.max[k].max(p[k]);
+        for ((lo, hi), &v) in self.min.iter_mut().zip(&mut self.max).zip(p) {
+            *lo = lo.min(v);
+            *hi = hi.max(v);
         }
     }
     /// True when no point was added.

@@ -42,11 +42,48 @@ impl Sep {
         }
     }
 
-    fn split<'a>(self, line: &'a str) -> Box<dyn Iterator<Item = &'a str> + 'a> {
-        match self {
-            Sep::Comma => Box::new(line.split(',').map(clean)),
-            Sep::Semicolon => Box::new(line.split(';').map(clean)),
-            Sep::Whitespace => Box::new(line.split_whitespace().map(clean)),
+    fn split(self, line: &str) -> Fields<'_> {
+        Fields {
+            rest: Some(line),
+            sep: self,
+        }
+    }
+}
+
+/// The cleaned fields of a line (an iterator without allocation: it runs once per line).
+struct Fields<'a> {
+    rest: Option<&'a str>,
+    sep: Sep,
+}
+
+impl<'a> Iterator for Fields<'a> {
+    type Item = &'a str;
+
+    fn next(&mut self) -> Option<&'a str> {
+        let rest = self.rest?;
+        let ch = match self.sep {
+            Sep::Comma => ',',
+            Sep::Semicolon => ';',
+            Sep::Whitespace => {
+                let t = rest.trim_start();
+                if t.is_empty() {
+                    self.rest = None;
+                    return None;
+                }
+                let end = t.find(char::is_whitespace).unwrap_or(t.len());
+                self.rest = Some(&t[end..]);
+                return Some(clean(&t[..end]));
+            }
+        };
+        match rest.split_once(ch) {
+            Some((field, tail)) => {
+                self.rest = Some(tail);
+                Some(clean(field))
+            }
+            None => {
+                self.rest = None;
+                Some(clean(rest))
+            }
         }
     }
 }
@@ -56,8 +93,8 @@ fn clean(field: &str) -> &str {
     field.trim().trim_matches(|c| c == '"' || c == '\'').trim()
 }
 
-/// A line with any leading comment marker (`//`, `#`) removed, or `None` for a comment line
-/// that cannot be a header.
+/// Whether the line starts with a comment marker (`//`, `#`), and the line without it
+/// (CloudCompare writes its header as `//X,Y,Z,...`).
 fn strip_comment(line: &str) -> (bool, &str) {
     let t = line.trim();
     if let Some(rest) = t.strip_prefix("//") {
@@ -158,9 +195,9 @@ fn parse_row(line: &str, layout: &Layout) -> std::result::Result<Point3, String>
     let mut seen = 0;
     for (i, field) in layout.sep.split(line).enumerate().take(need) {
         seen = i + 1;
-        for k in 0..3 {
-            if layout.cols[k] == i {
-                p[k] = field
+        for (v, &col) in p.iter_mut().zip(&layout.cols) {
+            if col == i {
+                *v = field
                     .parse::<f64>()
                     .map_err(|_| format!("'{field}' is not a number"))?;
             }

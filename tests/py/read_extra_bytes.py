@@ -5,7 +5,9 @@ Usage: read_extra_bytes.py FILE [N]
 Prints the header facts (point count, format, version, scales, offsets, bounds, WKT bit,
 (E)VLR ids, GeoTIFF ProjectedCSTypeGeoKey), the extra-bytes dimensions (name, numpy type,
 description) as laspy decodes them from the Extra Bytes VLR, and the first N values (default 10)
-of x, y, z and of every extra dimension. NaN is printed as null (JSON has no NaN).
+of x, y, z and of every extra dimension. NaN is printed as null (JSON has no NaN), and every
+float as its shortest round-trip string (repr) so that the reader parses the exact binary value
+(serde_json's default float parsing can be one ulp off).
 """
 
 import json
@@ -17,8 +19,8 @@ import laspy
 
 def clean(v):
     v = v.item() if hasattr(v, "item") else v
-    if isinstance(v, float) and not math.isfinite(v):
-        return None
+    if isinstance(v, float):
+        return repr(v) if math.isfinite(v) else None
     return v
 
 
@@ -44,10 +46,10 @@ def main():
         "point_count": int(h.point_count),
         "point_format": fmt.id,
         "version": f"{h.version.major}.{h.version.minor}",
-        "scales": [float(s) for s in h.scales],
-        "offsets": [float(o) for o in h.offsets],
-        "mins": [float(m) for m in h.mins],
-        "maxs": [float(m) for m in h.maxs],
+        "scales": [clean(float(s)) for s in h.scales],
+        "offsets": [clean(float(o)) for o in h.offsets],
+        "mins": [clean(float(m)) for m in h.mins],
+        "maxs": [clean(float(m)) for m in h.maxs],
         "wkt_bit": bool(h.global_encoding.wkt),
         "vlrs": vlrs,
         "epsg": epsg,
