@@ -6,5 +6,6 @@
 
 pub mod error;
 pub mod io;
+pub mod synth;
 
 pub use error::{Error, Result};
