@@ -1,17 +1,23 @@
 //! Streaming point generation: an epoch's points as a sequence of bounded chunks.
 //!
-//! The epoch's patches are cut into strips (along their v parameter) of at most
-//! [`CHUNK_POINTS`] expected points; the requested count is shared among all strips in proportion
-//! to their area (largest-remainder rounding, so the total is exact), and each strip is one chunk,
-//! sampled by rejection (see [`surface`](super::surface)) from its own random stream
-//! (seed, epoch, strip). A chunk is generated only when the writer asks for the next one, so at
-//! most one chunk of points is ever in memory, whatever the total.
+//! The epoch's patches are cut into strips (along their v parameter) of at most [`STRIP_POINTS`]
+//! expected points; the requested count is shared among all strips in proportion to their area
+//! (largest-remainder rounding, so the total is exact). Each strip is sampled by rejection (see
+//! [`surface`](super::surface)) from its own random stream (seed, epoch, strip), so the points do
+//! not depend on the thread count. A chunk is a run of consecutive strips holding at most
+//! [`CHUNK_POINTS`] points, sampled in parallel into one buffer, and only when the writer asks
+//! for the next chunk: at most one chunk of points is ever in memory, whatever the total.
+
+use rayon::prelude::*;
 
 use super::rng::Rng;
 use super::surface::{Patch, V3};
 
 /// Largest number of points generated (and held) at once.
 pub const CHUNK_POINTS: usize = 1_000_000;
+
+/// Target points per strip: the unit of parallel sampling (eight per chunk).
+pub const STRIP_POINTS: usize = CHUNK_POINTS / 8;
 
 /// Grid resolution (per side) of the midpoint-rule area integrals that share points out.
 const AREA_GRID: usize = 256;
@@ -93,7 +99,7 @@ fn apportion(weights: &[f64], total: u64) -> Vec<u64> {
 /// coordinates, each at most [`CHUNK_POINTS`] long, whose lengths add up to the requested count.
 pub struct Chunks {
     patches: Vec<Patch>,
-    strips: std::vec::IntoIter<Strip>,
+    strips: std::iter::Peekable<std::vec::IntoIter<Strip>>,
     seed: u64,
     epoch: u64,
     noise: f64,
@@ -115,7 +121,7 @@ impl Chunks {
             .iter()
             .map(|p| {
                 let d = p.domain();
-                p.area(d[2], d[3], AREA_GRID)
+                p.area(d[2], d[3], AREA_GRID, AREA_GRID)
             })
             .collect();
         let all: f64 = patch_area.iter().sum();
@@ -123,8 +129,8 @@ impl Chunks {
         let mut areas = Vec::new();
         for (i, p) in patches.iter().enumerate() {
             let expected = total as f64 * patch_area[i] / all;
-            // 2 % headroom so rounding never pushes a strip over CHUNK_POINTS.
-            let n = ((expected * 1.02 / CHUNK_POINTS as f64).ceil() as usize).max(1);
+            // 2 % headroom so rounding never pushes a strip over STRIP_POINTS.
+            let n = ((expected * 1.02 / STRIP_POINTS as f64).ceil() as usize).max(1);
             let [_, _, v0, v1] = p.domain();
             for k in 0..n {
                 let a = v0 + (v1 - v0) * k as f64 / n as f64;
@@ -132,7 +138,8 @@ impl Chunks {
                 areas.push(if n == 1 {
                     patch_area[i]
                 } else {
-                    p.area(a, b, AREA_GRID)
+                    // Thin strips: fewer rows suffice for their area.
+                    p.area(a, b, AREA_GRID, AREA_GRID / 8)
                 });
                 strips.push(Strip {
                     patch: i,
@@ -148,7 +155,7 @@ impl Chunks {
         }
         Chunks {
             patches,
-            strips: strips.into_iter(),
+            strips: strips.into_iter().peekable(),
             seed,
             epoch,
             noise,
@@ -156,7 +163,8 @@ impl Chunks {
         }
     }
 
-    fn sample(&self, strip: &Strip) -> Vec<V3> {
+    /// Fill `out` (of length strip.count) with the strip's points.
+    fn sample(&self, strip: &Strip, out: &mut [V3]) {
         let patch = &self.patches[strip.patch];
         let [u0, u1, _, _] = patch.domain();
         let [v0, v1] = strip.v;
@@ -164,8 +172,8 @@ impl Chunks {
         // One stream per (epoch, strip): epochs are independent, and a strip's points do not
         // depend on how many points other strips drew.
         let mut rng = Rng::new(self.seed, (self.epoch << 32) | strip.stream);
-        let mut out = Vec::with_capacity(strip.count as usize);
-        while (out.len() as u64) < strip.count {
+        let mut filled = 0;
+        while filled < out.len() {
             let u = u0 + (u1 - u0) * rng.uniform();
             let v = v0 + (v1 - v0) * rng.uniform();
             let jac = patch.jac(u, v);
@@ -179,21 +187,44 @@ impl Chunks {
                 s.p[1] + e * s.n[1],
                 s.p[2] + e * s.n[2],
             ];
-            out.push(self.placement.apply(p));
+            out[filled] = self.placement.apply(p);
+            filled += 1;
         }
-        out
     }
 }
 
 impl Iterator for Chunks {
     type Item = Vec<V3>;
     fn next(&mut self) -> Option<Vec<V3>> {
-        loop {
-            let strip = self.strips.next()?;
-            if strip.count > 0 {
-                return Some(self.sample(&strip));
+        // Gather consecutive non-empty strips up to CHUNK_POINTS (at least one).
+        let mut group = Vec::new();
+        let mut n = 0usize;
+        while let Some(s) = self
+            .strips
+            .next_if(|s| s.count == 0 || group.is_empty() || n + s.count as usize <= CHUNK_POINTS)
+        {
+            if s.count > 0 {
+                n += s.count as usize;
+                group.push(s);
             }
         }
+        if group.is_empty() {
+            return None;
+        }
+        // One buffer for the chunk, cut into one slice per strip, filled in parallel.
+        let mut out = vec![[0.0; 3]; n];
+        let mut slices = Vec::with_capacity(group.len());
+        let mut rest = out.as_mut_slice();
+        for s in &group {
+            let (head, tail) = rest.split_at_mut(s.count as usize);
+            slices.push(head);
+            rest = tail;
+        }
+        group
+            .par_iter()
+            .zip(slices.into_par_iter())
+            .for_each(|(s, slice)| self.sample(s, slice));
+        Some(out)
     }
 }
 

@@ -444,15 +444,15 @@ impl Patch {
         }
     }
 
-    /// Area of the part of the patch with v in [v0, v1], by the midpoint rule on an n × n grid
+    /// Area of the part of the patch with v in [v0, v1], by the midpoint rule on an nu × nv grid
     /// (used only to share points between patches and strips in proportion to area).
-    pub(crate) fn area(&self, v0: f64, v1: f64, n: usize) -> f64 {
+    pub(crate) fn area(&self, v0: f64, v1: f64, nu: usize, nv: usize) -> f64 {
         let [u0, u1, _, _] = self.domain();
-        let (du, dv) = ((u1 - u0) / n as f64, (v1 - v0) / n as f64);
+        let (du, dv) = ((u1 - u0) / nu as f64, (v1 - v0) / nv as f64);
         let mut sum = 0.0;
-        for j in 0..n {
+        for j in 0..nv {
             let v = v0 + (j as f64 + 0.5) * dv;
-            for i in 0..n {
+            for i in 0..nu {
                 sum += self.jac(u0 + (i as f64 + 0.5) * du, v);
             }
         }
