@@ -68,6 +68,11 @@ fn bad_options_are_usage_errors() {
         let e = synth(SceneKind::Hill, &o, dir.path()).unwrap_err();
         assert_eq!(e.exit_code(), 2, "{e}");
     }
+    // An output "directory" that is a file: a typed output error, nothing panics.
+    let file = dir.path().join("not-a-dir");
+    std::fs::write(&file, b"x").unwrap();
+    let e = synth(SceneKind::Hill, &opts(), &file).unwrap_err();
+    assert!(matches!(e, talus::Error::Output { .. }), "{e}");
     let e = synth(
         SceneKind::Large,
         &SynthOptions {

@@ -46,10 +46,13 @@ pub(crate) fn write_epoch(
     let tmp = std::path::PathBuf::from(tmp);
     let result = write_to(&tmp, chunks, origin, epoch, laz);
     match result {
-        Ok(n) => {
-            std::fs::rename(&tmp, path).map_err(|e| Error::output(path, e))?;
-            Ok(n)
-        }
+        Ok(n) => match std::fs::rename(&tmp, path) {
+            Ok(()) => Ok(n),
+            Err(e) => {
+                let _ = std::fs::remove_file(&tmp);
+                Err(Error::output(path, e))
+            }
+        },
         Err(e) => {
             let _ = std::fs::remove_file(&tmp);
             Err(e)
@@ -98,24 +101,34 @@ fn write_to(
         .map_err(|e| las_err(path, e))?;
     let transforms = *writer.header().transforms();
     let format = *writer.header().point_format();
-    let mut written = 0u64;
     // One chunk at a time: its points and their encoded records are dropped before the
     // iterator generates the next chunk.
-    for chunk in chunks {
-        let mut bytes = Vec::with_capacity(chunk.len() * RECORD_LEN);
-        for p in &chunk {
-            encode(&mut bytes, p, &transforms, epoch);
+    let write_all = || -> las::Result<u64> {
+        let mut written = 0u64;
+        for chunk in chunks {
+            let mut bytes = Vec::with_capacity(chunk.len() * RECORD_LEN);
+            for p in &chunk {
+                encode(&mut bytes, p, &transforms, epoch);
+            }
+            let data = las::PointDataBuilder::new()
+                .with_format(format)
+                .with_transforms(transforms)
+                .build_from_bytes(bytes)?;
+            writer.write_points(&data)?;
+            written += chunk.len() as u64;
         }
-        let data = las::PointDataBuilder::new()
-            .with_format(format)
-            .with_transforms(transforms)
-            .build_from_bytes(bytes)
-            .map_err(|e| las_err(path, e))?;
-        writer.write_points(&data).map_err(|e| las_err(path, e))?;
-        written += chunk.len() as u64;
+        writer.close()?;
+        Ok(written)
+    };
+    match write_all() {
+        Ok(n) => Ok(n),
+        Err(e) => {
+            // las-rs closes an unclosed writer in Drop and panics if that fails (disk full...):
+            // on this error path, leak the writer instead; the caller removes the file.
+            std::mem::forget(writer);
+            Err(las_err(path, e))
+        }
     }
-    writer.close().map_err(|e| las_err(path, e))?;
-    Ok(written)
 }
 
 /// One point format 6 record (LAS 1.4 R15 Table 13): X, Y, Z as scaled i32; intensity 0; return 1
