@@ -6,6 +6,7 @@
 
 pub mod error;
 pub mod io;
+pub mod synth;
 
 pub use error::{Error, Result};
 pub mod spatial;

@@ -1,0 +1,303 @@
+//! `talus synth`: synthetic pairs of epochs with exactly known ground truth.
+//!
+//! Each scene is two analytic surfaces ([`scenes`]) whose difference has a closed-form volume per
+//! change event. Each epoch is sampled independently (its own random streams), uniformly by area
+//! over its true surface including vertical faces (box walls, the cliff face, scar walls), with
+//! Gaussian noise of standard deviation `noise` applied along the surface normal (so a flat
+//! surface gets vertical noise and a cliff face horizontal noise, as a scanner's range noise
+//! would roughly do). Points are generated and written in chunks of at most
+//! [`CHUNK_POINTS`] ([`sampling`]), so the 120M-point scene never sits in memory.
+//!
+//! Outputs in the directory: `before.laz` and `after.laz` (or `.las`): LAS 1.4, point format 6,
+//! scale 1 mm, offsets at the scene origin (x = 500 000, y = 5 000 000, z = 0: UTM-like, ground at
+//! z ≈ 100), a WKT CRS VLR for WGS 84 / UTM zone 33N (EPSG:32633); and `truth.json`
+//! ([`Truth`]). Every file is written under a temporary name and renamed when complete.
+//!
+//! Evaluating the scenes is the point: the volumes follow Gorup & Bohak's synthetic tests (a hill,
+//! a cube, spheres, mixed cubes) plus a cliff with rockfall scars and a debris fan, a stable pair
+//! (false-positive check) and a large pair for the out-of-core path.
+
+mod output;
+mod rng;
+mod sampling;
+pub mod scenes;
+mod surface;
+mod truth;
+
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+
+pub use output::UTM33N_WKT;
+pub use sampling::{Chunks, CHUNK_POINTS};
+pub use scenes::{Footprint, ModelEvent, SceneModel};
+pub use truth::{Truth, TruthEvent};
+
+use crate::error::{Error, Result};
+use sampling::Placement;
+
+/// Global origin of the local scene coordinates (UTM-like easting, northing; z kept as is).
+pub const ORIGIN: [f64; 3] = [500_000.0, 5_000_000.0, 0.0];
+
+/// EPSG code of the CRS written in every synthetic file.
+pub const CRS_EPSG: u32 = 32633;
+
+/// The synthetic scenes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum SceneKind {
+    Hill,
+    Cube,
+    Spheres,
+    Cubes,
+    Cliff,
+    Stable,
+    Large,
+}
+
+impl SceneKind {
+    /// All scenes, in the order of their names.
+    pub const ALL: [SceneKind; 7] = [
+        SceneKind::Hill,
+        SceneKind::Cube,
+        SceneKind::Spheres,
+        SceneKind::Cubes,
+        SceneKind::Cliff,
+        SceneKind::Stable,
+        SceneKind::Large,
+    ];
+
+    /// The scene's name on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            SceneKind::Hill => "hill",
+            SceneKind::Cube => "cube",
+            SceneKind::Spheres => "spheres",
+            SceneKind::Cubes => "cubes",
+            SceneKind::Cliff => "cliff",
+            SceneKind::Stable => "stable",
+            SceneKind::Large => "large",
+        }
+    }
+
+    /// Points per epoch when none are asked for.
+    pub fn default_points(self) -> u64 {
+        scenes::default_points(self)
+    }
+
+    /// Noise standard deviation (m) when none is asked for: 1 cm for `stable`, else 5 mm.
+    pub fn default_noise(self) -> f64 {
+        scenes::default_noise(self)
+    }
+}
+
+impl std::fmt::Display for SceneKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for SceneKind {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        let lower = s.trim().to_ascii_lowercase();
+        SceneKind::ALL
+            .into_iter()
+            .find(|k| k.name() == lower)
+            .ok_or_else(|| {
+                let names: Vec<&str> = SceneKind::ALL.iter().map(|k| k.name()).collect();
+                Error::Usage(format!(
+                    "unknown scene '{s}': expected one of {}",
+                    names.join(", ")
+                ))
+            })
+    }
+}
+
+/// Options of [`synth`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct SynthOptions {
+    /// Points per epoch (epoch 2 gets `points · density2`); None = the scene's default.
+    pub points: Option<u64>,
+    pub seed: u64,
+    /// Noise standard deviation (m) along the surface normal; None = the scene's default.
+    pub noise: Option<f64>,
+    /// Rotate the whole scene about the vertical axis through its centre (degrees, CCW).
+    pub rotate_deg: f64,
+    /// Epoch-2 density relative to epoch 1.
+    pub density2: f64,
+    /// Write LAZ (true) or LAS.
+    pub laz: bool,
+}
+
+impl Default for SynthOptions {
+    fn default() -> Self {
+        SynthOptions {
+            points: None,
+            seed: 1,
+            noise: None,
+            rotate_deg: 0.0,
+            density2: 1.0,
+            laz: true,
+        }
+    }
+}
+
+/// Largest point count per epoch accepted (keeps the large scene's coordinates far inside the
+/// LAS i32 range at 1 mm scale).
+const MAX_POINTS: u64 = 100_000_000_000;
+/// Smallest point count per epoch accepted for the small scenes.
+const MIN_POINTS: u64 = 100;
+
+/// The checked, resolved parameters of a run.
+struct Resolved {
+    points: [u64; 2],
+    noise: f64,
+}
+
+fn resolve(kind: SceneKind, opts: &SynthOptions) -> Result<Resolved> {
+    let n1 = opts.points.unwrap_or_else(|| kind.default_points());
+    let min = if kind == SceneKind::Large {
+        scenes::LARGE_MIN_POINTS
+    } else {
+        MIN_POINTS
+    };
+    if !(min..=MAX_POINTS).contains(&n1) {
+        return Err(Error::Usage(format!(
+            "synth {kind}: --points must be between {min} and {MAX_POINTS}, got {n1}"
+        )));
+    }
+    let noise = opts.noise.unwrap_or_else(|| kind.default_noise());
+    if !(noise.is_finite() && (0.0..=1.0).contains(&noise)) {
+        return Err(Error::Usage(format!(
+            "synth: --noise must be between 0 and 1 m, got {noise}"
+        )));
+    }
+    if !opts.rotate_deg.is_finite() {
+        return Err(Error::Usage(
+            "synth: --rotate must be a finite angle".into(),
+        ));
+    }
+    if !(opts.density2.is_finite() && opts.density2 > 0.0) {
+        return Err(Error::Usage(format!(
+            "synth: --density2 must be positive, got {}",
+            opts.density2
+        )));
+    }
+    let n2 = (n1 as f64 * opts.density2).round();
+    if !(1.0..=MAX_POINTS as f64).contains(&n2) {
+        return Err(Error::Usage(format!(
+            "synth: epoch 2 would have {n2} points (--points × --density2); must be 1 to {MAX_POINTS}"
+        )));
+    }
+    Ok(Resolved {
+        points: [n1, n2 as u64],
+        noise,
+    })
+}
+
+/// The analytic model of a scene as [`synth`] would build it for `opts` (the large scene's size
+/// depends on the point count).
+pub fn scene_model(kind: SceneKind, opts: &SynthOptions) -> Result<SceneModel> {
+    let r = resolve(kind, opts)?;
+    Ok(SceneModel::new(kind, r.points[0]))
+}
+
+/// The points of epoch `epoch` (0 = before, 1 = after) as [`synth`] writes them (global
+/// coordinates, before 1 mm quantisation), as a lazy sequence of chunks of at most
+/// [`CHUNK_POINTS`] points.
+pub fn epoch_chunks(kind: SceneKind, opts: &SynthOptions, epoch: usize) -> Result<Chunks> {
+    if epoch > 1 {
+        return Err(Error::Usage(format!("epoch must be 0 or 1, got {epoch}")));
+    }
+    let r = resolve(kind, opts)?;
+    let model = SceneModel::new(kind, r.points[0]);
+    Ok(chunks_of(&model, &r, opts, epoch))
+}
+
+fn placement(model: &SceneModel, opts: &SynthOptions) -> Placement {
+    Placement::new(model.centre, opts.rotate_deg, ORIGIN)
+}
+
+fn chunks_of(model: &SceneModel, r: &Resolved, opts: &SynthOptions, epoch: usize) -> Chunks {
+    Chunks::new(
+        model.patches[epoch].clone(),
+        r.points[epoch],
+        opts.seed,
+        epoch as u64,
+        r.noise,
+        placement(model, opts),
+    )
+}
+
+/// Generate scene `kind` into `out_dir` (created if missing): `before.laz`, `after.laz` (`.las`
+/// when `opts.laz` is false) and `truth.json`, each written atomically. Returns the truth.
+pub fn synth(kind: SceneKind, opts: &SynthOptions, out_dir: &Path) -> Result<Truth> {
+    let r = resolve(kind, opts)?;
+    std::fs::create_dir_all(out_dir).map_err(|e| Error::output(out_dir, e))?;
+    let model = SceneModel::new(kind, r.points[0]);
+    let ext = if opts.laz { "laz" } else { "las" };
+    let names = [
+        PathBuf::from(format!("before.{ext}")),
+        PathBuf::from(format!("after.{ext}")),
+    ];
+    let mut written = [0u64; 2];
+    for epoch in 0..2 {
+        let chunks = chunks_of(&model, &r, opts, epoch);
+        written[epoch] = output::write_epoch(
+            &out_dir.join(&names[epoch]),
+            chunks,
+            ORIGIN,
+            epoch as u16 + 1,
+            opts.laz,
+        )?;
+        if written[epoch] != r.points[epoch] {
+            return Err(Error::Internal(format!(
+                "synth wrote {} points, planned {}",
+                written[epoch], r.points[epoch]
+            )));
+        }
+    }
+    let place = placement(&model, opts);
+    let events: Vec<TruthEvent> = model
+        .events
+        .iter()
+        .enumerate()
+        .map(|(i, e)| TruthEvent {
+            id: i as u32 + 1,
+            kind: if e.volume_m3 >= 0.0 { "gain" } else { "loss" }.into(),
+            volume_m3: e.volume_m3,
+            centre: place.apply(e.centre),
+            radius_m: e.radius_m,
+            description: e.description.clone(),
+        })
+        .collect();
+    let truth = Truth {
+        scene: kind.name().into(),
+        summary: model.summary.clone(),
+        seed: opts.seed,
+        epochs: names,
+        points: written,
+        noise_m: r.noise,
+        noise_model: "gaussian along the true surface normal".into(),
+        rotate_deg: opts.rotate_deg,
+        rotation_centre: [ORIGIN[0] + model.centre[0], ORIGIN[1] + model.centre[1]],
+        density2: opts.density2,
+        crs_epsg: CRS_EPSG,
+        crs_wkt: UTM33N_WKT.into(),
+        total_gain_m3: events.iter().map(|e| e.volume_m3.max(0.0)).sum(),
+        total_loss_m3: events.iter().map(|e| e.volume_m3.min(0.0)).sum(),
+        events,
+    };
+    write_json(&out_dir.join("truth.json"), &truth)?;
+    Ok(truth)
+}
+
+fn write_json(path: &Path, truth: &Truth) -> Result<()> {
+    let json = serde_json::to_vec_pretty(truth)
+        .map_err(|e| Error::Internal(format!("truth.json: {e}")))?;
+    let tmp = path.with_extension("json.tmp");
+    std::fs::write(&tmp, json).map_err(|e| Error::output(path, e))?;
+    std::fs::rename(&tmp, path).map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        Error::output(path, e)
+    })
+}

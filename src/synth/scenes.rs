@@ -1,0 +1,653 @@
+//! The synthetic scenes: two analytic surfaces per scene and the closed-form volumes of their
+//! differences (the ground truth of `talus synth`).
+//!
+//! All scenes are built in local metres (x east, y north, z up, ground at z ≈ 100) and shifted to
+//! UTM-like coordinates when written. Change features never overlap and stay at least a few metres
+//! from the scene edges. Volumes (signed: loss < 0) follow from the formulas in
+//! [`surface`](super::surface): bump h·R²(π/2 − 2/π), spherical cap πh²(3R − h)/3, box w·d·h,
+//! half-cone (a cone cut in half by the cliff face) πR²H/6, half-ellipsoid (2/3)πabc.
+
+use std::f64::consts::{PI, TAU};
+
+use super::surface::{
+    box_walls, bump_volume, cap_footprint, cap_volume, Base, Feature, Heightfield, Hole, Patch,
+    Wave,
+};
+use super::SceneKind;
+
+/// Where an event's change lies, for integrating it: a rectangle of the ground (x, y) over which
+/// the two heightfields differ, or a rectangle of the cliff face (x, z) over which the depth into
+/// the face differs. Local coordinates.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Footprint {
+    Ground { min: [f64; 2], max: [f64; 2] },
+    Face { min: [f64; 2], max: [f64; 2] },
+}
+
+/// One change event of a scene in local coordinates, with its closed-form volume.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ModelEvent {
+    /// Signed volume V(after) − V(before) in m³.
+    pub volume_m3: f64,
+    /// Centre of the footprint on the epoch-1 surface (on the face plane for face scars; the
+    /// footprint centroid for the half-disk of the debris fan).
+    pub centre: [f64; 3],
+    /// Radius of a circle around `centre` that contains the footprint.
+    pub radius_m: f64,
+    pub footprint: Footprint,
+    pub description: String,
+}
+
+/// A rockfall scar hollowed into the cliff face (plane y = 0, rock at y > 0); (x, z) coordinates.
+#[derive(Debug, Clone, Copy)]
+enum Scar {
+    Box {
+        min: [f64; 2],
+        max: [f64; 2],
+        depth: f64,
+    },
+    /// Half-ellipsoid with semi-axes a (along x), depth b (into the face, y), c (along z).
+    HalfEllipsoid {
+        c: [f64; 2],
+        a: f64,
+        b: f64,
+        cz: f64,
+    },
+}
+
+impl Scar {
+    fn depth(&self, x: f64, z: f64) -> f64 {
+        match *self {
+            Scar::Box { min, max, depth } => {
+                if x >= min[0] && x < max[0] && z >= min[1] && z < max[1] {
+                    depth
+                } else {
+                    0.0
+                }
+            }
+            Scar::HalfEllipsoid { c, a, b, cz } => {
+                let q = 1.0 - ((x - c[0]) / a).powi(2) - ((z - c[1]) / cz).powi(2);
+                if q > 0.0 {
+                    b * q.sqrt()
+                } else {
+                    0.0
+                }
+            }
+        }
+    }
+}
+
+/// The analytic model of a scene: each epoch's surface as sampling patches, the heightfields and
+/// face scars for evaluating it, and the events.
+#[derive(Debug, Clone)]
+pub struct SceneModel {
+    pub(crate) patches: [Vec<Patch>; 2],
+    scars: [Vec<Scar>; 2],
+    face: Option<([f64; 2], [f64; 2])>,
+    pub(crate) events: Vec<ModelEvent>,
+    /// Centre of the scene's footprint: the vertical rotation axis of `--rotate`.
+    pub(crate) centre: [f64; 2],
+    pub(crate) summary: String,
+}
+
+/// Default points per epoch of each scene (about 0.1 m spacing for the small ones).
+pub(crate) fn default_points(kind: SceneKind) -> u64 {
+    match kind {
+        SceneKind::Hill | SceneKind::Cubes | SceneKind::Stable => 160_000,
+        SceneKind::Cube => 100_000,
+        SceneKind::Spheres | SceneKind::Cliff => 250_000,
+        SceneKind::Large => 120_000_000,
+    }
+}
+
+/// Default noise (standard deviation, m) of each scene.
+pub(crate) fn default_noise(kind: SceneKind) -> f64 {
+    match kind {
+        SceneKind::Stable => 0.01,
+        _ => 0.005,
+    }
+}
+
+/// Point spacing of the large scene: its side is sqrt(points)·spacing.
+pub(crate) const LARGE_SPACING: f64 = 0.15;
+/// Feature grid pitch of the large scene (centres on multiples of it, so every feature straddles
+/// round-number coordinates such as 100 m tile borders).
+const LARGE_PITCH: f64 = 50.0;
+/// Distance from the large scene's edges within which no feature centre lies.
+const LARGE_MARGIN: f64 = 25.0;
+/// Smallest large scene that still holds a feature: 2 × margin + pitch on a side.
+pub(crate) const LARGE_MIN_POINTS: u64 = 1_000_000;
+
+fn ground(min: [f64; 2], max: [f64; 2]) -> Footprint {
+    Footprint::Ground { min, max }
+}
+
+fn square(c: [f64; 2], r: f64) -> Footprint {
+    ground([c[0] - r, c[1] - r], [c[0] + r, c[1] + r])
+}
+
+fn height_patch(field: Heightfield, min: [f64; 2], max: [f64; 2]) -> Patch {
+    Patch::Height { field, min, max }
+}
+
+impl SceneModel {
+    /// The model of `kind`; `points` is the per-epoch count (used by the large scene for its size).
+    pub fn new(kind: SceneKind, points: u64) -> Self {
+        match kind {
+            SceneKind::Hill => hill(),
+            SceneKind::Cube => cube(),
+            SceneKind::Spheres => spheres(),
+            SceneKind::Cubes => cubes(),
+            SceneKind::Cliff => cliff(),
+            SceneKind::Stable => stable(),
+            SceneKind::Large => large(points),
+        }
+    }
+
+    /// The events with their closed-form volumes (local coordinates).
+    pub fn events(&self) -> &[ModelEvent] {
+        &self.events
+    }
+
+    /// Height of epoch `epoch` (0 = before, 1 = after) at local (x, y), where the epoch's surface
+    /// is a heightfield there (ground, box tops, plateau); None elsewhere.
+    pub fn height(&self, epoch: usize, x: f64, y: f64) -> Option<f64> {
+        self.patches[epoch].iter().find_map(|p| match p {
+            Patch::Height { field, min, max }
+                if x >= min[0] && x <= max[0] && y >= min[1] && y <= max[1] =>
+            {
+                Some(field.eval(x, y).0)
+            }
+            _ => None,
+        })
+    }
+
+    /// Depth into the cliff face (m, ≥ 0) of epoch `epoch` at face coordinates (x, z); None when
+    /// the scene has no face or (x, z) is off it.
+    pub fn face_depth(&self, epoch: usize, x: f64, z: f64) -> Option<f64> {
+        let (min, max) = self.face?;
+        if x < min[0] || x > max[0] || z < min[1] || z > max[1] {
+            return None;
+        }
+        Some(self.scars[epoch].iter().map(|s| s.depth(x, z)).sum())
+    }
+
+    /// Local centre of the scene (rotation axis).
+    pub fn centre(&self) -> [f64; 2] {
+        self.centre
+    }
+
+    fn heightfield_scene(
+        size: [f64; 2],
+        fields: [Heightfield; 2],
+        walls: [Vec<Patch>; 2],
+        events: Vec<ModelEvent>,
+        summary: &str,
+    ) -> Self {
+        let [f1, f2] = fields;
+        let [w1, w2] = walls;
+        let mut p1 = vec![height_patch(f1, [0.0, 0.0], size)];
+        p1.extend(w1);
+        let mut p2 = vec![height_patch(f2, [0.0, 0.0], size)];
+        p2.extend(w2);
+        SceneModel {
+            patches: [p1, p2],
+            scars: [Vec::new(), Vec::new()],
+            face: None,
+            events,
+            centre: [size[0] / 2.0, size[1] / 2.0],
+            summary: summary.to_string(),
+        }
+    }
+}
+
+/// Epoch-1 height at (x, y), for event centres.
+fn z_at(field: &Heightfield, c: [f64; 2]) -> f64 {
+    field.eval(c[0], c[1]).0
+}
+
+/// hill: a 40 m × 40 m tilted plane; epoch 2 adds h·cos²(πr/2R), R = 6 m, h = 1.5 m at the centre.
+/// V = h·R²·(π/2 − 2/π) ≈ 50.44 m³.
+fn hill() -> SceneModel {
+    let base = Base {
+        z0: 100.0,
+        gx: 0.02,
+        gy: 0.01,
+        waves: Vec::new(),
+    };
+    let (c, radius, height) = ([20.0, 20.0], 6.0, 1.5);
+    let f1 = Heightfield::new(base.clone(), Vec::new());
+    let f2 = Heightfield::new(base, vec![Feature::Bump { c, radius, height }]);
+    let events = vec![ModelEvent {
+        volume_m3: bump_volume(radius, height),
+        centre: [c[0], c[1], z_at(&f1, c)],
+        radius_m: radius,
+        footprint: square(c, radius),
+        description: format!("hill: h·cos²(πr/2R) bump, R = {radius} m, h = {height} m"),
+    }];
+    SceneModel::heightfield_scene(
+        [40.0, 40.0],
+        [f1, f2],
+        [Vec::new(), Vec::new()],
+        events,
+        "smooth bump on a tilted plane",
+    )
+}
+
+/// cube: a 30 m × 30 m plane; epoch 2 has a 4 × 4 × 1.5 m box on it (top and four walls sampled).
+/// V = 24 m³.
+fn cube() -> SceneModel {
+    let (min, max, h) = ([13.0, 13.0], [17.0, 17.0], 1.5);
+    let f1 = Heightfield::new(Base::plane(100.0), Vec::new());
+    let f2 = Heightfield::new(
+        Base::plane(100.0),
+        vec![Feature::Block {
+            min,
+            max,
+            height: h,
+        }],
+    );
+    let events = vec![ModelEvent {
+        volume_m3: 4.0 * 4.0 * h,
+        centre: [15.0, 15.0, 100.0],
+        radius_m: 8f64.sqrt(),
+        footprint: ground(min, max),
+        description: "cube: 4 × 4 × 1.5 m box raised from the plane".into(),
+    }];
+    SceneModel::heightfield_scene(
+        [30.0, 30.0],
+        [f1, f2],
+        [Vec::new(), box_walls(min, max, 100.0, 100.0 + h)],
+        events,
+        "box raised from a plane",
+    )
+}
+
+/// spheres: a 50 m × 50 m gently tilted plane; epoch 2 has spherical caps (gains) and dents
+/// (losses), V = ±πh²(3R − h)/3 each.
+fn spheres() -> SceneModel {
+    let base = Base {
+        z0: 100.0,
+        gx: 0.01,
+        gy: -0.005,
+        waves: Vec::new(),
+    };
+    // (centre, sphere radius, signed cap height)
+    let caps: [([f64; 2], f64, f64); 5] = [
+        ([12.0, 12.0], 5.0, 1.0),
+        ([38.0, 14.0], 3.0, 1.5),
+        ([14.0, 37.0], 4.0, -0.8),
+        ([36.0, 36.0], 6.0, -1.2),
+        ([25.0, 25.0], 2.0, 0.5),
+    ];
+    let f1 = Heightfield::new(base.clone(), Vec::new());
+    let features = caps
+        .iter()
+        .map(|&(c, sphere_radius, height)| Feature::Cap {
+            c,
+            sphere_radius,
+            height,
+        })
+        .collect();
+    let f2 = Heightfield::new(base, features);
+    let events = caps
+        .iter()
+        .map(|&(c, rs, h)| {
+            let a = cap_footprint(rs, h);
+            ModelEvent {
+                volume_m3: cap_volume(rs, h),
+                centre: [c[0], c[1], z_at(&f1, c)],
+                radius_m: a,
+                footprint: square(c, a),
+                description: format!(
+                    "spherical {} R = {rs} m, h = {} m",
+                    if h > 0.0 { "cap" } else { "dent" },
+                    h.abs()
+                ),
+            }
+        })
+        .collect();
+    SceneModel::heightfield_scene(
+        [50.0, 50.0],
+        [f1, f2],
+        [Vec::new(), Vec::new()],
+        events,
+        "spherical caps and dents on a tilted plane",
+    )
+}
+
+/// cubes: boxes on a 40 m × 40 m plane in both epochs: A removed (loss), B appears (gain), C grows
+/// from 1 m to 2 m (gain), D a pit dug (loss), E unchanged (a control: no event).
+fn cubes() -> SceneModel {
+    struct Bx {
+        name: &'static str,
+        min: [f64; 2],
+        max: [f64; 2],
+        h: [f64; 2],
+    }
+    let boxes = [
+        Bx {
+            name: "A: 3 × 3 × 1 m box removed",
+            min: [8.0, 8.0],
+            max: [11.0, 11.0],
+            h: [1.0, 0.0],
+        },
+        Bx {
+            name: "B: 4 × 2 × 1.5 m box placed",
+            min: [28.0, 9.0],
+            max: [32.0, 11.0],
+            h: [0.0, 1.5],
+        },
+        Bx {
+            name: "C: 3 × 3 m box grown from 1 m to 2 m",
+            min: [8.5, 28.5],
+            max: [11.5, 31.5],
+            h: [1.0, 2.0],
+        },
+        Bx {
+            name: "D: 3 × 2 × 1 m pit dug",
+            min: [28.5, 29.0],
+            max: [31.5, 31.0],
+            h: [0.0, -1.0],
+        },
+        Bx {
+            name: "E: 2 × 2 × 1 m box unchanged",
+            min: [19.0, 19.0],
+            max: [21.0, 21.0],
+            h: [1.0, 1.0],
+        },
+    ];
+    let z0 = 100.0;
+    let mut fields = Vec::new();
+    let mut walls = [Vec::new(), Vec::new()];
+    for (e, w) in walls.iter_mut().enumerate() {
+        let mut features = Vec::new();
+        for b in boxes.iter().filter(|b| b.h[e] != 0.0) {
+            features.push(Feature::Block {
+                min: b.min,
+                max: b.max,
+                height: b.h[e],
+            });
+            w.extend(box_walls(
+                b.min,
+                b.max,
+                z0 + b.h[e].min(0.0),
+                z0 + b.h[e].max(0.0),
+            ));
+        }
+        fields.push(Heightfield::new(Base::plane(z0), features));
+    }
+    let events = boxes
+        .iter()
+        .filter(|b| b.h[0] != b.h[1])
+        .map(|b| {
+            let (dx, dy) = (b.max[0] - b.min[0], b.max[1] - b.min[1]);
+            let c = [(b.min[0] + b.max[0]) / 2.0, (b.min[1] + b.max[1]) / 2.0];
+            ModelEvent {
+                volume_m3: dx * dy * (b.h[1] - b.h[0]),
+                centre: [c[0], c[1], z0 + b.h[0]],
+                radius_m: dx.hypot(dy) / 2.0,
+                footprint: ground(b.min, b.max),
+                description: b.name.to_string(),
+            }
+        })
+        .collect();
+    let [f1, f2]: [Heightfield; 2] = match fields.try_into() {
+        Ok(f) => f,
+        Err(_) => unreachable!("two epochs"),
+    };
+    SceneModel::heightfield_scene(
+        [40.0, 40.0],
+        [f1, f2],
+        walls,
+        events,
+        "boxes removed, placed, grown, dug and unchanged",
+    )
+}
+
+/// cliff: a beach (x ∈ [0, 60], y ∈ [−20, 0], sloping 2 % seaward to −y) at the foot of a 30 m
+/// vertical face in the plane y = 0 (rock at y > 0, face normal −y), with a 10 m deep plateau on
+/// top. Epoch 2: a box scar 4 m wide × 3 m high × 1 m deep (V = −12 m³), a half-ellipsoid scar with
+/// semi-axes 3 m (x), 1.5 m (depth), 2.5 m (z) (V = −(2/3)π·3·1.5·2.5 ≈ −23.56 m³), and a debris
+/// fan at the foot: a cone of radius 5 m and height 3.5 m (35° slope) centred on the foot of the
+/// face, half of which lies in front of it (V = πR²H/6 ≈ 45.81 m³; it hides the face below its
+/// profile).
+fn cliff() -> SceneModel {
+    let (width, height, beach, plateau) = (60.0, 30.0, 20.0, 10.0);
+    let z0 = 100.0;
+    let beach_base = Base {
+        z0,
+        gx: 0.0,
+        gy: 0.02,
+        waves: Vec::new(),
+    };
+    let (fan_c, fan_r, fan_h) = ([26.0, 0.0], 5.0, 3.5);
+    let box_scar = Scar::Box {
+        min: [10.0, z0 + 15.0],
+        max: [14.0, z0 + 18.0],
+        depth: 1.0,
+    };
+    let (ell_c, ell_a, ell_b, ell_cz) = ([40.0, z0 + 20.0], 3.0, 1.5, 2.5);
+    let ell_scar = Scar::HalfEllipsoid {
+        c: ell_c,
+        a: ell_a,
+        b: ell_b,
+        cz: ell_cz,
+    };
+    let top = Heightfield::new(Base::plane(z0 + height), Vec::new());
+    let face = |holes: Vec<Hole>| Patch::Plane {
+        origin: [0.0, 0.0, z0],
+        eu: [1.0, 0.0, 0.0],
+        ev: [0.0, 0.0, 1.0],
+        len: [width, height],
+        holes,
+    };
+    let p1 = vec![
+        height_patch(
+            Heightfield::new(beach_base.clone(), Vec::new()),
+            [0.0, -beach],
+            [width, 0.0],
+        ),
+        height_patch(top.clone(), [0.0, 0.0], [width, plateau]),
+        face(Vec::new()),
+    ];
+    let mut p2 = vec![
+        height_patch(
+            Heightfield::new(
+                beach_base.clone(),
+                vec![Feature::Cone {
+                    c: fan_c,
+                    radius: fan_r,
+                    height: fan_h,
+                }],
+            ),
+            [0.0, -beach],
+            [width, 0.0],
+        ),
+        height_patch(top, [0.0, 0.0], [width, plateau]),
+        face(vec![
+            Hole::Rect {
+                min: [10.0, 15.0],
+                max: [14.0, 18.0],
+            },
+            Hole::Ellipse {
+                c: [ell_c[0], ell_c[1] - z0],
+                a: ell_a,
+                b: ell_cz,
+            },
+            Hole::BelowTent {
+                cu: fan_c[0],
+                peak: fan_h,
+                slope: fan_h / fan_r,
+            },
+        ]),
+    ];
+    // The box scar's back wall, floor, ceiling and two side walls.
+    let (bx0, bx1, bz0, bz1, d) = (10.0, 14.0, z0 + 15.0, z0 + 18.0, 1.0);
+    let plane = |origin, eu, ev, len| Patch::Plane {
+        origin,
+        eu,
+        ev,
+        len,
+        holes: Vec::new(),
+    };
+    let (ex, ey, ez) = ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]);
+    p2.push(plane([bx0, d, bz0], ex, ez, [bx1 - bx0, bz1 - bz0]));
+    p2.push(plane([bx0, 0.0, bz0], ex, ey, [bx1 - bx0, d]));
+    p2.push(plane([bx0, 0.0, bz1], ex, ey, [bx1 - bx0, d]));
+    p2.push(plane([bx0, 0.0, bz0], ey, ez, [d, bz1 - bz0]));
+    p2.push(plane([bx1, 0.0, bz0], ey, ez, [d, bz1 - bz0]));
+    p2.push(Patch::HalfEllipsoid {
+        centre: [ell_c[0], 0.0, ell_c[1]],
+        radii: [ell_a, ell_b, ell_cz],
+    });
+    let fan_centroid_y = -4.0 * fan_r / (3.0 * PI);
+    let events = vec![
+        ModelEvent {
+            volume_m3: -(bx1 - bx0) * (bz1 - bz0) * d,
+            centre: [(bx0 + bx1) / 2.0, 0.0, (bz0 + bz1) / 2.0],
+            radius_m: (bx1 - bx0).hypot(bz1 - bz0) / 2.0,
+            footprint: Footprint::Face {
+                min: [bx0, bz0],
+                max: [bx1, bz1],
+            },
+            description: "rockfall scar: box 4 m wide, 3 m high, 1 m deep into the face".into(),
+        },
+        ModelEvent {
+            volume_m3: -2.0 / 3.0 * PI * ell_a * ell_b * ell_cz,
+            centre: [ell_c[0], 0.0, ell_c[1]],
+            radius_m: ell_a.max(ell_cz),
+            footprint: Footprint::Face {
+                min: [ell_c[0] - ell_a, ell_c[1] - ell_cz],
+                max: [ell_c[0] + ell_a, ell_c[1] + ell_cz],
+            },
+            description: "rockfall scar: half-ellipsoid 3 m × 2.5 m semi-axes, 1.5 m deep".into(),
+        },
+        ModelEvent {
+            volume_m3: PI * fan_r * fan_r * fan_h / 6.0,
+            centre: [
+                fan_c[0],
+                fan_centroid_y,
+                z0 + beach_base.gy * fan_centroid_y,
+            ],
+            radius_m: fan_r,
+            footprint: ground([fan_c[0] - fan_r, -fan_r], [fan_c[0] + fan_r, 0.0]),
+            description: "debris fan: half-cone R = 5 m, H = 3.5 m against the face foot".into(),
+        },
+    ];
+    SceneModel {
+        patches: [p1, p2],
+        scars: [Vec::new(), vec![box_scar, ell_scar]],
+        face: Some(([0.0, z0], [width, z0 + height])),
+        events,
+        centre: [width / 2.0, (plateau - beach) / 2.0],
+        summary: "vertical cliff face with beach and plateau; rockfall scars and a debris fan"
+            .into(),
+    }
+}
+
+/// A smooth wave of wavelengths (lx, ly) (∞ = constant along that axis).
+fn wave(amp: f64, lx: f64, ly: f64, phase: f64) -> Wave {
+    Wave {
+        amp,
+        kx: TAU / lx,
+        ky: TAU / ly,
+        phase,
+    }
+}
+
+/// stable: 40 m × 40 m undulating surface, the same in both epochs except a 5 mm vertical shift of
+/// epoch 2 (a registration error below any sensible detection threshold): no events.
+fn stable() -> SceneModel {
+    let base = |z0| Base {
+        z0,
+        gx: 0.0,
+        gy: 0.0,
+        waves: vec![
+            wave(0.5, 25.0, f64::INFINITY, 0.3),
+            wave(0.3, f64::INFINITY, 30.0, 1.0),
+        ],
+    };
+    SceneModel::heightfield_scene(
+        [40.0, 40.0],
+        [
+            Heightfield::new(base(100.0), Vec::new()),
+            Heightfield::new(base(100.005), Vec::new()),
+        ],
+        [Vec::new(), Vec::new()],
+        Vec::new(),
+        "unchanged undulating surface resampled, epoch 2 shifted +5 mm in z",
+    )
+}
+
+/// large: a square of side sqrt(points)·0.15 m of gently undulating terrain (slopes below 12 %)
+/// with a grid of bumps and pits every 50 m (centres on multiples of 50 m, ≥ 25 m from the edges):
+/// cos² bumps and dents (V = ±h·R²(π/2 − 2/π)) and spherical caps and dents (V = ±πh²(3R − h)/3).
+fn large(points: u64) -> SceneModel {
+    let side = (points as f64).sqrt() * LARGE_SPACING;
+    let base = Base {
+        z0: 100.0,
+        gx: 0.0,
+        gy: 0.0,
+        waves: vec![
+            wave(3.0, 400.0, 583.0, 0.3),
+            wave(1.5, -520.0, 310.0, 1.1),
+            wave(0.4, 90.0, 120.0, 2.0),
+        ],
+    };
+    let f1 = Heightfield::new(base.clone(), Vec::new());
+    // Centres k·pitch for k = 1..=n with k·pitch ≤ side − margin (and pitch ≥ margin).
+    let n = ((side - LARGE_MARGIN) / LARGE_PITCH).floor().max(0.0) as usize;
+    let mut features = Vec::new();
+    let mut events = Vec::new();
+    for j in 1..=n {
+        for i in 1..=n {
+            let c = [i as f64 * LARGE_PITCH, j as f64 * LARGE_PITCH];
+            let sign = if (i + j) % 2 == 0 { 1.0 } else { -1.0 };
+            let word = if sign > 0.0 { "bump" } else { "dent" };
+            let (feature, volume, radius, what) = if (i / 2 + j) % 2 == 0 {
+                let radius = 4.0 + (i % 3) as f64;
+                let height = sign * (0.5 + 0.25 * (j % 3) as f64);
+                (
+                    Feature::Bump { c, radius, height },
+                    bump_volume(radius, height),
+                    radius,
+                    format!("cos² {word} R = {radius} m, h = {} m", height.abs()),
+                )
+            } else {
+                let sphere_radius = 8.0;
+                let height = sign * (0.6 + 0.2 * (i % 3) as f64);
+                (
+                    Feature::Cap {
+                        c,
+                        sphere_radius,
+                        height,
+                    },
+                    cap_volume(sphere_radius, height),
+                    cap_footprint(sphere_radius, height),
+                    format!(
+                        "spherical {} R = {sphere_radius} m, h = {} m",
+                        if sign > 0.0 { "cap" } else { "dent" },
+                        height.abs()
+                    ),
+                )
+            };
+            features.push(feature);
+            events.push(ModelEvent {
+                volume_m3: volume,
+                centre: [c[0], c[1], z_at(&f1, c)],
+                radius_m: radius,
+                footprint: square(c, radius),
+                description: what,
+            });
+        }
+    }
+    let f2 = Heightfield::new(base, features);
+    SceneModel::heightfield_scene(
+        [side, side],
+        [f1, f2],
+        [Vec::new(), Vec::new()],
+        events,
+        "undulating terrain with a 50 m grid of bumps and pits",
+    )
+}

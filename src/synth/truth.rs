@@ -1,0 +1,55 @@
+//! The ground truth written next to a synthetic pair (`truth.json`).
+
+use std::path::PathBuf;
+
+use serde::{Deserialize, Serialize};
+
+/// One true change event.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TruthEvent {
+    /// 1-based, in scene order.
+    pub id: u32,
+    /// "gain" or "loss" (the sign of `volume_m3`).
+    pub kind: String,
+    /// Signed volume change V(after) − V(before), m³ (loss < 0), from the closed-form formula.
+    pub volume_m3: f64,
+    /// Centre of the event's footprint on the epoch-1 surface, global coordinates.
+    pub centre: [f64; 3],
+    /// Radius (m) of a circle about `centre` containing the changed footprint.
+    pub radius_m: f64,
+    pub description: String,
+}
+
+/// Everything a comparison run is judged against.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Truth {
+    /// Scene name ("hill", "cube", ...).
+    pub scene: String,
+    /// One-line description of the scene.
+    pub summary: String,
+    pub seed: u64,
+    /// The two epoch files, relative to the directory of truth.json: [before, after].
+    pub epochs: [PathBuf; 2],
+    /// Points written per epoch.
+    pub points: [u64; 2],
+    /// Standard deviation of the noise (m).
+    pub noise_m: f64,
+    /// How noise was applied.
+    pub noise_model: String,
+    /// Rotation of the whole scene about the vertical axis through `rotation_centre` (degrees,
+    /// counter-clockwise seen from above).
+    pub rotate_deg: f64,
+    /// Global (x, y) of the rotation axis.
+    pub rotation_centre: [f64; 2],
+    /// Epoch-2 density relative to epoch 1.
+    pub density2: f64,
+    /// EPSG code of the CRS written in both files.
+    pub crs_epsg: u32,
+    /// The OGC WKT (version 1) written in both files' WKT CRS VLR.
+    pub crs_wkt: String,
+    pub events: Vec<TruthEvent>,
+    /// Sum of the positive volumes, m³.
+    pub total_gain_m3: f64,
+    /// Sum of the negative volumes, m³ (≤ 0).
+    pub total_loss_m3: f64,
+}
