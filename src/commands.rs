@@ -4,6 +4,7 @@ use std::net::IpAddr;
 use std::path::Path;
 
 use crate::error::{Error, Result};
+use crate::synth::{SceneKind, SynthOptions};
 
 /// `talus synth SCENE --out DIR`.
 #[allow(clippy::too_many_arguments)]
@@ -17,8 +18,25 @@ pub fn synth(
     density2: f64,
     laz: bool,
 ) -> Result<()> {
-    let _ = (scene, out, points, seed, noise, rotate, density2, laz);
-    Err(Error::Internal("synth is being merged".into()))
+    let kind: SceneKind = scene.parse()?;
+    let opts = SynthOptions {
+        points,
+        seed,
+        noise,
+        rotate_deg: rotate,
+        density2,
+        laz,
+    };
+    let truth = crate::synth::synth(kind, &opts, out)?;
+    println!(
+        "{}: {} + {} points, {} planted event(s), truth in {}",
+        truth.scene,
+        truth.points[0],
+        truth.points[1],
+        truth.events.len(),
+        out.join("truth.json").display()
+    );
+    Ok(())
 }
 
 /// `talus view DIR`.
