@@ -5,6 +5,8 @@
 //! DBSCAN, PCA box) → volume (clipped watertight solids) → outputs.
 
 pub mod error;
+pub mod events;
 pub mod io;
+pub mod volume;
 
 pub use error::{Error, Result};
