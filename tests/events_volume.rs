@@ -950,3 +950,42 @@ fn box_volume_is_unbiased_over_samplings() {
     assert!(mean.abs() < 0.25, "mean error {mean} %");
     assert!(errs.iter().all(|e| e.abs() < 1.0), "{errs:?}");
 }
+
+#[test]
+fn footprint_outside_the_data_takes_the_nearest_height() {
+    // The before epoch covers only the half u < 0.3 of the footprint; outside its hull the
+    // nearest vertex's height (0) carries on, so V = 0.5 m × footprint area.
+    let mut rng = Rng(15);
+    let place = Place::identity();
+    let density = 1.0 / (SPACING * SPACING);
+    let before: Vec<[f64; 3]> = sample(&[rect(5.0, 5.0, 0.0)], density, 0.0, &place, &mut rng)
+        .into_iter()
+        .filter(|p| p[0] < 0.3)
+        .collect();
+    let after = sample(&[rect(5.0, 5.0, 0.5)], density, 0.0, &place, &mut rng);
+    // An exactly level box frame: with a tilted one the nearest-vertex extension would not
+    // follow the tilt, and the truth would not be 0.5 × area.
+    let mut ev = box_case_event();
+    ev.obb = talus::events::Obb {
+        center: [0.0; 3],
+        axes: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        half_extents: [1.8, 1.4, 0.0],
+    };
+    let v = volume_of(&ev, 0.5, &before, &after, SPACING);
+    let truth = 0.5 * v.footprint_area_m2;
+    assert!(
+        (v.volume_m3 - truth).abs() < 1e-9 * truth,
+        "{} vs {truth}",
+        v.volume_m3
+    );
+    assert!((v.gain_m3 - truth).abs() < 1e-9 * truth && v.loss_m3 == 0.0);
+}
+
+#[test]
+fn volume_types_can_cross_threads() {
+    fn send_sync<T: Send + Sync>() {}
+    send_sync::<EventVolume>();
+    send_sync::<talus::volume::Tin>();
+    send_sync::<UserMesh>();
+    send_sync::<Event>();
+}

@@ -75,7 +75,13 @@ impl EventVolume {
     }
 }
 
-fn check_params(margin: f64, spacing: f64) -> Result<()> {
+fn check_params(obb: &Obb, margin: f64, spacing: f64) -> Result<()> {
+    let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+    if !(finite(&obb.center) && finite(&obb.half_extents) && obb.axes.iter().all(|a| finite(a))) {
+        return Err(Error::Internal(format!(
+            "volume: non-finite event box {obb:?}"
+        )));
+    }
     if !(spacing.is_finite() && spacing > 0.0) {
         return Err(Error::Usage(format!(
             "volume: point spacing must be > 0, got {spacing}"
@@ -120,7 +126,7 @@ pub fn event_volume(
     after: &[[f64; 3]],
     spacing: f64,
 ) -> Result<EventVolume> {
-    check_params(margin, spacing)?;
+    check_params(obb, margin, spacing)?;
     let frame = Frame::of_obb(obb);
     let r = Footprint::of_obb(obb, margin);
     let (tin1, n1) = epoch_tin(&frame, &r, before, spacing, "before")?;
@@ -148,7 +154,7 @@ pub fn event_volume_from_surfaces(
     after: &dyn Surface,
     spacing: f64,
 ) -> Result<EventVolume> {
-    check_params(margin, spacing)?;
+    check_params(obb, margin, spacing)?;
     let frame = Frame::of_obb(obb);
     let r = Footprint::of_obb(obb, margin);
     // The grid samples SUB² = 16 heights per node: cap at 1 M nodes.

@@ -358,3 +358,54 @@ pub fn close(top: &Mesh, base: f64, r: &Footprint) -> Mesh {
     }
     solid
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::volume::surface::Tin;
+
+    #[test]
+    fn flat_tin_clipped_solid_volume() {
+        let mut pts = Vec::new();
+        let mut s = 12345u64;
+        let mut f = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for _ in 0..4000 {
+            pts.push([f() * 10.0 - 5.0, f() * 10.0 - 5.0, 0.5]);
+        }
+        let tin = Tin::new(&pts).unwrap();
+        let (v, fc) = tin.mesh();
+        let r = Footprint {
+            u0: -2.31,
+            u1: 2.31,
+            v0: -1.9,
+            v1: 1.9,
+        };
+        let top = clipped_top(&v, &fc, &r);
+        let area: f64 = top
+            .faces
+            .iter()
+            .map(|t| {
+                let (a, b, c) = (
+                    top.vertices[t[0] as usize],
+                    top.vertices[t[1] as usize],
+                    top.vertices[t[2] as usize],
+                );
+                0.5 * ((b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1]))
+            })
+            .sum();
+        let solid = close(&top, 0.0, &r);
+        let vol = signed_volume(&solid);
+        eprintln!(
+            "area {area} vs {}, vol {vol} vs {}",
+            r.area(),
+            0.5 * r.area()
+        );
+        assert!((area - r.area()).abs() < 1e-9);
+        assert!((vol - 0.5 * r.area()).abs() < 1e-9);
+    }
+}

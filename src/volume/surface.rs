@@ -84,6 +84,12 @@ impl Tin {
     /// Add vertices every `step` along `rect`'s boundary wherever it lies outside the
     /// convex hull, with the height of the nearest data vertex, so that `rect` is covered.
     pub fn cover(&mut self, rect: &Footprint, step: f64) {
+        // At most ~100 k ring vertices, whatever the footprint.
+        let perimeter = 2.0 * ((rect.u1 - rect.u0) + (rect.v1 - rect.v0));
+        let step = step.max(perimeter / 1.0e5);
+        if !(step.is_finite() && step > 0.0) {
+            return;
+        }
         let nu = (((rect.u1 - rect.u0) / step).ceil() as usize).max(1);
         let nv = (((rect.v1 - rect.v0) / step).ceil() as usize).max(1);
         let mut ring = Vec::with_capacity(2 * (nu + nv));
