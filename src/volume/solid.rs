@@ -11,8 +11,12 @@
 //! - [`clipped_top`] (points → [`Tin`](super::surface::Tin)): every TIN triangle clipped to R
 //!   (Sutherland & Hodgman 1974). The volume is the exact integral of the piecewise-linear
 //!   TIN over R, so vertical steps (box sides, cliff scars) are kept where the wall points put
-//!   them. (A grid resampling would move each step to a grid line: a bias of up to
-//!   height × cell/2 per metre of wall, percent-level on a 1.5 m box — measured, not taken.)
+//!   them. (A plain grid resampling would move each step to the nearest grid line: up to
+//!   height × cell/2 per metre of wall, i.e. up to 3 % on the 4 × 3 × 1.5 m test box at
+//!   cell = spacing/2; that is why points are not resampled.) What remains is a zero-mean
+//!   sampling error: the triangles joining the last top (or ground) points to the wall
+//!   points take the random heights of those wall points over about half a spacing; on the
+//!   test box (10 cm spacing) its standard deviation is 0.35 % of the volume.
 //!   New vertices are labelled by what they are (a TIN vertex, a TIN edge ∩ a side of R, a
 //!   corner of R) and shared by label, so neighbouring triangles share them exactly and the
 //!   top is watertight by construction. Heights on clipped edges are interpolated along the
