@@ -1,0 +1,202 @@
+//! Event description (SPEC.md §1 "Event description"; Gorup & Bohak §3.4): statistics of a
+//! cluster and its PCA oriented bounding box.
+//!
+//! OBB by principal component analysis (Jolliffe 2002): the axes are the eigenvectors of the
+//! cluster's covariance matrix sorted by decreasing eigenvalue, so the third axis (smallest
+//! variance) approximates the surface normal. That axis is flipped to agree with the
+//! cluster's mean M3C2 normal ("out of the terrain", so below the surface = inside the
+//! material), the first axis is given a deterministic sign, and the second is their cross
+//! product, making the rows a right-handed orthonormal frame. Half extents are half the
+//! range of the projections on each axis, the centre the middle of those ranges.
+
+use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// The sign of a change.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Kind {
+    /// Material gained (smoothed distance > 0).
+    Gain,
+    /// Material lost (smoothed distance < 0).
+    Loss,
+}
+
+impl Kind {
+    /// Does a smoothed distance belong to this kind? (0 and NaN belong to neither.)
+    pub fn matches(self, smoothed: f64) -> bool {
+        match self {
+            Kind::Gain => smoothed > 0.0,
+            Kind::Loss => smoothed < 0.0,
+        }
+    }
+    /// "gain" / "loss", as in the outputs.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Kind::Gain => "gain",
+            Kind::Loss => "loss",
+        }
+    }
+}
+
+/// Oriented bounding box: `axes` are rows (unit, orthogonal, right-handed), the third one
+/// the outward surface normal.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Obb {
+    pub center: [f64; 3],
+    pub axes: [[f64; 3]; 3],
+    pub half_extents: [f64; 3],
+}
+
+impl Obb {
+    /// Coordinates of a global point in the box frame (u, v, w), relative to the centre.
+    pub fn to_local(&self, p: &[f64; 3]) -> [f64; 3] {
+        let d = [
+            p[0] - self.center[0],
+            p[1] - self.center[1],
+            p[2] - self.center[2],
+        ];
+        self.axes.map(|a| a[0] * d[0] + a[1] * d[1] + a[2] * d[2])
+    }
+    /// The global point of box-frame coordinates (u, v, w).
+    pub fn to_global(&self, l: &[f64; 3]) -> [f64; 3] {
+        let a = &self.axes;
+        std::array::from_fn(|k| self.center[k] + l[0] * a[0][k] + l[1] * a[1][k] + l[2] * a[2][k])
+    }
+}
+
+/// One change event.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Event {
+    pub id: u32,
+    pub kind: Kind,
+    pub n_points: usize,
+    pub centroid: [f64; 3],
+    /// n_points × core_spacing².
+    pub area_m2: f64,
+    /// Mean M3C2 distance (signed).
+    pub mean_distance: f64,
+    pub max_abs_distance: f64,
+    pub mean_lod95: f64,
+    pub obb: Obb,
+    /// Mean of the cluster's normals, normalised (the outward direction).
+    pub mean_normal: [f64; 3],
+}
+
+/// Describe a cluster from its core points and their distances, LoD95s and normals (all
+/// slices of the same length). `None` for an empty cluster.
+pub fn describe(
+    id: u32,
+    kind: Kind,
+    points: &[[f64; 3]],
+    distances: &[f64],
+    lod95: &[f64],
+    normals: &[[f64; 3]],
+    core_spacing: f64,
+) -> Option<Event> {
+    let n = points.len();
+    if n == 0 {
+        return None;
+    }
+    let nf = n as f64;
+    // Centroid in two steps (local offsets from the first point) to keep precision with
+    // survey coordinates.
+    let o = points[0];
+    let mut c = [0.0; 3];
+    for p in points {
+        for k in 0..3 {
+            c[k] += p[k] - o[k];
+        }
+    }
+    let c_local = c.map(|x| x / nf);
+    let centroid = std::array::from_fn(|k| o[k] + c_local[k]);
+
+    let mut cov = Matrix3::<f64>::zeros();
+    for p in points {
+        let d = Vector3::new(p[0] - centroid[0], p[1] - centroid[1], p[2] - centroid[2]);
+        cov += d * d.transpose();
+    }
+    cov /= nf;
+
+    let mut mn = Vector3::zeros();
+    for nm in normals {
+        if nm.iter().all(|x| x.is_finite()) {
+            mn += Vector3::new(nm[0], nm[1], nm[2]);
+        }
+    }
+    // Without usable normals, "out of the terrain" defaults to up.
+    let mean_normal = if mn.norm() > 1e-12 {
+        mn.normalize()
+    } else {
+        Vector3::z()
+    };
+
+    let axes = pca_axes(&cov, &mean_normal);
+    // Extents of the projections.
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for p in points {
+        let d = Vector3::new(p[0] - centroid[0], p[1] - centroid[1], p[2] - centroid[2]);
+        for k in 0..3 {
+            let t = axes[k].dot(&d);
+            lo[k] = lo[k].min(t);
+            hi[k] = hi[k].max(t);
+        }
+    }
+    let mid: [f64; 3] = std::array::from_fn(|k| 0.5 * (lo[k] + hi[k]));
+    let center = std::array::from_fn(|k| {
+        centroid[k] + mid[0] * axes[0][k] + mid[1] * axes[1][k] + mid[2] * axes[2][k]
+    });
+    let obb = Obb {
+        center,
+        axes: axes.map(|a| [a.x, a.y, a.z]),
+        half_extents: std::array::from_fn(|k| 0.5 * (hi[k] - lo[k])),
+    };
+
+    let finite = |v: &[f64]| -> (f64, usize) {
+        v.iter()
+            .filter(|x| x.is_finite())
+            .fold((0.0, 0), |(s, m), &x| (s + x, m + 1))
+    };
+    let (sd, nd) = finite(distances);
+    let (sl, nl) = finite(lod95);
+    Some(Event {
+        id,
+        kind,
+        n_points: n,
+        centroid,
+        area_m2: nf * core_spacing * core_spacing,
+        mean_distance: if nd > 0 { sd / nd as f64 } else { f64::NAN },
+        max_abs_distance: distances
+            .iter()
+            .filter(|x| x.is_finite())
+            .fold(0.0, |m, x| m.max(x.abs())),
+        mean_lod95: if nl > 0 { sl / nl as f64 } else { f64::NAN },
+        obb,
+        mean_normal: [mean_normal.x, mean_normal.y, mean_normal.z],
+    })
+}
+
+/// Right-handed PCA axes: decreasing variance, third axis agreeing with `outward`.
+fn pca_axes(cov: &Matrix3<f64>, outward: &Vector3<f64>) -> [Vector3<f64>; 3] {
+    let eig = SymmetricEigen::new(*cov);
+    let mut order = [0usize, 1, 2];
+    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
+    let col = |i: usize| -> Vector3<f64> { eig.eigenvectors.column(order[i]).into_owned() };
+    let mut e1 = col(0);
+    let mut e3 = col(2);
+    if e3.dot(outward) < 0.0 {
+        e3 = -e3;
+    }
+    // Deterministic sign of the first axis: its largest component positive.
+    let imax = (0..3)
+        .max_by(|&a, &b| e1[a].abs().total_cmp(&e1[b].abs()))
+        .unwrap_or(0);
+    if e1[imax] < 0.0 {
+        e1 = -e1;
+    }
+    // Re-orthonormalise (the solver's vectors are orthogonal to rounding) and close the frame.
+    e1 = (e1 - e3 * e3.dot(&e1)).normalize();
+    let e2 = e3.cross(&e1);
+    [e1, e2, e3]
+}
