@@ -29,7 +29,7 @@ pub fn inspect(path: &Path) -> Result<CloudReport> {
     let info = reader.info().clone();
     drop(reader);
     let spacing = sampling::measure(path)?;
-    let derived = Params::resolve(&UserParams::default(), spacing.spacing)?;
+    let derived = Params::resolve(&UserParams::default(), spacing.effective_spacing)?;
     Ok(CloudReport {
         path: path.to_path_buf(),
         format: info.format,
@@ -67,8 +67,12 @@ pub fn print(files: &[PathBuf], json: bool) -> Result<()> {
         );
         println!("  crs            {}", r.crs);
         println!(
-            "  point spacing  {:.4} ({}, {} points)",
+            "  point spacing  {:.4} median nearest-neighbour distance ({}, {} points)",
             r.spacing.spacing, r.spacing.method, r.spacing.measured_points
+        );
+        println!(
+            "  density        {:.2} points per unit² (effective spacing {:.4})",
+            r.spacing.density, r.spacing.effective_spacing
         );
         println!("  derived parameters:");
         for (name, v, src) in [

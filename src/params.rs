@@ -1,8 +1,9 @@
 //! Parameters of a comparison: what the user gave (flags over config file) and what talus derives
 //! from the data, each recorded with where it came from (written to summary.json).
 //!
-//! Derivation rules, all from the measured point spacing `s` of C1 (median nearest-neighbour
-//! distance, see [`crate::sampling`]):
+//! Derivation rules, all from the effective point spacing `s` = 1/√density of C1 (measured, see
+//! [`crate::sampling`]: the side of the square one point covers; a cylinder of radius r holds
+//! ≈ π r² / s² points whatever the point pattern):
 //!
 //! | parameter | rule | why |
 //! |---|---|---|
@@ -90,7 +91,7 @@ pub struct Resolved<T> {
 /// Every parameter of a run, resolved.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct Params {
-    /// Measured median nearest-neighbour distance of C1 the rules start from.
+    /// The effective point spacing of C1 (1/√density) the rules start from.
     pub point_spacing: f64,
     pub core_spacing: Resolved<f64>,
     pub normal_radius: Resolved<f64>,

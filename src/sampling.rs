@@ -12,7 +12,7 @@ use std::path::Path;
 
 use crate::error::{Error, Result};
 use crate::io::{self, Bounds, Point3};
-use crate::spatial::{median_nn_distance, Index};
+use crate::spatial::Index;
 
 /// Clouds up to this many points are measured whole.
 pub const WHOLE: u64 = 400_000;
@@ -22,7 +22,16 @@ pub const WINDOW_TARGET: f64 = 40_000.0;
 /// The measured spacing and how it was measured.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct Spacing {
+    /// Median nearest-neighbour distance.
     pub spacing: f64,
+    /// Median local surface density (points per unit²), from the distance r₁₀ to the 10th
+    /// neighbour: 10 / (π r₁₀²).
+    pub density: f64,
+    /// 1 / √density: the side of the square one point covers. This, not the nearest-neighbour
+    /// distance, is what the parameter rules start from: for randomly placed points the median
+    /// nearest-neighbour distance is only ≈ 0.47 / √density, for a grid it is 1 / √density, so
+    /// rules on it would give twice the points per cylinder on a grid as on a random cloud.
+    pub effective_spacing: f64,
     /// Points whose nearest-neighbour distance entered the median.
     pub measured_points: usize,
     pub method: String,
@@ -44,11 +53,16 @@ pub fn measure(path: &Path) -> Result<Spacing> {
         while reader.fill(&mut buf, 1 << 16)? > 0 {
             all.extend_from_slice(&buf);
         }
-        let s = median_nn_distance(&all).filter(|s| *s > 0.0).ok_or_else(no_spacing)?;
+        let probes: Vec<usize> = (0..all.len()).collect();
+        let origin = all.first().copied().unwrap_or_default();
+        let index = Index::new(&all, origin);
+        let (s, density) = stats(&index, &probes).ok_or_else(no_spacing)?;
         return Ok(Spacing {
             spacing: s,
+            density,
+            effective_spacing: 1.0 / density.sqrt(),
             measured_points: all.len(),
-            method: "median nearest-neighbour distance over all points".into(),
+            method: "over all points".into(),
         });
     }
     drop(reader);
@@ -70,26 +84,14 @@ pub fn measure(path: &Path) -> Result<Spacing> {
                     })
                     .collect();
                 let index = Index::new(&pts, [cx, cy, pts[0][2]]);
-                let mut d: Vec<f64> = inner
-                    .iter()
-                    .filter_map(|&i| {
-                        let q = index.points()[i];
-                        index.nearest(&q, 2).get(1).map(|x| x.1.sqrt())
-                    })
-                    .collect();
-                if d.is_empty() {
-                    return Err(no_spacing());
-                }
-                let mid = d.len() / 2;
-                let s = *d.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1;
-                if !(s > 0.0) {
-                    return Err(no_spacing());
-                }
+                let (s, density) = stats(&index, &inner).ok_or_else(no_spacing)?;
                 return Ok(Spacing {
                     spacing: s,
-                    measured_points: d.len(),
+                    density,
+                    effective_spacing: 1.0 / density.sqrt(),
+                    measured_points: inner.len(),
                     method: format!(
-                        "median nearest-neighbour distance in a {:.3} × {:.3} window at the footprint's centre",
+                        "in a {:.3} × {:.3} window at the footprint's centre",
                         2.0 * half,
                         2.0 * half
                     ),
@@ -98,6 +100,31 @@ pub fn measure(path: &Path) -> Result<Spacing> {
         }
     }
     Err(no_spacing())
+}
+
+/// Median nearest-neighbour distance and median local density over the `probes` of `index`.
+fn stats(index: &Index, probes: &[usize]) -> Option<(f64, f64)> {
+    use rayon::prelude::*;
+    let per: Vec<(f64, f64)> = probes
+        .par_iter()
+        .filter_map(|&i| {
+            let q = index.points()[i];
+            let nn = index.nearest(&q, 11);
+            let d1 = nn.get(1)?.1.sqrt();
+            let r10 = nn.get(10)?.1;
+            (r10 > 0.0).then(|| (d1, 10.0 / (std::f64::consts::PI * r10)))
+        })
+        .collect();
+    if per.is_empty() {
+        return None;
+    }
+    let median = |mut v: Vec<f64>| {
+        let mid = v.len() / 2;
+        *v.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1
+    };
+    let s = median(per.iter().map(|p| p.0).collect());
+    let density = median(per.iter().map(|p| p.1).collect());
+    (s > 0.0 && density.is_finite()).then_some((s, density))
 }
 
 /// Area of the footprint: the two largest extents (a vertical wall has no XY area).

@@ -147,7 +147,7 @@ pub fn compare(opts: &CompareOptions) -> Result<Summary> {
     Params::resolve(&user, 1.0)?;
     let t0 = Instant::now();
     let spacing = sampling::measure(&opts.before)?;
-    let params = Params::resolve(&user, spacing.spacing)?;
+    let params = Params::resolve(&user, spacing.effective_spacing)?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(params.threads.value)
         .build()
