@@ -6,5 +6,6 @@
 
 pub mod error;
 pub mod io;
+pub mod view;
 
 pub use error::{Error, Result};
