@@ -15,7 +15,7 @@ import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 import { CSS2DRenderer } from 'three/addons/renderers/CSS2DRenderer.js';
 import { loadView, loadEvents, loadTerrain, loadSummary, loadMesh, meshPaths } from './data.js';
 import { distanceColors, rampHalfWidth } from './colormap.js';
-import { Terrain } from './terrain.js';
+import { Terrain, interleaveTerrain } from './terrain.js';
 import { EyeDome } from './edl.js';
 import { EventLayer } from './events.js';
 import { EventTable, showEvent, drawLegend, drawMeta } from './ui.js';
@@ -48,14 +48,19 @@ main().catch((err) => {
 });
 
 async function main() {
+  const t0 = performance.now();
+  const ms = () => Math.round(performance.now() - t0);
+  T.timings = {};
   const loading = $('loading');
   const view = await loadView();
   const [{ events, crsName }, summary] = await Promise.all([loadEvents(view.origin), loadSummary()]);
   const origin = view.origin;
-  const terrainData = await loadTerrain(view, (p) => {
+  const raw = await loadTerrain(view, (p) => {
     loading.textContent = `Loading terrain… ${Math.round(p * 100)} %`;
   });
   loading.textContent = 'Preparing…';
+  T.timings.loaded = ms();
+  const terrainData = interleaveTerrain(raw.positions, raw.distances);
 
   // --- scene -------------------------------------------------------------------------------
   const container = $('view');
@@ -82,6 +87,7 @@ async function main() {
   const terrain = new Terrain(terrainData.positions, distanceColors(terrainData.distances, half));
   scene.add(terrain.points);
   T.terrainPoints = terrain.count;
+  T.timings.prepared = ms();
 
   // Scene extent: the terrain, or the events when there is no terrain.
   const box = terrain.count ? terrain.box.clone() : new THREE.Box3();
@@ -102,6 +108,34 @@ async function main() {
   controls.zoomToCursor = true;
   controls.addEventListener('change', requestRender);
 
+  // While the camera moves, big clouds draw an interleaved prefix sized to keep frames near 30 ms;
+  // the full cloud comes back as soon as the motion stops.
+  let moving = 0;
+  let detail = 1;
+  let lastMoveFrame = 0;
+  const adaptive = terrain.count > 300_000;
+  const startMove = () => { moving++; lastMoveFrame = 0; };
+  const endMove = () => {
+    moving = Math.max(0, moving - 1);
+    if (!moving && terrain.detail !== 1) {
+      terrain.setDetail(1);
+      requestRender();
+    }
+  };
+  controls.addEventListener('start', startMove);
+  controls.addEventListener('end', endMove);
+  function adaptDetail() {
+    if (!adaptive || !moving) return;
+    const now = performance.now();
+    if (lastMoveFrame) {
+      const dt = now - lastMoveFrame;
+      if (dt > 45) detail = Math.max(0.05, detail * 0.7);
+      else if (dt < 20) detail = Math.min(1, detail * 1.25);
+    }
+    lastMoveFrame = now;
+    terrain.setDetail(detail);
+  }
+
   // --- rendering on demand ------------------------------------------------------------------
   let framePending = false;
   function requestRender() {
@@ -116,6 +150,7 @@ async function main() {
     camera.near = Math.max(dist / 1000, diag * 1e-6);
     camera.far = dist + diag * 4;
     camera.updateProjectionMatrix();
+    adaptDetail();
     if (shading) edl.render(renderer, scene, camera);
     else renderer.render(scene, camera);
     labelRenderer.render(scene, camera);
@@ -152,6 +187,7 @@ async function main() {
     const p0 = camera.position.clone();
     const t0 = controls.target.clone();
     const start = performance.now();
+    if (!T.flying) startMove();
     T.flying = true;
     const step = (now) => {
       if (id !== flight) return; // a newer flight took over
@@ -162,7 +198,10 @@ async function main() {
       controls.update();
       renderNow();
       if (u < 1) requestAnimationFrame(step);
-      else T.flying = false;
+      else {
+        T.flying = false;
+        endMove();
+      }
     };
     requestAnimationFrame(step);
   }
@@ -289,7 +328,9 @@ async function main() {
   function hover() {
     hoverQueued = false;
     if (!pointer || pointer.buttons) return; // never pick while orbiting: keep dragging smooth
+    const t = performance.now();
     const hit = pickAt(pointer.x, pointer.y);
+    T.timings.lastPick = performance.now() - t;
     T.hovered = hit;
     readout.textContent = describe(hit);
     canvas.style.cursor = hit?.kind === 'event' ? 'pointer' : '';
@@ -331,11 +372,13 @@ async function main() {
   applyFilter();
   loading.hidden = true;
   renderNow();
+  T.timings.firstFrame = ms();
 
   // The solids come last: the terrain and markers are already usable meanwhile.
   await loadSolids(view, events, layer, requestRender);
   T.markers = layer.visibleMarkers();
   renderNow();
+  T.timings.ready = ms();
   T.ready = true;
 }
 

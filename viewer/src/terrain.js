@@ -49,6 +49,31 @@ const PICK_FRAG = /* glsl */ `
 flat varying vec4 vId;
 void main() { gl_FragColor = vId; }`;
 
+/** Interleave stride: prime, so a grid whose row length is a multiple of it still mixes. */
+const STRIDE = 17;
+
+/**
+ * Reorder the points so that any prefix of the arrays is an even sample of the whole cloud:
+ * every 17th point first, then the next residue, and so on. While the camera moves, drawing a
+ * prefix keeps frames fast (see Terrain.setDetail). Unlike a random shuffle this keeps the
+ * writer's spatial order within each pass, which rasterizers (software ones above all) like.
+ */
+export function interleaveTerrain(positions, distances) {
+  const n = distances.length;
+  const pos = new Float32Array(3 * n);
+  const dist = new Float32Array(n);
+  let o = 0;
+  for (let r = 0; r < STRIDE; r++) {
+    for (let k = r; k < n; k += STRIDE, o++) {
+      pos[3 * o] = positions[3 * k];
+      pos[3 * o + 1] = positions[3 * k + 1];
+      pos[3 * o + 2] = positions[3 * k + 2];
+      dist[o] = distances[k];
+    }
+  }
+  return { positions: pos, distances: dist };
+}
+
 /** Half-width (pixels) of the picking window around the cursor. */
 const PICK_R = 5;
 
@@ -94,8 +119,25 @@ export class Terrain {
 
   /** Point diameter as a multiple of the mean spacing. */
   setSizeFactor(f) {
-    this.material.uniforms.uSize.value = this.spacing * f;
-    this.pickMaterial.uniforms.uSize.value = this.spacing * f;
+    this.sizeFactor = f;
+    this.applySize();
+  }
+
+  /**
+   * Draw only the first `fraction` of the (interleaved) points, with points grown by
+   * 1/√fraction so the surface stays closed. 1 = everything.
+   */
+  setDetail(fraction) {
+    const f = Math.min(1, Math.max(0.01, fraction));
+    this.detail = f;
+    this.geometry.setDrawRange(0, f >= 1 ? Infinity : Math.ceil(this.count * f));
+    this.applySize();
+  }
+
+  applySize() {
+    const size = this.spacing * (this.sizeFactor ?? 1.5) / Math.sqrt(this.detail ?? 1);
+    this.material.uniforms.uSize.value = size;
+    this.pickMaterial.uniforms.uSize.value = this.spacing * (this.sizeFactor ?? 1.5);
   }
 
   /** Keep the pixel scale in step with the canvas height (drawing-buffer pixels). */

@@ -4,7 +4,7 @@
 // coordinates, and a 50k-point terrain whose M3C2 distances are positive around the gain events
 // and negative around the loss events.
 //
-// Usage: node make-fixture.mjs DIR   (or import { makeFixture } and call it)
+// Usage: node make-fixture.mjs DIR [scale]   (or import { makeFixture } and call it)
 
 import { mkdirSync, writeFileSync } from 'node:fs';
 import { join } from 'node:path';
@@ -13,10 +13,9 @@ import { fileURLToPath } from 'node:url';
 /** Global coordinates of local 0, as a writer would choose (UTM zone 33N-sized values). */
 export const ORIGIN = [500_100.0, 5_000_050.0, 120.0];
 
-// Terrain: a 250 × 200 grid at 0.5 m spacing = 50,000 points, a slope with a gentle wave.
-const NX = 250;
-const NY = 200;
-const STEP = 0.5;
+// Terrain: by default a 250 × 200 grid at 0.5 m spacing = 50,000 points over 125 m × 100 m, a
+// slope with a gentle wave. `scale` multiplies the density per axis (scale 6.4 ≈ 2M points, the
+// most a writer produces) over the same extent.
 const surface = (x, y) => 0.25 * y + 3 * Math.sin(x / 15); // local z at local (x, y)
 
 // The events: local footprint centre, footprint w × d (m), solid heights before/after (m)
@@ -80,7 +79,10 @@ function percentile(sorted, p) {
  * Write the fixture into `dir` and return what a reader should find:
  * { origin, points, events: [{ id, kind, volume_m3, volume_uncertainty_m3, centroid }], range }.
  */
-export function makeFixture(dir) {
+export function makeFixture(dir, scale = 1) {
+  const NX = Math.round(250 * scale);
+  const NY = Math.round(200 * scale);
+  const STEP = 125 / NX;
   mkdirSync(join(dir, 'meshes'), { recursive: true });
   const rand = rng(42);
   const n = NX * NY;
@@ -89,8 +91,8 @@ export function makeFixture(dir) {
   let k = 0;
   for (let j = 0; j < NY; j++) {
     for (let i = 0; i < NX; i++) {
-      const x = i * STEP + (rand() - 0.5) * 0.2;
-      const y = j * STEP + (rand() - 0.5) * 0.2;
+      const x = i * STEP + (rand() - 0.5) * 0.4 * STEP;
+      const y = j * STEP + (rand() - 0.5) * 0.4 * STEP;
       let d = (rand() - 0.5) * 0.04;
       for (const s of SPECS) {
         const r2 = (x - s.cx) ** 2 + (y - s.cy) ** 2;
@@ -188,10 +190,11 @@ export function makeFixture(dir) {
 
 if (process.argv[1] === fileURLToPath(import.meta.url)) {
   const dir = process.argv[2];
-  if (!dir) {
-    console.error('usage: node make-fixture.mjs DIR');
+  const scale = Number(process.argv[3] || 1);
+  if (!dir || !(scale > 0)) {
+    console.error('usage: node make-fixture.mjs DIR [density-scale]');
     process.exit(2);
   }
-  const f = makeFixture(dir);
+  const f = makeFixture(dir, scale);
   console.log(`wrote ${f.points} points and ${f.events.length} events to ${dir}`);
 }
