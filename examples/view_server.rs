@@ -5,7 +5,6 @@
 //! `talus view DIR --port 0` until the CLI is wired.
 
 use std::io::Write;
-use std::net::{IpAddr, Ipv4Addr};
 use std::path::PathBuf;
 
 fn main() {
@@ -14,7 +13,7 @@ fn main() {
         std::process::exit(2);
     };
     let result = talus::view::viewer_root().and_then(|root| {
-        talus::view::serve(&dir, IpAddr::V4(Ipv4Addr::LOCALHOST), 0, &root, |addr| {
+        talus::view::serve(&dir, talus::view::DEFAULT_BIND, 0, &root, |addr| {
             let mut out = std::io::stdout().lock();
             let _ = writeln!(out, "talus viewer: http://{addr}/");
             let _ = out.flush();

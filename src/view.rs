@@ -25,6 +25,9 @@ use std::time::Duration;
 
 use crate::error::{Error, Result};
 
+/// Where `talus view` listens unless told otherwise: this machine only.
+pub const DEFAULT_BIND: IpAddr = IpAddr::V4(std::net::Ipv4Addr::LOCALHOST);
+
 /// At most this many connections are served at once; more get `503` right away. A browser opens
 /// about six per host, so this leaves room for a few tabs without letting a client exhaust threads.
 pub const MAX_CONNECTIONS: usize = 32;

@@ -356,6 +356,16 @@ async function main() {
     if (hit?.kind === 'event') select(hit.id, false);
   });
 
+  window.addEventListener('keydown', (ev) => {
+    if (ev.key !== 'Escape' || pinned == null) return;
+    pinned = null;
+    T.selected = null;
+    layer.select(null);
+    table.select(null);
+    showEvent(panel, null, view.units);
+    requestRender();
+  });
+
   // --- go -----------------------------------------------------------------------------------------
   T.events = events;
   T.crs = view.crs;
