@@ -15,6 +15,7 @@ pub mod params;
 pub mod pipeline;
 pub mod sampling;
 pub mod spatial;
+pub mod view;
 pub mod synth;
 pub mod volume;
 

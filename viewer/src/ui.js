@@ -1,0 +1,193 @@
+// The side panel: the sortable, filterable event table, the property panel of one event, the
+// legend and the header line. Plain DOM; the table is rebuilt on sort/filter (events number in
+// the hundreds, not millions).
+
+import { fixed, signed, volumeLabel, coords } from './format.js';
+import { rampCss, NO_DATA } from './colormap.js';
+import { KIND_COLOR } from './events.js';
+
+const hex = (c) => `#${c.toString(16).padStart(6, '0')}`;
+
+export class EventTable {
+  /** onPick(id) is called when a row is clicked. */
+  constructor(table, note, events, onPick) {
+    this.table = table;
+    this.tbody = table.querySelector('tbody');
+    this.note = note;
+    this.events = events;
+    this.sort = { key: 'id', dir: 1 };
+    this.filter = () => true;
+    this.selected = null;
+    for (const th of table.querySelectorAll('th[data-key]')) {
+      th.addEventListener('click', () => {
+        const key = th.dataset.key;
+        // First click on a volume column: largest gains first is less useful than the biggest
+        // change, so numbers start descending; ids and kinds ascending.
+        const first = key === 'id' || key === 'kind' ? 1 : -1;
+        this.sort = this.sort.key === key ? { key, dir: -this.sort.dir } : { key, dir: first };
+        this.render();
+      });
+    }
+    this.tbody.addEventListener('click', (ev) => {
+      const tr = ev.target.closest('tr[data-id]');
+      if (tr) onPick(Number(tr.dataset.id));
+    });
+  }
+
+  setFilter(pred) {
+    this.filter = pred;
+    this.render();
+  }
+
+  select(id) {
+    this.selected = id;
+    for (const tr of this.tbody.rows) tr.classList.toggle('selected', Number(tr.dataset.id) === id);
+    const row = this.tbody.querySelector(`tr[data-id="${id}"]`);
+    if (row) row.scrollIntoView({ block: 'nearest' });
+  }
+
+  rowCount() {
+    return this.tbody.rows.length;
+  }
+
+  render() {
+    const { key, dir } = this.sort;
+    for (const th of this.table.querySelectorAll('th[data-key]')) {
+      if (th.dataset.key === key) th.setAttribute('aria-sort', dir > 0 ? 'ascending' : 'descending');
+      else th.removeAttribute('aria-sort');
+    }
+    const val = (e) => e[key];
+    const rows = this.events.filter(this.filter).sort((a, b) => {
+      const x = val(a);
+      const y = val(b);
+      const c = typeof x === 'string' || typeof y === 'string'
+        ? String(x).localeCompare(String(y))
+        : (Number.isFinite(x) ? x : -Infinity) - (Number.isFinite(y) ? y : -Infinity);
+      return c * dir || a.id - b.id;
+    });
+    const frag = document.createDocumentFragment();
+    for (const e of rows) {
+      const tr = document.createElement('tr');
+      tr.dataset.id = String(e.id);
+      if (e.id === this.selected) tr.className = 'selected';
+      const cells = [
+        [String(e.id), ''],
+        [e.kind, `kind ${e.kind}`],
+        [volumeLabel(e.volume_m3, e.volume_uncertainty_m3).replace(' m³', ''), 'num'],
+        [fixed(e.area_m2, 1), 'num'],
+        [fixed(e.max_abs_distance_m, 2), 'num'],
+        [Number.isFinite(e.n_points) ? String(e.n_points) : '–', 'num'],
+      ];
+      for (const [text, cls] of cells) {
+        const td = document.createElement('td');
+        td.textContent = text;
+        if (cls) td.className = cls;
+        tr.appendChild(td);
+      }
+      tr.children[2].dataset.value = String(e.volume_m3);
+      frag.appendChild(tr);
+    }
+    this.tbody.replaceChildren(frag);
+    const hidden = this.events.length - rows.length;
+    this.note.textContent = `${rows.length} of ${this.events.length} events shown` +
+      (hidden ? ` (${hidden} filtered out)` : '');
+  }
+}
+
+/** Fill the property panel with every property of event `e` (null: the hint). */
+export function showEvent(panel, e, units) {
+  panel.replaceChildren();
+  if (!e) {
+    const p = document.createElement('p');
+    p.className = 'hint';
+    p.textContent = 'Click an event (marker, solid or table row) to see its properties.';
+    panel.appendChild(p);
+    return;
+  }
+  const h = document.createElement('h2');
+  h.innerHTML = `Event #${e.id} <span class="kind ${e.kind}"></span>`;
+  h.querySelector('span').textContent = e.kind;
+  panel.appendChild(h);
+  const dl = document.createElement('dl');
+  const add = (label, text, field, cls) => {
+    const dt = document.createElement('dt');
+    dt.textContent = label;
+    const dd = document.createElement('dd');
+    dd.textContent = text;
+    if (field) dd.dataset.field = field;
+    if (cls) dd.className = cls;
+    dl.append(dt, dd);
+  };
+  const u = units || 'm';
+  add('Volume', `${signed(e.volume_m3, 2)} ${u}³`, 'volume_m3', 'big');
+  add('Uncertainty', `± ${fixed(e.volume_uncertainty_m3, 2)} ${u}³`, 'volume_uncertainty_m3');
+  if (e.gain_m3 !== undefined) add('Gain part', `${signed(e.gain_m3, 2)} ${u}³`, 'gain_m3');
+  if (e.loss_m3 !== undefined) add('Loss part', `${signed(e.loss_m3, 2)} ${u}³`, 'loss_m3');
+  add('Core points', Number.isFinite(e.n_points) ? String(e.n_points) : '–', 'n_points');
+  add('Area', `${fixed(e.area_m2, 2)} ${u}²`, 'area_m2');
+  add('Mean distance', `${signed(e.mean_distance_m, 3)} ${u}`, 'mean_distance_m');
+  add('Max |distance|', `${fixed(e.max_abs_distance_m, 3)} ${u}`, 'max_abs_distance_m');
+  add('Mean LoD95', `${fixed(e.mean_lod95_m, 3)} ${u}`, 'mean_lod95_m');
+  add('Centroid', coords(e.centroid), 'centroid');
+  const obb = e.obb;
+  if (obb && typeof obb === 'object') {
+    if (Array.isArray(obb.center)) add('Box centre', coords(obb.center), 'obb_center');
+    if (Array.isArray(obb.half_extents)) {
+      add('Box half extents', obb.half_extents.map((v) => fixed(v, 2)).join(' × ') + ` ${u}`, 'obb_half_extents');
+    }
+    if (Array.isArray(obb.axes)) {
+      obb.axes.forEach((a, i) => {
+        if (Array.isArray(a)) add(`Box axis ${i + 1}`, a.map((v) => fixed(v, 3)).join(', '), `obb_axis_${i}`);
+      });
+    }
+  }
+  // Anything else the writer added, so the panel shows *all* properties.
+  const known = new Set(['id', 'kind', 'volume_m3', 'volume_uncertainty_m3', 'gain_m3', 'loss_m3',
+    'n_points', 'area_m2', 'mean_distance_m', 'max_abs_distance_m', 'mean_lod95_m', 'obb',
+    'centroid', 'local']);
+  for (const [k, v] of Object.entries(e)) {
+    if (known.has(k)) continue;
+    add(k, typeof v === 'number' ? String(v) : JSON.stringify(v), k);
+  }
+  panel.appendChild(dl);
+}
+
+/** The legend: the distance ramp with ticks and units, marker colours and sizes. */
+export function drawLegend(el, half, units) {
+  const u = units || 'm';
+  // Three significant figures, trailing zeros dropped: "+0.3", "−0.0075", "+150".
+  const tick = (v) => (v === 0 ? '0' : (v < 0 ? '\u2212' : '+') + String(Number(Math.abs(v).toPrecision(3))));
+  const ticks = [-1, -0.5, 0, 0.5, 1]
+    .map((t) => `<span style="left:${(t + 1) * 50}%">${tick(t * half)}</span>`)
+    .join('');
+  el.innerHTML = `
+    <div class="title">M3C2 distance (${u})</div>
+    <div class="ramp" style="background:${rampCss()}"></div>
+    <div class="ticks">${ticks}</div>
+    <div class="keys">
+      <span><span class="sw" style="background:rgb(${NO_DATA.join(',')})"></span>not computed</span>
+      <span><span class="dot" style="background:${hex(KIND_COLOR.gain)}"></span>gain</span>
+      <span><span class="dot" style="background:${hex(KIND_COLOR.loss)}"></span>loss</span>
+      <span>marker size ∝ ∛|volume|</span>
+    </div>`;
+}
+
+/** The header: CRS, counts, and tool version and inputs from summary.json when present. */
+export function drawMeta(el, view, crsName, nEvents, summary) {
+  const lines = [];
+  const crs = crsName && crsName !== view.crs ? `${view.crs} (${crsName})` : view.crs;
+  lines.push(`CRS <b></b> · ${view.points.toLocaleString('en-US')} terrain points · ${nEvents} events`);
+  const esc = (s) => String(s).replace(/[&<>"]/g, (c) => ({ '&': '&amp;', '<': '&lt;', '>': '&gt;', '"': '&quot;' })[c]);
+  if (summary && typeof summary === 'object') {
+    const version = summary.version ?? summary.tool_version ?? summary.tool?.version;
+    let inputs = summary.inputs;
+    if (inputs && !Array.isArray(inputs) && typeof inputs === 'object') inputs = Object.values(inputs);
+    const names = Array.isArray(inputs)
+      ? inputs.map((i) => (typeof i === 'string' ? i : i?.path)).filter(Boolean).map((p) => String(p).split(/[\\/]/).pop())
+      : [];
+    if (names.length) lines.push(`${names.map(esc).join(' → ')}`);
+    if (version) lines.push(`talus ${esc(version)}`);
+  }
+  el.innerHTML = lines.join('<br>');
+  el.querySelector('b').textContent = crs;
+}
