@@ -42,11 +42,7 @@ fn benches(c: &mut Criterion) {
     let b = Index::new(&before, [50.0, 50.0, 0.0]);
     let a = Index::new(&after, [50.0, 50.0, 0.0]);
     // 1000 core points in Morton-like (row) order, as the pipeline queries them.
-    let mut cores: Vec<Point3> = before
-        .iter()
-        .step_by(1000)
-        .map(|p| b.to_local(p))
-        .collect();
+    let mut cores: Vec<Point3> = before.iter().step_by(1000).map(|p| b.to_local(p)).collect();
     cores.sort_by(|p, q| (p[1] as i64, p[0] as i64).cmp(&(q[1] as i64, q[0] as i64)));
     let params = M3c2Params {
         normal_radius: 1.0,
@@ -86,22 +82,28 @@ fn benches(c: &mut Criterion) {
         })
     });
     let mut s = cylinder::Scratch::default();
-    g.bench_function("cylinder chained r=0.5 h=3, 1000 cores x 2 epochs", |bench| {
-        bench.iter(|| {
-            for (q, n) in cores.iter().zip(&normals) {
-                black_box(cylinder::cylinder_stats(&b, q, n, 0.5, 3.0, &mut s));
-                black_box(cylinder::cylinder_stats(&a, q, n, 0.5, 3.0, &mut s));
-            }
-        })
-    });
-    g.bench_function("cylinder sphere r=0.5 h=3, 1000 cores x 2 epochs", |bench| {
-        bench.iter(|| {
-            for (q, n) in cores.iter().zip(&normals) {
-                black_box(cylinder::cylinder_stats_sphere(&b, q, n, 0.5, 3.0, &mut s));
-                black_box(cylinder::cylinder_stats_sphere(&a, q, n, 0.5, 3.0, &mut s));
-            }
-        })
-    });
+    g.bench_function(
+        "cylinder chained r=0.5 h=3, 1000 cores x 2 epochs",
+        |bench| {
+            bench.iter(|| {
+                for (q, n) in cores.iter().zip(&normals) {
+                    black_box(cylinder::cylinder_stats(&b, q, n, 0.5, 3.0, &mut s));
+                    black_box(cylinder::cylinder_stats(&a, q, n, 0.5, 3.0, &mut s));
+                }
+            })
+        },
+    );
+    g.bench_function(
+        "cylinder sphere r=0.5 h=3, 1000 cores x 2 epochs",
+        |bench| {
+            bench.iter(|| {
+                for (q, n) in cores.iter().zip(&normals) {
+                    black_box(cylinder::cylinder_stats_sphere(&b, q, n, 0.5, 3.0, &mut s));
+                    black_box(cylinder::cylinder_stats_sphere(&a, q, n, 0.5, 3.0, &mut s));
+                }
+            })
+        },
+    );
     g.finish();
 }
 

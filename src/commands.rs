@@ -41,8 +41,12 @@ pub fn synth(
 
 /// `talus view DIR`.
 pub fn view(dir: &Path, bind: IpAddr, port: u16) -> Result<()> {
-    let _ = (dir, bind, port);
-    Err(Error::Internal("view is being merged".into()))
+    let root = crate::view::viewer_root()?;
+    crate::view::serve(dir, bind, port, &root, |addr| {
+        println!("talus viewer: http://{addr}/");
+        use std::io::Write;
+        let _ = std::io::stdout().flush();
+    })
 }
 
 /// `talus demo`.

@@ -77,7 +77,11 @@ pub fn print(files: &[PathBuf], json: bool) -> Result<()> {
         println!("  derived parameters:");
         for (name, v, src) in [
             ("core_spacing", p.core_spacing.value, &p.core_spacing.source),
-            ("normal_radius", p.normal_radius.value, &p.normal_radius.source),
+            (
+                "normal_radius",
+                p.normal_radius.value,
+                &p.normal_radius.source,
+            ),
             ("cyl_radius", p.cyl_radius.value, &p.cyl_radius.source),
             ("cyl_halflen", p.cyl_halflen.value, &p.cyl_halflen.source),
             ("threshold", p.threshold.value, &p.threshold.source),

@@ -15,8 +15,8 @@ pub mod params;
 pub mod pipeline;
 pub mod sampling;
 pub mod spatial;
-pub mod view;
 pub mod synth;
+pub mod view;
 pub mod volume;
 
 pub use error::{Error, Result};

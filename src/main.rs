@@ -189,14 +189,7 @@ fn run(cli: Cli) -> talus::Result<()> {
         }
         Command::Info { files, json } => talus::info::print(&files, json),
         Command::Synth(s) => talus::commands::synth(
-            &s.scene,
-            &s.out,
-            s.points,
-            s.seed,
-            s.noise,
-            s.rotate,
-            s.density2,
-            !s.las,
+            &s.scene, &s.out, s.points, s.seed, s.noise, s.rotate, s.density2, !s.las,
         ),
         Command::View { dir, port, bind } => talus::commands::view(&dir, bind, port),
         Command::Demo { out, view } => talus::commands::demo(&out, view),

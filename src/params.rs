@@ -142,7 +142,11 @@ pub fn parse_size(s: &str) -> Result<u64> {
         .find(|c: char| !(c.is_ascii_digit() || c == '.'))
         .unwrap_or(t.len());
     let (num, unit) = t.split_at(split);
-    let bad = || Error::Usage(format!("--memory: cannot read '{s}' as a size (e.g. 2GiB, 512MiB)"));
+    let bad = || {
+        Error::Usage(format!(
+            "--memory: cannot read '{s}' as a size (e.g. 2GiB, 512MiB)"
+        ))
+    };
     let n: f64 = num.parse().map_err(|_| bad())?;
     let mul = match unit.trim().to_ascii_lowercase().as_str() {
         "" | "b" => 1.0,
@@ -202,7 +206,9 @@ impl Params {
         let orientation = user.orientation.clone().unwrap_or_else(|| "auto".into());
         orientation.parse::<Orientation>().map_err(Error::Usage)?;
         if !(s > 0.0 && s.is_finite()) {
-            return Err(Error::Internal(format!("point spacing {s} is not positive")));
+            return Err(Error::Internal(format!(
+                "point spacing {s} is not positive"
+            )));
         }
         let core_spacing = pick(user.core_spacing, 2.0 * s, "derived: 2 × point spacing");
         let c = core_spacing.value;

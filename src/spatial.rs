@@ -113,7 +113,13 @@ pub fn median_nn_distance(points: &[Point3]) -> Option<f64> {
     let mut d: Vec<f64> = index
         .points()
         .iter()
-        .map(|p| index.nearest(p, 2).get(1).map(|x| x.1.sqrt()).unwrap_or(f64::NAN))
+        .map(|p| {
+            index
+                .nearest(p, 2)
+                .get(1)
+                .map(|x| x.1.sqrt())
+                .unwrap_or(f64::NAN)
+        })
         .filter(|x| x.is_finite())
         .collect();
     if d.is_empty() {

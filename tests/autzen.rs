@@ -51,15 +51,15 @@ fn autzen_agrees_with_cloudcompare() {
         "--orientation",
         "up",
     ]);
-    assert!(
-        o.status.success(),
-        "{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let t = result_table::read(&res.join("m3c2.laz")).unwrap();
     let (h, rows) = read_cc(&cc);
     let col = |name: &str| h.iter().position(|c| c == name).unwrap();
-    let (cd, cn1, cn2) = (col("M3C2 distance"), col("Npoints_cloud1"), col("Npoints_cloud2"));
+    let (cd, cn1, cn2) = (
+        col("M3C2 distance"),
+        col("Npoints_cloud1"),
+        col("Npoints_cloud2"),
+    );
     // Every core point appears, at its coordinates, in input order.
     assert_eq!(t.xyz.len(), rows.len());
     for (p, r) in t.xyz.iter().zip(&rows) {

@@ -59,7 +59,16 @@ fn vertical_bump_is_measured_exactly() {
     let t = compare(
         &sample(1, false),
         &sample(2, true),
-        &["--core-spacing", "0.5", "--normal-radius", "0.5", "--cyl-radius", "0.3", "--cyl-halflen", "2"],
+        &[
+            "--core-spacing",
+            "0.5",
+            "--normal-radius",
+            "0.5",
+            "--cyl-radius",
+            "0.3",
+            "--cyl-halflen",
+            "2",
+        ],
     );
     let d = t.column("m3c2_distance").unwrap();
     let (mut inner, mut outer) = (Vec::new(), Vec::new());
@@ -121,7 +130,18 @@ fn tilted_plane_shifted_along_its_normal() {
     let t = compare(
         &sample(3, 0.0),
         &sample(4, shift),
-        &["--core-spacing", "1.0", "--normal-radius", "0.6", "--cyl-radius", "0.4", "--cyl-halflen", "1.5", "--orientation", "up"],
+        &[
+            "--core-spacing",
+            "1.0",
+            "--normal-radius",
+            "0.6",
+            "--cyl-radius",
+            "0.4",
+            "--cyl-halflen",
+            "1.5",
+            "--orientation",
+            "up",
+        ],
     );
     let d = t.column("m3c2_distance").unwrap();
     let nz = t.column("normal_z").unwrap();
@@ -132,7 +152,12 @@ fn tilted_plane_shifted_along_its_normal() {
         let b = q[0] * w[0] + q[1] * w[1] + q[2] * w[2];
         if a.abs() < 8.0 && b.abs() < 8.0 {
             interior.push(d[i]);
-            assert!((nz[i] - n[2]).abs() < 0.01, "normal z {} vs {}", nz[i], n[2]);
+            assert!(
+                (nz[i] - n[2]).abs() < 0.01,
+                "normal z {} vs {}",
+                nz[i],
+                n[2]
+            );
         }
     }
     assert!(interior.len() > 150);
@@ -171,7 +196,16 @@ fn vertical_face_moved_horizontally() {
     let t = compare(
         &sample(5, false),
         &sample(6, true),
-        &["--core-spacing", "0.5", "--normal-radius", "0.5", "--cyl-radius", "0.3", "--cyl-halflen", "2"],
+        &[
+            "--core-spacing",
+            "0.5",
+            "--normal-radius",
+            "0.5",
+            "--cyl-radius",
+            "0.3",
+            "--cyl-halflen",
+            "2",
+        ],
     );
     let d = t.column("m3c2_distance").unwrap();
     let ny = t.column("normal_y").unwrap();
@@ -182,14 +216,23 @@ fn vertical_face_moved_horizontally() {
         if !on_face {
             continue;
         }
-        assert!(ny[i] > 0.99, "face normal at {x:.2},{z:.2} has n_y {}", ny[i]);
+        assert!(
+            ny[i] > 0.99,
+            "face normal at {x:.2},{z:.2} has n_y {}",
+            ny[i]
+        );
         if (8.0..12.0).contains(&x) && (4.0..6.0).contains(&z) {
             patch.push(d[i]);
         } else if !(6.0..14.0).contains(&x) || !(2.0..8.0).contains(&z) {
             face.push(d[i]);
         }
     }
-    assert!(patch.len() > 15 && face.len() > 100, "{} {}", patch.len(), face.len());
+    assert!(
+        patch.len() > 15 && face.len() > 100,
+        "{} {}",
+        patch.len(),
+        face.len()
+    );
     for &x in &patch {
         assert!((x - dy).abs() < 0.003, "patch distance {x}");
     }

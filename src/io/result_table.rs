@@ -76,7 +76,9 @@ pub fn read(path: &Path) -> Result<ResultTable> {
             let end = name_bytes.iter().position(|&c| c == 0).unwrap_or(32);
             let name = String::from_utf8_lossy(&name_bytes[..end]).to_string();
             let size = type_size(data_type).ok_or_else(|| {
-                bad(format!("extra dimension {name}: unsupported data type {data_type}"))
+                bad(format!(
+                    "extra dimension {name}: unsupported data type {data_type}"
+                ))
             })?;
             descs.push(Descriptor {
                 name,
@@ -103,7 +105,9 @@ pub fn read(path: &Path) -> Result<ResultTable> {
     let rec = data.record_len();
     let total: usize = descs.iter().map(|d| d.size).sum();
     if total > rec {
-        return Err(bad("point records are shorter than their extra bytes".into()));
+        return Err(bad(
+            "point records are shorter than their extra bytes".into()
+        ));
     }
     for r in data.raw_bytes().chunks_exact(rec) {
         let mut off = rec - total;

@@ -174,7 +174,10 @@ impl TopSurface {
         TopSurface { cell, top }
     }
     fn at(&self, x: f64, y: f64) -> Option<f64> {
-        let key = ((x / self.cell).floor() as i64, (y / self.cell).floor() as i64);
+        let key = (
+            (x / self.cell).floor() as i64,
+            (y / self.cell).floor() as i64,
+        );
         self.top.get(&key).copied()
     }
     /// +1 when the terrain is lower on the +h side of `p`, −1 when on the −h side, 0 when the

@@ -75,8 +75,14 @@ pub fn run(
     let hash = format!(
         "{:016x}",
         talus_tiling::hash64(
-            format!("{}|{}|{:?}|{}", tiled.hash, layout.key(), m, params.core_spacing.value)
-                .as_bytes()
+            format!(
+                "{}|{}|{:?}|{}",
+                tiled.hash,
+                layout.key(),
+                m,
+                params.core_spacing.value
+            )
+            .as_bytes()
         )
     );
     let mut chunks = Vec::new();
@@ -154,12 +160,9 @@ fn compute_tile(
     let after = Index::new(&w.after.points, origin);
     let keyed: Vec<(u64, Point3)> = match user_cores {
         Some(c) => c.to_vec(),
-        None => core_points::thin(
-            &w.before.points,
-            &layout.anchor,
-            layout.core_spacing,
-            |i| w.before.owned[i],
-        )
+        None => core_points::thin(&w.before.points, &layout.anchor, layout.core_spacing, |i| {
+            w.before.owned[i]
+        })
         .into_iter()
         .map(|(k, i)| (k, w.before.points[i]))
         .collect(),
@@ -188,7 +191,8 @@ pub fn chunk_path(dir: &Path, id: TileId, k: usize) -> PathBuf {
 fn write_chunks(dir: &Path, id: TileId, results: &[KeyedResult]) -> Result<usize> {
     let mut n = 0;
     for (k, part) in results.chunks(CHUNK_ROWS).enumerate() {
-        talus_tiling::write_tile(&chunk_path(dir, id, k), &to_columns(part)).map_err(tiling_error)?;
+        talus_tiling::write_tile(&chunk_path(dir, id, k), &to_columns(part))
+            .map_err(tiling_error)?;
         n = k + 1;
     }
     Ok(n)
@@ -239,21 +243,37 @@ pub fn read_chunk(path: &Path) -> Result<Vec<KeyedResult>> {
     let f = |name: &str| -> Result<&Vec<f64>> {
         match c.column(name) {
             Some(ColumnData::F64(v)) => Ok(v),
-            _ => Err(Error::Internal(format!("{}: no column {name}", path.display()))),
+            _ => Err(Error::Internal(format!(
+                "{}: no column {name}",
+                path.display()
+            ))),
         }
     };
     let u = |name: &str| -> Result<&Vec<u32>> {
         match c.column(name) {
             Some(ColumnData::U32(v)) => Ok(v),
-            _ => Err(Error::Internal(format!("{}: no column {name}", path.display()))),
+            _ => Err(Error::Internal(format!(
+                "{}: no column {name}",
+                path.display()
+            ))),
         }
     };
     let sig = match c.column("significant") {
         Some(ColumnData::U8(v)) => v,
-        _ => return Err(Error::Internal(format!("{}: no column significant", path.display()))),
+        _ => {
+            return Err(Error::Internal(format!(
+                "{}: no column significant",
+                path.display()
+            )))
+        }
     };
     let (hi, lo) = (u("key_hi")?, u("key_lo")?);
-    let (d, unc, s1, s2) = (f("distance")?, f("uncertainty")?, f("std_dev1")?, f("std_dev2")?);
+    let (d, unc, s1, s2) = (
+        f("distance")?,
+        f("uncertainty")?,
+        f("std_dev1")?,
+        f("std_dev2")?,
+    );
     let (n1, n2) = (u("count1")?, u("count2")?);
     let (nx, ny, nz) = (f("normal_x")?, f("normal_y")?, f("normal_z")?);
     Ok((0..c.len())

@@ -9,6 +9,8 @@
 //! Every unit (an epoch's tiling, a tile's M3C2) is an immutable file recorded in the manifest
 //! with the hash of what it was made from, so `--resume` redoes only what is missing or stale.
 
+pub mod event_outputs;
+pub mod events_pass;
 pub mod m3c2_pass;
 pub mod outputs;
 pub mod tiles;
@@ -88,6 +90,15 @@ pub struct Summary {
     pub core_points: u64,
     pub computed_points: u64,
     pub significant_points: u64,
+    /// Core points kept by the significance filter (|d| ≥ τ and significant).
+    pub kept_points: u64,
+    pub events: usize,
+    pub gain_events: usize,
+    pub loss_events: usize,
+    /// Sum of the positive event volumes, m³.
+    pub total_gain_m3: f64,
+    /// Sum of the negative event volumes, m³ (≤ 0).
+    pub total_loss_m3: f64,
     pub stages: Vec<StageTime>,
 }
 
@@ -95,15 +106,16 @@ impl Summary {
     /// One line for the terminal.
     pub fn one_line(&self) -> String {
         format!(
-            "talus: {} core points, {} with a distance, {} significant; {} tile(s); results in {}",
+            "talus: {} core points ({} with a distance, {} significant), {} event(s): {} gain {:+.3} m³, {} loss {:+.3} m³; {} tile(s)",
             self.core_points,
             self.computed_points,
             self.significant_points,
+            self.events,
+            self.gain_events,
+            self.total_gain_m3,
+            self.loss_events,
+            self.total_loss_m3,
             self.tiles,
-            self.inputs
-                .first()
-                .map(|_| "the output directory")
-                .unwrap_or("")
         )
     }
 }
@@ -181,9 +193,13 @@ pub fn compare(opts: &CompareOptions) -> Result<Summary> {
 /// The hash of everything a run's results depend on (inputs' identity and parameters).
 fn run_key(opts: &CompareOptions, params: &Params) -> Result<String> {
     let mut h = talus_tiling::Fnv64::new();
-    for p in [Some(&opts.before), Some(&opts.after), opts.core_points.as_ref()]
-        .into_iter()
-        .flatten()
+    for p in [
+        Some(&opts.before),
+        Some(&opts.after),
+        opts.core_points.as_ref(),
+    ]
+    .into_iter()
+    .flatten()
     {
         h.write_str(&file_identity(p)?);
     }
@@ -240,18 +256,35 @@ fn run_stages(
         reused: m3c2.reused,
     });
     let t = Instant::now();
-    let written =
-        outputs::write_m3c2_laz(wd, &m3c2, &before.crs, layout.anchor, &|_| (f64::NAN, 0))?;
+    let ev = events_pass::run(
+        &m3c2,
+        &layout,
+        &tiled,
+        &params,
+        (opts.before_mesh.as_deref(), opts.after_mesh.as_deref()),
+    )?;
+    stages.push(StageTime {
+        stage: "events and volumes".into(),
+        seconds: t.elapsed().as_secs_f64(),
+        reused: false,
+    });
+    let t = Instant::now();
+    let per_point = &ev.per_point;
+    let written = outputs::write_m3c2_laz(wd, &m3c2, &before.crs, layout.anchor, &|k| {
+        per_point.get(&k).copied().unwrap_or((f64::NAN, 0))
+    })?;
+    let meshes = event_outputs::write_meshes(wd, &ev.events)?;
+    event_outputs::write_tables(wd, &ev.events, &before.crs)?;
     view_export::write(
         wd,
         &m3c2,
         written.core_points,
         &before.crs,
         layout.anchor,
-        &[],
+        &meshes,
     )?;
     stages.push(StageTime {
-        stage: "m3c2.laz and viewer files".into(),
+        stage: "outputs".into(),
         seconds: t.elapsed().as_secs_f64(),
         reused: false,
     });
@@ -271,6 +304,30 @@ fn run_stages(
         core_points: written.core_points,
         computed_points: written.computed,
         significant_points: written.significant,
+        kept_points: ev.kept_points as u64,
+        events: ev.events.len(),
+        gain_events: ev
+            .events
+            .iter()
+            .filter(|e| e.event.kind == crate::events::Kind::Gain)
+            .count(),
+        loss_events: ev
+            .events
+            .iter()
+            .filter(|e| e.event.kind == crate::events::Kind::Loss)
+            .count(),
+        total_gain_m3: ev
+            .events
+            .iter()
+            .filter_map(|e| e.volume_m3)
+            .filter(|v| *v > 0.0)
+            .sum(),
+        total_loss_m3: ev
+            .events
+            .iter()
+            .filter_map(|e| e.volume_m3)
+            .filter(|v| *v < 0.0)
+            .sum(),
         stages,
     };
     outputs::write_summary(wd, &summary)?;

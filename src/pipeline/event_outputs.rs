@@ -1,0 +1,119 @@
+//! events.geojson, events.csv and meshes/ (SPEC.md §2), each written under a temporary name and
+//! renamed.
+
+use serde_json::{json, Value};
+
+use crate::error::{Error, Result};
+use crate::io::Crs;
+use crate::pipeline::events_pass::EventRecord;
+use crate::pipeline::outputs::write_atomic;
+use crate::pipeline::view_export::EventMeshes;
+use crate::pipeline::workdir::WorkDir;
+use crate::volume;
+
+fn opt(v: Option<f64>) -> Value {
+    match v {
+        Some(x) if x.is_finite() => json!(x),
+        _ => Value::Null,
+    }
+}
+
+/// The properties of one event (GeoJSON and CSV share them).
+fn properties(r: &EventRecord) -> Value {
+    let e = &r.event;
+    json!({
+        "id": e.id,
+        "kind": e.kind.as_str(),
+        "volume_m3": opt(r.volume_m3),
+        "volume_uncertainty_m3": opt(r.volume_uncertainty_m3),
+        "gain_m3": opt(r.gain_m3),
+        "loss_m3": opt(r.loss_m3),
+        "n_points": e.n_points,
+        "area_m2": e.area_m2,
+        "footprint_area_m2": opt(r.footprint_area_m2),
+        "mean_distance_m": e.mean_distance,
+        "max_abs_distance_m": e.max_abs_distance,
+        "mean_lod95_m": e.mean_lod95,
+        "obb": {
+            "center": e.obb.center,
+            "axes": e.obb.axes,
+            "half_extents": e.obb.half_extents,
+        },
+        "volume_note": r.volume_note,
+    })
+}
+
+/// Write meshes/event_NNNN_{before,after}.ply for every event with solids; returns their names.
+pub fn write_meshes(wd: &WorkDir, events: &[EventRecord]) -> Result<Vec<(u32, EventMeshes)>> {
+    let dir = wd.out.join("meshes");
+    std::fs::create_dir_all(&dir).map_err(|e| Error::output(&dir, e))?;
+    let mut out = Vec::new();
+    for r in events {
+        let Some((b, a)) = &r.solids else { continue };
+        let names = EventMeshes {
+            before: format!("meshes/event_{:04}_before.ply", r.event.id),
+            after: format!("meshes/event_{:04}_after.ply", r.event.id),
+        };
+        volume::write_ply(&wd.out.join(&names.before), b)?;
+        volume::write_ply(&wd.out.join(&names.after), a)?;
+        out.push((r.event.id, names));
+    }
+    Ok(out)
+}
+
+/// Write events.geojson and events.csv.
+pub fn write_tables(wd: &WorkDir, events: &[EventRecord], crs: &Crs) -> Result<()> {
+    let features: Vec<Value> = events
+        .iter()
+        .map(|r| {
+            json!({
+                "type": "Feature",
+                "geometry": { "type": "Point", "coordinates": r.event.centroid },
+                "properties": properties(r),
+            })
+        })
+        .collect();
+    let fc = json!({
+        "type": "FeatureCollection",
+        "crs_name": crs.describe(),
+        "features": features,
+    });
+    let text = serde_json::to_string_pretty(&fc).map_err(|e| Error::Internal(e.to_string()))?;
+    write_atomic(&wd.out.join("events.geojson"), text.as_bytes())?;
+
+    let mut csv = String::from(
+        "id,kind,x,y,z,volume_m3,volume_uncertainty_m3,gain_m3,loss_m3,n_points,area_m2,\
+         mean_distance_m,max_abs_distance_m,mean_lod95_m,obb_center_x,obb_center_y,obb_center_z,\
+         obb_axis1_x,obb_axis1_y,obb_axis1_z,obb_axis2_x,obb_axis2_y,obb_axis2_z,\
+         obb_axis3_x,obb_axis3_y,obb_axis3_z,obb_half_1,obb_half_2,obb_half_3\n",
+    );
+    let f = |v: Option<f64>| v.map(|x| format!("{x:.6}")).unwrap_or_default();
+    for r in events {
+        let e = &r.event;
+        let o = &e.obb;
+        let mut row = vec![
+            e.id.to_string(),
+            e.kind.as_str().to_string(),
+            format!("{:.4}", e.centroid[0]),
+            format!("{:.4}", e.centroid[1]),
+            format!("{:.4}", e.centroid[2]),
+            f(r.volume_m3),
+            f(r.volume_uncertainty_m3),
+            f(r.gain_m3),
+            f(r.loss_m3),
+            e.n_points.to_string(),
+            format!("{:.6}", e.area_m2),
+            format!("{:.6}", e.mean_distance),
+            format!("{:.6}", e.max_abs_distance),
+            format!("{:.6}", e.mean_lod95),
+        ];
+        row.extend(o.center.iter().map(|v| format!("{v:.4}")));
+        for a in &o.axes {
+            row.extend(a.iter().map(|v| format!("{v:.6}")));
+        }
+        row.extend(o.half_extents.iter().map(|v| format!("{v:.4}")));
+        csv.push_str(&row.join(","));
+        csv.push('\n');
+    }
+    write_atomic(&wd.out.join("events.csv"), csv.as_bytes())
+}

@@ -1,0 +1,329 @@
+//! Events: significance filter → smoothing → signed DBSCAN merged across tiles → description →
+//! volume per event, in parallel (SPEC.md §1, §3).
+//!
+//! The kept core points (significant and |d| ≥ τ) are few next to the epochs, so they are
+//! gathered in memory. DBSCAN still runs tile by tile, with halos of `eps`, and is merged by a
+//! global union-find over core-point keys ([`crate::events::dbscan`]): the clusters are exactly
+//! those of one whole-cloud run, whatever the tile size. Volumes read only the points inside each
+//! event's grown box, one tile at a time.
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::error::Result;
+use crate::events::{self, dbscan, Event, Kind, Obb};
+use crate::io::Point3;
+use crate::params::Params;
+use crate::pipeline::m3c2_pass::M3c2Results;
+use crate::pipeline::outputs::MergedResults;
+use crate::pipeline::tiles::{self, Layout, Tiled};
+use crate::volume::{self, EventVolume, Mesh};
+
+/// A kept core point.
+struct Kept {
+    key: u64,
+    xyz: Point3,
+    d: f64,
+    lod: f64,
+    normal: Point3,
+}
+
+/// One event with its volume.
+#[derive(Debug, Clone, Serialize)]
+pub struct EventRecord {
+    #[serde(flatten)]
+    pub event: Event,
+    /// V(C2) − V(C1); None when the footprint had no surface in one epoch.
+    pub volume_m3: Option<f64>,
+    pub volume_uncertainty_m3: Option<f64>,
+    pub gain_m3: Option<f64>,
+    pub loss_m3: Option<f64>,
+    pub footprint_area_m2: Option<f64>,
+    /// Why there is no volume, when there is none.
+    pub volume_note: Option<String>,
+    #[serde(skip)]
+    pub solids: Option<(Mesh, Mesh)>,
+}
+
+/// What the events stage produced.
+pub struct EventsOut {
+    pub events: Vec<EventRecord>,
+    /// Kept core points: key → (smoothed distance, event id or 0).
+    pub per_point: HashMap<u64, (f64, u32)>,
+    pub kept_points: usize,
+}
+
+/// Run the events stage over the merged M3C2 results.
+pub fn run(
+    results: &M3c2Results,
+    layout: &Layout,
+    tiled: &Tiled,
+    params: &Params,
+    meshes: (Option<&Path>, Option<&Path>),
+) -> Result<EventsOut> {
+    let tau = params.threshold.value;
+    let mut kept = Vec::new();
+    let mut merged = MergedResults::new(results)?;
+    while let Some(k) = merged.next_result()? {
+        if events::filter::is_kept(k.r.distance, k.r.uncertainty, tau) {
+            kept.push(Kept {
+                key: k.key,
+                xyz: k.xyz,
+                d: k.r.distance,
+                lod: k.r.uncertainty,
+                normal: k.r.normal,
+            });
+        }
+    }
+    let pts: Vec<Point3> = kept.iter().map(|k| k.xyz).collect();
+    let d: Vec<f64> = kept.iter().map(|k| k.d).collect();
+    let smoothed = events::smooth::smooth(
+        &pts,
+        &d,
+        params.smooth_k.value as usize,
+        params.smooth_sigma.value,
+    )?;
+    // Signed clusters, each sign on its own.
+    let mut clusters: Vec<(u64, Kind, Vec<usize>)> = Vec::new();
+    for kind in [Kind::Gain, Kind::Loss] {
+        let idx: Vec<usize> = (0..kept.len())
+            .filter(|&i| kind.matches(smoothed[i]))
+            .collect();
+        let p: Vec<Point3> = idx.iter().map(|&i| pts[i]).collect();
+        let keys: Vec<u64> = idx.iter().map(|&i| kept[i].key).collect();
+        let labels = cluster_tiled(
+            &p,
+            &keys,
+            layout,
+            params.eps.value,
+            params.cluster_min_points.value as usize,
+        )?;
+        let mut by_label: HashMap<u32, Vec<usize>> = HashMap::new();
+        for (j, &l) in labels.iter().enumerate() {
+            if l > 0 {
+                by_label.entry(l).or_default().push(idx[j]);
+            }
+        }
+        for (_, members) in by_label {
+            let min_key = members.iter().map(|&i| kept[i].key).min().unwrap_or(0);
+            clusters.push((min_key, kind, members));
+        }
+    }
+    // Event ids in a canonical order: by the smallest key of each cluster.
+    clusters.sort_by_key(|c| c.0);
+    let mut per_point: HashMap<u64, (f64, u32)> = kept
+        .iter()
+        .zip(&smoothed)
+        .map(|(k, &s)| (k.key, (s, 0)))
+        .collect();
+    let mut described = Vec::new();
+    for (n, (_, kind, members)) in clusters.iter().enumerate() {
+        let id = n as u32 + 1;
+        let get =
+            |f: &dyn Fn(&Kept) -> Point3| members.iter().map(|&i| f(&kept[i])).collect::<Vec<_>>();
+        let p = get(&|k| k.xyz);
+        let normals = get(&|k| k.normal);
+        let dist: Vec<f64> = members.iter().map(|&i| kept[i].d).collect();
+        let lod: Vec<f64> = members.iter().map(|&i| kept[i].lod).collect();
+        for &i in members {
+            per_point.insert(kept[i].key, (smoothed[i], id));
+        }
+        if let Some(e) = events::describe(id, *kind, &p, &dist, &lod, &normals, layout.core_spacing)
+        {
+            described.push(e);
+        }
+    }
+    let events = volumes(described, layout, tiled, params, meshes)?;
+    Ok(EventsOut {
+        events,
+        per_point,
+        kept_points: kept.len(),
+    })
+}
+
+/// DBSCAN tile by tile (halo = eps), merged by a global union-find over `keys`.
+fn cluster_tiled(
+    pts: &[Point3],
+    keys: &[u64],
+    layout: &Layout,
+    eps: f64,
+    min_pts: usize,
+) -> Result<Vec<u32>> {
+    let grid = &layout.grid;
+    let mut members: Vec<Vec<usize>> = vec![Vec::new(); grid.len()];
+    let mut owner = Vec::with_capacity(pts.len());
+    for (i, p) in pts.iter().enumerate() {
+        owner.push(grid.index(grid.owner(p[0], p[1])));
+        for t in grid.tiles_touching(p[0], p[1], eps) {
+            members[grid.index(t)].push(i);
+        }
+    }
+    let tile_points = |t: usize| -> (Vec<Point3>, Vec<bool>) {
+        (
+            members[t].iter().map(|&i| pts[i]).collect(),
+            members[t].iter().map(|&i| owner[i] == t).collect(),
+        )
+    };
+    // Phase 1: each tile decides the core status of the points it owns.
+    let flags: Vec<Vec<bool>> = (0..grid.len())
+        .into_par_iter()
+        .map(|t| {
+            let (p, owned) = tile_points(t);
+            dbscan::core_flags(&p, &owned, eps, min_pts)
+        })
+        .collect::<Result<_>>()?;
+    let mut core = vec![false; pts.len()];
+    for (t, f) in flags.iter().enumerate() {
+        for (j, &i) in members[t].iter().enumerate() {
+            if owner[i] == t {
+                core[i] = f[j];
+            }
+        }
+    }
+    // Phase 2: links through core points, halo ones included, then one global merge.
+    let links: Vec<dbscan::TileLinks> = (0..grid.len())
+        .into_par_iter()
+        .map(|t| {
+            let (p, owned) = tile_points(t);
+            let ids: Vec<u64> = members[t].iter().map(|&i| keys[i]).collect();
+            let c: Vec<bool> = members[t].iter().map(|&i| core[i]).collect();
+            dbscan::tile_links(&p, &ids, &owned, &c, eps)
+        })
+        .collect::<Result<_>>()?;
+    let labels = dbscan::merge(links);
+    Ok(keys.iter().map(|&k| labels.get(k)).collect())
+}
+
+/// The box (in the event's frame) whose points the volume needs, and its XY bounds.
+fn search_box(obb: &Obb, margin: f64, params: &Params) -> ([f64; 3], [f64; 4]) {
+    let s = params.point_spacing;
+    let h = [
+        obb.half_extents[0] + margin + 3.0 * s,
+        obb.half_extents[1] + margin + 3.0 * s,
+        obb.half_extents[2] + params.cyl_halflen.value,
+    ];
+    let mut xy = [
+        f64::INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::NEG_INFINITY,
+    ];
+    for c in 0..8 {
+        let l = [
+            if c & 1 == 0 { -h[0] } else { h[0] },
+            if c & 2 == 0 { -h[1] } else { h[1] },
+            if c & 4 == 0 { -h[2] } else { h[2] },
+        ];
+        let g = obb.to_global(&l);
+        xy[0] = xy[0].min(g[0]);
+        xy[1] = xy[1].min(g[1]);
+        xy[2] = xy[2].max(g[0]);
+        xy[3] = xy[3].max(g[1]);
+    }
+    (h, xy)
+}
+
+/// Volume margin of SPEC.md §1: cyl_radius + 2 × point spacing.
+pub fn margin(params: &Params) -> f64 {
+    params.cyl_radius.value + 2.0 * params.point_spacing
+}
+
+fn volumes(
+    described: Vec<Event>,
+    layout: &Layout,
+    tiled: &Tiled,
+    params: &Params,
+    meshes: (Option<&Path>, Option<&Path>),
+) -> Result<Vec<EventRecord>> {
+    let margin = margin(params);
+    let boxes: Vec<([f64; 3], [f64; 4])> = described
+        .iter()
+        .map(|e| search_box(&e.obb, margin, params))
+        .collect();
+    let user = match meshes {
+        (Some(b), Some(a)) => Some((volume::read_ply_mesh(b)?, volume::read_ply_mesh(a)?)),
+        (Some(p), None) | (None, Some(p)) => {
+            return Err(crate::Error::input(
+                p,
+                "--before-mesh and --after-mesh go together: give both surfaces",
+            ))
+        }
+        (None, None) => None,
+    };
+    // Gather each event's points from the tiles its box touches (owned points only: no
+    // duplicates from halos).
+    let mut before: Vec<Vec<Point3>> = vec![Vec::new(); described.len()];
+    let mut after: Vec<Vec<Point3>> = vec![Vec::new(); described.len()];
+    if user.is_none() {
+        for id in layout.grid.tiles() {
+            let sq = layout.grid.square(id);
+            let touching: Vec<usize> = (0..described.len())
+                .filter(|&e| {
+                    let b = &boxes[e].1;
+                    b[0] <= sq.max[0] && b[2] >= sq.min[0] && b[1] <= sq.max[1] && b[3] >= sq.min[1]
+                })
+                .collect();
+            if touching.is_empty() {
+                continue;
+            }
+            for (dir, out) in [(&tiled.before, &mut before), (&tiled.after, &mut after)] {
+                let t = tiles::read_tile(dir, id)?;
+                for (p, &own) in t.points.iter().zip(&t.owned) {
+                    if !own {
+                        continue;
+                    }
+                    for &e in &touching {
+                        let (h, _) = &boxes[e];
+                        let l = described[e].obb.to_local(p);
+                        if l[0].abs() <= h[0] && l[1].abs() <= h[1] && l[2].abs() <= h[2] {
+                            out[e].push(*p);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    let spacing = params.point_spacing;
+    let records = described
+        .into_par_iter()
+        .enumerate()
+        .map(|(i, e)| {
+            let v: Result<EventVolume> = match &user {
+                Some((mb, ma)) => {
+                    let frame = volume::Frame::of_obb(&e.obb);
+                    let r = volume::Footprint::of_obb(&e.obb, margin);
+                    let sb = volume::UserMesh::new(mb, &frame, &r);
+                    let sa = volume::UserMesh::new(ma, &frame, &r);
+                    volume::event_volume_from_surfaces(&e.obb, margin, &sb, &sa, spacing)
+                }
+                None => volume::event_volume(&e.obb, margin, &before[i], &after[i], spacing),
+            };
+            match v {
+                Ok(v) => EventRecord {
+                    volume_m3: Some(v.volume_m3),
+                    volume_uncertainty_m3: Some(v.uncertainty_m3(e.mean_lod95)),
+                    gain_m3: Some(v.gain_m3),
+                    loss_m3: Some(v.loss_m3),
+                    footprint_area_m2: Some(v.footprint_area_m2),
+                    volume_note: None,
+                    solids: Some((v.before_solid, v.after_solid)),
+                    event: e,
+                },
+                Err(err) => EventRecord {
+                    volume_m3: None,
+                    volume_uncertainty_m3: None,
+                    gain_m3: None,
+                    loss_m3: None,
+                    footprint_area_m2: None,
+                    volume_note: Some(err.to_string()),
+                    solids: None,
+                    event: e,
+                },
+            }
+        })
+        .collect();
+    Ok(records)
+}
