@@ -1,0 +1,21 @@
+#!/usr/bin/env bash
+# Every test of talus, on a fresh machine: installs what the tests need (a Python venv with laspy
+# for the independent-reader checks, Debian chromium and the viewer's npm packages for the
+# browser tests), then runs the Rust tests of the workspace and the viewer's browser tests.
+# This is the test command README.md gives; .ci/run calls it.
+set -euo pipefail
+repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$repo"
+
+# Independent LAS reader for the format tests (tests/py/.venv, gitignored).
+if ! tests/py/.venv/bin/python -c "import laspy, lazrs" 2>/dev/null; then
+  echo "test.sh: creating tests/py/.venv with laspy" >&2
+  python3 -m venv tests/py/.venv
+  tests/py/.venv/bin/pip install --quiet --disable-pip-version-check 'laspy[lazrs]'
+fi
+export TALUS_PYTHON="$repo/tests/py/.venv/bin/python"
+
+cargo test --workspace --no-fail-fast
+
+# Browser tests of the web viewer (installs chromium and npm packages when missing).
+bash viewer/tests/run.sh
