@@ -85,3 +85,4 @@ pub fn shared_data(sub: &str) -> Option<PathBuf> {
         None
     }
 }
+pub mod laspy;
