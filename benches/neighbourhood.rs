@@ -81,14 +81,13 @@ fn benches(c: &mut Criterion) {
             }
         })
     });
-    let mut s = cylinder::Scratch::default();
     g.bench_function(
         "cylinder chained r=0.5 h=3, 1000 cores x 2 epochs",
         |bench| {
             bench.iter(|| {
                 for (q, n) in cores.iter().zip(&normals) {
-                    black_box(cylinder::cylinder_stats(&b, q, n, 0.5, 3.0, &mut s));
-                    black_box(cylinder::cylinder_stats(&a, q, n, 0.5, 3.0, &mut s));
+                    black_box(cylinder::cylinder_stats(&b, q, n, 0.5, 3.0));
+                    black_box(cylinder::cylinder_stats(&a, q, n, 0.5, 3.0));
                 }
             })
         },
@@ -98,8 +97,8 @@ fn benches(c: &mut Criterion) {
         |bench| {
             bench.iter(|| {
                 for (q, n) in cores.iter().zip(&normals) {
-                    black_box(cylinder::cylinder_stats_sphere(&b, q, n, 0.5, 3.0, &mut s));
-                    black_box(cylinder::cylinder_stats_sphere(&a, q, n, 0.5, 3.0, &mut s));
+                    black_box(cylinder::cylinder_stats_sphere(&b, q, n, 0.5, 3.0));
+                    black_box(cylinder::cylinder_stats_sphere(&a, q, n, 0.5, 3.0));
                 }
             })
         },

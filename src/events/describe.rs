@@ -132,6 +132,10 @@ pub fn describe(
     };
 
     let axes = pca_axes(&cov, &mean_normal);
+    // The in-plane axes: PCA's are arbitrary for a square or round cluster (two equal
+    // eigenvalues), and a box turned 45° grows its footprint's corners into the neighbours.
+    // Keep the third axis and turn the first two to the cluster's minimum-area rectangle.
+    let axes = tighten_in_plane(axes, points, &centroid);
     // Extents of the projections.
     let mut lo = [f64::INFINITY; 3];
     let mut hi = [f64::NEG_INFINITY; 3];
@@ -175,6 +179,112 @@ pub fn describe(
         obb,
         mean_normal: [mean_normal.x, mean_normal.y, mean_normal.z],
     })
+}
+
+/// Turn the first two axes about the third to the minimum-area enclosing rectangle of the points
+/// projected on their plane (Freeman & Shapira 1975: one side of that rectangle lies on an edge
+/// of the convex hull; rotating calipers, Toussaint 1983).
+fn tighten_in_plane(
+    axes: [Vector3<f64>; 3],
+    points: &[[f64; 3]],
+    centroid: &[f64; 3],
+) -> [Vector3<f64>; 3] {
+    let pts: Vec<[f64; 2]> = points
+        .iter()
+        .map(|p| {
+            let d = Vector3::new(p[0] - centroid[0], p[1] - centroid[1], p[2] - centroid[2]);
+            [axes[0].dot(&d), axes[1].dot(&d)]
+        })
+        .collect();
+    let hull = convex_hull(pts.clone());
+    if hull.len() < 3 {
+        return axes;
+    }
+    let mut best = (f64::INFINITY, 0.0f64);
+    for i in 0..hull.len() {
+        let (a, b) = (hull[i], hull[(i + 1) % hull.len()]);
+        let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+        let len = (dx * dx + dy * dy).sqrt();
+        if len <= 0.0 {
+            continue;
+        }
+        let (c, s) = (dx / len, dy / len);
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for p in &hull {
+            let u = c * p[0] + s * p[1];
+            let v = -s * p[0] + c * p[1];
+            lo = [lo[0].min(u), lo[1].min(v)];
+            hi = [hi[0].max(u), hi[1].max(v)];
+        }
+        let area = (hi[0] - lo[0]) * (hi[1] - lo[1]);
+        // Prefer the PCA orientation unless the rectangle is really smaller (stable for
+        // elongated clusters, where PCA already gives the long side).
+        if area < best.0 * (1.0 - 1e-9) {
+            best = (area, s.atan2(c));
+        }
+    }
+    let pca_area = {
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for p in &hull {
+            lo = [lo[0].min(p[0]), lo[1].min(p[1])];
+            hi = [hi[0].max(p[0]), hi[1].max(p[1])];
+        }
+        (hi[0] - lo[0]) * (hi[1] - lo[1])
+    };
+    if !(best.0 < pca_area * 0.999) {
+        return axes;
+    }
+    let (c, s) = (best.1.cos(), best.1.sin());
+    let mut e1 = axes[0] * c + axes[1] * s;
+    let e3 = axes[2];
+    // Of the rectangle's two side directions take the longer as the first axis.
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for p in &pts {
+        let u = c * p[0] + s * p[1];
+        let v = -s * p[0] + c * p[1];
+        lo = [lo[0].min(u), lo[1].min(v)];
+        hi = [hi[0].max(u), hi[1].max(v)];
+    }
+    if hi[1] - lo[1] > hi[0] - lo[0] {
+        e1 = e3.cross(&e1);
+    }
+    let imax = (0..3)
+        .max_by(|&a, &b| e1[a].abs().total_cmp(&e1[b].abs()))
+        .unwrap_or(0);
+    if e1[imax] < 0.0 {
+        e1 = -e1;
+    }
+    let e1 = (e1 - e3 * e3.dot(&e1)).normalize();
+    [e1, e3.cross(&e1), e3]
+}
+
+/// Convex hull (Andrew's monotone chain), counter-clockwise, without collinear points.
+fn convex_hull(mut p: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
+    p.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
+    p.dedup();
+    if p.len() < 3 {
+        return p;
+    }
+    let cross = |o: [f64; 2], a: [f64; 2], b: [f64; 2]| {
+        (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+    };
+    let mut h: Vec<[f64; 2]> = Vec::with_capacity(2 * p.len());
+    for &q in &p {
+        while h.len() >= 2 && cross(h[h.len() - 2], h[h.len() - 1], q) <= 0.0 {
+            h.pop();
+        }
+        h.push(q);
+    }
+    let lower = h.len() + 1;
+    for &q in p.iter().rev().skip(1) {
+        while h.len() >= lower && cross(h[h.len() - 2], h[h.len() - 1], q) <= 0.0 {
+            h.pop();
+        }
+        h.push(q);
+    }
+    // The upper chain ends where the lower one started.
+    h.pop();
+    h
 }
 
 /// Right-handed PCA axes: decreasing variance, third axis agreeing with `outward`.

@@ -4,6 +4,7 @@
 
 pub mod core_points;
 pub mod cylinder;
+pub mod moments;
 pub mod normals;
 pub mod orientation;
 
@@ -106,12 +107,16 @@ fn in_spatial_order<T: Send + Copy + Default, S: Send>(
 
 /// Normals at `cores` (local frame of `before`), oriented as `params.orientation` says.
 pub fn normals(before: &Index, cores: &[Point3], params: &M3c2Params) -> Vec<Point3> {
-    let mut normals: Vec<Point3> =
-        in_spatial_order(cores, params.normal_radius, Vec::new, |scratch, i| {
-            normals::normal_at_with(before, &cores[i], params.normal_radius, scratch)
+    let mut normals: Vec<Point3> = in_spatial_order(
+        cores,
+        params.normal_radius,
+        || (),
+        |_, i| {
+            normals::normal_at(before, &cores[i], params.normal_radius)
                 .map(|(n, _)| n)
                 .unwrap_or([f64::NAN; 3])
-        });
+        },
+    );
     orientation::orient(
         cores,
         &mut normals,
@@ -136,16 +141,16 @@ pub fn distances(
     in_spatial_order(
         cores,
         params.cyl_radius.max(params.normal_radius),
-        || (cylinder::Scratch::default(), cylinder::Scratch::default()),
-        |(s1, s2), i| {
+        || (),
+        |_, i| {
             let (q, n) = (&cores[i], &normals[i]);
             {
                 if !n[0].is_finite() {
                     return CoreResult::undefined(*n);
                 }
                 let (r, h) = (params.cyl_radius, params.cyl_halflen);
-                let c1 = cylinder::cylinder_stats(before, q, n, r, h, s1);
-                let c2 = cylinder::cylinder_stats(after, q, n, r, h, s2);
+                let c1 = cylinder::cylinder_stats(before, q, n, r, h);
+                let c2 = cylinder::cylinder_stats(after, q, n, r, h);
                 let need = params.min_points.max(1);
                 if c1.count < need || c2.count < need {
                     return CoreResult {

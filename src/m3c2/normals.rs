@@ -8,6 +8,7 @@
 
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 
+use super::moments::Moments3;
 use crate::io::Point3;
 use crate::spatial::Index;
 
@@ -18,54 +19,18 @@ pub const MIN_NORMAL_POINTS: usize = 3;
 /// the planarity measure λ₀/(λ₀+λ₁+λ₂) (0 = a perfect plane). None when fewer than
 /// [`MIN_NORMAL_POINTS`] neighbours exist or the neighbourhood is degenerate.
 pub fn normal_at(index: &Index, q: &Point3, radius: f64) -> Option<(Point3, f64)> {
-    normal_at_with(index, q, radius, &mut Vec::new())
-}
-
-/// [`normal_at`] with a reusable neighbourhood buffer: one tree query, then the mean and the
-/// centred covariance from the buffer (two passes over memory, which keeps full precision even
-/// when the neighbourhood sits far from the local origin).
-pub fn normal_at_with(
-    index: &Index,
-    q: &Point3,
-    radius: f64,
-    scratch: &mut Vec<Point3>,
-) -> Option<(Point3, f64)> {
+    // One pass: exact integer moments (see `moments`), so the result does not depend on the
+    // order in which the tree visits the neighbourhood, and no second query is needed.
     let pts = index.points();
-    scratch.clear();
+    let mut m = Moments3::default();
     index.for_each_within(q, radius, |i, _| {
         let p = &pts[i];
-        scratch.push([p[0] - q[0], p[1] - q[1], p[2] - q[2]]);
+        m.add([p[0] - q[0], p[1] - q[1], p[2] - q[2]]);
     });
-    let n = scratch.len();
-    if n < MIN_NORMAL_POINTS {
+    if m.count() < MIN_NORMAL_POINTS {
         return None;
     }
-    // The tree visits the neighbourhood in an order that depends on its layout only; sum in a
-    // fixed order anyway so results never depend on how the query was run.
-    scratch.sort_unstable_by(|a, b| {
-        a[0].total_cmp(&b[0])
-            .then(a[1].total_cmp(&b[1]))
-            .then(a[2].total_cmp(&b[2]))
-    });
-    let inv = 1.0 / n as f64;
-    let mut mean = [0.0f64; 3];
-    for d in scratch.iter() {
-        mean[0] += d[0];
-        mean[1] += d[1];
-        mean[2] += d[2];
-    }
-    mean = [mean[0] * inv, mean[1] * inv, mean[2] * inv];
-    let mut c = [0.0f64; 6]; // xx xy xz yy yz zz
-    for p in scratch.iter() {
-        let d = [p[0] - mean[0], p[1] - mean[1], p[2] - mean[2]];
-        c[0] += d[0] * d[0];
-        c[1] += d[0] * d[1];
-        c[2] += d[0] * d[2];
-        c[3] += d[1] * d[1];
-        c[4] += d[1] * d[2];
-        c[5] += d[2] * d[2];
-    }
-    smallest_eigenvector(&c)
+    smallest_eigenvector(&m.covariance())
 }
 
 /// The unit eigenvector of the smallest eigenvalue of a symmetric 3×3 matrix given as its upper

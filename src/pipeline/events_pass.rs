@@ -20,6 +20,7 @@ use crate::params::Params;
 use crate::pipeline::m3c2_pass::M3c2Results;
 use crate::pipeline::outputs::MergedResults;
 use crate::pipeline::tiles::{self, Layout, Tiled};
+use crate::spatial::Index;
 use crate::volume::{self, EventVolume, Mesh};
 
 /// A kept core point.
@@ -136,7 +137,15 @@ pub fn run(
             described.push(e);
         }
     }
-    let events = volumes(described, layout, tiled, params, meshes)?;
+    // The clustered core points with their event: the volume of one event must not count its
+    // neighbour's change where their grown footprints overlap.
+    let labelled: Vec<(Point3, u32)> = clusters
+        .iter()
+        .enumerate()
+        .flat_map(|(n, (_, _, members))| members.iter().map(move |&i| (n as u32 + 1, i)))
+        .map(|(id, i)| (kept[i].xyz, id))
+        .collect();
+    let events = volumes(described, &labelled, layout, tiled, params, meshes)?;
     Ok(EventsOut {
         events,
         per_point,
@@ -231,8 +240,86 @@ pub fn margin(params: &Params) -> f64 {
     params.cyl_radius.value + 2.0 * params.point_spacing
 }
 
+/// Which event, if any, a point near the events belongs to: the event of the nearest clustered
+/// core point within `reach` (3-D distance, so it works on cliffs too).
+struct Territory {
+    index: Index,
+    ids: Vec<u32>,
+    reach: f64,
+}
+
+impl Territory {
+    fn new(labelled: &[(Point3, u32)], reach: f64) -> Self {
+        let pts: Vec<Point3> = labelled.iter().map(|l| l.0).collect();
+        let origin = pts.first().copied().unwrap_or_default();
+        Territory {
+            index: Index::new(&pts, origin),
+            ids: labelled.iter().map(|l| l.1).collect(),
+            reach,
+        }
+    }
+    fn owner(&self, p: &Point3) -> u32 {
+        let q = self.index.to_local(p);
+        match self.index.nearest(&q, 1).first() {
+            Some(&(i, d2)) if d2 <= self.reach * self.reach => self.ids[i],
+            _ => 0,
+        }
+    }
+}
+
+/// A coarse XY grid over the events' search boxes: which events may contain a point.
+struct BoxGrid {
+    origin: [f64; 2],
+    cell: f64,
+    cells: HashMap<(i64, i64), Vec<usize>>,
+}
+
+impl BoxGrid {
+    fn new(boxes: &[[f64; 4]]) -> Self {
+        let mut ext: Vec<f64> = boxes
+            .iter()
+            .map(|b| (b[2] - b[0]).max(b[3] - b[1]))
+            .collect();
+        ext.sort_by(|a, b| a.total_cmp(b));
+        let cell = ext.get(ext.len() / 2).copied().unwrap_or(1.0).max(1e-6);
+        let origin = [
+            boxes.iter().map(|b| b[0]).fold(f64::INFINITY, f64::min),
+            boxes.iter().map(|b| b[1]).fold(f64::INFINITY, f64::min),
+        ];
+        let mut cells: HashMap<(i64, i64), Vec<usize>> = HashMap::new();
+        for (e, b) in boxes.iter().enumerate() {
+            let (x0, y0) = (
+                ((b[0] - origin[0]) / cell) as i64,
+                ((b[1] - origin[1]) / cell) as i64,
+            );
+            let (x1, y1) = (
+                ((b[2] - origin[0]) / cell) as i64,
+                ((b[3] - origin[1]) / cell) as i64,
+            );
+            for x in x0..=x1 {
+                for y in y0..=y1 {
+                    cells.entry((x, y)).or_default().push(e);
+                }
+            }
+        }
+        BoxGrid {
+            origin,
+            cell,
+            cells,
+        }
+    }
+    fn candidates(&self, x: f64, y: f64) -> &[usize] {
+        let k = (
+            ((x - self.origin[0]) / self.cell).floor() as i64,
+            ((y - self.origin[1]) / self.cell).floor() as i64,
+        );
+        self.cells.get(&k).map(|v| v.as_slice()).unwrap_or(&[])
+    }
+}
+
 fn volumes(
     described: Vec<Event>,
+    labelled: &[(Point3, u32)],
     layout: &Layout,
     tiled: &Tiled,
     params: &Params,
@@ -254,32 +341,53 @@ fn volumes(
         (None, None) => None,
     };
     // Gather each event's points from the tiles its box touches (owned points only: no
-    // duplicates from halos).
+    // duplicates from halos). Where a point lies in another event's territory, that event's
+    // change is taken out: event i sees the C1 surface there in both epochs.
     let mut before: Vec<Vec<Point3>> = vec![Vec::new(); described.len()];
     let mut after: Vec<Vec<Point3>> = vec![Vec::new(); described.len()];
-    if user.is_none() {
+    if user.is_none() && !described.is_empty() {
+        let xy: Vec<[f64; 4]> = boxes.iter().map(|b| b.1).collect();
+        let grid = BoxGrid::new(&xy);
+        let territory = Territory::new(labelled, margin);
         for id in layout.grid.tiles() {
             let sq = layout.grid.square(id);
-            let touching: Vec<usize> = (0..described.len())
-                .filter(|&e| {
-                    let b = &boxes[e].1;
-                    b[0] <= sq.max[0] && b[2] >= sq.min[0] && b[1] <= sq.max[1] && b[3] >= sq.min[1]
-                })
-                .collect();
-            if touching.is_empty() {
+            let touches = xy.iter().any(|b| {
+                b[0] <= sq.max[0] && b[2] >= sq.min[0] && b[1] <= sq.max[1] && b[3] >= sq.min[1]
+            });
+            if !touches {
                 continue;
             }
-            for (dir, out) in [(&tiled.before, &mut before), (&tiled.after, &mut after)] {
+            for epoch in [0, 1] {
+                let dir = if epoch == 0 {
+                    &tiled.before
+                } else {
+                    &tiled.after
+                };
                 let t = tiles::read_tile(dir, id)?;
                 for (p, &own) in t.points.iter().zip(&t.owned) {
                     if !own {
                         continue;
                     }
-                    for &e in &touching {
-                        let (h, _) = &boxes[e];
+                    let mut owner = None;
+                    for &e in grid.candidates(p[0], p[1]) {
+                        let (h, b) = &boxes[e];
+                        if p[0] < b[0] || p[0] > b[2] || p[1] < b[1] || p[1] > b[3] {
+                            continue;
+                        }
                         let l = described[e].obb.to_local(p);
-                        if l[0].abs() <= h[0] && l[1].abs() <= h[1] && l[2].abs() <= h[2] {
-                            out[e].push(*p);
+                        if l[0].abs() > h[0] || l[1].abs() > h[1] || l[2].abs() > h[2] {
+                            continue;
+                        }
+                        let o = *owner.get_or_insert_with(|| territory.owner(p));
+                        let foreign = o != 0 && o != described[e].id;
+                        match (epoch, foreign) {
+                            (0, false) => before[e].push(*p),
+                            (0, true) => {
+                                before[e].push(*p);
+                                after[e].push(*p);
+                            }
+                            (_, false) => after[e].push(*p),
+                            (_, true) => {}
                         }
                     }
                 }
