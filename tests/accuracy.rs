@@ -1,0 +1,583 @@
+//! Accuracy of `talus compare` against ground truth we did not compute with the pipeline: the
+//! closed-form volumes of the `talus synth` scenes (bump h·R²(π/2 − 2/π), spherical caps
+//! πh²(3R − h)/3, boxes w·d·h, half-ellipsoid (2/3)πabc, half-cone πR²H/6; checked against
+//! numerical integration in tests/synth.rs), and a gain/loss pair of boxes built here.
+//!
+//! Issue "Change events and their volumes", item 5: every event of the paper's four tests (hill,
+//! cube, spheres, cubes) and of the cliff scene within 2 % (Gorup & Bohak report 10 % on their
+//! mixed "cubes" test); cliff scars measured along the horizontal axis; a gain and a loss 1 m
+//! apart as two events; a rotated cliff; epoch 2 at half the density; a stable scene with no
+//! event above 0.2 m³. Item 3: every written solid is watertight (`check_watertight`), and the
+//! solids' volumes, recomputed here by the divergence theorem, give the reported volume.
+//!
+//! Everything runs the real binary with default parameters only (no tuning flags). Each scene is
+//! its own test function so that the harness runs them in parallel. Run
+//! `cargo test --test accuracy -- --nocapture` to see the accuracy table.
+
+mod common;
+
+use std::path::Path;
+
+use serde_json::Value;
+use talus::synth::Truth;
+use talus::volume::{check_watertight, read_ply_mesh, Mesh};
+
+/// Relative volume tolerance of the issue: 2 % of the true volume.
+const REL_TOL: f64 = 0.02;
+/// A found event matches a truth event of the same kind when its centroid lies within this
+/// distance (m) of the truth centre. The truth centre is the footprint centre on the epoch-1
+/// surface while talus reports the centroid of the changed core points, which differ by up to
+/// about 1 m for asymmetric shapes (the debris fan's half-cone); the nearest other event of any
+/// scene is more than 10 m away, so 3 m cannot pick the wrong one.
+const MATCH_DIST: f64 = 3.0;
+/// Largest |volume| (m³) an event may have without matching a planted event. This is the
+/// false-positive bound the issue sets for the stable scene (1 cm noise, 5 mm shift): anything
+/// larger is either a spurious detection or a planted event split in two (the smallest planted
+/// event is 1.44 m³, so a split-off part above 0.2 m³ would also cost its match more than 2 % in
+/// most scenes, and we want to see it named rather than hidden in that error).
+const STRAY_MAX: f64 = 0.2;
+/// The reported uncertainty must bracket the error: |V − V_true| ≤ UNC_K · U. talus reports at
+/// least the conservative bound area × mean LoD95 (a 95 % level), so 1 would do; 2 leaves room
+/// for a tighter (e.g. one-sigma) estimate the spec welcomes, without allowing a vacuous one.
+const UNC_K: f64 = 2.0;
+/// ... and must not be vacuous: U ≤ UNC_MAX_REL · |V_true| (an uncertainty of half the volume
+/// would make the event's volume meaningless).
+const UNC_MAX_REL: f64 = 0.5;
+
+// ---------------------------------------------------------------- running talus
+
+/// Run `talus synth SCENE --out DIR [extra...]` and read its truth.json.
+fn synth(scene: &str, extra: &[&str], dir: &Path) -> Truth {
+    let out = dir.to_str().expect("utf-8 temp path");
+    let mut args = vec!["synth", scene, "--out", out];
+    args.extend_from_slice(extra);
+    let o = common::run(&args);
+    assert!(
+        o.status.success(),
+        "talus {args:?} failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let text = std::fs::read_to_string(dir.join("truth.json")).expect("truth.json written");
+    serde_json::from_str(&text).expect("truth.json parses")
+}
+
+/// One event of events.geojson.
+#[derive(Debug, Clone)]
+struct Found {
+    id: u64,
+    kind: String,
+    volume: f64,
+    uncertainty: f64,
+    gain: f64,
+    loss: f64,
+    n_points: u64,
+    centre: [f64; 3],
+    /// OBB axes (rows); the third is the extrusion direction, out of the terrain.
+    axes: [[f64; 3]; 3],
+    note: Option<String>,
+}
+
+fn num(v: &Value, key: &str) -> f64 {
+    v[key]
+        .as_f64()
+        .unwrap_or_else(|| panic!("property {key} is not a number: {v}"))
+}
+
+fn vec3(v: &Value) -> [f64; 3] {
+    std::array::from_fn(|k| {
+        v[k].as_f64()
+            .unwrap_or_else(|| panic!("not a 3-vector: {v}"))
+    })
+}
+
+/// Run `talus compare BEFORE AFTER --out RES` (defaults only), read events.geojson, and check
+/// every written solid (see [`check_solids`]).
+fn compare(before: &Path, after: &Path, res: &Path) -> Vec<Found> {
+    let args = [
+        "compare",
+        before.to_str().expect("utf-8 path"),
+        after.to_str().expect("utf-8 path"),
+        "--out",
+        res.to_str().expect("utf-8 path"),
+    ];
+    let o = common::run(&args);
+    assert!(
+        o.status.success(),
+        "talus {args:?} failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let text = std::fs::read_to_string(res.join("events.geojson")).expect("events.geojson");
+    let gj: Value = serde_json::from_str(&text).expect("events.geojson parses");
+    assert_eq!(gj["type"], "FeatureCollection");
+    let found: Vec<Found> = gj["features"]
+        .as_array()
+        .expect("features array")
+        .iter()
+        .map(|f| {
+            let p = &f["properties"];
+            let axes = &p["obb"]["axes"];
+            Found {
+                id: p["id"].as_u64().expect("id"),
+                kind: p["kind"].as_str().expect("kind").to_string(),
+                volume: num(p, "volume_m3"),
+                uncertainty: num(p, "volume_uncertainty_m3"),
+                gain: num(p, "gain_m3"),
+                loss: num(p, "loss_m3"),
+                n_points: p["n_points"].as_u64().expect("n_points"),
+                centre: vec3(&f["geometry"]["coordinates"]),
+                axes: [vec3(&axes[0]), vec3(&axes[1]), vec3(&axes[2])],
+                note: p["volume_note"].as_str().map(str::to_string),
+            }
+        })
+        .collect();
+    check_solids(res, &found);
+    found
+}
+
+/// Signed volume of a closed triangle mesh by the divergence theorem, Σ (a · (b × c)) / 6 over
+/// its faces, relative to the first vertex (large UTM coordinates). Written here so the check
+/// does not rely on the pipeline's own volume code.
+fn mesh_volume(m: &Mesh) -> f64 {
+    let o = m.vertices[0];
+    let rel = |i: u32| -> [f64; 3] {
+        let p = m.vertices[i as usize];
+        [p[0] - o[0], p[1] - o[1], p[2] - o[2]]
+    };
+    m.faces
+        .iter()
+        .map(|f| {
+            let (a, b, c) = (rel(f[0]), rel(f[1]), rel(f[2]));
+            let bxc = [
+                b[1] * c[2] - b[2] * c[1],
+                b[2] * c[0] - b[0] * c[2],
+                b[0] * c[1] - b[1] * c[0],
+            ];
+            a[0] * bxc[0] + a[1] * bxc[1] + a[2] * bxc[2]
+        })
+        .sum::<f64>()
+        / 6.0
+}
+
+/// Issue item 3: both solids of every event are watertight (every edge shared by exactly two
+/// faces, once in each direction, positive volume), and V(after) − V(before) of the written
+/// solids is the reported volume_m3.
+fn check_solids(res: &Path, found: &[Found]) {
+    for e in found {
+        let mut v = [0.0; 2];
+        for (k, which) in ["before", "after"].into_iter().enumerate() {
+            let path = res
+                .join("meshes")
+                .join(format!("event_{:04}_{which}.ply", e.id));
+            let mesh =
+                read_ply_mesh(&path).unwrap_or_else(|err| panic!("{}: {err}", path.display()));
+            if let Err(why) = check_watertight(&mesh) {
+                panic!("{} is not a watertight solid: {why}", path.display());
+            }
+            v[k] = mesh_volume(&mesh);
+        }
+        let dv = v[1] - v[0];
+        assert!(
+            (dv - e.volume).abs() <= 1e-6 * (1.0 + v[0].abs() + v[1].abs()),
+            "event {}: solids give V(after) − V(before) = {} − {} = {dv}, reported {}",
+            e.id,
+            v[1],
+            v[0],
+            e.volume
+        );
+    }
+}
+
+// ---------------------------------------------------------------- judging
+
+/// A planted event: kind, signed volume, centre (global), what it is.
+#[derive(Debug, Clone)]
+struct Planted {
+    kind: String,
+    volume: f64,
+    centre: [f64; 3],
+    what: String,
+}
+
+fn planted(truth: &Truth) -> Vec<Planted> {
+    truth
+        .events
+        .iter()
+        .map(|e| Planted {
+            kind: e.kind.clone(),
+            volume: e.volume_m3,
+            centre: e.centre,
+            what: e.description.clone(),
+        })
+        .collect()
+}
+
+fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+/// For each planted event, the index of its found event (nearest centroid of the same kind
+/// within [`MATCH_DIST`], each found event used once), or None.
+fn match_events(planted: &[Planted], found: &[Found]) -> Vec<Option<usize>> {
+    // Pairs by increasing distance, taken greedily: a found event goes to its closest truth.
+    let mut pairs: Vec<(f64, usize, usize)> = Vec::new();
+    for (t, p) in planted.iter().enumerate() {
+        for (f, e) in found.iter().enumerate() {
+            let d = dist(p.centre, e.centre);
+            if e.kind == p.kind && d <= MATCH_DIST {
+                pairs.push((d, t, f));
+            }
+        }
+    }
+    pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut of_truth = vec![None; planted.len()];
+    let mut used = vec![false; found.len()];
+    for (_, t, f) in pairs {
+        if of_truth[t].is_none() && !used[f] {
+            of_truth[t] = Some(f);
+            used[f] = true;
+        }
+    }
+    of_truth
+}
+
+/// Check a run against its planted events; prints the accuracy table rows of `scene` and
+/// returns the matches. Panics listing every failure (never a widened tolerance).
+fn judge(scene: &str, planted: &[Planted], found: &[Found]) -> Vec<Option<usize>> {
+    let matches = match_events(planted, found);
+    let mut table = String::new();
+    let mut fails = Vec::new();
+    for (p, m) in planted.iter().zip(&matches) {
+        let Some(f) = *m else {
+            table.push_str(&format!(
+                "| {scene} | {} | {:+.3} | (none) | | | |\n",
+                p.what, p.volume
+            ));
+            fails.push(format!(
+                "{scene}: planted {} {} ({:+.3} m³ at {:?}) has no found {} event within {MATCH_DIST} m",
+                p.kind, p.what, p.volume, p.centre, p.kind
+            ));
+            continue;
+        };
+        let e = &found[f];
+        let err = e.volume - p.volume;
+        let rel = err / p.volume.abs();
+        table.push_str(&format!(
+            "| {scene} | {} | {:+.3} | {:+.3} | {:+.2} | ±{:.3} | {} |\n",
+            p.what,
+            p.volume,
+            e.volume,
+            100.0 * rel,
+            e.uncertainty,
+            e.n_points
+        ));
+        let ctx = format!(
+            "{scene}: {} (true {:+.4} m³) ↔ event {} ({:+.4} m³ ± {:.4}, gain {:+.4}, loss {:+.4}, {} core points, centroid {:.2} m from the truth{})",
+            p.what,
+            p.volume,
+            e.id,
+            e.volume,
+            e.uncertainty,
+            e.gain,
+            e.loss,
+            e.n_points,
+            dist(p.centre, e.centre),
+            e.note.as_deref().map(|n| format!(", note: {n}")).unwrap_or_default()
+        );
+        if rel.abs() > REL_TOL {
+            fails.push(format!(
+                "{ctx}: error {:+.2} % exceeds {} %",
+                100.0 * rel,
+                100.0 * REL_TOL
+            ));
+        }
+        if !(e.uncertainty > 0.0 && err.abs() <= UNC_K * e.uncertainty) {
+            fails.push(format!(
+                "{ctx}: error {err:+.4} m³ is outside {UNC_K} × the reported uncertainty"
+            ));
+        }
+        if e.uncertainty > UNC_MAX_REL * p.volume.abs() {
+            fails.push(format!(
+                "{ctx}: uncertainty is more than {} % of the volume",
+                100.0 * UNC_MAX_REL
+            ));
+        }
+    }
+    for (f, e) in found.iter().enumerate() {
+        if matches.contains(&Some(f)) {
+            continue;
+        }
+        table.push_str(&format!(
+            "| {scene} | unmatched event {} ({}) | | {:+.3} | | ±{:.3} | {} |\n",
+            e.id, e.kind, e.volume, e.uncertainty, e.n_points
+        ));
+        if e.volume.abs() > STRAY_MAX {
+            fails.push(format!(
+                "{scene}: found {} event {} ({:+.4} m³, {} core points) at {:?} matches no planted event and exceeds {STRAY_MAX} m³",
+                e.kind, e.id, e.volume, e.n_points, e.centre
+            ));
+        }
+    }
+    eprint!("{table}");
+    assert!(fails.is_empty(), "{}", fails.join("\n"));
+    matches
+}
+
+/// Synthesize `scene` with `extra` synth options (scene variants, never compare tuning), compare
+/// with default parameters, judge. Returns the truth, the found events and the matches.
+fn run_scene(scene: &str, extra: &[&str]) -> (Truth, Vec<Found>, Vec<Option<usize>>) {
+    let dir = common::tempdir();
+    let data = dir.path().join("data");
+    let truth = synth(scene, extra, &data);
+    let found = compare(
+        &data.join("before.laz"),
+        &data.join("after.laz"),
+        &dir.path().join("res"),
+    );
+    let label = if extra.is_empty() {
+        scene.to_string()
+    } else {
+        format!("{scene} {}", extra.join(" "))
+    };
+    let matches = judge(&label, &planted(&truth), &found);
+    (truth, found, matches)
+}
+
+/// The cliff's scars (rockfall losses in the vertical face) must be measured along the horizontal
+/// axis: the OBB's third axis horizontal and pointing out of the face. The face is the plane
+/// y = 0 with rock at y > 0 (outward normal −y) before `--rotate θ` turns the scene
+/// counter-clockwise about the vertical, which turns the outward normal to (sin θ, −cos θ, 0).
+fn check_scars(label: &str, truth: &Truth, found: &[Found], matches: &[Option<usize>]) {
+    let th = truth.rotate_deg.to_radians();
+    let out = [th.sin(), -th.cos(), 0.0];
+    let mut n = 0;
+    for (t, m) in truth.events.iter().zip(matches) {
+        if !t.description.contains("scar") {
+            continue;
+        }
+        n += 1;
+        let e = &found[m.expect("judged: every event matched")];
+        let a = e.axes[2];
+        let along = a[0] * out[0] + a[1] * out[1] + a[2] * out[2];
+        eprintln!(
+            "{label}: {} — OBB axis 3 = [{:.3}, {:.3}, {:.3}], outward face normal [{:.3}, {:.3}, 0], cos = {along:.3}",
+            t.description, a[0], a[1], a[2], out[0], out[1]
+        );
+        assert!(
+            a[2].abs() < 0.2,
+            "{label}: {}: OBB third axis {a:?} is not horizontal",
+            t.description
+        );
+        assert!(
+            along > 0.9,
+            "{label}: {}: OBB third axis {a:?} does not point out of the face {out:?} (cos {along:.3})",
+            t.description
+        );
+    }
+    assert_eq!(n, 2, "the cliff scene has two scars");
+}
+
+// ---------------------------------------------------------------- the paper's tests and the cliff
+
+#[test]
+fn hill_within_2_percent() {
+    run_scene("hill", &[]);
+}
+
+#[test]
+fn cube_within_2_percent() {
+    run_scene("cube", &[]);
+}
+
+#[test]
+fn spheres_within_2_percent() {
+    run_scene("spheres", &[]);
+}
+
+/// The paper's mixed test (10 % error there): removed, placed, grown and dug boxes, plus an
+/// unchanged box that must give no event.
+#[test]
+fn cubes_within_2_percent() {
+    let (truth, _, _) = run_scene("cubes", &[]);
+    assert_eq!(truth.events.len(), 4, "A–D change, E is the control");
+}
+
+/// Also: the scars are measured along the horizontal axis.
+#[test]
+fn cliff_within_2_percent_scars_horizontal() {
+    let (truth, found, m) = run_scene("cliff", &[]);
+    check_scars("cliff", &truth, &found, &m);
+}
+
+// ---------------------------------------------------------------- rotation and density
+
+/// The cliff turned 30° about the vertical: its face is aligned with neither axis.
+#[test]
+fn rotated_cliff_within_2_percent() {
+    let (truth, found, m) = run_scene("cliff", &["--rotate", "30"]);
+    check_scars("cliff --rotate 30", &truth, &found, &m);
+}
+
+/// The mixed boxes turned 37°: box edges aligned with neither axis.
+#[test]
+fn rotated_cubes_within_2_percent() {
+    run_scene("cubes", &["--rotate", "37"]);
+}
+
+#[test]
+fn half_density_cube_within_2_percent() {
+    run_scene("cube", &["--density2", "0.5"]);
+}
+
+#[test]
+fn half_density_cliff_within_2_percent() {
+    let (truth, found, m) = run_scene("cliff", &["--density2", "0.5"]);
+    check_scars("cliff --density2 0.5", &truth, &found, &m);
+}
+
+// ---------------------------------------------------------------- stable
+
+/// Independent resampling, 1 cm noise, a 5 mm vertical shift: no event above 0.2 m³.
+#[test]
+fn stable_scene_has_no_event_above_0_2_m3() {
+    let (truth, found, _) = run_scene("stable", &[]);
+    assert!(truth.events.is_empty());
+    let worst = found.iter().map(|e| e.volume.abs()).fold(0.0, f64::max);
+    eprintln!(
+        "| stable | {} event(s), largest |V| | 0 | {worst:.3} | | | |",
+        found.len()
+    );
+    // judge() already failed on any event above STRAY_MAX = 0.2 m³; say it here too.
+    assert!(worst <= 0.2, "{found:?}");
+}
+
+// ---------------------------------------------------------------- a gain and a loss 1 m apart
+
+/// Points per m² of the pair scene: about 0.1 m spacing, like the synth scenes' defaults.
+const PAIR_DENSITY: f64 = 100.0;
+/// Noise along the surface normal (m), as synth's default.
+const PAIR_NOISE: f64 = 0.005;
+
+/// An axis-aligned rectangle of the ground, local coordinates.
+#[derive(Clone, Copy)]
+struct Rect {
+    min: [f64; 2],
+    max: [f64; 2],
+}
+
+impl Rect {
+    fn contains(&self, x: f64, y: f64) -> bool {
+        x >= self.min[0] && x < self.max[0] && y >= self.min[1] && y < self.max[1]
+    }
+    fn area(&self) -> f64 {
+        (self.max[0] - self.min[0]) * (self.max[1] - self.min[1])
+    }
+    fn centre(&self) -> [f64; 2] {
+        [
+            (self.min[0] + self.max[0]) / 2.0,
+            (self.min[1] + self.max[1]) / 2.0,
+        ]
+    }
+}
+
+/// `n` points uniform by area on the four vertical walls of `r` between heights z0 and z1, with
+/// noise along the wall normal (its sign does not matter for symmetric noise).
+fn walls(rng: &mut common::Rng, r: Rect, z0: f64, z1: f64, out: &mut Vec<[f64; 3]>) {
+    let (w, d) = (r.max[0] - r.min[0], r.max[1] - r.min[1]);
+    let perimeter = 2.0 * (w + d);
+    let n = (PAIR_DENSITY * perimeter * (z1 - z0)).round() as usize;
+    for _ in 0..n {
+        let s = rng.uniform() * perimeter;
+        let z = z0 + rng.uniform() * (z1 - z0);
+        let e = PAIR_NOISE * rng.normal();
+        let (x, y) = if s < w {
+            (r.min[0] + s, r.min[1] + e)
+        } else if s < w + d {
+            (r.max[0] + e, r.min[1] + (s - w))
+        } else if s < 2.0 * w + d {
+            (r.max[0] - (s - w - d), r.max[1] + e)
+        } else {
+            (r.min[0] + e, r.max[1] - (s - 2.0 * w - d))
+        };
+        out.push([x, y, z]);
+    }
+}
+
+/// One epoch of the pair scene: a level plane z = 0 over `size`², with, when `changed`, the
+/// ground inside `raise` lifted by `h` and inside `sink` lowered by `h` (tops, floors and walls
+/// sampled). Global coordinates (OFFSET added).
+fn pair_epoch(seed: u64, size: f64, changed: Option<(Rect, Rect, f64)>) -> Vec<[f64; 3]> {
+    let mut rng = common::Rng::new(seed);
+    let n = (PAIR_DENSITY * size * size).round() as usize;
+    let mut pts = Vec::with_capacity(n + n / 10);
+    for _ in 0..n {
+        let (x, y) = (rng.uniform() * size, rng.uniform() * size);
+        let z = match changed {
+            Some((raise, _, h)) if raise.contains(x, y) => h,
+            Some((_, sink, h)) if sink.contains(x, y) => -h,
+            _ => 0.0,
+        };
+        pts.push([x, y, z + PAIR_NOISE * rng.normal()]);
+    }
+    if let Some((raise, sink, h)) = changed {
+        walls(&mut rng, raise, 0.0, h, &mut pts);
+        walls(&mut rng, sink, -h, 0.0, &mut pts);
+    }
+    for p in &mut pts {
+        for (c, o) in p.iter_mut().zip(common::OFFSET) {
+            *c += o;
+        }
+    }
+    pts
+}
+
+/// A 4 × 4 × 1 m box raised and a 4 × 4 × 1 m pit dug, their footprints 1 m apart (x ∈ [10, 14]
+/// and [15, 19]): exactly two events, +16 m³ and −16 m³, each within 2 %. This is where a
+/// footprint grown by the margin, or a rotated OBB, could swallow part of the neighbour.
+#[test]
+fn gain_and_loss_1_m_apart_are_two_events() {
+    let dir = common::tempdir();
+    let size = 30.0;
+    let h = 1.0;
+    let raise = Rect {
+        min: [10.0, 13.0],
+        max: [14.0, 17.0],
+    };
+    let sink = Rect {
+        min: [15.0, 13.0],
+        max: [19.0, 17.0],
+    };
+    assert_eq!(sink.min[0] - raise.max[0], 1.0);
+    let before = dir.path().join("before.laz");
+    let after = dir.path().join("after.laz");
+    common::write_cloud(&before, &pair_epoch(11, size, None));
+    common::write_cloud(&after, &pair_epoch(12, size, Some((raise, sink, h))));
+    let at = |r: Rect| {
+        let c = r.centre();
+        [
+            common::OFFSET[0] + c[0],
+            common::OFFSET[1] + c[1],
+            common::OFFSET[2],
+        ]
+    };
+    let planted = vec![
+        Planted {
+            kind: "gain".into(),
+            volume: raise.area() * h,
+            centre: at(raise),
+            what: "box raised 1 m (4 × 4 m)".into(),
+        },
+        Planted {
+            kind: "loss".into(),
+            volume: -sink.area() * h,
+            centre: at(sink),
+            what: "pit dug 1 m (4 × 4 m), 1 m from the box".into(),
+        },
+    ];
+    let found = compare(&before, &after, &dir.path().join("res"));
+    judge("gain+loss 1 m apart", &planted, &found);
+    assert_eq!(
+        found.iter().filter(|e| e.volume.abs() > STRAY_MAX).count(),
+        2,
+        "exactly two events: {found:?}"
+    );
+}
