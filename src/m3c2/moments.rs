@@ -9,10 +9,16 @@
 
 const SCALE: f64 = (1u64 << 30) as f64;
 
+/// Quantise: truncation (one instruction; `round` is a library call on baseline x86-64). The
+/// value stays an i64 so that products are single 64×64→128-bit multiplications.
 #[inline]
-fn q(v: f64) -> i128 {
-    // Through i64: one instruction, where f64 → i128 is a library call.
-    (v * SCALE).round() as i64 as i128
+fn q(v: f64) -> i64 {
+    (v * SCALE) as i64
+}
+
+#[inline]
+fn mul(a: i64, b: i64) -> i128 {
+    a as i128 * b as i128
 }
 
 /// Count, mean and population variance of scalar values.
@@ -28,8 +34,8 @@ impl Moments1 {
     pub fn add(&mut self, v: f64) {
         let x = q(v);
         self.n += 1;
-        self.s += x;
-        self.ss += x * x;
+        self.s += x as i128;
+        self.ss += mul(x, x);
     }
     pub fn count(&self) -> u64 {
         self.n as u64
@@ -62,15 +68,15 @@ impl Moments3 {
     pub fn add(&mut self, p: [f64; 3]) {
         let (x, y, z) = (q(p[0]), q(p[1]), q(p[2]));
         self.n += 1;
-        self.s[0] += x;
-        self.s[1] += y;
-        self.s[2] += z;
-        self.ss[0] += x * x;
-        self.ss[1] += x * y;
-        self.ss[2] += x * z;
-        self.ss[3] += y * y;
-        self.ss[4] += y * z;
-        self.ss[5] += z * z;
+        self.s[0] += x as i128;
+        self.s[1] += y as i128;
+        self.s[2] += z as i128;
+        self.ss[0] += mul(x, x);
+        self.ss[1] += mul(x, y);
+        self.ss[2] += mul(x, z);
+        self.ss[3] += mul(y, y);
+        self.ss[4] += mul(y, z);
+        self.ss[5] += mul(z, z);
     }
     pub fn count(&self) -> usize {
         self.n as usize

@@ -21,10 +21,8 @@ pub const MIN_NORMAL_POINTS: usize = 3;
 pub fn normal_at(index: &Index, q: &Point3, radius: f64) -> Option<(Point3, f64)> {
     // One pass: exact integer moments (see `moments`), so the result does not depend on the
     // order in which the tree visits the neighbourhood, and no second query is needed.
-    let pts = index.points();
     let mut m = Moments3::default();
-    index.for_each_within(q, radius, |i, _| {
-        let p = &pts[i];
+    index.for_each_point_within(q, radius, |p| {
         m.add([p[0] - q[0], p[1] - q[1], p[2] - q[2]]);
     });
     if m.count() < MIN_NORMAL_POINTS {
