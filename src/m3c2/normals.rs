@@ -18,38 +18,44 @@ pub const MIN_NORMAL_POINTS: usize = 3;
 /// the planarity measure λ₀/(λ₀+λ₁+λ₂) (0 = a perfect plane). None when fewer than
 /// [`MIN_NORMAL_POINTS`] neighbours exist or the neighbourhood is degenerate.
 pub fn normal_at(index: &Index, q: &Point3, radius: f64) -> Option<(Point3, f64)> {
-    // Two passes over the neighbourhood: mean first, then the centred covariance, which keeps
-    // full precision even when the neighbourhood sits far from the local origin.
+    // The neighbours' offsets from q, sorted: the kd-tree visits them in an order that depends
+    // on every point it holds, and a tile holds a different set than the whole cloud, so summing
+    // in visiting order would change the last bits of the normal (and of every distance) with
+    // the tiling. Sorted, the sums are the same whatever the tiling and the thread count.
     let pts = index.points();
-    let mut n = 0usize;
-    let mut sum = [0.0f64; 3];
+    let mut d: Vec<Point3> = Vec::new();
     index.for_each_within(q, radius, |i, _| {
         let p = &pts[i];
-        n += 1;
-        sum[0] += p[0] - q[0];
-        sum[1] += p[1] - q[1];
-        sum[2] += p[2] - q[2];
+        d.push([p[0] - q[0], p[1] - q[1], p[2] - q[2]]);
     });
-    if n < MIN_NORMAL_POINTS {
+    if d.len() < MIN_NORMAL_POINTS {
         return None;
     }
-    let inv = 1.0 / n as f64;
+    d.sort_unstable_by(|a, b| {
+        a[0].total_cmp(&b[0])
+            .then(a[1].total_cmp(&b[1]))
+            .then(a[2].total_cmp(&b[2]))
+    });
+    // Two passes: mean first, then the centred covariance, which keeps full precision even when
+    // the neighbourhood sits far from the local origin.
+    let mut sum = [0.0f64; 3];
+    for v in &d {
+        sum[0] += v[0];
+        sum[1] += v[1];
+        sum[2] += v[2];
+    }
+    let inv = 1.0 / d.len() as f64;
     let mean = [sum[0] * inv, sum[1] * inv, sum[2] * inv];
     let mut c = [0.0f64; 6]; // xx xy xz yy yz zz
-    index.for_each_within(q, radius, |i, _| {
-        let p = &pts[i];
-        let d = [
-            p[0] - q[0] - mean[0],
-            p[1] - q[1] - mean[1],
-            p[2] - q[2] - mean[2],
-        ];
-        c[0] += d[0] * d[0];
-        c[1] += d[0] * d[1];
-        c[2] += d[0] * d[2];
-        c[3] += d[1] * d[1];
-        c[4] += d[1] * d[2];
-        c[5] += d[2] * d[2];
-    });
+    for v in &d {
+        let e = [v[0] - mean[0], v[1] - mean[1], v[2] - mean[2]];
+        c[0] += e[0] * e[0];
+        c[1] += e[0] * e[1];
+        c[2] += e[0] * e[2];
+        c[3] += e[1] * e[1];
+        c[4] += e[1] * e[2];
+        c[5] += e[2] * e[2];
+    }
     smallest_eigenvector(&c)
 }
 
