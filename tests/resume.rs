@@ -15,8 +15,7 @@ use std::time::{Duration, Instant};
 
 use common::Rng;
 use pipeline_common::{
-    assert_same_outputs, chunk_mtimes, cliff, compare, compare_output, done_m3c2_tiles,
-    stage_line,
+    assert_same_outputs, chunk_mtimes, cliff, compare, compare_output, done_m3c2_tiles, stage_line,
 };
 
 /// Small tiles, so that pass 2 has many units to be killed between.
@@ -65,26 +64,47 @@ fn sigkill_at_random_moments_then_resume_gives_the_uninterrupted_result() {
         child.wait().unwrap();
         let times = chunk_mtimes(&dir);
         for tile in done_m3c2_tiles(&dir) {
-            for (name, time) in times.iter().filter(|(n, _)| n.starts_with(&format!("{tile}."))) {
+            for (name, time) in times
+                .iter()
+                .filter(|(n, _)| n.starts_with(&format!("{tile}.")))
+            {
                 finished.entry(name.clone()).or_insert(*time);
             }
         }
     }
     assert!(landed > 0, "no kill landed while the run was going");
-    assert!(!finished.is_empty(), "no kill came after a finished M3C2 unit");
+    assert!(
+        !finished.is_empty(),
+        "no kill came after a finished M3C2 unit"
+    );
     let out = compare_output(&before, &after, &dir, &[ARGS, &["--resume"]].concat());
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert_same_outputs(&reference, &dir);
     let now = chunk_mtimes(&dir);
     for (name, time) in &finished {
-        assert_eq!(now.get(name), Some(time), "{name} was finished but computed again");
+        assert_eq!(
+            now.get(name),
+            Some(time),
+            "{name} was finished but computed again"
+        );
     }
 
     // A resume after a complete run reuses both passes.
     let out = compare_output(&before, &after, &dir, &[ARGS, &["--resume"]].concat());
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert_eq!(stage_line(&out.stderr, "pass 1: tiling"), (0, true));
-    assert_eq!(stage_line(&out.stderr, "pass 2: normals and M3C2"), (0, true));
+    assert_eq!(
+        stage_line(&out.stderr, "pass 2: normals and M3C2"),
+        (0, true)
+    );
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
     let stages = summary["stages"].as_array().unwrap();
@@ -93,9 +113,16 @@ fn sigkill_at_random_moments_then_resume_gives_the_uninterrupted_result() {
 
     // --force starts over: both passes run again, same result.
     let out = compare_output(&before, &after, &dir, &[ARGS, &["--force"]].concat());
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert_eq!(stage_line(&out.stderr, "pass 1: tiling"), (200_000, false));
-    assert_eq!(stage_line(&out.stderr, "pass 2: normals and M3C2"), (200_000, false));
+    assert_eq!(
+        stage_line(&out.stderr, "pass 2: normals and M3C2"),
+        (200_000, false)
+    );
     assert_same_outputs(&reference, &dir);
 }
 
@@ -106,7 +133,11 @@ fn a_changed_parameter_or_input_redoes_exactly_what_depends_on_it() {
     // `--resume` where nothing ran yet is a fresh run.
     let dir = tmp.path().join("run");
     let out = compare_output(&before, &after, &dir, &[ARGS, &["--resume"]].concat());
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert_eq!(stage_line(&out.stderr, "pass 1: tiling"), (120_000, false));
     // A DIR holding a run is not overwritten without --resume or --force.
     let out = compare_output(&before, &after, &dir, ARGS);
@@ -122,9 +153,16 @@ fn a_changed_parameter_or_input_redoes_exactly_what_depends_on_it() {
         &dir,
         &[ARGS, &events_params, &["--resume"]].concat(),
     );
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert_eq!(stage_line(&out.stderr, "pass 1: tiling"), (0, true));
-    assert_eq!(stage_line(&out.stderr, "pass 2: normals and M3C2"), (0, true));
+    assert_eq!(
+        stage_line(&out.stderr, "pass 2: normals and M3C2"),
+        (0, true)
+    );
     assert_eq!(chunk_mtimes(&dir), times);
     let fresh = tmp.path().join("fresh");
     compare(&before, &after, &fresh, &[ARGS, &events_params].concat());
@@ -138,9 +176,16 @@ fn a_changed_parameter_or_input_redoes_exactly_what_depends_on_it() {
         &dir,
         &[ARGS, &events_params, &["--reg-error", "0.01", "--resume"]].concat(),
     );
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert_eq!(stage_line(&out.stderr, "pass 1: tiling"), (0, true));
-    assert_eq!(stage_line(&out.stderr, "pass 2: normals and M3C2"), (120_000, false));
+    assert_eq!(
+        stage_line(&out.stderr, "pass 2: normals and M3C2"),
+        (120_000, false)
+    );
 
     // Rewriting the before file (same bytes, new modification time) cuts that epoch again and
     // redoes pass 2, and not the after epoch's tiles.
@@ -153,9 +198,16 @@ fn a_changed_parameter_or_input_redoes_exactly_what_depends_on_it() {
         &dir,
         &[ARGS, &events_params, &["--reg-error", "0.01", "--resume"]].concat(),
     );
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert_eq!(stage_line(&out.stderr, "pass 1: tiling"), (60_000, false));
-    assert_eq!(stage_line(&out.stderr, "pass 2: normals and M3C2"), (120_000, false));
+    assert_eq!(
+        stage_line(&out.stderr, "pass 2: normals and M3C2"),
+        (120_000, false)
+    );
     let fresh2 = tmp.path().join("fresh2");
     compare(
         &before,

@@ -40,7 +40,12 @@ fn tiled_runs_equal_the_whole_cloud_run() {
     let (before, after) = cliff(&tmp.path().join("scene"), 120_000);
     let whole = tmp.path().join("whole");
     let base = ["--core-spacing", "0.25"];
-    compare(&before, &after, &whole, &[&base[..], &["--tile-size", "1000"]].concat());
+    compare(
+        &before,
+        &after,
+        &whole,
+        &[&base[..], &["--tile-size", "1000"]].concat(),
+    );
     let s = summary_without_timings(&whole);
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(whole.join("summary.json")).unwrap())
@@ -61,6 +66,10 @@ fn tiled_runs_equal_the_whole_cloud_run() {
                 .unwrap();
         assert!(t["tiles"].as_u64().unwrap() > 1, "{t}");
         assert_same_outputs(&whole, &tiled);
-        assert_eq!(s, summary_without_timings(&tiled), "summary.json of {ts} m tiles");
+        assert_eq!(
+            s,
+            summary_without_timings(&tiled),
+            "summary.json of {ts} m tiles"
+        );
     }
 }

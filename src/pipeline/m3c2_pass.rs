@@ -171,13 +171,17 @@ pub fn run(
                     return Err(tiling_error(err));
                 }
                 resplit[k] = true;
-                eprintln!("talus: {err}; cutting the {} epoch into tiles again", epoch.name());
+                eprintln!(
+                    "talus: {err}; cutting the {} epoch into tiles again",
+                    epoch.name()
+                );
                 let src = match epoch {
                     Epoch::Before => &tiled.before_src,
                     Epoch::After => &tiled.after_src,
                 };
                 let hash = tiles::split_hash(layout, src)?;
-                let redo = Stage::log_only(&format!("pass 1 again: tiling {}", epoch.name()), "points");
+                let redo =
+                    Stage::log_only(&format!("pass 1 again: tiling {}", epoch.name()), "points");
                 tiles::split(wd, layout, epoch, src, &hash, tiled.split_budget, &redo)?;
                 redo.finish("after damage");
             }
@@ -239,7 +243,9 @@ fn sweep(
         });
         // The receiver is moved in and so dropped when this returns, error or not: a reader
         // blocked on a full channel then wakes up with a send error and the scope can join it.
-        consume(rx, wd, dir, layout, params, user_cores, hash, chunks, next, stage)
+        consume(
+            rx, wd, dir, layout, params, user_cores, hash, chunks, next, stage,
+        )
     })
 }
 

@@ -7,7 +7,13 @@
 //! 4. outputs: m3c2.laz in a canonical order, summary.json ([`outputs`]).
 //!
 //! Every unit (an epoch's tiling, a tile's M3C2) is an immutable file recorded in the manifest
-//! with the hash of what it was made from, so `--resume` redoes only what is missing or stale.
+//! with the hash of what it was made from and the checksum of its files, so `--resume` redoes
+//! only what is missing, stale or damaged ([`workdir`]). Each stage reports its progress on
+//! stderr ([`progress`]).
+//!
+//! Tiling invariance: a tiled run writes the bytes of a whole-cloud run. Tiles are aligned to the
+//! core-point grid, every tile uses the same local frame, neighbourhood sums run in a sorted
+//! order, and the events stage works on global keys; `tests/tiling_invariance.rs` checks it.
 
 pub mod event_outputs;
 pub mod events_pass;

@@ -31,7 +31,7 @@ impl Stage {
                     let b = ProgressBar::with_draw_target(Some(n), target);
                     // The template is a constant: it always parses.
                     if let Ok(s) = ProgressStyle::with_template(&format!(
-                        "{{prefix}} [{{bar:30}}] {{human_pos}}/{{human_len}} {unit} ({{per_sec}}, ETA {{eta}})"
+                        "{{prefix}} [{{bar:30}}] {{human_pos}}/{{human_len}} {unit} ({{per_sec:0}}, ETA {{eta}})"
                     )) {
                         b.set_style(s.progress_chars("=> "));
                     }

@@ -2,7 +2,8 @@
 //!
 //! The tile grid is anchored on the core-point grid (its origin and side are whole multiples of
 //! `core_spacing`), so a core-point cell never straddles two tiles and a tiled run thins C1 to
-//! exactly the core points of a whole-cloud run.
+//! exactly the core points of a whole-cloud run. A split is one resume unit per epoch, recorded
+//! with the checksum of its tile files: a damaged or missing tile makes the split be redone.
 
 use std::path::{Path, PathBuf};
 
@@ -212,7 +213,9 @@ fn ensure_split(
     let unit = unit_name(epoch);
     let dir = wd.work.join("tiles").join(epoch.name());
     if let Some(e) = wd.entry(&unit) {
-        if e.inputs_hash == hash && split_checksum(&dir, &layout.grid).ok() == Some(e.checksum.clone()) {
+        if e.inputs_hash == hash
+            && split_checksum(&dir, &layout.grid).ok() == Some(e.checksum.clone())
+        {
             return Ok((dir, true));
         }
     }
@@ -239,7 +242,7 @@ pub fn split(
     }
     let dir = wd.sub(&format!("tiles/{}", epoch.name()))?;
     let mut splitter =
-        TileSplitter::new(&dir, layout.grid.clone(), layout.halo, budget).map_err(tiling_error)?;
+        TileSplitter::new(&dir, layout.grid, layout.halo, budget).map_err(tiling_error)?;
     let mut reader = io::open(src)?;
     let mut buf = Vec::new();
     while reader.fill(&mut buf, 1 << 16)? > 0 {
@@ -277,7 +280,9 @@ pub fn split(
 fn split_checksum(dir: &Path, grid: &TileGrid) -> talus_tiling::Result<String> {
     let mut h = talus_tiling::Fnv64::new();
     for id in grid.tiles() {
-        h.write_str(&talus_tiling::file_checksum(&talus_tiling::tile_path(dir, id))?);
+        h.write_str(&talus_tiling::file_checksum(&talus_tiling::tile_path(
+            dir, id,
+        ))?);
     }
     Ok(format!("fnv-crc32:{}", h.hex()))
 }

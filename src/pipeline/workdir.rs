@@ -116,7 +116,13 @@ impl WorkDir {
     /// `checksum`) and save the manifest atomically. Call this only once the unit's files are
     /// complete under their final names: after a SIGKILL the manifest then names only finished
     /// units.
-    pub fn done(&mut self, unit: &str, file: &str, inputs_hash: &str, checksum: &str) -> Result<()> {
+    pub fn done(
+        &mut self,
+        unit: &str,
+        file: &str,
+        inputs_hash: &str,
+        checksum: &str,
+    ) -> Result<()> {
         self.manifest.record(
             unit,
             talus_tiling::manifest::UnitEntry {

@@ -233,8 +233,6 @@ fn gross(s1: &dyn Surface, s2: &dyn Surface, r: &Footprint, cell: f64) -> (f64, 
             (g, l)
         })
         .collect();
-    let (g, l) = rows
-        .iter()
-        .fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+    let (g, l) = rows.iter().fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
     (g * du * dv, l * du * dv)
 }

@@ -8,7 +8,13 @@ use std::process::Output;
 use crate::common::run;
 
 /// The outputs that do not hold timings (summary.json does; its counts are compared apart).
-pub const COMPARED: &[&str] = &["m3c2.laz", "events.geojson", "events.csv", "view.json", "terrain.bin"];
+pub const COMPARED: &[&str] = &[
+    "m3c2.laz",
+    "events.geojson",
+    "events.csv",
+    "view.json",
+    "terrain.bin",
+];
 
 /// Write the cliff scene (3 planted events) with `points` per epoch into `dir`.
 pub fn cliff(dir: &Path, points: u64) -> (PathBuf, PathBuf) {
@@ -20,7 +26,11 @@ pub fn cliff(dir: &Path, points: u64) -> (PathBuf, PathBuf) {
         "--points",
         &points.to_string(),
     ]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     (dir.join("before.laz"), dir.join("after.laz"))
 }
 
@@ -86,13 +96,14 @@ pub fn assert_same_outputs(reference: &Path, other: &Path) {
         v
     };
     let names = meshes(reference);
-    assert!(!names.is_empty(), "no event meshes in {}", reference.display());
+    assert!(
+        !names.is_empty(),
+        "no event meshes in {}",
+        reference.display()
+    );
     assert_eq!(names, meshes(other));
     let mesh_paths: Vec<String> = names.iter().map(|n| format!("meshes/{n}")).collect();
-    let all = COMPARED
-        .iter()
-        .map(|s| s.to_string())
-        .chain(mesh_paths);
+    let all = COMPARED.iter().map(|s| s.to_string()).chain(mesh_paths);
     for name in all {
         let name = name.as_str();
         let (a, b) = (reference.join(name), other.join(name));
@@ -103,11 +114,7 @@ pub fn assert_same_outputs(reference: &Path, other: &Path) {
             } else {
                 String::new()
             };
-            panic!(
-                "{} differs from {}: {detail}",
-                b.display(),
-                a.display()
-            );
+            panic!("{} differs from {}: {detail}", b.display(), a.display());
         }
     }
 }
