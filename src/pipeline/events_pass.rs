@@ -394,6 +394,18 @@ fn volumes(
             }
         }
     }
+    // Gathered tile by tile, the points come in an order that depends on the tiling; the
+    // triangulation of points on a lattice (ties) and the sums depend on it. Sort them, so the
+    // volumes are the same bytes whatever the tiling.
+    let by_xyz = |a: &Point3, b: &Point3| {
+        a[0].total_cmp(&b[0])
+            .then(a[1].total_cmp(&b[1]))
+            .then(a[2].total_cmp(&b[2]))
+    };
+    before
+        .par_iter_mut()
+        .chain(after.par_iter_mut())
+        .for_each(|v| v.sort_unstable_by(by_xyz));
     let spacing = params.point_spacing;
     let records = described
         .into_par_iter()

@@ -14,7 +14,8 @@ use crate::error::{Error, Result};
 use crate::io::Point3;
 use crate::m3c2::{self, core_points, CoreResult};
 use crate::params::Params;
-use crate::pipeline::tiles::{self, tiling_error, Layout, TilePoints, Tiled};
+use crate::pipeline::progress::Stage;
+use crate::pipeline::tiles::{self, tiling_error, Epoch, Layout, TilePoints, Tiled};
 use crate::pipeline::workdir::WorkDir;
 use crate::spatial::Index;
 
@@ -62,17 +63,25 @@ struct Work {
     after: TilePoints,
 }
 
-/// Run pass 2 over every tile not already done.
-pub fn run(
-    wd: &mut WorkDir,
-    layout: &Layout,
-    tiled: &Tiled,
-    params: &Params,
-    user_cores: Option<&UserCores>,
-) -> Result<M3c2Results> {
-    let dir = wd.sub("m3c2")?;
+/// Why the reader thread stopped early.
+enum ReadFailure {
+    /// A tile file of this epoch is damaged: redo its split.
+    Corrupt(Epoch, talus_tiling::Error),
+    Other(Error),
+}
+
+/// How one sweep over the tiles to do ended.
+enum Sweep {
+    Finished,
+    /// The split of this epoch is damaged; the tiles before it in the list are done.
+    Resplit(Epoch, talus_tiling::Error),
+}
+
+/// The hash a tile's M3C2 unit is made from: the tile sets, the layout and the parameters of
+/// pass 2 only (so a changed threshold, eps or smoothing reuses every unit).
+fn units_hash(layout: &Layout, tiled: &Tiled, params: &Params) -> String {
     let m = params.m3c2();
-    let hash = format!(
+    format!(
         "{:016x}",
         talus_tiling::hash64(
             format!(
@@ -84,63 +93,197 @@ pub fn run(
             )
             .as_bytes()
         )
-    );
+    )
+}
+
+fn unit_name(id: TileId) -> String {
+    format!("m3c2:{}", id.name())
+}
+
+/// The number of chunk files recorded for a finished unit whose files all still carry their
+/// recorded checksum; None when the unit must be (re)done.
+fn reusable(wd: &WorkDir, dir: &Path, id: TileId, hash: &str) -> Option<usize> {
+    let e = wd.entry(&unit_name(id))?;
+    if e.inputs_hash != hash {
+        return None;
+    }
+    let n: usize = e.file.parse().ok()?;
+    (chunks_checksum(dir, id, n).ok()? == e.checksum).then_some(n)
+}
+
+/// FNV-1a over the CRC-32 of every chunk file of a tile.
+fn chunks_checksum(dir: &Path, id: TileId, n: usize) -> talus_tiling::Result<String> {
+    let mut h = talus_tiling::Fnv64::new();
+    h.write_u64(n as u64);
+    for k in 0..n {
+        h.write_str(&talus_tiling::file_checksum(&chunk_path(dir, id, k))?);
+    }
+    Ok(format!("fnv-crc32:{}", h.hex()))
+}
+
+/// Run pass 2 over every tile not already done. A tile file found damaged (checksum) makes the
+/// split of its epoch be redone, then the pass goes on; a damaged result chunk makes its tile be
+/// redone.
+pub fn run(
+    wd: &mut WorkDir,
+    layout: &Layout,
+    tiled: &Tiled,
+    params: &Params,
+    user_cores: Option<&UserCores>,
+    stage: &Stage,
+) -> Result<M3c2Results> {
+    let dir = wd.sub("m3c2")?;
+    let hash = units_hash(layout, tiled, params);
     let mut chunks = Vec::new();
     let mut todo = Vec::new();
     for id in layout.grid.tiles() {
-        let unit = format!("m3c2:{}", id.name());
-        match wd.manifest.units.get(&unit) {
-            Some(e) if e.inputs_hash == hash => {
-                let n: usize = e.file.parse().unwrap_or(usize::MAX);
-                if n != usize::MAX && (0..n).all(|k| chunk_path(&dir, id, k).exists()) {
-                    chunks.push((id, n));
-                    continue;
-                }
+        match reusable(wd, &dir, id, &hash) {
+            Some(n) => chunks.push((id, n)),
+            None => {
                 todo.push(id);
+                chunks.push((id, 0));
             }
-            _ => todo.push(id),
         }
-        chunks.push((id, 0));
     }
     let reused = todo.is_empty();
-    let (tx, rx) = bounded::<Result<Work>>(1);
-    let before_dir = tiled.before.clone();
-    let after_dir = tiled.after.clone();
-    let todo_ids = todo.clone();
-    std::thread::scope(|s| -> Result<()> {
-        s.spawn(move || {
-            for id in todo_ids {
-                let w = tiles::read_tile(&before_dir, id).and_then(|before| {
-                    Ok(Work {
-                        id,
-                        before,
-                        after: tiles::read_tile(&after_dir, id)?,
-                    })
-                });
-                let failed = w.is_err();
-                if tx.send(w).is_err() || failed {
-                    return;
+    // Resplit each epoch at most once per run: damage that survives a fresh split is not
+    // something a redo can fix.
+    let mut resplit = [false; 2];
+    let mut next = 0;
+    while next < todo.len() {
+        match sweep(
+            wd,
+            &dir,
+            layout,
+            tiled,
+            params,
+            user_cores,
+            &hash,
+            &todo[next..],
+            &mut chunks,
+            &mut next,
+            stage,
+        )? {
+            Sweep::Finished => break,
+            Sweep::Resplit(epoch, err) => {
+                let k = epoch as usize;
+                if resplit[k] {
+                    return Err(tiling_error(err));
                 }
-            }
-        });
-        for w in rx.iter() {
-            let w = w?;
-            let cores = user_cores.map(|u| u.by_tile[layout.grid.index(w.id)].as_slice());
-            let results = compute_tile(&w, layout, params, cores);
-            let n = write_chunks(&dir, w.id, &results)?;
-            wd.done(&format!("m3c2:{}", w.id.name()), &n.to_string(), &hash)?;
-            if let Some(c) = chunks.iter_mut().find(|c| c.0 == w.id) {
-                c.1 = n;
+                resplit[k] = true;
+                eprintln!(
+                    "talus: {err}; cutting the {} epoch into tiles again",
+                    epoch.name()
+                );
+                let src = match epoch {
+                    Epoch::Before => &tiled.before_src,
+                    Epoch::After => &tiled.after_src,
+                };
+                let hash = tiles::split_hash(layout, src)?;
+                let redo =
+                    Stage::log_only(&format!("pass 1 again: tiling {}", epoch.name()), "points");
+                tiles::split(wd, layout, epoch, src, &hash, tiled.split_budget, &redo)?;
+                redo.finish("after damage");
             }
         }
-        Ok(())
-    })?;
+    }
     Ok(M3c2Results {
         dir,
         chunks,
         hash,
         reused,
     })
+}
+
+/// Compute the tiles of `todo` in order (`next` counts those done, into the whole list),
+/// with a reader thread decoding the next tile meanwhile.
+#[allow(clippy::too_many_arguments)]
+fn sweep(
+    wd: &mut WorkDir,
+    dir: &Path,
+    layout: &Layout,
+    tiled: &Tiled,
+    params: &Params,
+    user_cores: Option<&UserCores>,
+    hash: &str,
+    todo: &[TileId],
+    chunks: &mut [(TileId, usize)],
+    next: &mut usize,
+    stage: &Stage,
+) -> Result<Sweep> {
+    let (tx, rx) = bounded::<std::result::Result<Work, ReadFailure>>(1);
+    let before_dir = tiled.before.clone();
+    let after_dir = tiled.after.clone();
+    let todo_ids = todo.to_vec();
+    std::thread::scope(|s| -> Result<Sweep> {
+        s.spawn(move || {
+            let read = |epoch: Epoch, dir: &Path, id: TileId| {
+                tiles::read_tile_raw(dir, id).map_err(|e| {
+                    if e.is_corrupt() {
+                        ReadFailure::Corrupt(epoch, e)
+                    } else {
+                        ReadFailure::Other(tiling_error(e))
+                    }
+                })
+            };
+            for id in todo_ids {
+                let w = read(Epoch::Before, &before_dir, id).and_then(|before| {
+                    Ok(Work {
+                        id,
+                        before,
+                        after: read(Epoch::After, &after_dir, id)?,
+                    })
+                });
+                let failed = w.is_err();
+                // A closed channel means the consumer stopped (error): stop reading.
+                if tx.send(w).is_err() || failed {
+                    return;
+                }
+            }
+        });
+        // The receiver is moved in and so dropped when this returns, error or not: a reader
+        // blocked on a full channel then wakes up with a send error and the scope can join it.
+        consume(
+            rx, wd, dir, layout, params, user_cores, hash, chunks, next, stage,
+        )
+    })
+}
+
+#[allow(clippy::too_many_arguments)]
+fn consume(
+    rx: crossbeam_channel::Receiver<std::result::Result<Work, ReadFailure>>,
+    wd: &mut WorkDir,
+    dir: &Path,
+    layout: &Layout,
+    params: &Params,
+    user_cores: Option<&UserCores>,
+    hash: &str,
+    chunks: &mut [(TileId, usize)],
+    next: &mut usize,
+    stage: &Stage,
+) -> Result<Sweep> {
+    for w in rx.iter() {
+        let w = match w {
+            Ok(w) => w,
+            Err(ReadFailure::Corrupt(epoch, e)) => return Ok(Sweep::Resplit(epoch, e)),
+            Err(ReadFailure::Other(e)) => return Err(e),
+        };
+        let cores = user_cores.map(|u| u.by_tile[layout.grid.index(w.id)].as_slice());
+        let results = compute_tile(&w, layout, params, cores);
+        let unit = unit_name(w.id);
+        // Forget the old entry before its chunk files are overwritten (see `WorkDir::forget`).
+        wd.forget(&unit)?;
+        let n = write_chunks(dir, w.id, &results)?;
+        let checksum = chunks_checksum(dir, w.id, n).map_err(tiling_error)?;
+        wd.done(&unit, &n.to_string(), hash, &checksum)?;
+        if let Some(c) = chunks.iter_mut().find(|c| c.0 == w.id) {
+            c.1 = n;
+        }
+        *next += 1;
+        let owned = |t: &TilePoints| t.owned.iter().filter(|&&o| o).count() as u64;
+        stage.inc(owned(&w.before) + owned(&w.after));
+    }
+    Ok(Sweep::Finished)
 }
 
 /// Normals and M3C2 for the core points tile `w` owns, sorted by key.
@@ -150,12 +293,11 @@ fn compute_tile(
     params: &Params,
     user_cores: Option<&[(u64, Point3)]>,
 ) -> Vec<KeyedResult> {
-    let sq = layout.grid.square(w.id);
-    let origin = [
-        0.5 * (sq.min[0] + sq.max[0]),
-        0.5 * (sq.min[1] + sq.max[1]),
-        layout.anchor[2],
-    ];
+    // One local frame for every tile (the core-point anchor), not one per tile: the local
+    // coordinates, and so every rounding in the sums and the top-surface cells of `auto`
+    // orientation, are then the same whatever the tiling, and a tiled run gives the bytes of a
+    // whole-cloud run.
+    let origin = layout.anchor;
     let before = Index::new(&w.before.points, origin);
     let after = Index::new(&w.after.points, origin);
     let keyed: Vec<(u64, Point3)> = match user_cores {

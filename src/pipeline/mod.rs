@@ -7,12 +7,19 @@
 //! 4. outputs: m3c2.laz in a canonical order, summary.json ([`outputs`]).
 //!
 //! Every unit (an epoch's tiling, a tile's M3C2) is an immutable file recorded in the manifest
-//! with the hash of what it was made from, so `--resume` redoes only what is missing or stale.
+//! with the hash of what it was made from and the checksum of its files, so `--resume` redoes
+//! only what is missing, stale or damaged ([`workdir`]). Each stage reports its progress on
+//! stderr ([`progress`]).
+//!
+//! Tiling invariance: a tiled run writes the bytes of a whole-cloud run. Tiles are aligned to the
+//! core-point grid, every tile uses the same local frame, neighbourhood sums run in a sorted
+//! order, and the events stage works on global keys; `tests/tiling_invariance.rs` checks it.
 
 pub mod event_outputs;
 pub mod events_pass;
 pub mod m3c2_pass;
 pub mod outputs;
+pub mod progress;
 pub mod tiles;
 pub mod view_export;
 pub mod workdir;
@@ -26,6 +33,7 @@ use crate::error::{Error, Result};
 use crate::io::{self, CloudInfo};
 use crate::params::{Params, UserParams};
 use crate::sampling;
+use progress::Stage;
 use workdir::WorkDir;
 
 /// Everything `compare` needs.
@@ -237,25 +245,36 @@ fn run_stages(
         reused: false,
     }];
     let layout = tiles::Layout::plan(before, after, cores, &params, opts.tile_size)?;
-    let t = Instant::now();
-    let tiled = tiles::tile_epochs(wd, &layout, opts, &params)?;
+    let stage = Stage::start(
+        "pass 1: tiling",
+        Some(before.point_count + after.point_count),
+        "points",
+    );
+    let tiled = tiles::tile_epochs(wd, &layout, opts, &params, &stage)?;
     stages.push(StageTime {
         stage: "pass 1: tiling".into(),
-        seconds: t.elapsed().as_secs_f64(),
+        seconds: stage.finish(if tiled.reused { "reused" } else { "" }),
         reused: tiled.reused,
     });
-    let t = Instant::now();
     let user_cores = match &opts.core_points {
         Some(p) => Some(m3c2_pass::UserCores::load(p, &layout)?),
         None => None,
     };
-    let m3c2 = m3c2_pass::run(wd, &layout, &tiled, &params, user_cores.as_ref())?;
+    // Every input point is owned by one tile, so the points of all tiles sum to the inputs'
+    // counts; on a resume the bar's length is an estimate (the finished tiles' share is unknown
+    // until they are read, and they are not).
+    let stage = Stage::start(
+        "pass 2: normals and M3C2",
+        Some(before.point_count + after.point_count),
+        "points",
+    );
+    let m3c2 = m3c2_pass::run(wd, &layout, &tiled, &params, user_cores.as_ref(), &stage)?;
     stages.push(StageTime {
         stage: "pass 2: normals and M3C2".into(),
-        seconds: t.elapsed().as_secs_f64(),
+        seconds: stage.finish(if m3c2.reused { "reused" } else { "" }),
         reused: m3c2.reused,
     });
-    let t = Instant::now();
+    let stage = Stage::start("events and volumes", None, "events");
     let ev = events_pass::run(
         &m3c2,
         &layout,
@@ -263,12 +282,13 @@ fn run_stages(
         &params,
         (opts.before_mesh.as_deref(), opts.after_mesh.as_deref()),
     )?;
+    stage.inc(ev.events.len() as u64);
     stages.push(StageTime {
         stage: "events and volumes".into(),
-        seconds: t.elapsed().as_secs_f64(),
+        seconds: stage.finish(&format!("{} kept core points", ev.kept_points)),
         reused: false,
     });
-    let t = Instant::now();
+    let stage = Stage::start("outputs", None, "core points");
     let per_point = &ev.per_point;
     let written = outputs::write_m3c2_laz(wd, &m3c2, &before.crs, layout.anchor, &|k| {
         per_point.get(&k).copied().unwrap_or((f64::NAN, 0))
@@ -283,9 +303,10 @@ fn run_stages(
         layout.anchor,
         &meshes,
     )?;
+    stage.inc(written.core_points);
     stages.push(StageTime {
         stage: "outputs".into(),
-        seconds: t.elapsed().as_secs_f64(),
+        seconds: stage.finish(""),
         reused: false,
     });
     let mut inputs = vec![InputSummary::of(before), InputSummary::of(after)];

@@ -2,15 +2,19 @@
 //!
 //! The tile grid is anchored on the core-point grid (its origin and side are whole multiples of
 //! `core_spacing`), so a core-point cell never straddles two tiles and a tiled run thins C1 to
-//! exactly the core points of a whole-cloud run.
+//! exactly the core points of a whole-cloud run. A split is one resume unit per epoch, recorded
+//! with the checksum of its tile files: a damaged or missing tile makes the split be redone.
 
 use std::path::{Path, PathBuf};
 
-use talus_tiling::{BoundsXY, TileGrid, TileId, TileSplitter};
+use talus_tiling::{
+    BoundsXY, Column, ColumnData, TileColumns, TileGrid, TileId, TileSplitter, OWNED_COLUMN,
+};
 
 use crate::error::{Error, Result};
 use crate::io::{self, Bounds, CloudInfo, Point3};
 use crate::params::Params;
+use crate::pipeline::progress::Stage;
 use crate::pipeline::workdir::WorkDir;
 use crate::pipeline::{file_identity, CompareOptions};
 
@@ -56,7 +60,7 @@ impl Layout {
             (b.min[1] / c).floor() * c,
             (b.min[2] / c).floor() * c,
         ];
-        let halo = params.halo();
+        let halo = tile_halo(params);
         let w = (b.max[0] - anchor[0]).max(c);
         let h = (b.max[1] - anchor[1]).max(c);
         let density = (before.point_count + after.point_count) as f64 / (w * h);
@@ -106,64 +110,181 @@ impl Layout {
 pub struct Tiled {
     pub before: PathBuf,
     pub after: PathBuf,
-    /// Hash of the tile sets (inputs of the next stage).
+    /// Hash of the tile sets (inputs of the next stage): made from the inputs' identity and the
+    /// layout, not from the files' bytes, so a split redone after damage (identical bytes, the
+    /// split is deterministic) does not invalidate the M3C2 units made from it.
     pub hash: String,
     pub reused: bool,
+    /// The input each epoch's tiles were cut from (to redo a split found damaged in pass 2).
+    pub before_src: PathBuf,
+    pub after_src: PathBuf,
+    /// Memory for the splitter's buffers.
+    pub split_budget: u64,
 }
 
-/// Split every epoch (and the core-point file) into tiles, or reuse a finished split.
+/// One of the two epochs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Epoch {
+    Before,
+    After,
+}
+
+impl Epoch {
+    pub fn name(self) -> &'static str {
+        match self {
+            Epoch::Before => "before",
+            Epoch::After => "after",
+        }
+    }
+}
+
+/// The halo of the tile files: how far beyond its square a tile must hold points so that every
+/// neighbourhood pass 2 computes for the core points it owns is the one a whole-cloud run sees
+/// (SPEC.md §3). Pass 2 looks at the normal sphere, the M3C2 cylinder (inside its circumscribed
+/// sphere), and, for `auto` orientation, the top-surface cells 1..4 × normal_radius away (cells of
+/// normal_radius / 2, so a cell reaches another half diagonal, < 0.71 × normal_radius, further).
+/// The DBSCAN `eps` is not in it: the events stage clusters the kept core points in memory with
+/// its own halo, so a changed `eps` must not cut the epochs again.
+pub fn tile_halo(params: &Params) -> f64 {
+    let nr = params.normal_radius.value;
+    let cyl = (params.cyl_radius.value.powi(2) + params.cyl_halflen.value.powi(2)).sqrt();
+    let orient = 4.0 * nr + 0.5 * nr * std::f64::consts::SQRT_2;
+    nr.max(cyl).max(orient) + 2.0 * params.core_spacing.value
+}
+
+/// Split every epoch into tiles, or reuse a finished split whose files are intact.
 pub fn tile_epochs(
     wd: &mut WorkDir,
     layout: &Layout,
     opts: &CompareOptions,
     params: &Params,
+    stage: &Stage,
 ) -> Result<Tiled> {
     let mut all = talus_tiling::Fnv64::new();
+    let budget = (params.memory_bytes.value / 4).max(16 << 20);
     let mut reused = true;
-    let mut split = |wd: &mut WorkDir, name: &str, src: &Path, halo: f64| -> Result<PathBuf> {
-        let dir = wd.sub(&format!("tiles/{name}"))?;
-        let inputs = format!("{}|{}|{}", file_identity(src)?, layout.key(), halo);
-        let hash = talus_tiling::hash64(inputs.as_bytes());
-        let hash = format!("{hash:016x}");
+    let mut dirs = Vec::new();
+    for (epoch, src) in [(Epoch::Before, &opts.before), (Epoch::After, &opts.after)] {
+        let hash = split_hash(layout, src)?;
         all.write_str(&hash);
-        let unit = format!("tiles:{name}");
-        if wd.is_done(&unit, &hash) && tiles_present(&dir, &layout.grid) {
-            return Ok(dir);
-        }
-        reused = false;
-        // A stale or partial split: start it again from nothing.
-        let _ = std::fs::remove_dir_all(&dir);
-        let dir = wd.sub(&format!("tiles/{name}"))?;
-        let budget = (params.memory_bytes.value / 4).max(16 << 20);
-        let mut splitter =
-            TileSplitter::new(&dir, layout.grid.clone(), halo, budget).map_err(tiling_error)?;
-        let mut reader = io::open(src)?;
-        let mut buf = Vec::new();
-        while reader.fill(&mut buf, 1 << 16)? > 0 {
-            splitter.push(&buf).map_err(tiling_error)?;
-        }
-        splitter.finish().map_err(tiling_error)?;
-        wd.done(&unit, &dir.display().to_string(), &hash)?;
-        Ok(dir)
-    };
-    let before = split(wd, "before", &opts.before, layout.halo)?;
-    let after = split(wd, "after", &opts.after, layout.halo)?;
+        let (dir, was_reused) = ensure_split(wd, layout, epoch, src, &hash, budget, stage)?;
+        reused &= was_reused;
+        dirs.push(dir);
+    }
     // User core points are not split: they stay in memory with their input order (see
     // `m3c2_pass::UserCores`); their file's identity enters the hash here.
     if let Some(p) = &opts.core_points {
         all.write_str(&file_identity(p)?);
     }
+    let after = dirs.pop().unwrap_or_default();
+    let before = dirs.pop().unwrap_or_default();
     Ok(Tiled {
         before,
         after,
         hash: all.hex(),
         reused,
+        before_src: opts.before.clone(),
+        after_src: opts.after.clone(),
+        split_budget: budget,
     })
 }
 
-fn tiles_present(dir: &Path, grid: &TileGrid) -> bool {
-    grid.tiles()
-        .all(|id| talus_tiling::splitter::tile_path(dir, id).exists())
+/// What a split depends on: its input file (path, size, mtime) and the layout (grid and halo).
+pub fn split_hash(layout: &Layout, src: &Path) -> Result<String> {
+    let inputs = format!("{}|{}", file_identity(src)?, layout.key());
+    Ok(format!("{:016x}", talus_tiling::hash64(inputs.as_bytes())))
+}
+
+fn unit_name(epoch: Epoch) -> String {
+    format!("tiles:{}", epoch.name())
+}
+
+/// Reuse the split of `epoch` when the manifest records it from `hash` and every tile file still
+/// has its recorded checksum; otherwise (re)do it. Returns the directory and whether it was reused.
+fn ensure_split(
+    wd: &mut WorkDir,
+    layout: &Layout,
+    epoch: Epoch,
+    src: &Path,
+    hash: &str,
+    budget: u64,
+    stage: &Stage,
+) -> Result<(PathBuf, bool)> {
+    let unit = unit_name(epoch);
+    let dir = wd.work.join("tiles").join(epoch.name());
+    if let Some(e) = wd.entry(&unit) {
+        if e.inputs_hash == hash
+            && split_checksum(&dir, &layout.grid).ok() == Some(e.checksum.clone())
+        {
+            return Ok((dir, true));
+        }
+    }
+    split(wd, layout, epoch, src, hash, budget, stage)?;
+    Ok((dir, false))
+}
+
+/// Cut `src` into the tiles of `layout` under `tiles/<epoch>` and record the unit.
+pub fn split(
+    wd: &mut WorkDir,
+    layout: &Layout,
+    epoch: Epoch,
+    src: &Path,
+    hash: &str,
+    budget: u64,
+    stage: &Stage,
+) -> Result<PathBuf> {
+    let unit = unit_name(epoch);
+    // The old entry goes first, then the files: a stale or partial split starts from nothing.
+    wd.forget(&unit)?;
+    let dir = wd.work.join("tiles").join(epoch.name());
+    if dir.exists() {
+        std::fs::remove_dir_all(&dir).map_err(|e| Error::output(&dir, e))?;
+    }
+    let dir = wd.sub(&format!("tiles/{}", epoch.name()))?;
+    let mut splitter =
+        TileSplitter::new(&dir, layout.grid, layout.halo, budget).map_err(tiling_error)?;
+    let mut reader = io::open(src)?;
+    let mut buf = Vec::new();
+    while reader.fill(&mut buf, 1 << 16)? > 0 {
+        splitter.push(&buf).map_err(tiling_error)?;
+        stage.inc(buf.len() as u64);
+    }
+    let written = splitter.finish().map_err(tiling_error)?;
+    // The splitter writes no file for a tile without points; write an empty one, so that every
+    // tile of the grid has a file and a missing file always means damage.
+    let mut has_file = vec![false; layout.grid.len()];
+    for (id, _) in &written {
+        has_file[layout.grid.index(*id)] = true;
+    }
+    for id in layout.grid.tiles() {
+        if !has_file[layout.grid.index(id)] {
+            let empty = TileColumns {
+                extra: vec![Column {
+                    name: OWNED_COLUMN.into(),
+                    data: ColumnData::U8(Vec::new()),
+                }],
+                ..TileColumns::default()
+            };
+            talus_tiling::write_tile(&talus_tiling::tile_path(&dir, id), &empty)
+                .map_err(tiling_error)?;
+        }
+    }
+    let checksum = split_checksum(&dir, &layout.grid).map_err(tiling_error)?;
+    wd.done(&unit, &format!("tiles/{}", epoch.name()), hash, &checksum)?;
+    Ok(dir)
+}
+
+/// Checksum of a whole split: FNV-1a over the CRC-32 of every tile file, in grid order. Reading
+/// the files back costs one sequential pass over them, small next to pass 2, and catches a
+/// damaged or missing tile before any stage reads it.
+fn split_checksum(dir: &Path, grid: &TileGrid) -> talus_tiling::Result<String> {
+    let mut h = talus_tiling::Fnv64::new();
+    for id in grid.tiles() {
+        h.write_str(&talus_tiling::file_checksum(&talus_tiling::tile_path(
+            dir, id,
+        ))?);
+    }
+    Ok(format!("fnv-crc32:{}", h.hex()))
 }
 
 /// The points of one tile: global coordinates and whether the tile owns each one.
@@ -172,11 +293,16 @@ pub struct TilePoints {
     pub owned: Vec<bool>,
 }
 
-/// Read one tile of a split. A corrupt file (checksum) is reported as such; the caller redoes the
-/// split.
+/// Read one tile of a split.
 pub fn read_tile(dir: &Path, id: TileId) -> Result<TilePoints> {
+    read_tile_raw(dir, id).map_err(tiling_error)
+}
+
+/// Read one tile of a split with the tiling crate's error, so that the caller can tell damage
+/// ([`talus_tiling::Error::Corrupt`], a checksum mismatch) from an I/O failure and redo the split.
+pub fn read_tile_raw(dir: &Path, id: TileId) -> talus_tiling::Result<TilePoints> {
     let path = talus_tiling::splitter::tile_path(dir, id);
-    let cols = talus_tiling::read_tile(&path).map_err(tiling_error)?;
+    let cols = talus_tiling::read_tile(&path)?;
     let owned = match cols.column(talus_tiling::splitter::OWNED_COLUMN) {
         Some(talus_tiling::ColumnData::U8(v)) => v.iter().map(|&o| o == 1).collect(),
         _ => vec![true; cols.len()],

@@ -74,14 +74,23 @@ impl WorkDir {
         std::fs::create_dir_all(&work).map_err(io_out(&work))?;
         // Probe writability now, before hours of work.
         let probe = work.join(".probe");
-        std::fs::write(&probe, b"ok").map_err(io_out(&work))?;
+        std::fs::write(&probe, b"ok").map_err(io_out(&probe))?;
         let _ = std::fs::remove_file(&probe);
         let manifest_path = work.join("manifest.json");
-        let mut manifest = if resume && manifest_path.exists() {
+        // `--resume` without a previous run (no manifest) is a fresh run. A damaged manifest
+        // only costs the redo of its units; each unit is checked against its own inputs hash, so
+        // the run key is not used to discard the manifest (a changed threshold must not redo
+        // M3C2). A manifest that cannot be read at all (permissions, I/O) is an error.
+        let mut manifest = if resume {
             match Manifest::load(&manifest_path) {
-                Ok(m) => m,
-                // An unreadable manifest only costs the redo of its units.
-                Err(_) => Manifest::new(key_hash),
+                Ok(m) if m.version == talus_tiling::manifest::MANIFEST_VERSION => m,
+                Ok(_) | Err(talus_tiling::Error::Corrupt { .. }) => Manifest::new(key_hash),
+                Err(talus_tiling::Error::Io { source, .. })
+                    if source.kind() == std::io::ErrorKind::NotFound =>
+                {
+                    Manifest::new(key_hash)
+                }
+                Err(e) => return Err(crate::pipeline::tiles::tiling_error(e)),
             }
         } else {
             Manifest::new(key_hash)
@@ -103,24 +112,52 @@ impl WorkDir {
         Ok(p)
     }
 
-    /// Record `unit` as done (made from `inputs_hash`, stored in `file`) and save the manifest.
-    pub fn done(&mut self, unit: &str, file: &str, inputs_hash: &str) -> Result<()> {
+    /// Record `unit` as done (made from `inputs_hash`, stored in `file`, whose content has
+    /// `checksum`) and save the manifest atomically. Call this only once the unit's files are
+    /// complete under their final names: after a SIGKILL the manifest then names only finished
+    /// units.
+    pub fn done(
+        &mut self,
+        unit: &str,
+        file: &str,
+        inputs_hash: &str,
+        checksum: &str,
+    ) -> Result<()> {
         self.manifest.record(
             unit,
             talus_tiling::manifest::UnitEntry {
                 file: file.to_string(),
-                checksum: String::new(),
+                checksum: checksum.to_string(),
                 inputs_hash: inputs_hash.to_string(),
             },
         );
+        self.save()
+    }
+
+    /// Forget `unit` and save the manifest, before its files are overwritten: otherwise a run
+    /// killed half-way through the rewrite would leave an entry naming the old inputs over new
+    /// (or partial) files, which a later `--resume` with the old inputs would take as done.
+    pub fn forget(&mut self, unit: &str) -> Result<()> {
+        if self.manifest.forget(unit).is_some() {
+            self.save()?;
+        }
+        Ok(())
+    }
+
+    fn save(&self) -> Result<()> {
         self.manifest
             .save(&self.manifest_path)
-            .map_err(|e| Error::Internal(format!("saving the manifest: {e}")))
+            .map_err(crate::pipeline::tiles::tiling_error)
     }
 
     /// Is `unit` done from exactly `inputs_hash`?
     pub fn is_done(&self, unit: &str, inputs_hash: &str) -> bool {
         self.manifest.is_done(unit, inputs_hash)
+    }
+
+    /// The manifest entry of `unit`, if any.
+    pub fn entry(&self, unit: &str) -> Option<&talus_tiling::UnitEntry> {
+        self.manifest.units.get(unit)
     }
 
     /// After a failure: remove DIR again if this run created it and nothing is worth resuming.

@@ -213,7 +213,9 @@ fn gross(s1: &dyn Surface, s2: &dyn Surface, r: &Footprint, cell: f64) -> (f64, 
     let nu = (((r.u1 - r.u0) / cell).ceil() as usize).max(1);
     let nv = (((r.v1 - r.v0) / cell).ceil() as usize).max(1);
     let (du, dv) = ((r.u1 - r.u0) / nu as f64, (r.v1 - r.v0) / nv as f64);
-    let (g, l) = (0..nv)
+    // Rows in parallel, then summed in row order: rayon's `reduce` would add the floats in an
+    // order that depends on the thread count and on work stealing.
+    let rows: Vec<(f64, f64)> = (0..nv)
         .into_par_iter()
         .map(|j| {
             let v = r.v0 + (j as f64 + 0.5) * dv;
@@ -231,6 +233,7 @@ fn gross(s1: &dyn Surface, s2: &dyn Surface, r: &Footprint, cell: f64) -> (f64, 
             }
             (g, l)
         })
-        .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+        .collect();
+    let (g, l) = rows.iter().fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
     (g * du * dv, l * du * dv)
 }

@@ -1,0 +1,122 @@
+//! Progress of a run's stages on stderr.
+//!
+//! On a terminal each stage draws an indicatif bar (items per second and ETA); otherwise (a log
+//! file, a CI job, a test) nothing is drawn while the stage runs and one line is printed when it
+//! ends: `talus: <stage>: <count> <unit> in <seconds> s[, reused]`. The line is the same whether
+//! or not a bar was drawn, so a terminal keeps a record of every stage too.
+
+use std::io::IsTerminal;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+/// One stage being run.
+pub struct Stage {
+    name: String,
+    unit: &'static str,
+    bar: Option<ProgressBar>,
+    count: AtomicU64,
+    start: Instant,
+}
+
+impl Stage {
+    /// Start a stage expected to handle about `total` items (`unit`, e.g. "points"); `None` when
+    /// the total is unknown (a spinner on a terminal).
+    pub fn start(name: &str, total: Option<u64>, unit: &'static str) -> Stage {
+        let bar = std::io::stderr().is_terminal().then(|| {
+            let target = ProgressDrawTarget::stderr();
+            let bar = match total {
+                Some(n) => {
+                    let b = ProgressBar::with_draw_target(Some(n), target);
+                    // The template is a constant: it always parses.
+                    if let Ok(s) = ProgressStyle::with_template(&format!(
+                        "{{prefix}} [{{bar:30}}] {{human_pos}}/{{human_len}} {unit} ({{per_sec:0}}, ETA {{eta}})"
+                    )) {
+                        b.set_style(s.progress_chars("=> "));
+                    }
+                    b
+                }
+                None => {
+                    let b = ProgressBar::with_draw_target(None, target);
+                    if let Ok(s) = ProgressStyle::with_template("{prefix} {spinner} {elapsed}") {
+                        b.set_style(s);
+                    }
+                    b.enable_steady_tick(Duration::from_millis(200));
+                    b
+                }
+            };
+            bar.set_prefix(name.to_string());
+            bar
+        });
+        Stage {
+            name: name.to_string(),
+            unit,
+            bar,
+            count: AtomicU64::new(0),
+            start: Instant::now(),
+        }
+    }
+
+    /// A stage that draws no bar, only its line at the end (a stage nested in another one's bar).
+    pub fn log_only(name: &str, unit: &'static str) -> Stage {
+        Stage {
+            name: name.to_string(),
+            unit,
+            bar: None,
+            count: AtomicU64::new(0),
+            start: Instant::now(),
+        }
+    }
+
+    /// `n` more items done (callable from any thread).
+    pub fn inc(&self, n: u64) {
+        self.count.fetch_add(n, Ordering::Relaxed);
+        if let Some(b) = &self.bar {
+            b.inc(n);
+        }
+    }
+
+    /// Items counted so far.
+    pub fn count(&self) -> u64 {
+        self.count.load(Ordering::Relaxed)
+    }
+
+    /// Seconds since the stage started.
+    pub fn seconds(&self) -> f64 {
+        self.start.elapsed().as_secs_f64()
+    }
+
+    /// End the stage: clear its bar and print its line, with `note` (e.g. "reused") appended.
+    pub fn finish(self, note: &str) -> f64 {
+        let secs = self.seconds();
+        if let Some(b) = &self.bar {
+            b.finish_and_clear();
+        }
+        let note = if note.is_empty() {
+            String::new()
+        } else {
+            format!(", {note}")
+        };
+        eprintln!(
+            "talus: {}: {} {} in {:.2} s{}",
+            self.name,
+            self.count(),
+            self.unit,
+            secs,
+            note
+        );
+        secs
+    }
+}
+
+impl Drop for Stage {
+    /// A stage left by an error: take its bar off the screen so the error line reads cleanly.
+    fn drop(&mut self) {
+        if let Some(b) = &self.bar {
+            if !b.is_finished() {
+                b.abandon();
+            }
+        }
+    }
+}

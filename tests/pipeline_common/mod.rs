@@ -1,0 +1,179 @@
+//! Helpers shared by the pipeline tests (tiling invariance, resume, faults): a scene with planted
+//! events, running `talus compare`, and comparing two runs' outputs byte for byte.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::process::Output;
+
+use crate::common::run;
+
+/// The outputs that do not hold timings (summary.json does; its counts are compared apart).
+pub const COMPARED: &[&str] = &[
+    "m3c2.laz",
+    "events.geojson",
+    "events.csv",
+    "view.json",
+    "terrain.bin",
+];
+
+/// Write the cliff scene (3 planted events) with `points` per epoch into `dir`.
+pub fn cliff(dir: &Path, points: u64) -> (PathBuf, PathBuf) {
+    let out = run(&[
+        "synth",
+        "cliff",
+        "--out",
+        dir.to_str().unwrap(),
+        "--points",
+        &points.to_string(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (dir.join("before.laz"), dir.join("after.laz"))
+}
+
+pub fn compare(before: &Path, after: &Path, out: &Path, extra: &[&str]) {
+    let mut args = vec![
+        "compare",
+        before.to_str().unwrap(),
+        after.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    let o = run(&args);
+    assert!(
+        o.status.success(),
+        "talus {args:?}: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
+/// Which m3c2.laz values differ between two runs: a readable failure message.
+pub fn describe_differences(a: &Path, b: &Path) -> String {
+    let ta = talus::io::result_table::read(a).unwrap();
+    let tb = talus::io::result_table::read(b).unwrap();
+    if ta.xyz.len() != tb.xyz.len() {
+        return format!("{} vs {} core points", ta.xyz.len(), tb.xyz.len());
+    }
+    let mut msg = String::new();
+    let n_xyz = ta.xyz.iter().zip(&tb.xyz).filter(|(p, q)| p != q).count();
+    if n_xyz > 0 {
+        msg.push_str(&format!("xyz differ at {n_xyz} points; "));
+    }
+    for name in &ta.names {
+        let (ca, cb) = (ta.column(name).unwrap(), tb.column(name).unwrap());
+        let diff: Vec<usize> = (0..ca.len())
+            .filter(|&i| ca[i].to_bits() != cb[i].to_bits() && !(ca[i].is_nan() && cb[i].is_nan()))
+            .collect();
+        if let Some(&i) = diff.first() {
+            let max = diff
+                .iter()
+                .map(|&i| (ca[i] - cb[i]).abs())
+                .fold(0.0f64, f64::max);
+            msg.push_str(&format!(
+                "{name}: {} points differ (max |Δ| {max:e}; first at {:?}: {} vs {}); ",
+                diff.len(),
+                ta.xyz[i],
+                ca[i],
+                cb[i]
+            ));
+        }
+    }
+    msg
+}
+
+pub fn assert_same_outputs(reference: &Path, other: &Path) {
+    // The event solids too (meshes/*.ply).
+    let meshes = |d: &Path| {
+        let mut v: Vec<String> = std::fs::read_dir(d.join("meshes"))
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    };
+    let names = meshes(reference);
+    assert!(
+        !names.is_empty(),
+        "no event meshes in {}",
+        reference.display()
+    );
+    assert_eq!(names, meshes(other));
+    let mesh_paths: Vec<String> = names.iter().map(|n| format!("meshes/{n}")).collect();
+    let all = COMPARED.iter().map(|s| s.to_string()).chain(mesh_paths);
+    for name in all {
+        let name = name.as_str();
+        let (a, b) = (reference.join(name), other.join(name));
+        let (ba, bb) = (std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+        if ba != bb {
+            let detail = if name == "m3c2.laz" {
+                describe_differences(&a, &b)
+            } else {
+                String::new()
+            };
+            panic!("{} differs from {}: {detail}", b.display(), a.display());
+        }
+    }
+}
+
+/// Run `talus compare` and return its output, whatever the exit status.
+pub fn compare_output(before: &Path, after: &Path, out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec![
+        "compare",
+        before.to_str().unwrap(),
+        after.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    run(&args)
+}
+
+/// The stage line `talus: <stage>: <count> ...` of a run's stderr: (count, reused).
+pub fn stage_line(stderr: &[u8], stage: &str) -> (u64, bool) {
+    let text = String::from_utf8_lossy(stderr);
+    let prefix = format!("talus: {stage}: ");
+    let line = text
+        .lines()
+        .find(|l| l.starts_with(&prefix))
+        .unwrap_or_else(|| panic!("no line for stage '{stage}' in:\n{text}"));
+    let count = line[prefix.len()..]
+        .split(' ')
+        .next()
+        .and_then(|c| c.parse().ok())
+        .unwrap_or_else(|| panic!("no count in '{line}'"));
+    (count, line.ends_with(", reused"))
+}
+
+/// Modification times of every result chunk file (`.talus/m3c2/*.tile`) by name.
+pub fn chunk_mtimes(dir: &Path) -> std::collections::BTreeMap<String, std::time::SystemTime> {
+    let mut m = std::collections::BTreeMap::new();
+    let Ok(rd) = std::fs::read_dir(dir.join(".talus/m3c2")) else {
+        return m;
+    };
+    for e in rd {
+        let e = e.unwrap();
+        let name = e.file_name().to_string_lossy().into_owned();
+        if name.ends_with(".tile") {
+            m.insert(name, e.metadata().unwrap().modified().unwrap());
+        }
+    }
+    m
+}
+
+/// The tiles whose M3C2 unit the manifest of `dir` records as done.
+pub fn done_m3c2_tiles(dir: &Path) -> Vec<String> {
+    let Ok(text) = std::fs::read_to_string(dir.join(".talus/manifest.json")) else {
+        return Vec::new();
+    };
+    let v: serde_json::Value = serde_json::from_str(&text).expect("the manifest is valid JSON");
+    v["units"]
+        .as_object()
+        .unwrap()
+        .keys()
+        .filter_map(|k| k.strip_prefix("m3c2:").map(str::to_string))
+        .collect()
+}

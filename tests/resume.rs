@@ -1,0 +1,219 @@
+//! Resumable runs (SPEC.md §3 "Resume"): a run killed with SIGKILL at any moment and continued
+//! with `--resume` gives the bytes of an uninterrupted run without redoing finished units; a
+//! changed parameter or input redoes exactly what depends on it; `--force` starts over.
+//!
+//! The reference is an uninterrupted run of the same scene and parameters; the finished units
+//! are read from the run's own manifest and their files' modification times, so "not redone" is
+//! checked on disk, not taken from the program's word.
+
+mod common;
+mod pipeline_common;
+
+use std::path::Path;
+use std::process::Stdio;
+use std::time::{Duration, Instant};
+
+use common::Rng;
+use pipeline_common::{
+    assert_same_outputs, chunk_mtimes, cliff, compare, compare_output, done_m3c2_tiles, stage_line,
+};
+
+/// Small tiles, so that pass 2 has many units to be killed between.
+const ARGS: &[&str] = &["--tile-size", "5", "--core-spacing", "0.25"];
+
+fn spawn_compare(before: &Path, after: &Path, out: &Path, extra: &[&str]) -> std::process::Child {
+    common::talus()
+        .args([
+            "compare",
+            before.to_str().unwrap(),
+            after.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .args(extra)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("talus starts")
+}
+
+#[test]
+fn sigkill_at_random_moments_then_resume_gives_the_uninterrupted_result() {
+    let tmp = common::tempdir();
+    let (before, after) = cliff(&tmp.path().join("scene"), 100_000);
+    let reference = tmp.path().join("reference");
+    let t = Instant::now();
+    compare(&before, &after, &reference, ARGS);
+    let full = t.elapsed();
+
+    let dir = tmp.path().join("killed");
+    let mut rng = Rng::new(20_240_601);
+    let mut landed = 0;
+    // Units recorded done at some kill, with their chunk files' times then: none may be redone.
+    let mut finished = std::collections::BTreeMap::new();
+    for attempt in 0..5 {
+        let resume: &[&str] = if attempt == 0 { &[] } else { &["--resume"] };
+        let mut child = spawn_compare(&before, &after, &dir, &[ARGS, resume].concat());
+        // A moment between 5 % and 90 % of an uninterrupted run.
+        let at = full.mul_f64(0.05 + 0.85 * rng.uniform());
+        std::thread::sleep(at);
+        if child.try_wait().unwrap().is_none() {
+            child.kill().unwrap(); // SIGKILL on Unix
+            landed += 1;
+        }
+        child.wait().unwrap();
+        let times = chunk_mtimes(&dir);
+        for tile in done_m3c2_tiles(&dir) {
+            for (name, time) in times
+                .iter()
+                .filter(|(n, _)| n.starts_with(&format!("{tile}.")))
+            {
+                finished.entry(name.clone()).or_insert(*time);
+            }
+        }
+    }
+    assert!(landed > 0, "no kill landed while the run was going");
+    assert!(
+        !finished.is_empty(),
+        "no kill came after a finished M3C2 unit"
+    );
+    let out = compare_output(&before, &after, &dir, &[ARGS, &["--resume"]].concat());
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_same_outputs(&reference, &dir);
+    let now = chunk_mtimes(&dir);
+    for (name, time) in &finished {
+        assert_eq!(
+            now.get(name),
+            Some(time),
+            "{name} was finished but computed again"
+        );
+    }
+
+    // A resume after a complete run reuses both passes.
+    let out = compare_output(&before, &after, &dir, &[ARGS, &["--resume"]].concat());
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(stage_line(&out.stderr, "pass 1: tiling"), (0, true));
+    assert_eq!(
+        stage_line(&out.stderr, "pass 2: normals and M3C2"),
+        (0, true)
+    );
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
+    let stages = summary["stages"].as_array().unwrap();
+    assert!(stages[1]["reused"].as_bool().unwrap() && stages[2]["reused"].as_bool().unwrap());
+    assert_same_outputs(&reference, &dir);
+
+    // --force starts over: both passes run again, same result.
+    let out = compare_output(&before, &after, &dir, &[ARGS, &["--force"]].concat());
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(stage_line(&out.stderr, "pass 1: tiling"), (200_000, false));
+    assert_eq!(
+        stage_line(&out.stderr, "pass 2: normals and M3C2"),
+        (200_000, false)
+    );
+    assert_same_outputs(&reference, &dir);
+}
+
+#[test]
+fn a_changed_parameter_or_input_redoes_exactly_what_depends_on_it() {
+    let tmp = common::tempdir();
+    let (before, after) = cliff(&tmp.path().join("scene"), 60_000);
+    // `--resume` where nothing ran yet is a fresh run.
+    let dir = tmp.path().join("run");
+    let out = compare_output(&before, &after, &dir, &[ARGS, &["--resume"]].concat());
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(stage_line(&out.stderr, "pass 1: tiling"), (120_000, false));
+    // A DIR holding a run is not overwritten without --resume or --force.
+    let out = compare_output(&before, &after, &dir, ARGS);
+    assert_eq!(out.status.code(), Some(2));
+
+    // Events parameters (threshold, eps) reuse the tiles and every M3C2 unit, and give what a
+    // fresh run with those parameters gives.
+    let events_params = ["--threshold", "0.2", "--eps", "0.8"];
+    let times = chunk_mtimes(&dir);
+    let out = compare_output(
+        &before,
+        &after,
+        &dir,
+        &[ARGS, &events_params, &["--resume"]].concat(),
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(stage_line(&out.stderr, "pass 1: tiling"), (0, true));
+    assert_eq!(
+        stage_line(&out.stderr, "pass 2: normals and M3C2"),
+        (0, true)
+    );
+    assert_eq!(chunk_mtimes(&dir), times);
+    let fresh = tmp.path().join("fresh");
+    compare(&before, &after, &fresh, &[ARGS, &events_params].concat());
+    assert_same_outputs(&fresh, &dir);
+
+    // An M3C2 parameter that does not change the halo (the registration error) redoes pass 2
+    // only.
+    let out = compare_output(
+        &before,
+        &after,
+        &dir,
+        &[ARGS, &events_params, &["--reg-error", "0.01", "--resume"]].concat(),
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(stage_line(&out.stderr, "pass 1: tiling"), (0, true));
+    assert_eq!(
+        stage_line(&out.stderr, "pass 2: normals and M3C2"),
+        (120_000, false)
+    );
+
+    // Rewriting the before file (same bytes, new modification time) cuts that epoch again and
+    // redoes pass 2, and not the after epoch's tiles.
+    let bytes = std::fs::read(&before).unwrap();
+    std::thread::sleep(Duration::from_millis(20));
+    std::fs::write(&before, &bytes).unwrap();
+    let out = compare_output(
+        &before,
+        &after,
+        &dir,
+        &[ARGS, &events_params, &["--reg-error", "0.01", "--resume"]].concat(),
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(stage_line(&out.stderr, "pass 1: tiling"), (60_000, false));
+    assert_eq!(
+        stage_line(&out.stderr, "pass 2: normals and M3C2"),
+        (120_000, false)
+    );
+    let fresh2 = tmp.path().join("fresh2");
+    compare(
+        &before,
+        &after,
+        &fresh2,
+        &[ARGS, &events_params, &["--reg-error", "0.01"]].concat(),
+    );
+    assert_same_outputs(&fresh2, &dir);
+}
