@@ -21,7 +21,7 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Compare two epochs: M3C2 distances, change events and their volumes.
-    Compare(CompareArgs),
+    Compare(Box<CompareArgs>),
     /// Point count, bounds, format, CRS, point spacing and derived parameters of point clouds.
     Info {
         /// Point clouds (LAS/LAZ, text, PLY).

@@ -157,7 +157,7 @@ pub fn parse_size(s: &str) -> Result<u64> {
         _ => return Err(bad()),
     };
     let bytes = n * mul;
-    if !(bytes >= 64.0 * 1024.0 * 1024.0) {
+    if bytes.is_nan() || bytes < 64.0 * 1024.0 * 1024.0 {
         return Err(Error::Usage(format!(
             "--memory: {s} is too small; talus needs at least 64MiB"
         )));

@@ -76,10 +76,11 @@ fn vertical_bump_is_measured_exactly() {
         let (x, y) = (p[0] - OFFSET[0], p[1] - OFFSET[1]);
         if (8.0..12.0).contains(&x) && (8.0..12.0).contains(&y) {
             inner.push(d);
-        } else if !(6.0..14.0).contains(&x) || !(6.0..14.0).contains(&y) {
-            if (1.0..19.0).contains(&x) && (1.0..19.0).contains(&y) {
-                outer.push(d);
-            }
+        } else if (!(6.0..14.0).contains(&x) || !(6.0..14.0).contains(&y))
+            && (1.0..19.0).contains(&x)
+            && (1.0..19.0).contains(&y)
+        {
+            outer.push(d);
         }
     }
     assert!(inner.len() > 40 && outer.len() > 300);

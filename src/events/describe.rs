@@ -231,7 +231,7 @@ fn tighten_in_plane(
         }
         (hi[0] - lo[0]) * (hi[1] - lo[1])
     };
-    if !(best.0 < pca_area * 0.999) {
+    if best.0.is_nan() || best.0 >= pca_area * 0.999 {
         return axes;
     }
     let (c, s) = (best.1.cos(), best.1.sin());

@@ -36,7 +36,7 @@ pub fn normal_at(index: &Index, q: &Point3, radius: f64) -> Option<(Point3, f64)
 pub fn smallest_eigenvector(c: &[f64; 6]) -> Option<(Point3, f64)> {
     let m = Matrix3::new(c[0], c[1], c[2], c[1], c[3], c[4], c[2], c[4], c[5]);
     let trace = c[0] + c[3] + c[5];
-    if !(trace > 0.0) || !trace.is_finite() {
+    if trace.is_nan() || trace <= 0.0 || !trace.is_finite() {
         return None;
     }
     let eig = SymmetricEigen::new(m);
@@ -47,7 +47,7 @@ pub fn smallest_eigenvector(c: &[f64; 6]) -> Option<(Point3, f64)> {
         .min_by(|a, b| a.1.total_cmp(b.1))?;
     let v: Vector3<f64> = eig.eigenvectors.column(imin).into_owned();
     let norm = v.norm();
-    if !(norm > 0.0) {
+    if norm.is_nan() || norm <= 0.0 {
         return None;
     }
     let v = v / norm;

@@ -48,10 +48,8 @@ pub fn write(
     let mut dist: Vec<f32> = Vec::new();
     let mut i = 0u64;
     while let Some(k) = merged.next_result()? {
-        if i % stride == 0 {
-            for a in 0..3 {
-                pos.push((k.xyz[a] - origin[a]) as f32);
-            }
+        if i.is_multiple_of(stride) {
+            pos.extend(k.xyz.iter().zip(&origin).map(|(x, o)| (x - o) as f32));
             dist.push(k.r.distance as f32);
         }
         i += 1;
