@@ -23,6 +23,8 @@ fi
 if [ -z "${TALUS_VIEW_CMD:-}" ]; then
   (cd "$repo" && cargo build --quiet --example view_server)
 fi
+# The real-result test runs the talus binary (synth, compare, view).
+(cd "$repo" && cargo build --quiet --bin talus)
 
 cd "$repo"
 exec node --test viewer/tests/
