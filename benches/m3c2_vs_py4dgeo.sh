@@ -71,7 +71,7 @@ fi
 
 # ---- 3. data
 say "data in $WORK"
-"$PY" "$HELPERS/make_data.py" "$WORK"
+"$PY" "$HELPERS/make_data.py" "$WORK" --core-layout "${CORE_LAYOUT:-grid}"
 BEFORE=$WORK/before.las
 AFTER=$WORK/after.las
 CORES=$WORK/cores.las
@@ -84,7 +84,7 @@ mkdir -p "$TIMES" "$LOGS"
 
 talus_cmd=("$TALUS" compare "$BEFORE" "$AFTER" --out "$TALUS_OUT" --force
     --core-points "$CORES" --normal-radius "$NORMAL_RADIUS" --cyl-radius "$CYL_RADIUS"
-    --cyl-halflen "$CYL_HALFLEN" --orientation up --threads "$THREADS")
+    --cyl-halflen "$CYL_HALFLEN" --orientation up --threads "$THREADS" --m3c2-only)
 py_cmd=(env OMP_NUM_THREADS="$THREADS" OMP_PROC_BIND=false "$PY" "$HELPERS/run_py4dgeo.py"
     "$BEFORE" "$AFTER" "$CORES" "$PY_OUT" --normal-radius "$NORMAL_RADIUS"
     --cyl-radius "$CYL_RADIUS" --cyl-halflen "$CYL_HALFLEN")

@@ -116,6 +116,9 @@ struct CompareArgs {
     /// Use this PLY surface for C2 instead of the local reconstruction.
     #[arg(long)]
     after_mesh: Option<PathBuf>,
+    /// Stop after M3C2 (m3c2.laz, summary.json): no events, volumes or meshes.
+    #[arg(long)]
+    m3c2_only: bool,
     /// Tile side (for testing tiling invariance; default: planned from --memory).
     #[arg(long, hide = true)]
     tile_size: Option<f64>,
@@ -182,6 +185,7 @@ fn run(cli: Cli) -> talus::Result<()> {
                 before_mesh: a.before_mesh,
                 after_mesh: a.after_mesh,
                 tile_size: a.tile_size,
+                m3c2_only: a.m3c2_only,
             };
             let summary = talus::pipeline::compare(&opts)?;
             eprintln!("{}", summary.one_line());

@@ -4,7 +4,11 @@ Writes into OUTDIR:
   before.las  epoch 1: N points of a rough surface (uniform random XY over 100 m x 100 m)
   after.las   epoch 2: N points of the same surface, sampled independently, with planted
               bumps and pits (Gaussian, 0.2-1 m)
-  cores.las   a random subset of epoch 1 (the core points, in random order)
+  cores.las   the core points: with --core-layout grid (default) a regular grid on the
+              noise-free surface (round(sqrt(cores))² points, in row order); with
+              --core-layout epoch1 a random subset of epoch 1 in random order (py4dgeo then
+              miscounts: its cylinder segment boundary falls on t = 0, where every such core
+              point's own epoch-1 point lies; see benches/README.md)
   data.json   the generation parameters and the planted changes
 
 All three files are LAS 1.4, point format 6, scale 0.0001 m, UTM-like offsets, so the core
@@ -75,6 +79,7 @@ def main():
     ap.add_argument("outdir")
     ap.add_argument("--points", type=int, default=1_000_000, help="points per epoch")
     ap.add_argument("--cores", type=int, default=100_000, help="core points")
+    ap.add_argument("--core-layout", choices=["grid", "epoch1"], default="grid")
     ap.add_argument("--noise", type=float, default=0.007, help="noise sigma, m")
     ap.add_argument("--seed", type=int, default=20241121)
     args = ap.parse_args()
@@ -85,6 +90,7 @@ def main():
         "format_version": FORMAT_VERSION,
         "points": args.points,
         "cores": args.cores,
+        "core_layout": args.core_layout,
         "noise": args.noise,
         "seed": args.seed,
     }
@@ -129,7 +135,20 @@ def main():
 
     write_las(os.path.join(args.outdir, "before.las"), x1, y1, z1)
     write_las(os.path.join(args.outdir, "after.las"), x2, y2, z2)
-    write_las(os.path.join(args.outdir, "cores.las"), x1[sel], y1[sel], z1[sel])
+    if args.core_layout == "grid":
+        k = int(round(np.sqrt(args.cores)))
+        g = (np.arange(k) + 0.5) * (SIZE / k)
+        gx, gy = np.meshgrid(g, g)
+        gx, gy = gx.ravel(), gy.ravel()
+        gz = surface(gx, gy, phases)
+        write_las(
+            os.path.join(args.outdir, "cores.las"),
+            gx + ORIGIN[0],
+            gy + ORIGIN[1],
+            gz + ORIGIN[2],
+        )
+    else:
+        write_las(os.path.join(args.outdir, "cores.las"), x1[sel], y1[sel], z1[sel])
     with open(stamp_path, "w") as f:
         json.dump(
             {

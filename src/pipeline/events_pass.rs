@@ -50,6 +50,7 @@ pub struct EventRecord {
 }
 
 /// What the events stage produced.
+#[derive(Default)]
 pub struct EventsOut {
     pub events: Vec<EventRecord>,
     /// Kept core points: key → (smoothed distance, event id or 0).

@@ -51,6 +51,9 @@ pub struct CompareOptions {
     pub after_mesh: Option<PathBuf>,
     /// Force the tile side (tests of tiling invariance); None = plan from the memory budget.
     pub tile_size: Option<f64>,
+    /// Stop after M3C2: m3c2.laz (without smoothed values and event ids), summary.json and the
+    /// viewer's terrain; no events, volumes or meshes.
+    pub m3c2_only: bool,
 }
 
 /// One input as summary.json reports it.
@@ -274,27 +277,37 @@ fn run_stages(
         seconds: stage.finish(if m3c2.reused { "reused" } else { "" }),
         reused: m3c2.reused,
     });
-    let stage = Stage::start("events and volumes", None, "events");
-    let ev = events_pass::run(
-        &m3c2,
-        &layout,
-        &tiled,
-        &params,
-        (opts.before_mesh.as_deref(), opts.after_mesh.as_deref()),
-    )?;
-    stage.inc(ev.events.len() as u64);
-    stages.push(StageTime {
-        stage: "events and volumes".into(),
-        seconds: stage.finish(&format!("{} kept core points", ev.kept_points)),
-        reused: false,
-    });
+    let ev = if opts.m3c2_only {
+        events_pass::EventsOut::default()
+    } else {
+        let stage = Stage::start("events and volumes", None, "events");
+        let ev = events_pass::run(
+            &m3c2,
+            &layout,
+            &tiled,
+            &params,
+            (opts.before_mesh.as_deref(), opts.after_mesh.as_deref()),
+        )?;
+        stage.inc(ev.events.len() as u64);
+        stages.push(StageTime {
+            stage: "events and volumes".into(),
+            seconds: stage.finish(&format!("{} kept core points", ev.kept_points)),
+            reused: false,
+        });
+        ev
+    };
     let stage = Stage::start("outputs", None, "core points");
     let per_point = &ev.per_point;
     let written = outputs::write_m3c2_laz(wd, &m3c2, &before.crs, layout.anchor, &|k| {
         per_point.get(&k).copied().unwrap_or((f64::NAN, 0))
     })?;
-    let meshes = event_outputs::write_meshes(wd, &ev.events)?;
-    event_outputs::write_tables(wd, &ev.events, &before.crs)?;
+    let meshes = if opts.m3c2_only {
+        Vec::new()
+    } else {
+        let meshes = event_outputs::write_meshes(wd, &ev.events)?;
+        event_outputs::write_tables(wd, &ev.events, &before.crs)?;
+        meshes
+    };
     view_export::write(
         wd,
         &m3c2,
