@@ -275,21 +275,6 @@ impl Params {
                 .expect("validated in resolve"),
         }
     }
-
-    /// How far around a tile's square its points must reach so that every neighbourhood used for
-    /// the core points it owns is complete (SPEC.md §3).
-    pub fn halo(&self) -> f64 {
-        let cyl = (self.cyl_radius.value.powi(2) + self.cyl_halflen.value.powi(2)).sqrt();
-        // The DSM test of `auto` orientation looks up to 4 × normal_radius away.
-        let orient = 4.0 * self.normal_radius.value;
-        let margin = 2.0 * self.core_spacing.value;
-        self.normal_radius
-            .value
-            .max(cyl)
-            .max(orient)
-            .max(self.eps.value)
-            + margin
-    }
 }
 
 #[cfg(test)]

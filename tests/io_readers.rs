@@ -7,10 +7,12 @@
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use talus::io::{self, CloudFormat, Point3};
 use talus::Error;
+
+mod common;
+use common::laspy::{laspy_python, laspy_read};
 
 // ---------------------------------------------------------------------------------------------
 // helpers
@@ -29,48 +31,6 @@ fn data_dir() -> Option<PathBuf> {
     }
     eprintln!("SKIPPED: shared/data not found (set TALUS_DATA)");
     None
-}
-
-/// A python with laspy: `$TALUS_PYTHON`, else `tests/py/.venv/bin/python`.
-fn laspy_python() -> Option<PathBuf> {
-    let mut candidates = Vec::new();
-    if let Ok(p) = std::env::var("TALUS_PYTHON") {
-        candidates.push(PathBuf::from(p));
-    }
-    candidates.push(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/py/.venv/bin/python"));
-    for py in candidates {
-        let ok = Command::new(&py)
-            .args(["-c", "import laspy"])
-            .output()
-            .map(|o| o.status.success())
-            .unwrap_or(false);
-        if ok {
-            return Some(py);
-        }
-    }
-    eprintln!(
-        "SKIPPED: laspy not available (run: python3 -m venv tests/py/.venv && \
-         tests/py/.venv/bin/pip install 'laspy[lazrs]')"
-    );
-    None
-}
-
-/// laspy's view of a file (see tests/py/read_extra_bytes.py).
-fn laspy_read(py: &Path, file: &Path, n: usize) -> serde_json::Value {
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/py/read_extra_bytes.py");
-    let out = Command::new(py)
-        .arg(script)
-        .arg(file)
-        .arg(n.to_string())
-        .output()
-        .expect("run python");
-    assert!(
-        out.status.success(),
-        "laspy failed on {}: {}",
-        file.display(),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).expect("laspy JSON")
 }
 
 fn f64s(v: &serde_json::Value) -> Vec<f64> {
