@@ -31,7 +31,9 @@ impl Index {
         let tree = if points.is_empty() {
             ImmutableKdTree::new_from_slice(&[[f64::MAX; 3]]).expect("one point always builds")
         } else {
-            ImmutableKdTree::new_from_slice(&points).expect("finite points always build")
+            // Parallel construction on the current rayon pool above kiddo's size threshold; it
+            // builds the same tree as the sequential algorithm.
+            ImmutableKdTree::new_from_slice_parallel(&points).expect("finite points always build")
         };
         Index {
             origin,
