@@ -210,9 +210,9 @@ impl Params {
                 "point spacing {s} is not positive"
             )));
         }
-        let core_spacing = pick(user.core_spacing, 2.0 * s, "derived: 2 × point spacing");
+        let core_spacing = pick(user.core_spacing, 2.0 * s, "derived: 2 × effective spacing");
         let c = core_spacing.value;
-        let cyl_radius = pick(user.cyl_radius, 3.0 * s, "derived: 3 × point spacing");
+        let cyl_radius = pick(user.cyl_radius, 3.0 * s, "derived: 3 × effective spacing");
         let memory = match &user.memory {
             Some(m) => Resolved {
                 value: parse_size(m)?,
@@ -228,7 +228,11 @@ impl Params {
             .unwrap_or(1);
         Ok(Params {
             point_spacing: s,
-            normal_radius: pick(user.normal_radius, 4.0 * s, "derived: 4 × point spacing"),
+            normal_radius: pick(
+                user.normal_radius,
+                4.0 * s,
+                "derived: 4 × effective spacing",
+            ),
             cyl_halflen: pick(
                 user.cyl_halflen,
                 10.0 * cyl_radius.value,
@@ -245,7 +249,7 @@ impl Params {
                 },
                 value: orientation,
             },
-            threshold: pick(user.threshold, 0.5 * s, "derived: point spacing / 2"),
+            threshold: pick(user.threshold, 0.5 * s, "derived: effective spacing / 2"),
             smooth_k: pick(user.smooth_k, 30, "default: 30 (the paper's value)"),
             smooth_sigma: pick(user.smooth_sigma, 2.0 * c, "derived: 2 × core_spacing"),
             eps: pick(user.eps, 2.5 * c, "derived: 2.5 × core_spacing"),
