@@ -23,7 +23,7 @@ use crate::error::{Error, Result};
 const MAX_HEADER_BYTES: u64 = 1 << 20;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Encoding {
+pub(crate) enum Encoding {
     Ascii,
     LittleEndian,
     BigEndian,
@@ -31,7 +31,7 @@ enum Encoding {
 
 /// The scalar property types of the PLY spec, with their alternative names.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Scalar {
+pub(crate) enum Scalar {
     I8,
     U8,
     I16,
@@ -43,7 +43,7 @@ enum Scalar {
 }
 
 impl Scalar {
-    fn parse(name: &str) -> Option<Scalar> {
+    pub(crate) fn parse(name: &str) -> Option<Scalar> {
         Some(match name {
             "char" | "int8" => Scalar::I8,
             "uchar" | "uint8" => Scalar::U8,
@@ -57,7 +57,7 @@ impl Scalar {
         })
     }
 
-    fn size(self) -> usize {
+    pub(crate) fn size(self) -> usize {
         match self {
             Scalar::I8 | Scalar::U8 => 1,
             Scalar::I16 | Scalar::U16 => 2,
@@ -67,7 +67,7 @@ impl Scalar {
     }
 
     /// Decode from exactly `size()` bytes.
-    fn decode(self, b: &[u8], enc: Encoding) -> f64 {
+    pub(crate) fn decode(self, b: &[u8], enc: Encoding) -> f64 {
         macro_rules! num {
             ($t:ty, $n:expr) => {{
                 let mut a = [0u8; $n];
@@ -93,16 +93,16 @@ impl Scalar {
 }
 
 #[derive(Debug, Clone, Copy)]
-enum Property {
+pub(crate) enum Property {
     Scalar(Scalar),
     List { count: Scalar, item: Scalar },
 }
 
 #[derive(Debug, Clone)]
-struct Element {
-    name: String,
-    count: u64,
-    props: Vec<(String, Property)>,
+pub(crate) struct Element {
+    pub(crate) name: String,
+    pub(crate) count: u64,
+    pub(crate) props: Vec<(String, Property)>,
 }
 
 impl Element {
@@ -129,7 +129,12 @@ struct Header {
     xyz_ty: [Scalar; 3],
 }
 
-fn parse_header(path: &Path, r: &mut BufReader<File>) -> Result<Header> {
+/// Read a PLY header up to `end_header`: the encoding and the elements with their properties.
+/// Shared by the point reader and the mesh reader ([`crate::volume::read_ply_mesh`]).
+pub(crate) fn parse_elements(
+    path: &Path,
+    r: &mut BufReader<File>,
+) -> Result<(Encoding, Vec<Element>)> {
     let bad = |msg: String| Error::input(path, format!("unreadable PLY header: {msg}"));
     let mut line = String::new();
     let mut read = 0u64;
@@ -196,6 +201,11 @@ fn parse_header(path: &Path, r: &mut BufReader<File>) -> Result<Header> {
         }
     }
     let encoding = encoding.ok_or_else(|| bad("no format line".into()))?;
+    Ok((encoding, elements))
+}
+
+fn parse_header(path: &Path, r: &mut BufReader<File>) -> Result<Header> {
+    let (encoding, elements) = parse_elements(path, r)?;
     let vertex = elements
         .iter()
         .position(|e| e.name == "vertex")
