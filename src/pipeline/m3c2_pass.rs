@@ -31,6 +31,21 @@ pub struct M3c2Results {
     pub reused: bool,
 }
 
+impl M3c2Results {
+    /// How many core points the results hold, from the chunk headers alone.
+    pub fn count(&self) -> Result<u64> {
+        let mut n = 0;
+        for &(id, chunks) in &self.chunks {
+            for k in 0..chunks {
+                n += talus_tiling::read_tile_header(&chunk_path(&self.dir, id, k))
+                    .map_err(tiling_error)?
+                    .point_count;
+            }
+        }
+        Ok(n)
+    }
+}
+
 /// One core point's result with its global sort key.
 #[derive(Debug, Clone, Copy)]
 pub struct KeyedResult {

@@ -298,9 +298,15 @@ fn run_stages(
     };
     let stage = Stage::start("outputs", None, "core points");
     let per_point = &ev.per_point;
-    let written = outputs::write_m3c2_laz(wd, &m3c2, &before.crs, layout.anchor, &|k| {
-        per_point.get(&k).copied().unwrap_or((f64::NAN, 0))
-    })?;
+    let mut terrain = view_export::TerrainSample::new(m3c2.count()?, layout.anchor);
+    let written = outputs::write_m3c2_laz(
+        wd,
+        &m3c2,
+        &before.crs,
+        layout.anchor,
+        &|k| per_point.get(&k).copied().unwrap_or((f64::NAN, 0)),
+        &mut |k| terrain.push(k),
+    )?;
     let meshes = if opts.m3c2_only {
         Vec::new()
     } else {
@@ -308,14 +314,7 @@ fn run_stages(
         event_outputs::write_tables(wd, &ev.events, &before.crs)?;
         meshes
     };
-    view_export::write(
-        wd,
-        &m3c2,
-        written.core_points,
-        &before.crs,
-        layout.anchor,
-        &meshes,
-    )?;
+    terrain.write(wd, &before.crs, &meshes)?;
     stage.inc(written.core_points);
     stages.push(StageTime {
         stage: "outputs".into(),

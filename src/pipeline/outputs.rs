@@ -137,13 +137,15 @@ impl<'a> MergedResults<'a> {
 }
 
 /// Write DIR/m3c2.laz. `event_of(key)` gives the smoothed distance and event id of a core point
-/// (NaN, 0 when it is in no event).
+/// (NaN, 0 when it is in no event); `each` sees every result in the same order (the viewer's
+/// terrain sample rides on this pass instead of merging the results again).
 pub fn write_m3c2_laz(
     wd: &WorkDir,
     results: &M3c2Results,
     crs: &Crs,
     origin_hint: [f64; 3],
     event_of: &dyn Fn(u64) -> (f64, u32),
+    each: &mut dyn FnMut(&KeyedResult),
 ) -> Result<Written> {
     let path = wd.out.join("m3c2.laz");
     let mut w = ResultWriter::create(&path, crs, M3C2_DIMS, origin_hint)?;
@@ -153,11 +155,11 @@ pub fn write_m3c2_laz(
         computed: 0,
         significant: 0,
     };
-    let mut extra = [0.0f64; 12];
     while let Some(k) = merged.next_result()? {
+        each(&k);
         let r = &k.r;
         let (smoothed, event) = event_of(k.key);
-        extra = [
+        let extra = [
             r.distance,
             r.uncertainty,
             r.significant as u8 as f64,
@@ -176,7 +178,6 @@ pub fn write_m3c2_laz(
         written.computed += r.distance.is_finite() as u64;
         written.significant += r.significant as u64;
     }
-    let _ = extra;
     w.finish()?;
     Ok(written)
 }

@@ -6,8 +6,8 @@ use serde::Serialize;
 
 use crate::error::{Error, Result};
 use crate::io::{Crs, Point3};
-use crate::pipeline::m3c2_pass::M3c2Results;
-use crate::pipeline::outputs::{write_atomic, MergedResults};
+use crate::pipeline::m3c2_pass::KeyedResult;
+use crate::pipeline::outputs::write_atomic;
 use crate::pipeline::workdir::WorkDir;
 
 /// Upper bound on the terrain points the viewer gets.
@@ -32,54 +32,72 @@ struct ViewJson<'a> {
     meshes: std::collections::BTreeMap<String, EventMeshes>,
 }
 
-/// Write DIR/terrain.bin and DIR/view.json. `total` is the number of core points (to choose the
-/// stride); `origin` the local origin of the rendering.
-pub fn write(
-    wd: &WorkDir,
-    results: &M3c2Results,
-    total: u64,
-    crs: &Crs,
+/// The terrain the viewer gets: every `stride`-th core point of the canonical order, collected
+/// while m3c2.laz is written (one pass over the results for both).
+pub struct TerrainSample {
+    stride: u64,
     origin: Point3,
-    meshes: &[(u32, EventMeshes)],
-) -> Result<()> {
-    let stride = total.div_ceil(MAX_TERRAIN_POINTS).max(1);
-    let mut merged = MergedResults::new(results)?;
-    let mut pos: Vec<f32> = Vec::new();
-    let mut dist: Vec<f32> = Vec::new();
-    let mut i = 0u64;
-    while let Some(k) = merged.next_result()? {
-        if i.is_multiple_of(stride) {
-            pos.extend(k.xyz.iter().zip(&origin).map(|(x, o)| (x - o) as f32));
-            dist.push(k.r.distance as f32);
+    seen: u64,
+    pos: Vec<f32>,
+    dist: Vec<f32>,
+}
+
+impl TerrainSample {
+    /// A sample of at most [`MAX_TERRAIN_POINTS`] of `total` core points, relative to `origin`.
+    pub fn new(total: u64, origin: Point3) -> Self {
+        TerrainSample {
+            stride: total.div_ceil(MAX_TERRAIN_POINTS).max(1),
+            origin,
+            seen: 0,
+            pos: Vec::new(),
+            dist: Vec::new(),
         }
-        i += 1;
     }
-    let mut finite: Vec<f32> = dist.iter().copied().filter(|d| d.is_finite()).collect();
-    let range = if finite.is_empty() {
-        [0.0, 0.0]
-    } else {
-        finite.sort_by(|a, b| a.total_cmp(b));
-        let q = |f: f64| finite[((finite.len() - 1) as f64 * f).round() as usize] as f64;
-        [q(0.02), q(0.98)]
-    };
-    let mut bytes = Vec::with_capacity((pos.len() + dist.len()) * 4);
-    for v in pos.iter().chain(dist.iter()) {
-        bytes.extend_from_slice(&v.to_le_bytes());
+
+    /// The next core point in canonical order.
+    pub fn push(&mut self, k: &KeyedResult) {
+        if self.seen.is_multiple_of(self.stride) {
+            let o = self.origin;
+            self.pos
+                .extend(k.xyz.iter().zip(&o).map(|(x, o)| (x - o) as f32));
+            self.dist.push(k.r.distance as f32);
+        }
+        self.seen += 1;
     }
-    write_atomic(&wd.out.join("terrain.bin"), &bytes)?;
-    let view = ViewJson {
-        version: 1,
-        crs: crs.describe(),
-        units: "m",
-        origin,
-        points: dist.len(),
-        distance_range: range,
-        terrain: "terrain.bin",
-        meshes: meshes
-            .iter()
-            .map(|(id, m)| (id.to_string(), m.clone()))
-            .collect(),
-    };
-    let text = serde_json::to_string_pretty(&view).map_err(|e| Error::Internal(e.to_string()))?;
-    write_atomic(&wd.out.join("view.json"), text.as_bytes())
+
+    /// Write DIR/terrain.bin and DIR/view.json.
+    pub fn write(self, wd: &WorkDir, crs: &Crs, meshes: &[(u32, EventMeshes)]) -> Result<()> {
+        let TerrainSample {
+            origin, pos, dist, ..
+        } = self;
+        let mut finite: Vec<f32> = dist.iter().copied().filter(|d| d.is_finite()).collect();
+        let range = if finite.is_empty() {
+            [0.0, 0.0]
+        } else {
+            finite.sort_by(|a, b| a.total_cmp(b));
+            let q = |f: f64| finite[((finite.len() - 1) as f64 * f).round() as usize] as f64;
+            [q(0.02), q(0.98)]
+        };
+        let mut bytes = Vec::with_capacity((pos.len() + dist.len()) * 4);
+        for v in pos.iter().chain(dist.iter()) {
+            bytes.extend_from_slice(&v.to_le_bytes());
+        }
+        write_atomic(&wd.out.join("terrain.bin"), &bytes)?;
+        let view = ViewJson {
+            version: 1,
+            crs: crs.describe(),
+            units: "m",
+            origin,
+            points: dist.len(),
+            distance_range: range,
+            terrain: "terrain.bin",
+            meshes: meshes
+                .iter()
+                .map(|(id, m)| (id.to_string(), m.clone()))
+                .collect(),
+        };
+        let text =
+            serde_json::to_string_pretty(&view).map_err(|e| Error::Internal(e.to_string()))?;
+        write_atomic(&wd.out.join("view.json"), text.as_bytes())
+    }
 }
