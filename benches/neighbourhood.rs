@@ -1,5 +1,6 @@
-//! Criterion benches of the inner loops: neighbourhood queries on a rough 1M-point surface and
-//! M3C2 per core point (chained cylinder query against the circumscribed-sphere query).
+//! Criterion benches of the inner loops on a rough 1M-point surface: neighbourhood queries (the
+//! kd-tree of the later stages, the column grid of M3C2) and M3C2 per core point (the column
+//! grid's cylinder query against the circumscribed-sphere query).
 //!
 //! `cargo bench --bench neighbourhood`
 
@@ -8,7 +9,7 @@ use std::hint::black_box;
 use criterion::{criterion_group, criterion_main, Criterion};
 use talus::io::Point3;
 use talus::m3c2::{self, cylinder, M3c2Params, Orientation};
-use talus::spatial::Index;
+use talus::spatial::{Columns, Index};
 
 struct Rng(u64);
 impl Rng {
@@ -39,10 +40,13 @@ fn surface(n: usize, seed: u64) -> Vec<Point3> {
 fn benches(c: &mut Criterion) {
     let before = surface(1_000_000, 1);
     let after = surface(1_000_000, 2);
-    let b = Index::new(&before, [50.0, 50.0, 0.0]);
-    let a = Index::new(&after, [50.0, 50.0, 0.0]);
+    let tree = Index::new(&before, [50.0, 50.0, 0.0]);
     // 1000 core points in Morton-like (row) order, as the pipeline queries them.
-    let mut cores: Vec<Point3> = before.iter().step_by(1000).map(|p| b.to_local(p)).collect();
+    let mut cores: Vec<Point3> = before
+        .iter()
+        .step_by(1000)
+        .map(|p| tree.to_local(p))
+        .collect();
     cores.sort_by(|p, q| (p[1] as i64, p[0] as i64).cmp(&(q[1] as i64, q[0] as i64)));
     let params = M3c2Params {
         normal_radius: 1.0,
@@ -52,14 +56,26 @@ fn benches(c: &mut Criterion) {
         min_points: 1,
         orientation: Orientation::Up,
     };
+    let cell = m3c2::column_width(&params);
+    let b = Columns::new(&before, [50.0, 50.0, 0.0], cell);
+    let a = Columns::new(&after, [50.0, 50.0, 0.0], cell);
     let normals = m3c2::normals(&b, &cores, &params);
 
     let mut g = c.benchmark_group("neighbourhood");
-    g.bench_function("sphere r=1.0, 1000 queries", |bench| {
+    g.bench_function("kd-tree sphere r=1.0, 1000 queries", |bench| {
         bench.iter(|| {
             let mut n = 0usize;
             for q in &cores {
-                b.for_each_within(q, 1.0, |_, _| n += 1);
+                tree.for_each_within(q, 1.0, |_, _| n += 1);
+            }
+            black_box(n)
+        })
+    });
+    g.bench_function("columns sphere r=1.0, 1000 queries", |bench| {
+        bench.iter(|| {
+            let mut n = 0usize;
+            for q in &cores {
+                b.for_each_within(q, 1.0, |_| n += 1);
             }
             black_box(n)
         })
@@ -67,7 +83,7 @@ fn benches(c: &mut Criterion) {
     g.bench_function("knn k=30, 1000 queries", |bench| {
         bench.iter(|| {
             for q in &cores {
-                black_box(b.nearest(q, 30));
+                black_box(tree.nearest(q, 30));
             }
         })
     });
@@ -82,7 +98,7 @@ fn benches(c: &mut Criterion) {
         })
     });
     g.bench_function(
-        "cylinder chained r=0.5 h=3, 1000 cores x 2 epochs",
+        "cylinder columns r=0.5 h=3, 1000 cores x 2 epochs",
         |bench| {
             bench.iter(|| {
                 for (q, n) in cores.iter().zip(&normals) {

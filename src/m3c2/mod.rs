@@ -11,7 +11,7 @@ pub mod orientation;
 use rayon::prelude::*;
 
 use crate::io::Point3;
-use crate::spatial::Index;
+use crate::spatial::Columns;
 pub use orientation::Orientation;
 
 /// The M3C2 parameters (lengths in the input's units).
@@ -64,6 +64,15 @@ impl CoreResult {
     }
 }
 
+/// The column width of the M3C2 indexes: the cylinder radius, or half the normal radius if that
+/// is smaller. Narrower columns fit a query's disc more tightly (fewer points tested for
+/// nothing) but cost more columns per query, each with its own bounds and search; on the
+/// benchmark surface (`examples/kernel_cost.rs`) this width was the fastest of 0.25, 0.35, 0.5 and
+/// 0.7 m for a 0.5 m cylinder and a 1 m normal radius.
+pub fn column_width(params: &M3c2Params) -> f64 {
+    params.cyl_radius.min(0.5 * params.normal_radius)
+}
+
 /// A processing order of `cores` along a Z-order curve (cells of size `cell`): consecutive
 /// queries then touch the same tree nodes and cache lines, several times faster than a random
 /// order (a `--core-points` file may come in any order). Results are scattered back, so the
@@ -106,7 +115,7 @@ fn in_spatial_order<T: Send + Copy + Default, S: Send>(
 }
 
 /// Normals at `cores` (local frame of `before`), oriented as `params.orientation` says.
-pub fn normals(before: &Index, cores: &[Point3], params: &M3c2Params) -> Vec<Point3> {
+pub fn normals(before: &Columns, cores: &[Point3], params: &M3c2Params) -> Vec<Point3> {
     let mut normals: Vec<Point3> = in_spatial_order(
         cores,
         params.normal_radius,
@@ -131,8 +140,8 @@ pub fn normals(before: &Index, cores: &[Point3], params: &M3c2Params) -> Vec<Poi
 /// frame of `cores`. Work is split over rayon's pool; the result does not depend on the thread
 /// count (each core point is computed alone, and its cylinder's sums in a fixed order).
 pub fn distances(
-    before: &Index,
-    after: &Index,
+    before: &Columns,
+    after: &Columns,
     cores: &[Point3],
     normals: &[Point3],
     params: &M3c2Params,

@@ -10,7 +10,7 @@ use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 
 use super::moments::Moments3;
 use crate::io::Point3;
-use crate::spatial::Index;
+use crate::spatial::Columns;
 
 /// Fewer neighbours than this leave the normal undefined (a plane needs three points).
 pub const MIN_NORMAL_POINTS: usize = 3;
@@ -18,13 +18,11 @@ pub const MIN_NORMAL_POINTS: usize = 3;
 /// Unoriented unit normal at `q` (local frame of `index`) from the points within `radius`, plus
 /// the planarity measure λ₀/(λ₀+λ₁+λ₂) (0 = a perfect plane). None when fewer than
 /// [`MIN_NORMAL_POINTS`] neighbours exist or the neighbourhood is degenerate.
-pub fn normal_at(index: &Index, q: &Point3, radius: f64) -> Option<(Point3, f64)> {
+pub fn normal_at(index: &Columns, q: &Point3, radius: f64) -> Option<(Point3, f64)> {
     // One pass: exact integer moments (see `moments`), so the result does not depend on the
-    // order in which the tree visits the neighbourhood, and no second query is needed.
-    let mut m = Moments3::default();
-    index.for_each_point_within(q, radius, |p| {
-        m.add([p[0] - q[0], p[1] - q[1], p[2] - q[2]]);
-    });
+    // order in which the index visits the neighbourhood, and no second query is needed.
+    let mut m = Moments3::new(radius);
+    index.visit_sphere(q, radius, |v, inside| m.add(v, inside));
     if m.count() < MIN_NORMAL_POINTS {
         return None;
     }
@@ -69,7 +67,7 @@ mod tests {
                 pts.push([x, y, 0.3 * x - 0.2 * y]);
             }
         }
-        let idx = Index::new(&pts, [0.0; 3]);
+        let idx = Columns::new(&pts, [0.0; 3], 0.25);
         let (n, planarity) = normal_at(&idx, &[0.0, 0.0, 0.0], 0.5).unwrap();
         let e = [-0.3, 0.2, 1.0];
         let en = (0.09f64 + 0.04 + 1.0).sqrt();
@@ -81,7 +79,7 @@ mod tests {
     #[test]
     fn too_few_points_give_none() {
         let pts = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]];
-        let idx = Index::new(&pts, [0.0; 3]);
+        let idx = Columns::new(&pts, [0.0; 3], 0.25);
         assert!(normal_at(&idx, &[0.0, 0.0, 0.0], 5.0).is_none());
     }
 }

@@ -22,7 +22,7 @@ use std::collections::BinaryHeap;
 use std::str::FromStr;
 
 use crate::io::Point3;
-use crate::spatial::Index;
+use crate::spatial::{Columns, Index};
 
 /// How normals are oriented (`--orientation`).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -99,7 +99,7 @@ fn flip(n: &mut Point3) {
 pub fn orient(
     cores: &[Point3],
     normals: &mut [Point3],
-    before: &Index,
+    before: &Columns,
     scale: f64,
     how: Orientation,
 ) {
@@ -120,7 +120,7 @@ pub fn orient(
                 }
             }
         }
-        Orientation::Auto => orient_auto(cores, normals, before.points(), scale),
+        Orientation::Auto => orient_auto(cores, normals, before, scale),
     }
 }
 
@@ -197,7 +197,7 @@ impl TopSurface {
     }
 }
 
-fn orient_auto(cores: &[Point3], normals: &mut [Point3], before: &[Point3], scale: f64) {
+fn orient_auto(cores: &[Point3], normals: &mut [Point3], before: &Columns, scale: f64) {
     let n = cores.len();
     let mut done = vec![false; n];
     let valid = |nv: &Point3| nv[0].is_finite();
@@ -217,7 +217,7 @@ fn orient_auto(cores: &[Point3], normals: &mut [Point3], before: &[Point3], scal
     if !any_steep {
         return;
     }
-    let dsm = TopSurface::new(before, scale / 2.0);
+    let dsm = TopSurface::new(before.points(), scale / 2.0);
     for i in 0..n {
         if done[i] {
             continue;
@@ -361,7 +361,7 @@ mod tests {
                 c1.push([x, 0.0, t]);
             }
         }
-        let before = Index::new(&c1, [0.0; 3]);
+        let before = Columns::new(&c1, [0.0; 3], 0.5);
         orient(&cores, &mut normals, &before, 1.0, Orientation::Auto);
         for (p, n) in cores.iter().zip(&normals) {
             if p[1] == 0.0 && p[2] > 0.0 && p[2] < 10.0 {

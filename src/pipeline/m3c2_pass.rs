@@ -17,7 +17,7 @@ use crate::params::Params;
 use crate::pipeline::progress::Stage;
 use crate::pipeline::tiles::{self, tiling_error, Epoch, Layout, TilePoints, Tiled};
 use crate::pipeline::workdir::WorkDir;
-use crate::spatial::Index;
+use crate::spatial::Columns;
 
 /// Rows per result chunk file: the final merge holds one chunk per tile.
 pub const CHUNK_ROWS: usize = 8192;
@@ -242,11 +242,22 @@ fn sweep(
                 })
             };
             for id in todo_ids {
-                let w = read(Epoch::Before, &before_dir, id).and_then(|before| {
+                // Both epochs at once: decompressing a tile is one thread's work.
+                let (before, after) = std::thread::scope(|s| {
+                    let after = s.spawn(|| read(Epoch::After, &after_dir, id));
+                    let before = read(Epoch::Before, &before_dir, id);
+                    let after = after.join().unwrap_or_else(|_| {
+                        Err(ReadFailure::Other(Error::Internal(
+                            "a tile reader panicked".into(),
+                        )))
+                    });
+                    (before, after)
+                });
+                let w = before.and_then(|before| {
                     Ok(Work {
                         id,
                         before,
-                        after: read(Epoch::After, &after_dir, id)?,
+                        after: after?,
                     })
                 });
                 let failed = w.is_err();
@@ -313,8 +324,12 @@ fn compute_tile(
     // orientation, are then the same whatever the tiling, and a tiled run gives the bytes of a
     // whole-cloud run.
     let origin = layout.anchor;
-    let before = Index::new(&w.before.points, origin);
-    let after = Index::new(&w.after.points, origin);
+    let m = params.m3c2();
+    let cell = m3c2::column_width(&m);
+    let (before, after) = rayon::join(
+        || Columns::new(&w.before.points, origin, cell),
+        || Columns::new(&w.after.points, origin, cell),
+    );
     let keyed: Vec<(u64, Point3)> = match user_cores {
         Some(c) => c.to_vec(),
         None => core_points::thin(&w.before.points, &layout.anchor, layout.core_spacing, |i| {
@@ -328,7 +343,6 @@ fn compute_tile(
         return Vec::new();
     }
     let local: Vec<Point3> = keyed.iter().map(|(_, p)| before.to_local(p)).collect();
-    let m = params.m3c2();
     let normals = m3c2::normals(&before, &local, &m);
     let results = m3c2::distances(&before, &after, &local, &normals, &m);
     let mut out: Vec<KeyedResult> = keyed

@@ -6,6 +6,7 @@
 //! with the checksum of its tile files: a damaged or missing tile makes the split be redone.
 
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use talus_tiling::{
     BoundsXY, Column, ColumnData, TileColumns, TileGrid, TileId, TileSplitter, OWNED_COLUMN,
@@ -18,8 +19,9 @@ use crate::pipeline::progress::Stage;
 use crate::pipeline::workdir::WorkDir;
 use crate::pipeline::{file_identity, CompareOptions};
 
-/// Resident bytes per input point while its tile is processed: coordinates (24), the kd-tree's
-/// copy and index (≈ 32), the owned flag and slack for the per-core-point results.
+/// Resident bytes per input point while its tile is processed: coordinates (24), the column
+/// index's copy (24), the owned flag and slack for the per-core-point results and the tile
+/// being read meanwhile.
 pub const BYTES_PER_POINT: u64 = 72;
 
 /// Map an error of the tiling crate onto talus's.
@@ -152,7 +154,9 @@ pub fn tile_halo(params: &Params) -> f64 {
     nr.max(cyl).max(orient) + 2.0 * params.core_spacing.value
 }
 
-/// Split every epoch into tiles, or reuse a finished split whose files are intact.
+/// Split every epoch into tiles, or reuse a finished split whose files are intact. Epochs to
+/// split are cut at the same time, one thread each with half the budget: a split is mostly one
+/// thread's work (decoding, bucketing, compressing), so on two cores this halves pass 1.
 pub fn tile_epochs(
     wd: &mut WorkDir,
     layout: &Layout,
@@ -162,25 +166,76 @@ pub fn tile_epochs(
 ) -> Result<Tiled> {
     let mut all = talus_tiling::Fnv64::new();
     let budget = (params.memory_bytes.value / 4).max(16 << 20);
-    let mut reused = true;
-    let mut dirs = Vec::new();
-    for (epoch, src) in [(Epoch::Before, &opts.before), (Epoch::After, &opts.after)] {
+    let epochs = [(Epoch::Before, &opts.before), (Epoch::After, &opts.after)];
+    let mut todo = Vec::new();
+    for (epoch, src) in epochs {
         let hash = split_hash(layout, src)?;
         all.write_str(&hash);
-        let (dir, was_reused) = ensure_split(wd, layout, epoch, src, &hash, budget, stage)?;
-        reused &= was_reused;
-        dirs.push(dir);
+        if !reusable(wd, layout, epoch, &hash) {
+            todo.push((epoch, src.as_path(), hash));
+        }
+    }
+    let reused = todo.is_empty();
+    // The old entries go first, then the files: a stale or partial split starts from nothing.
+    let mut dirs = Vec::new();
+    for (epoch, _, _) in &todo {
+        wd.forget(&unit_name(*epoch))?;
+        dirs.push(fresh_dir(wd, *epoch)?);
+    }
+    let share = (budget / todo.len().max(1) as u64).max(16 << 20);
+    // A failed split stops the other one: the run fails anyway.
+    let failed = AtomicBool::new(false);
+    let results: Vec<Result<Option<String>>> = std::thread::scope(|s| {
+        let handles: Vec<_> = todo
+            .iter()
+            .zip(&dirs)
+            .map(|((_, src, _), dir)| {
+                let failed = &failed;
+                s.spawn(move || {
+                    let r = cut(dir, layout, src, share, stage, failed);
+                    if r.is_err() {
+                        failed.store(true, Ordering::Relaxed);
+                    }
+                    r
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| {
+                h.join()
+                    .unwrap_or_else(|_| Err(Error::Internal("a tiling thread panicked".into())))
+            })
+            .collect()
+    });
+    // Record what finished even when the other failed (a rerun then resumes from it), and
+    // report the first epoch's error first.
+    let mut first_error = None;
+    for (((epoch, _, hash), dir), result) in todo.iter().zip(&dirs).zip(results) {
+        match result {
+            Ok(Some(checksum)) => {
+                wd.done(&unit_name(*epoch), &split_file(*epoch), hash, &checksum)?
+            }
+            Ok(None) => {
+                let _ = std::fs::remove_dir_all(dir);
+            }
+            Err(e) => {
+                let _ = std::fs::remove_dir_all(dir);
+                first_error.get_or_insert(e);
+            }
+        }
+    }
+    if let Some(e) = first_error {
+        return Err(e);
     }
     // User core points are not split: they stay in memory with their input order (see
     // `m3c2_pass::UserCores`); their file's identity enters the hash here.
     if let Some(p) = &opts.core_points {
         all.write_str(&file_identity(p)?);
     }
-    let after = dirs.pop().unwrap_or_default();
-    let before = dirs.pop().unwrap_or_default();
     Ok(Tiled {
-        before,
-        after,
+        before: wd.work.join(split_file(Epoch::Before)),
+        after: wd.work.join(split_file(Epoch::After)),
         hash: all.hex(),
         reused,
         before_src: opts.before.clone(),
@@ -199,31 +254,31 @@ fn unit_name(epoch: Epoch) -> String {
     format!("tiles:{}", epoch.name())
 }
 
-/// Reuse the split of `epoch` when the manifest records it from `hash` and every tile file still
-/// has its recorded checksum; otherwise (re)do it. Returns the directory and whether it was reused.
-fn ensure_split(
-    wd: &mut WorkDir,
-    layout: &Layout,
-    epoch: Epoch,
-    src: &Path,
-    hash: &str,
-    budget: u64,
-    stage: &Stage,
-) -> Result<(PathBuf, bool)> {
-    let unit = unit_name(epoch);
-    let dir = wd.work.join("tiles").join(epoch.name());
-    if let Some(e) = wd.entry(&unit) {
-        if e.inputs_hash == hash
-            && split_checksum(&dir, &layout.grid).ok() == Some(e.checksum.clone())
-        {
-            return Ok((dir, true));
-        }
-    }
-    split(wd, layout, epoch, src, hash, budget, stage)?;
-    Ok((dir, false))
+/// True when the manifest records the split of `epoch` as made from `hash` and every tile file
+/// still has its recorded checksum.
+fn reusable(wd: &WorkDir, layout: &Layout, epoch: Epoch, hash: &str) -> bool {
+    let dir = wd.work.join(split_file(epoch));
+    wd.entry(&unit_name(epoch)).is_some_and(|e| {
+        e.inputs_hash == hash && split_checksum(&dir, &layout.grid).ok() == Some(e.checksum.clone())
+    })
 }
 
-/// Cut `src` into the tiles of `layout` under `tiles/<epoch>` and record the unit.
+/// The directory of an epoch's split, relative to the work directory.
+fn split_file(epoch: Epoch) -> String {
+    format!("tiles/{}", epoch.name())
+}
+
+/// The split directory of `epoch`, emptied.
+fn fresh_dir(wd: &WorkDir, epoch: Epoch) -> Result<PathBuf> {
+    let dir = wd.work.join(split_file(epoch));
+    if dir.exists() {
+        std::fs::remove_dir_all(&dir).map_err(|e| Error::output(&dir, e))?;
+    }
+    wd.sub(&split_file(epoch))
+}
+
+/// Cut `src` into the tiles of `layout` under `tiles/<epoch>` and record the unit (used again
+/// by pass 2 when a tile file turns out damaged).
 pub fn split(
     wd: &mut WorkDir,
     layout: &Layout,
@@ -234,20 +289,34 @@ pub fn split(
     stage: &Stage,
 ) -> Result<PathBuf> {
     let unit = unit_name(epoch);
-    // The old entry goes first, then the files: a stale or partial split starts from nothing.
     wd.forget(&unit)?;
-    let dir = wd.work.join("tiles").join(epoch.name());
-    if dir.exists() {
-        std::fs::remove_dir_all(&dir).map_err(|e| Error::output(&dir, e))?;
-    }
-    let dir = wd.sub(&format!("tiles/{}", epoch.name()))?;
+    let dir = fresh_dir(wd, epoch)?;
+    let checksum = cut(&dir, layout, src, budget, stage, &AtomicBool::new(false))?
+        .ok_or_else(|| Error::Internal("a split stopped without a reason".into()))?;
+    wd.done(&unit, &split_file(epoch), hash, &checksum)?;
+    Ok(dir)
+}
+
+/// Write the tile files of `src` into the empty directory `dir`; returns the split's checksum,
+/// or None when `stop` was raised (by another split's failure) before the end.
+fn cut(
+    dir: &Path,
+    layout: &Layout,
+    src: &Path,
+    budget: u64,
+    stage: &Stage,
+    stop: &AtomicBool,
+) -> Result<Option<String>> {
     let mut splitter =
-        TileSplitter::new(&dir, layout.grid, layout.halo, budget).map_err(tiling_error)?;
+        TileSplitter::new(dir, layout.grid, layout.halo, budget).map_err(tiling_error)?;
     let mut reader = io::open(src)?;
     let mut buf = Vec::new();
     while reader.fill(&mut buf, 1 << 16)? > 0 {
         splitter.push(&buf).map_err(tiling_error)?;
         stage.inc(buf.len() as u64);
+        if stop.load(Ordering::Relaxed) {
+            return Ok(None);
+        }
     }
     let written = splitter.finish().map_err(tiling_error)?;
     // The splitter writes no file for a tile without points; write an empty one, so that every
@@ -265,13 +334,13 @@ pub fn split(
                 }],
                 ..TileColumns::default()
             };
-            talus_tiling::write_tile(&talus_tiling::tile_path(&dir, id), &empty)
+            talus_tiling::write_tile(&talus_tiling::tile_path(dir, id), &empty)
                 .map_err(tiling_error)?;
         }
     }
-    let checksum = split_checksum(&dir, &layout.grid).map_err(tiling_error)?;
-    wd.done(&unit, &format!("tiles/{}", epoch.name()), hash, &checksum)?;
-    Ok(dir)
+    split_checksum(dir, &layout.grid)
+        .map(Some)
+        .map_err(tiling_error)
 }
 
 /// Checksum of a whole split: FNV-1a over the CRC-32 of every tile file, in grid order. Reading

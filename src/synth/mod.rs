@@ -18,7 +18,7 @@
 //! (false-positive check) and a large pair for the out-of-core path.
 
 mod output;
-mod rng;
+pub(crate) mod rng;
 mod sampling;
 pub mod scenes;
 mod surface;

@@ -1,5 +1,4 @@
-//! Neighbourhood queries on one epoch's points: a kd-tree (kiddo 6) over coordinates relative
-//! to a local origin, so that UTM-sized values do not cost precision in the distance arithmetic.
+//! The kd-tree index: kiddo 6 over coordinates relative to a local origin.
 
 use std::num::NonZeroUsize;
 

@@ -1,0 +1,454 @@
+//! A column grid: the points of one epoch bucketed into square vertical columns of the xy plane,
+//! each column's points stored contiguously and sorted by height (a cell list, Allen & Tildesley,
+//! "Computer Simulation of Liquids", §5.3.2, with one axis kept sorted instead of binned).
+//!
+//! M3C2 asks two questions at every core point: which points lie within a sphere (the normal),
+//! and which lie within a cylinder along that normal (the distance). A kd-tree answers the
+//! second only through a sphere around the cylinder, and spends most of its time descending the
+//! tree. Here a query walks the few columns its shape can reach; in each it bounds the heights
+//! the shape can have over that column, finds the first candidate by binary search and scans
+//! contiguous memory until the bound. On terrain a column holds one stretch of surface, so the
+//! scan is short; on a cliff the height bound skips the rest of the face. The final test is exact,
+//! so the grid only decides which points are tested, never which are accepted.
+
+use crate::io::Point3;
+
+/// At most this many columns per point: a sparse cloud over a wide extent gets wider columns
+/// rather than a mostly empty table.
+const MAX_COLUMNS_PER_POINT: usize = 2;
+
+/// Points in a local frame, bucketed into columns of width `cell`.
+pub struct Columns {
+    origin: Point3,
+    cell: f64,
+    /// Local xy of the lower corner of column (0, 0).
+    corner: [f64; 2],
+    /// Columns along x and y.
+    dims: [usize; 2],
+    /// Column `j · dims[0] + i` holds the points `starts[k]..starts[k + 1]`.
+    starts: Vec<usize>,
+    /// Local coordinates, by column, ascending height within each column.
+    points: Vec<Point3>,
+}
+
+impl Columns {
+    /// Bucket `points` (global coordinates) in the frame centred on `origin`, in columns about
+    /// `cell` wide (wider when the extent is large for the number of points). Memory: the index
+    /// (24 bytes a point) and nothing else.
+    pub fn new(points: &[Point3], origin: Point3, cell: f64) -> Self {
+        assert!(cell > 0.0 && cell.is_finite(), "column width {cell}");
+        let local = |p: &Point3| [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]];
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for p in points.iter().map(local) {
+            for a in 0..2 {
+                lo[a] = lo[a].min(p[a]);
+                hi[a] = hi[a].max(p[a]);
+            }
+        }
+        if points.is_empty() {
+            lo = [0.0; 2];
+            hi = [0.0; 2];
+        }
+        let span = [hi[0] - lo[0], hi[1] - lo[1]];
+        let budget = (MAX_COLUMNS_PER_POINT * points.len()).max(1) as f64;
+        let mut cell = cell;
+        let columns = |c: f64| (span[0] / c + 1.0) * (span[1] / c + 1.0);
+        if columns(cell) > budget {
+            // Solve (w/c + 1)(h/c + 1) ≈ budget for c, then nudge up until it fits.
+            cell = ((span[0] * span[1]) / budget).sqrt().max(cell);
+            while columns(cell) > budget {
+                cell *= 1.25;
+            }
+        }
+        let dims = [
+            (span[0] / cell).floor() as usize + 1,
+            (span[1] / cell).floor() as usize + 1,
+        ];
+        let mut index = Columns {
+            origin,
+            cell,
+            corner: lo,
+            dims,
+            starts: vec![0; dims[0] * dims[1] + 1],
+            points: Vec::new(),
+        };
+        // Counting sort by column (the column is computed twice rather than stored), then each
+        // column by height.
+        for p in points.iter().map(local) {
+            let c = index.column_of(p[0], p[1]);
+            index.starts[c + 1] += 1;
+        }
+        for k in 1..index.starts.len() {
+            index.starts[k] += index.starts[k - 1];
+        }
+        let mut next = index.starts.clone();
+        let mut sorted = vec![[0.0; 3]; points.len()];
+        for p in points.iter().map(local) {
+            let c = index.column_of(p[0], p[1]);
+            sorted[next[c]] = p;
+            next[c] += 1;
+        }
+        drop(next);
+        for w in index.starts.windows(2) {
+            sorted[w[0]..w[1]].sort_unstable_by(|a, b| a[2].total_cmp(&b[2]));
+        }
+        index.points = sorted;
+        index
+    }
+
+    /// Number of indexed points.
+    pub fn len(&self) -> usize {
+        self.points.len()
+    }
+
+    /// True when nothing is indexed.
+    pub fn is_empty(&self) -> bool {
+        self.points.is_empty()
+    }
+
+    /// The local origin.
+    pub fn origin(&self) -> Point3 {
+        self.origin
+    }
+
+    /// The column width actually used.
+    pub fn cell(&self) -> f64 {
+        self.cell
+    }
+
+    /// A global point in this index's local frame.
+    pub fn to_local(&self, p: &Point3) -> Point3 {
+        [
+            p[0] - self.origin[0],
+            p[1] - self.origin[1],
+            p[2] - self.origin[2],
+        ]
+    }
+
+    /// Every indexed point (local frame), in column order.
+    pub fn points(&self) -> &[Point3] {
+        &self.points
+    }
+
+    /// The column index along one axis of a local coordinate, clamped to the grid. Monotone in
+    /// `v`, so a range of coordinates maps onto a range of columns whatever the rounding.
+    #[inline]
+    fn axis_cell(&self, v: f64, a: usize) -> usize {
+        let f = ((v - self.corner[a]) / self.cell).floor();
+        if f <= 0.0 {
+            0
+        } else {
+            (f as usize).min(self.dims[a] - 1)
+        }
+    }
+
+    #[inline]
+    fn column_of(&self, x: f64, y: f64) -> usize {
+        self.axis_cell(y, 1) * self.dims[0] + self.axis_cell(x, 0)
+    }
+
+    /// The columns' extent along one axis, widened by `pad` so that every point bucketed into
+    /// it lies inside whatever the rounding of the bucketing.
+    #[inline]
+    fn axis_bounds(&self, i: usize, a: usize, pad: f64) -> (f64, f64) {
+        let lo = self.corner[a] + i as f64 * self.cell;
+        (lo - pad, lo + self.cell + pad)
+    }
+
+    /// The range of the points of column `k` whose height is in `[zlo, zhi]`.
+    #[inline]
+    fn heights(&self, k: usize, zlo: f64, zhi: f64) -> (usize, usize) {
+        let (s, e) = (self.starts[k], self.starts[k + 1]);
+        if s == e {
+            return (s, s);
+        }
+        let col = &self.points[s..e];
+        // On terrain a column usually lies wholly inside the bounds: no search then.
+        let a = if col[0][2] >= zlo {
+            s
+        } else {
+            s + col.partition_point(|p| p[2] < zlo)
+        };
+        let b = if col[col.len() - 1][2] <= zhi {
+            e
+        } else {
+            s + col.partition_point(|p| p[2] <= zhi)
+        };
+        (a, b.max(a))
+    }
+
+    /// A rounding margin for bounds computed around `q`: far below any length that matters and
+    /// far above the rounding of the arithmetic.
+    fn pad(&self, q: &Point3, extent: f64) -> f64 {
+        1e-9 * (1.0 + extent + self.cell + q[0].abs().max(q[1].abs()).max(q[2].abs()))
+    }
+
+    /// Call `f(v)` with `v = p − q` for every point `p` with |p − q|² ≤ `radius`² (`q` in the
+    /// local frame), in no particular order.
+    #[inline]
+    pub fn for_each_within(&self, q: &Point3, radius: f64, mut f: impl FnMut(Point3)) {
+        self.visit_sphere(q, radius, |v, inside| {
+            if inside {
+                f(v)
+            }
+        })
+    }
+
+    /// Call `f(t)` with the position `t = (p − q)·n` along the axis for every point `p` of the
+    /// closed cylinder of unit axis `n` through `q` (local frame), radius `r`, extending from
+    /// `−h` to `+h` along the axis: |t| ≤ h and |p − q|² − t² ≤ r².
+    #[inline]
+    pub fn for_each_in_cylinder(
+        &self,
+        q: &Point3,
+        n: &Point3,
+        r: f64,
+        h: f64,
+        mut f: impl FnMut(f64),
+    ) {
+        self.visit_cylinder(q, n, r, h, |t, inside| {
+            if inside {
+                f(t)
+            }
+        })
+    }
+
+    /// [`Columns::for_each_within`] as a scan: `f(v, inside)` for every candidate the columns
+    /// give, with the exact test's verdict, so that a caller can accumulate without a branch
+    /// (the verdicts follow no pattern a branch predictor could learn).
+    #[inline]
+    pub fn visit_sphere(&self, q: &Point3, radius: f64, mut f: impl FnMut(Point3, bool)) {
+        if self.is_empty() || radius.is_nan() || radius < 0.0 {
+            return;
+        }
+        let r2 = radius * radius;
+        let pad = self.pad(q, radius);
+        let (i0, i1) = (
+            self.axis_cell(q[0] - radius - pad, 0),
+            self.axis_cell(q[0] + radius + pad, 0),
+        );
+        let (j0, j1) = (
+            self.axis_cell(q[1] - radius - pad, 1),
+            self.axis_cell(q[1] + radius + pad, 1),
+        );
+        for j in j0..=j1 {
+            let (ylo, yhi) = self.axis_bounds(j, 1, pad);
+            let dy = (ylo - q[1]).max(q[1] - yhi).max(0.0);
+            for i in i0..=i1 {
+                let (xlo, xhi) = self.axis_bounds(i, 0, pad);
+                let dx = (xlo - q[0]).max(q[0] - xhi).max(0.0);
+                let d2 = dx * dx + dy * dy;
+                if d2 > r2 {
+                    continue;
+                }
+                let dz = (r2 - d2).sqrt() + pad;
+                let (a, b) = self.heights(j * self.dims[0] + i, q[2] - dz, q[2] + dz);
+                for p in &self.points[a..b] {
+                    let v = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
+                    f(v, v[0] * v[0] + v[1] * v[1] + v[2] * v[2] <= r2);
+                }
+            }
+        }
+    }
+
+    /// [`Columns::for_each_in_cylinder`] as a scan: `f(t, inside)` for every candidate, with the
+    /// exact test's verdict (see [`Columns::visit_sphere`]).
+    #[inline]
+    pub fn visit_cylinder(
+        &self,
+        q: &Point3,
+        n: &Point3,
+        r: f64,
+        h: f64,
+        mut f: impl FnMut(f64, bool),
+    ) {
+        if self.is_empty() || !(r >= 0.0 && h >= 0.0) || !n.iter().all(|c| c.is_finite()) {
+            return;
+        }
+        let r2 = r * r;
+        let pad = self.pad(q, r + h);
+        // A point p = q + t·n + w with w ⊥ n, |w| ≤ r: w's component along axis a is at most
+        // r·√(1 − n_a²) in magnitude.
+        let reach = |a: usize| r * (1.0 - n[a] * n[a]).max(0.0).sqrt() + pad;
+        let e = [reach(0), reach(1), reach(2)];
+        let span = |a: usize| {
+            let (u, v) = (q[a] - h * n[a], q[a] + h * n[a]);
+            (u.min(v) - e[a], u.max(v) + e[a])
+        };
+        let ((x0, x1), (y0, y1)) = (span(0), span(1));
+        let (i0, i1) = (self.axis_cell(x0, 0), self.axis_cell(x1, 0));
+        let (j0, j1) = (self.axis_cell(y0, 1), self.axis_cell(y1, 1));
+        // The axis positions t at which a point of the cylinder can have its coordinate a in
+        // [lo, hi]: the axis must pass within e[a] of that slab.
+        let slab = |a: usize, lo: f64, hi: f64, t: (f64, f64)| -> (f64, f64) {
+            let (lo, hi) = (lo - e[a], hi + e[a]);
+            if n[a].abs() < 1e-12 {
+                if q[a] >= lo && q[a] <= hi {
+                    t
+                } else {
+                    (1.0, -1.0)
+                }
+            } else {
+                let (u, v) = ((lo - q[a]) / n[a], (hi - q[a]) / n[a]);
+                (t.0.max(u.min(v)), t.1.min(u.max(v)))
+            }
+        };
+        let along = (-h - pad, h + pad);
+        let horizontal = (n[0] * n[0] + n[1] * n[1]).sqrt();
+        for j in j0..=j1 {
+            let (ylo, yhi) = self.axis_bounds(j, 1, pad);
+            let ty = slab(1, ylo, yhi, along);
+            if ty.0 > ty.1 {
+                continue;
+            }
+            for i in i0..=i1 {
+                let k = j * self.dims[0] + i;
+                let (s, e_) = (self.starts[k], self.starts[k + 1]);
+                if s == e_ {
+                    continue;
+                }
+                let (xlo, xhi) = self.axis_bounds(i, 0, pad);
+                // The axis positions that can reach this column's points: within its x slab
+                // and within the heights its points actually have.
+                let tx = slab(0, xlo, xhi, ty);
+                let (t0, t1) = slab(2, self.points[s][2] - pad, self.points[e_ - 1][2] + pad, tx);
+                if t0 > t1 {
+                    continue;
+                }
+                // Over those positions the axis's trace in the plane is a segment of half
+                // length `half` around `mid`; a point of the column within r of the axis is
+                // within r of that trace, so within r + half of `mid`.
+                let tm = 0.5 * (t0 + t1);
+                let half = 0.5 * (t1 - t0) * horizontal;
+                let mid = [q[0] + tm * n[0], q[1] + tm * n[1]];
+                let dx = (xlo - mid[0]).max(mid[0] - xhi).max(0.0);
+                let dy = (ylo - mid[1]).max(mid[1] - yhi).max(0.0);
+                let reach = r + half + pad;
+                if dx * dx + dy * dy > reach * reach {
+                    continue;
+                }
+                let (u, v) = (q[2] + t0 * n[2], q[2] + t1 * n[2]);
+                let (a, b) = self.heights(k, u.min(v) - e[2] - pad, u.max(v) + e[2] + pad);
+                for p in &self.points[a..b] {
+                    let v = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
+                    let t = v[0] * n[0] + v[1] * n[1] + v[2] * n[2];
+                    let radial2 = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]) - t * t;
+                    f(t, (t.abs() <= h) & (radial2 <= r2));
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Pseudo-random points, each `f` of three uniform numbers, deterministic.
+    fn cloud(n: usize, seed: u64, f: impl Fn([f64; 3]) -> Point3) -> Vec<Point3> {
+        let mut rng = crate::synth::rng::Rng::new(seed, 0);
+        (0..n)
+            .map(|_| f([rng.uniform(), rng.uniform(), rng.uniform()]))
+            .collect()
+    }
+
+    fn sorted(mut v: Vec<f64>) -> Vec<f64> {
+        v.sort_by(f64::total_cmp);
+        v
+    }
+
+    /// Both queries return exactly the points a brute-force scan accepts, on a volume cloud, a
+    /// terrain and a vertical face, for axes in every direction and several column widths
+    /// (including queries reaching past the grid's edge).
+    #[test]
+    fn queries_equal_brute_force() {
+        let shapes: Vec<Vec<Point3>> = vec![
+            cloud(6000, 1, |u| {
+                [u[0] * 4.0 - 2.0, u[1] * 4.0 - 2.0, u[2] * 6.0 - 3.0]
+            }),
+            cloud(6000, 2, |u| {
+                let (x, y) = (u[0] * 6.0 - 3.0, u[1] * 6.0 - 3.0);
+                [x, y, 0.4 * (x * 1.3).sin() * y.cos() + 0.01 * u[2]]
+            }),
+            cloud(6000, 3, |u| {
+                [u[0] * 4.0 - 2.0, 0.02 * u[1], u[2] * 6.0 - 3.0]
+            }),
+        ];
+        let axes = [
+            [0.0, 0.0, 1.0],
+            [0.0, 0.0, -1.0],
+            [1.0, 0.0, 0.0],
+            [0.0, -1.0, 0.0],
+            [0.6, 0.0, 0.8],
+            [0.48, -0.6, 0.64],
+            [-0.36, 0.48, -0.8],
+        ];
+        for (s, pts) in shapes.iter().enumerate() {
+            for cell in [0.1, 0.37, 1.0, 10.0] {
+                let idx = Columns::new(pts, [0.5, -0.25, 0.0], cell);
+                assert_eq!(idx.len(), pts.len());
+                for (k, n) in axes.iter().enumerate() {
+                    let q = idx.to_local(&pts[k * 97]);
+                    let q = [q[0] + 0.03, q[1] - 0.02, q[2] + 0.01];
+                    for (r, h) in [(0.3, 2.5), (0.5, 0.2), (0.25, 1.1), (1.5, 9.0)] {
+                        let mut brute = Vec::new();
+                        for p in pts {
+                            let v = idx.to_local(p);
+                            let v = [v[0] - q[0], v[1] - q[1], v[2] - q[2]];
+                            let t = v[0] * n[0] + v[1] * n[1] + v[2] * n[2];
+                            if t.abs() <= h
+                                && v[0] * v[0] + v[1] * v[1] + v[2] * v[2] - t * t <= r * r
+                            {
+                                brute.push(t);
+                            }
+                        }
+                        let mut got = Vec::new();
+                        idx.for_each_in_cylinder(&q, n, r, h, |t| got.push(t));
+                        assert_eq!(
+                            sorted(got),
+                            sorted(brute.clone()),
+                            "shape {s} cell {cell} n {n:?} r {r} h {h}"
+                        );
+                        assert!(s == 2 || r < 1.0 || !brute.is_empty());
+                    }
+                    for radius in [0.05, 0.3, 1.0, 4.0] {
+                        let mut brute = Vec::new();
+                        for p in pts {
+                            let v = idx.to_local(p);
+                            let v = [v[0] - q[0], v[1] - q[1], v[2] - q[2]];
+                            if v[0] * v[0] + v[1] * v[1] + v[2] * v[2] <= radius * radius {
+                                brute.push(v[0] + 3.0 * v[1] + 7.0 * v[2]);
+                            }
+                        }
+                        let mut got = Vec::new();
+                        idx.for_each_within(&q, radius, |v| {
+                            got.push(v[0] + 3.0 * v[1] + 7.0 * v[2])
+                        });
+                        assert_eq!(
+                            sorted(got),
+                            sorted(brute),
+                            "shape {s} cell {cell} radius {radius}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    /// A sparse cloud over a wide extent gets wider columns, not a huge table; an empty one
+    /// answers every query with nothing.
+    #[test]
+    fn wide_sparse_and_empty() {
+        let pts = vec![[0.0, 0.0, 0.0], [1e5, 1e5, 1.0], [5e4, 2e4, 2.0]];
+        let idx = Columns::new(&pts, [0.0; 3], 0.1);
+        assert!(idx.dims[0] * idx.dims[1] <= 6, "{:?}", idx.dims);
+        let mut n = 0;
+        idx.for_each_within(&[5e4, 2e4, 2.0], 1.0, |_| n += 1);
+        assert_eq!(n, 1);
+        let empty = Columns::new(&[], [0.0; 3], 0.5);
+        idx.for_each_in_cylinder(&[0.0; 3], &[0.0, 0.0, 1.0], 1.0, 1.0, |_| n += 1);
+        empty.for_each_in_cylinder(&[0.0; 3], &[0.0, 0.0, 1.0], 1.0, 1.0, |_| n += 1);
+        empty.for_each_within(&[0.0; 3], 1.0, |_| n += 1);
+        assert_eq!(n, 2);
+    }
+}

@@ -1,0 +1,13 @@
+//! Neighbourhood queries on one epoch's points, in a local frame (coordinates relative to an
+//! origin, so that UTM-sized values do not cost precision in the distance arithmetic).
+//!
+//! - [`Index`]: a kd-tree (kiddo 6) for k-nearest and radius queries of the later stages
+//!   (spacing, smoothing, DBSCAN, volumes).
+//! - [`Columns`]: a grid of vertical point columns sorted by height, for the two queries M3C2 makes
+//!   at every core point: a sphere (normals) and a cylinder along an arbitrary axis.
+
+mod columns;
+mod kdtree;
+
+pub use columns::Columns;
+pub use kdtree::{median_nn_distance, Index};
