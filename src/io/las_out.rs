@@ -69,8 +69,9 @@ pub struct ExtraDim {
     pub description: &'static str,
 }
 
-/// Points buffered before each hand-over to the `las` writer (LAZ compresses in chunks).
-const BATCH: usize = 65_536;
+/// Points buffered before each hand-over to the `las` writer: four LAZ chunks (of 50 000
+/// points), so that the parallel compressor has a chunk for every core of a small machine.
+const BATCH: usize = 200_000;
 
 /// Coordinate scale: millimetres.
 pub const SCALE: f64 = 0.001;
