@@ -21,21 +21,36 @@ const NAMES: [(&str, &str); 12] = [
     ("event_id", "uint32"),
 ];
 
+/// `talus synth cube` into `dir/scene`.
+fn cube_scene(dir: &std::path::Path) -> std::path::PathBuf {
+    let scene = dir.join("scene");
+    let o = common::run(&["synth", "cube", "--out", scene.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    scene
+}
+
+/// `talus compare` of the scene's epochs into `dir/res`, with `extra` arguments.
+fn compare(scene: &std::path::Path, dir: &std::path::Path, extra: &[&str]) -> std::path::PathBuf {
+    let res = dir.join("res");
+    let (b, a) = (scene.join("before.laz"), scene.join("after.laz"));
+    let mut args = vec![
+        "compare",
+        b.to_str().unwrap(),
+        a.to_str().unwrap(),
+        "--out",
+        res.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    let o = common::run(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    res
+}
+
 #[test]
 fn m3c2_laz_dimensions_and_values() {
     let dir = common::tempdir();
-    let scene = dir.path().join("scene");
-    let res = dir.path().join("res");
-    let o = common::run(&["synth", "cube", "--out", scene.to_str().unwrap()]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let o = common::run(&[
-        "compare",
-        scene.join("before.laz").to_str().unwrap(),
-        scene.join("after.laz").to_str().unwrap(),
-        "--out",
-        res.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let scene = cube_scene(dir.path());
+    let res = compare(&scene, dir.path(), &[]);
     let laz = res.join("m3c2.laz");
     let t = result_table::read(&laz).unwrap();
     assert_eq!(
@@ -117,4 +132,71 @@ fn m3c2_laz_dimensions_and_values() {
             assert!((x - t.xyz[i][k]).abs() < 1e-9, "{axis}[{i}]");
         }
     }
+}
+
+/// Core points from a LAS file at 0.1 mm scale come back in m3c2.laz at their coordinates to the
+/// 0.1 mm, in file order (m3c2.laz takes the inputs' finest coordinate quantum), and the header
+/// says so (checked with laspy too).
+#[test]
+fn user_core_points_keep_their_precision_and_order() {
+    use talus::io::las_out::{CoordinateGrid, ResultWriter};
+    let dir = common::tempdir();
+    let scene = cube_scene(dir.path());
+    let (_, c1) = talus::io::read_all(&scene.join("before.laz")).unwrap();
+    // Every 97th point of C1, moved by fractions of a millimetre, in reverse order.
+    let cores: Vec<[f64; 3]> = c1
+        .iter()
+        .step_by(97)
+        .enumerate()
+        .map(|(i, p)| {
+            let f = (i % 9) as f64 * 1e-4;
+            [p[0] + f, p[1] - f, p[2] + 0.5 * f]
+        })
+        .rev()
+        .collect();
+    let grid = CoordinateGrid {
+        scale: [1e-4; 3],
+        offset: [500_000.0, 5_000_000.0, 0.0],
+    };
+    let path = dir.path().join("cores.las");
+    let mut w = ResultWriter::create_on_grid(&path, &talus::io::Crs::default(), &[], grid).unwrap();
+    for p in &cores {
+        w.write(*p, &[]).unwrap();
+    }
+    w.finish().unwrap();
+    // What the file holds: the points on the 0.1 mm grid.
+    let (_, stored) = talus::io::read_all(&path).unwrap();
+    let res = compare(
+        &scene,
+        dir.path(),
+        &["--core-points", path.to_str().unwrap()],
+    );
+    let t = result_table::read(&res.join("m3c2.laz")).unwrap();
+    assert_eq!(t.xyz.len(), stored.len());
+    for (got, want) in t.xyz.iter().zip(&stored) {
+        for a in 0..3 {
+            assert!(
+                (got[a] - want[a]).abs() < 1e-7,
+                "core point {want:?} came back as {got:?}"
+            );
+        }
+    }
+    let Some(py) = common::laspy::laspy_python() else {
+        return;
+    };
+    let script = "import laspy,sys; h=laspy.open(sys.argv[1]).header; print(*h.scales)";
+    let out = std::process::Command::new(py)
+        .args(["-c", script, res.join("m3c2.laz").to_str().unwrap()])
+        .output()
+        .expect("run laspy");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let scales: Vec<f64> = String::from_utf8_lossy(&out.stdout)
+        .split_whitespace()
+        .map(|s| s.parse().unwrap())
+        .collect();
+    assert_eq!(scales, vec![1e-4; 3]);
 }

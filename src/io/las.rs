@@ -142,6 +142,7 @@ impl LasReader {
                 max: [hb.max.x, hb.max.y, hb.max.z],
             },
             crs: crs_from_header(&header),
+            scale: Some([t.x.scale.abs(), t.y.scale.abs(), t.z.scale.abs()]),
         };
         drop(read);
 

@@ -11,8 +11,9 @@
 //!   little-endian;
 //! - an Extra Bytes VLR (user id `LASF_Spec`, record id 4, §2.5.5 / Table 24) with one 192-byte
 //!   descriptor per dimension, written here because `las` does not write it;
-//! - scale 0.001 (millimetres) on all axes with an offset near `origin_hint` (rounded to a whole
-//!   kilometre) so that UTM-sized coordinates keep millimetre precision in the i32 records;
+//! - coordinates on a [`CoordinateGrid`]: the inputs' finest scale but at most 0.001
+//!   (millimetres), with an offset near the data (rounded to a whole kilometre) so that UTM-sized
+//!   coordinates keep that precision in the i32 records;
 //! - the input CRS copied: the WKT VLR when the input had WKT (with the WKT bit), otherwise the
 //!   GeoTIFF VLRs verbatim. Records over 65 535 bytes go to EVLRs.
 //!
@@ -73,8 +74,61 @@ pub struct ExtraDim {
 /// points), so that the parallel compressor has a chunk for every core of a small machine.
 const BATCH: usize = 200_000;
 
-/// Coordinate scale: millimetres.
+/// The coarsest coordinate scale written: millimetres.
 pub const SCALE: f64 = 0.001;
+
+/// How coordinates are stored in the i32 records: per-axis scale and offset.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CoordinateGrid {
+    pub scale: [f64; 3],
+    pub offset: [f64; 3],
+}
+
+impl CoordinateGrid {
+    /// Millimetres, with offsets at `origin_hint` rounded to a whole kilometre.
+    pub fn millimetre(origin_hint: [f64; 3]) -> Self {
+        CoordinateGrid {
+            scale: [SCALE; 3],
+            offset: origin_hint.map(round_to_km),
+        }
+    }
+
+    /// The grid for points within `min..=max` that come from files with the coordinate quanta
+    /// `input_scales`: per axis the finest of those, but never coarser than a millimetre, so that
+    /// input coordinates are written back exactly (a core point of a 0.1 mm survey keeps its
+    /// 0.1 mm). Offsets at the centre rounded to a whole kilometre (a multiple of every usual
+    /// scale). An axis whose extent would overflow the i32 records at that scale is coarsened
+    /// tenfold until it fits.
+    pub fn for_extent(min: [f64; 3], max: [f64; 3], input_scales: &[[f64; 3]]) -> Self {
+        let mut grid = CoordinateGrid::millimetre([0.0; 3]);
+        for a in 0..3 {
+            let finest = input_scales
+                .iter()
+                .map(|s| s[a])
+                .filter(|s| s.is_finite() && *s > 0.0)
+                .fold(SCALE, f64::min);
+            let centre = 0.5 * (min[a] + max[a]);
+            let offset = round_to_km(centre);
+            let reach = (max[a] - offset).abs().max((min[a] - offset).abs());
+            let mut scale = finest;
+            // 2³¹ − 1 with a margin for rounding.
+            while reach.is_finite() && reach / scale > 2.0e9 && scale < SCALE {
+                scale *= 10.0;
+            }
+            grid.scale[a] = scale.min(SCALE);
+            grid.offset[a] = offset;
+        }
+        grid
+    }
+}
+
+fn round_to_km(v: f64) -> f64 {
+    if v.is_finite() {
+        (v / 1000.0).round() * 1000.0
+    } else {
+        0.0
+    }
+}
 
 /// A streaming LAS/LAZ writer of result points; see the module doc.
 pub struct ResultWriter {
@@ -87,17 +141,28 @@ pub struct ResultWriter {
     base_len: usize,
     record_len: usize,
     extended: bool,
-    offset: [f64; 3],
+    grid: CoordinateGrid,
     count: u64,
 }
 
 impl ResultWriter {
-    /// Writes to `<path>.tmp` then renames on finish. LAZ when path ends with .laz.
+    /// Writes to `<path>.tmp` then renames on finish. LAZ when path ends with .laz. Coordinates
+    /// in millimetres (see [`CoordinateGrid::millimetre`]).
     pub fn create(
         path: &Path,
         crs: &Crs,
         dims: &[ExtraDim],
         origin_hint: [f64; 3],
+    ) -> Result<Self> {
+        Self::create_on_grid(path, crs, dims, CoordinateGrid::millimetre(origin_hint))
+    }
+
+    /// [`ResultWriter::create`] with coordinates stored on `grid`.
+    pub fn create_on_grid(
+        path: &Path,
+        crs: &Crs,
+        dims: &[ExtraDim],
+        grid: CoordinateGrid,
     ) -> Result<Self> {
         let mut seen = std::collections::HashSet::new();
         for d in dims {
@@ -136,26 +201,14 @@ impl ResultWriter {
         format.is_compressed = compress;
         let base_len = usize::from(format.len()) - extra;
 
-        let offset = origin_hint.map(|v| {
-            if v.is_finite() {
-                (v / 1000.0).round() * 1000.0
-            } else {
-                0.0
-            }
-        });
+        let axis = |a: usize| las::Transform {
+            scale: grid.scale[a],
+            offset: grid.offset[a],
+        };
         let transforms = las::Vector {
-            x: las::Transform {
-                scale: SCALE,
-                offset: offset[0],
-            },
-            y: las::Transform {
-                scale: SCALE,
-                offset: offset[1],
-            },
-            z: las::Transform {
-                scale: SCALE,
-                offset: offset[2],
-            },
+            x: axis(0),
+            y: axis(1),
+            z: axis(2),
         };
 
         let mut builder = las::Builder::from((1, 4));
@@ -225,7 +278,7 @@ impl ResultWriter {
             base_len,
             record_len,
             extended,
-            offset,
+            grid,
             count: 0,
         })
     }
@@ -251,15 +304,15 @@ impl ResultWriter {
         }
         let mut raw = [0i32; 3];
         for k in 0..3 {
-            let v = ((xyz[k] - self.offset[k]) / SCALE).round();
+            let v = ((xyz[k] - self.grid.offset[k]) / self.grid.scale[k]).round();
             if !(v >= f64::from(i32::MIN) && v <= f64::from(i32::MAX)) {
                 return Err(Error::output(
                     &self.path,
                     std::io::Error::new(
                         std::io::ErrorKind::InvalidInput,
                         format!(
-                            "coordinate {} cannot be stored at millimetre scale around offset {}",
-                            xyz[k], self.offset[k]
+                            "coordinate {} cannot be stored at scale {} around offset {}",
+                            xyz[k], self.grid.scale[k], self.grid.offset[k]
                         ),
                     ),
                 ));
@@ -399,5 +452,28 @@ fn to_io(e: las::Error) -> std::io::Error {
     match e {
         las::Error::Io(e) => e,
         other => std::io::Error::other(other.to_string()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn grid_takes_the_finest_input_scale_but_at_most_a_millimetre() {
+        let (lo, hi) = (
+            [499_000.0, 5_001_000.0, 10.0],
+            [501_000.0, 5_003_000.0, 90.0],
+        );
+        let g = CoordinateGrid::for_extent(lo, hi, &[[1e-3, 1e-3, 1e-2], [1e-4, 1e-3, 1e-2]]);
+        assert_eq!(g.scale, [1e-4, 1e-3, 1e-3]);
+        assert_eq!(g.offset, [500_000.0, 5_002_000.0, 0.0]);
+        // Text inputs only: millimetres.
+        assert_eq!(CoordinateGrid::for_extent(lo, hi, &[]).scale, [1e-3; 3]);
+        // 1e-6 over 10 km would overflow i32: coarsened until it fits.
+        let g = CoordinateGrid::for_extent([0.0; 3], [10_000.0, 1.0, 1.0], &[[1e-6; 3]]);
+        for (got, want) in g.scale.iter().zip([1e-5, 1e-6, 1e-6]) {
+            assert!((got / want - 1.0).abs() < 1e-12, "{:?}", g.scale);
+        }
     }
 }

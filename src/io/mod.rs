@@ -111,6 +111,9 @@ pub struct CloudInfo {
     pub point_count: u64,
     pub bounds: Bounds,
     pub crs: Crs,
+    /// The coordinate quantum per axis of a LAS/LAZ file (its scale factors); None for text and
+    /// PLY, whose coordinates are decimal or floating point.
+    pub scale: Option<[f64; 3]>,
 }
 
 /// A streaming reader of points. Call [`PointReader::fill`] until it returns 0.

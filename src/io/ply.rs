@@ -497,6 +497,7 @@ impl PlyReader {
             point_count: count,
             bounds,
             crs: Crs::default(),
+            scale: None,
         };
         Ok(PlyReader {
             info,

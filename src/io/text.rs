@@ -344,6 +344,7 @@ impl TextReader {
             point_count: count,
             bounds,
             crs: Crs::default(),
+            scale: None,
         };
         Ok(TextReader {
             info,

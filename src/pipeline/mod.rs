@@ -30,6 +30,7 @@ use std::time::Instant;
 use serde::Serialize;
 
 use crate::error::{Error, Result};
+use crate::io::las_out::CoordinateGrid;
 use crate::io::{self, CloudInfo};
 use crate::params::{Params, UserParams};
 use crate::sampling;
@@ -299,11 +300,20 @@ fn run_stages(
     let stage = Stage::start("outputs", None, "core points");
     let per_point = &ev.per_point;
     let mut terrain = view_export::TerrainSample::new(m3c2.count()?, layout.anchor);
+    // Core points are C1 points or the user's: the inputs' finest coordinate quantum keeps
+    // them exact.
+    let inputs = [Some(before), Some(after), cores];
+    let mut extent = io::Bounds::empty();
+    for info in inputs.iter().flatten() {
+        extent.grow(&info.bounds.min);
+        extent.grow(&info.bounds.max);
+    }
+    let scales: Vec<[f64; 3]> = inputs.iter().flatten().filter_map(|i| i.scale).collect();
     let written = outputs::write_m3c2_laz(
         wd,
         &m3c2,
         &before.crs,
-        layout.anchor,
+        CoordinateGrid::for_extent(extent.min, extent.max, &scales),
         &|k| per_point.get(&k).copied().unwrap_or((f64::NAN, 0)),
         &mut |k| terrain.push(k),
     )?;

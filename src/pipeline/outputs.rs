@@ -6,7 +6,7 @@ use std::collections::BinaryHeap;
 use std::path::Path;
 
 use crate::error::{Error, Result};
-use crate::io::las_out::{ExtraDim, ExtraType, ResultWriter};
+use crate::io::las_out::{CoordinateGrid, ExtraDim, ExtraType, ResultWriter};
 use crate::io::Crs;
 use crate::pipeline::m3c2_pass::{chunk_path, read_chunk, KeyedResult, M3c2Results};
 use crate::pipeline::workdir::WorkDir;
@@ -143,12 +143,12 @@ pub fn write_m3c2_laz(
     wd: &WorkDir,
     results: &M3c2Results,
     crs: &Crs,
-    origin_hint: [f64; 3],
+    grid: CoordinateGrid,
     event_of: &dyn Fn(u64) -> (f64, u32),
     each: &mut dyn FnMut(&KeyedResult),
 ) -> Result<Written> {
     let path = wd.out.join("m3c2.laz");
-    let mut w = ResultWriter::create(&path, crs, M3C2_DIMS, origin_hint)?;
+    let mut w = ResultWriter::create_on_grid(&path, crs, M3C2_DIMS, grid)?;
     let mut merged = MergedResults::new(results)?;
     let mut written = Written {
         core_points: 0,
