@@ -42,15 +42,7 @@ impl Case {
     /// Run compare; assert exit code 2, a one-line message containing `needles`, no output.
     fn fails(&self, before: &Path, after: &Path, extra: &[&str], needles: &[&str]) {
         let out = self.out();
-        let mut args = vec![
-            "compare",
-            before.to_str().unwrap(),
-            after.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ];
-        args.extend_from_slice(extra);
-        let o = common::run(&args);
+        let o = common::run_compare(before, after, &out, extra);
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(2), "stderr: {err}");
         assert_eq!(err.trim().lines().count(), 1, "not one line: {err}");

@@ -22,18 +22,22 @@ fn compare(before: &[Point3], after: &[Point3], extra: &[&str]) -> result_table:
     );
     common::write_cloud(&b, before);
     common::write_cloud(&a, after);
-    let mut args = vec![
-        "compare",
-        b.to_str().unwrap(),
-        a.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ];
-    args.extend_from_slice(extra);
-    let o = common::run(&args);
+    let o = common::run_compare(&b, &a, &out, extra);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     result_table::read(&out.join("m3c2.laz")).unwrap()
 }
+
+/// Core points every 0.5 m, normals over 0.5 m, cylinders 0.3 m × ±2 m: the scenes' scale.
+const FINE: &[&str] = &[
+    "--core-spacing",
+    "0.5",
+    "--normal-radius",
+    "0.5",
+    "--cyl-radius",
+    "0.3",
+    "--cyl-halflen",
+    "2",
+];
 
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(|a, b| a.total_cmp(b));
@@ -56,20 +60,7 @@ fn vertical_bump_is_measured_exactly() {
             })
             .collect::<Vec<_>>()
     };
-    let t = compare(
-        &sample(1, false),
-        &sample(2, true),
-        &[
-            "--core-spacing",
-            "0.5",
-            "--normal-radius",
-            "0.5",
-            "--cyl-radius",
-            "0.3",
-            "--cyl-halflen",
-            "2",
-        ],
-    );
+    let t = compare(&sample(1, false), &sample(2, true), FINE);
     let d = t.column("m3c2_distance").unwrap();
     let (mut inner, mut outer) = (Vec::new(), Vec::new());
     for (p, &d) in t.xyz.iter().zip(d) {
@@ -194,20 +185,7 @@ fn vertical_face_moved_horizontally() {
         }
         pts
     };
-    let t = compare(
-        &sample(5, false),
-        &sample(6, true),
-        &[
-            "--core-spacing",
-            "0.5",
-            "--normal-radius",
-            "0.5",
-            "--cyl-radius",
-            "0.3",
-            "--cyl-halflen",
-            "2",
-        ],
-    );
+    let t = compare(&sample(5, false), &sample(6, true), FINE);
     let d = t.column("m3c2_distance").unwrap();
     let ny = t.column("normal_y").unwrap();
     let (mut patch, mut face) = (Vec::new(), Vec::new());

@@ -32,16 +32,12 @@ fn cube_scene(dir: &std::path::Path) -> std::path::PathBuf {
 /// `talus compare` of the scene's epochs into `dir/res`, with `extra` arguments.
 fn compare(scene: &std::path::Path, dir: &std::path::Path, extra: &[&str]) -> std::path::PathBuf {
     let res = dir.join("res");
-    let (b, a) = (scene.join("before.laz"), scene.join("after.laz"));
-    let mut args = vec![
-        "compare",
-        b.to_str().unwrap(),
-        a.to_str().unwrap(),
-        "--out",
-        res.to_str().unwrap(),
-    ];
-    args.extend_from_slice(extra);
-    let o = common::run(&args);
+    let o = common::run_compare(
+        &scene.join("before.laz"),
+        &scene.join("after.laz"),
+        &res,
+        extra,
+    );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     res
 }

@@ -15,7 +15,8 @@ use std::time::{Duration, Instant};
 
 use common::Rng;
 use pipeline_common::{
-    assert_same_outputs, chunk_mtimes, cliff, compare, compare_output, done_m3c2_tiles, stage_line,
+    assert_same_outputs, chunk_mtimes, cliff, compare, compare_output, compare_passes,
+    done_m3c2_tiles,
 };
 
 /// Small tiles, so that pass 2 has many units to be killed between.
@@ -94,16 +95,9 @@ fn sigkill_at_random_moments_then_resume_gives_the_uninterrupted_result() {
     }
 
     // A resume after a complete run reuses both passes.
-    let out = compare_output(&before, &after, &dir, &[ARGS, &["--resume"]].concat());
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    assert_eq!(stage_line(&out.stderr, "pass 1: tiling"), (0, true));
     assert_eq!(
-        stage_line(&out.stderr, "pass 2: normals and M3C2"),
-        (0, true)
+        compare_passes(&before, &after, &dir, &[ARGS, &["--resume"]].concat()),
+        [(0, true), (0, true)]
     );
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
@@ -112,16 +106,9 @@ fn sigkill_at_random_moments_then_resume_gives_the_uninterrupted_result() {
     assert_same_outputs(&reference, &dir);
 
     // --force starts over: both passes run again, same result.
-    let out = compare_output(&before, &after, &dir, &[ARGS, &["--force"]].concat());
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    assert_eq!(stage_line(&out.stderr, "pass 1: tiling"), (200_000, false));
     assert_eq!(
-        stage_line(&out.stderr, "pass 2: normals and M3C2"),
-        (200_000, false)
+        compare_passes(&before, &after, &dir, &[ARGS, &["--force"]].concat()),
+        [(200_000, false), (200_000, false)]
     );
     assert_same_outputs(&reference, &dir);
 }
@@ -132,13 +119,10 @@ fn a_changed_parameter_or_input_redoes_exactly_what_depends_on_it() {
     let (before, after) = cliff(&tmp.path().join("scene"), 60_000);
     // `--resume` where nothing ran yet is a fresh run.
     let dir = tmp.path().join("run");
-    let out = compare_output(&before, &after, &dir, &[ARGS, &["--resume"]].concat());
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    assert_eq!(
+        compare_passes(&before, &after, &dir, &[ARGS, &["--resume"]].concat()),
+        [(120_000, false), (120_000, false)]
     );
-    assert_eq!(stage_line(&out.stderr, "pass 1: tiling"), (120_000, false));
     // A DIR holding a run is not overwritten without --resume or --force.
     let out = compare_output(&before, &after, &dir, ARGS);
     assert_eq!(out.status.code(), Some(2));
@@ -147,21 +131,14 @@ fn a_changed_parameter_or_input_redoes_exactly_what_depends_on_it() {
     // fresh run with those parameters gives.
     let events_params = ["--threshold", "0.2", "--eps", "0.8"];
     let times = chunk_mtimes(&dir);
-    let out = compare_output(
-        &before,
-        &after,
-        &dir,
-        &[ARGS, &events_params, &["--resume"]].concat(),
-    );
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    assert_eq!(stage_line(&out.stderr, "pass 1: tiling"), (0, true));
     assert_eq!(
-        stage_line(&out.stderr, "pass 2: normals and M3C2"),
-        (0, true)
+        compare_passes(
+            &before,
+            &after,
+            &dir,
+            &[ARGS, &events_params, &["--resume"]].concat()
+        ),
+        [(0, true), (0, true)]
     );
     assert_eq!(chunk_mtimes(&dir), times);
     let fresh = tmp.path().join("fresh");
@@ -170,21 +147,14 @@ fn a_changed_parameter_or_input_redoes_exactly_what_depends_on_it() {
 
     // An M3C2 parameter that does not change the halo (the registration error) redoes pass 2
     // only.
-    let out = compare_output(
-        &before,
-        &after,
-        &dir,
-        &[ARGS, &events_params, &["--reg-error", "0.01", "--resume"]].concat(),
-    );
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    assert_eq!(stage_line(&out.stderr, "pass 1: tiling"), (0, true));
     assert_eq!(
-        stage_line(&out.stderr, "pass 2: normals and M3C2"),
-        (120_000, false)
+        compare_passes(
+            &before,
+            &after,
+            &dir,
+            &[ARGS, &events_params, &["--reg-error", "0.01", "--resume"]].concat()
+        ),
+        [(0, true), (120_000, false)]
     );
 
     // Rewriting the before file (same bytes, new modification time) cuts that epoch again and
@@ -192,21 +162,14 @@ fn a_changed_parameter_or_input_redoes_exactly_what_depends_on_it() {
     let bytes = std::fs::read(&before).unwrap();
     std::thread::sleep(Duration::from_millis(20));
     std::fs::write(&before, &bytes).unwrap();
-    let out = compare_output(
-        &before,
-        &after,
-        &dir,
-        &[ARGS, &events_params, &["--reg-error", "0.01", "--resume"]].concat(),
-    );
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    assert_eq!(stage_line(&out.stderr, "pass 1: tiling"), (60_000, false));
     assert_eq!(
-        stage_line(&out.stderr, "pass 2: normals and M3C2"),
-        (120_000, false)
+        compare_passes(
+            &before,
+            &after,
+            &dir,
+            &[ARGS, &events_params, &["--reg-error", "0.01", "--resume"]].concat()
+        ),
+        [(60_000, false), (120_000, false)]
     );
     let fresh2 = tmp.path().join("fresh2");
     compare(

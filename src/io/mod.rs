@@ -125,6 +125,23 @@ pub trait PointReader: Send {
     fn fill(&mut self, buf: &mut Vec<Point3>, max: usize) -> Result<usize>;
 }
 
+/// [`PointReader::fill`] for readers that decode one point at a time: clear `buf`, then push
+/// points from `next` until `max` or its end.
+fn fill_from(
+    buf: &mut Vec<Point3>,
+    max: usize,
+    mut next: impl FnMut() -> Result<Option<Point3>>,
+) -> Result<usize> {
+    buf.clear();
+    while buf.len() < max {
+        match next()? {
+            Some(p) => buf.push(p),
+            None => break,
+        }
+    }
+    Ok(buf.len())
+}
+
 /// Open any supported point cloud, choosing the reader by content (LAS signature `LASF`, PLY
 /// magic `ply`) and falling back to text. A missing file, a file that is not a point cloud and
 /// a cloud with zero points are errors naming the file.

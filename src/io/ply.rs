@@ -512,13 +512,6 @@ impl PointReader for PlyReader {
     }
 
     fn fill(&mut self, buf: &mut Vec<Point3>, max: usize) -> Result<usize> {
-        buf.clear();
-        while buf.len() < max {
-            match self.pass.next_point()? {
-                Some(p) => buf.push(p),
-                None => break,
-            }
-        }
-        Ok(buf.len())
+        super::fill_from(buf, max, || self.pass.next_point())
     }
 }

@@ -359,13 +359,6 @@ impl PointReader for TextReader {
     }
 
     fn fill(&mut self, buf: &mut Vec<Point3>, max: usize) -> Result<usize> {
-        buf.clear();
-        while buf.len() < max {
-            match self.pass.next_point()? {
-                Some(p) => buf.push(p),
-                None => break,
-            }
-        }
-        Ok(buf.len())
+        super::fill_from(buf, max, || self.pass.next_point())
     }
 }

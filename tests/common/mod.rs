@@ -65,6 +65,19 @@ pub fn run(args: &[&str]) -> Output {
     talus().args(args).output().expect("talus runs")
 }
 
+/// `talus compare BEFORE AFTER --out OUT EXTRA...`, whatever its outcome.
+pub fn run_compare(before: &Path, after: &Path, out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec![
+        "compare",
+        before.to_str().unwrap(),
+        after.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    run(&args)
+}
+
 /// A fresh temporary directory.
 pub fn tempdir() -> tempfile::TempDir {
     tempfile::tempdir().unwrap()

@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
-use crate::common::run;
+use crate::common::{run, run_compare};
 
 /// The outputs that do not hold timings (summary.json does; its counts are compared apart).
 pub const COMPARED: &[&str] = &[
@@ -35,18 +35,10 @@ pub fn cliff(dir: &Path, points: u64) -> (PathBuf, PathBuf) {
 }
 
 pub fn compare(before: &Path, after: &Path, out: &Path, extra: &[&str]) {
-    let mut args = vec![
-        "compare",
-        before.to_str().unwrap(),
-        after.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ];
-    args.extend_from_slice(extra);
-    let o = run(&args);
+    let o = run_compare(before, after, out, extra);
     assert!(
         o.status.success(),
-        "talus {args:?}: {}",
+        "talus compare {extra:?}: {}",
         String::from_utf8_lossy(&o.stderr)
     );
 }
@@ -121,15 +113,18 @@ pub fn assert_same_outputs(reference: &Path, other: &Path) {
 
 /// Run `talus compare` and return its output, whatever the exit status.
 pub fn compare_output(before: &Path, after: &Path, out: &Path, extra: &[&str]) -> Output {
-    let mut args = vec![
-        "compare",
-        before.to_str().unwrap(),
-        after.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ];
-    args.extend_from_slice(extra);
-    run(&args)
+    run_compare(before, after, out, extra)
+}
+
+/// `compare` that must succeed; returns the stage lines of its two passes, tiling and M3C2, as
+/// [`stage_line`] reads them.
+pub fn compare_passes(before: &Path, after: &Path, out: &Path, extra: &[&str]) -> [(u64, bool); 2] {
+    let o = compare_output(before, after, out, extra);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    [
+        stage_line(&o.stderr, "pass 1: tiling"),
+        stage_line(&o.stderr, "pass 2: normals and M3C2"),
+    ]
 }
 
 /// The stage line `talus: <stage>: <count> ...` of a run's stderr: (count, reused).
