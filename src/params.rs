@@ -122,11 +122,19 @@ fn pick<T: Copy>(user: Option<T>, derived: T, rule: &str) -> Resolved<T> {
     }
 }
 
+/// The shortest length a user may give: a micrometre in metre units. Shorter ones are not a
+/// survey's scale, and they would push the exact sums' quantisation (`m3c2::moments`) and the
+/// column grid towards subnormal numbers.
+pub const MIN_LENGTH: f64 = 1e-6;
+
 fn positive(name: &str, v: Option<f64>) -> Result<()> {
+    let flag = name.replace('_', "-");
     match v {
         Some(x) if !(x > 0.0 && x.is_finite()) => Err(Error::Usage(format!(
-            "--{}: must be a positive number, got {x}",
-            name.replace('_', "-")
+            "--{flag}: must be a positive number, got {x}"
+        ))),
+        Some(x) if x < MIN_LENGTH => Err(Error::Usage(format!(
+            "--{flag}: {x} is below the shortest length talus accepts ({MIN_LENGTH})"
         ))),
         _ => Ok(()),
     }
@@ -313,6 +321,14 @@ mod tests {
         assert!(matches!(
             Params::resolve(&bad, 0.1),
             Err(Error::Usage(m)) if m.contains("--normal-radius")
+        ));
+        let tiny = UserParams {
+            cyl_radius: Some(5e-324),
+            ..Default::default()
+        };
+        assert!(matches!(
+            Params::resolve(&tiny, 0.1),
+            Err(Error::Usage(m)) if m.contains("--cyl-radius") && m.contains("shortest")
         ));
     }
 

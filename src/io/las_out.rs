@@ -96,7 +96,7 @@ impl CoordinateGrid {
     /// The grid for points within `min..=max` that come from files with the coordinate quanta
     /// `input_scales`: per axis the finest of those, but never coarser than a millimetre, so that
     /// input coordinates are written back exactly (a core point of a 0.1 mm survey keeps its
-    /// 0.1 mm). Offsets at the centre rounded to a whole kilometre (a multiple of every usual
+    /// 0.1 mm) when the files' grids nest (scales that are powers of ten, offsets on them). Offsets at the centre rounded to a whole kilometre (a multiple of every usual
     /// scale). An axis whose extent would overflow the i32 records at that scale is coarsened
     /// tenfold until it fits.
     pub fn for_extent(min: [f64; 3], max: [f64; 3], input_scales: &[[f64; 3]]) -> Self {
@@ -113,12 +113,27 @@ impl CoordinateGrid {
             let mut scale = finest;
             // 2³¹ − 1 with a margin for rounding.
             while reach.is_finite() && reach / scale > 2.0e9 && scale < SCALE {
-                scale *= 10.0;
+                scale = decimal(scale * 10.0);
             }
             grid.scale[a] = scale.min(SCALE);
             grid.offset[a] = offset;
         }
         grid
+    }
+}
+
+/// `s` itself, or the power of ten it is within rounding of, written exactly as that decimal
+/// (1e-5, not 1.0000000000000002e-5, in the header a reader prints).
+fn decimal(s: f64) -> f64 {
+    let k = s.log10().round();
+    if (s.log10() - k).abs() < 1e-9 && (-22.0..=22.0).contains(&k) {
+        if k < 0.0 {
+            1.0 / 10f64.powi(-k as i32)
+        } else {
+            10f64.powi(k as i32)
+        }
+    } else {
+        s
     }
 }
 
@@ -472,8 +487,6 @@ mod tests {
         assert_eq!(CoordinateGrid::for_extent(lo, hi, &[]).scale, [1e-3; 3]);
         // 1e-6 over 10 km would overflow i32: coarsened until it fits.
         let g = CoordinateGrid::for_extent([0.0; 3], [10_000.0, 1.0, 1.0], &[[1e-6; 3]]);
-        for (got, want) in g.scale.iter().zip([1e-5, 1e-6, 1e-6]) {
-            assert!((got / want - 1.0).abs() < 1e-12, "{:?}", g.scale);
-        }
+        assert_eq!(g.scale, [1e-5, 1e-6, 1e-6]);
     }
 }

@@ -33,13 +33,16 @@ struct Quantiser {
 
 impl Quantiser {
     fn new(extent: f64) -> Self {
-        let extent = if extent > 0.0 && extent.is_finite() {
-            extent
-        } else {
-            1.0
-        };
+        // An extent the quantisation cannot serve (not positive, not finite, or so small that
+        // the factor overflows; the parameters forbid these) falls back to 1: the sums stay
+        // exact and finite, only coarse.
+        let factor = 2f64.powi(BITS) / extent;
         Quantiser {
-            factor: 2f64.powi(BITS) / extent,
+            factor: if extent > 0.0 && factor.is_finite() {
+                factor
+            } else {
+                2f64.powi(BITS)
+            },
         }
     }
 
@@ -47,7 +50,8 @@ impl Quantiser {
     /// NaN, only ever reach this masked out).
     #[inline(always)]
     fn masked(&self, v: f64, keep: bool) -> i64 {
-        let x = (v * self.factor + MAGIC).to_bits() as i64 - MAGIC.to_bits() as i64;
+        // Wrapping: a rejected value far outside the extent may give any bits, masked below.
+        let x = ((v * self.factor + MAGIC).to_bits() as i64).wrapping_sub(MAGIC.to_bits() as i64);
         x & -(keep as i64)
     }
 
@@ -240,7 +244,10 @@ mod tests {
             a.add(v, true);
             b.add(v, true);
             // Anything at all, rejected: far outside the extent, infinite, NaN.
-            b.add([1e300, f64::INFINITY, f64::NAN, -7.0][k % 4], false);
+            b.add(
+                [1e300, f64::INFINITY, f64::NAN, -7.0, -1.5e8, 1.5e8][k % 6],
+                false,
+            );
         }
         assert_eq!(a.count(), 5000);
         assert_eq!(a.mean_var(), b.mean_var());

@@ -300,15 +300,16 @@ fn run_stages(
     let stage = Stage::start("outputs", None, "core points");
     let per_point = &ev.per_point;
     let mut terrain = view_export::TerrainSample::new(m3c2.count()?, layout.anchor);
-    // Core points are C1 points or the user's: the inputs' finest coordinate quantum keeps
-    // them exact.
+    // Core points are C1 points or the user's: the finest coordinate quantum of the file they
+    // come from keeps them exact. The extent covers every input (the layout's).
+    let sources = [Some(before), cores];
     let inputs = [Some(before), Some(after), cores];
     let mut extent = io::Bounds::empty();
     for info in inputs.iter().flatten() {
         extent.grow(&info.bounds.min);
         extent.grow(&info.bounds.max);
     }
-    let scales: Vec<[f64; 3]> = inputs.iter().flatten().filter_map(|i| i.scale).collect();
+    let scales: Vec<[f64; 3]> = sources.iter().flatten().filter_map(|i| i.scale).collect();
     let written = outputs::write_m3c2_laz(
         wd,
         &m3c2,

@@ -182,7 +182,7 @@ pub fn tile_epochs(
         wd.forget(&unit_name(*epoch))?;
         dirs.push(fresh_dir(wd, *epoch)?);
     }
-    let share = (budget / todo.len().max(1) as u64).max(16 << 20);
+    let share = (budget / todo.len().max(1) as u64).max(8 << 20);
     // A failed split stops the other one: the run fails anyway.
     let failed = AtomicBool::new(false);
     let results: Vec<Result<Option<String>>> = std::thread::scope(|s| {
@@ -192,10 +192,19 @@ pub fn tile_epochs(
             .map(|((_, src, _), dir)| {
                 let failed = &failed;
                 s.spawn(move || {
-                    let r = cut(dir, layout, src, share, stage, failed);
-                    if r.is_err() {
-                        failed.store(true, Ordering::Relaxed);
+                    // Raised on the way out whatever happens (an error, even a panic), so
+                    // the other split stops too.
+                    struct RaiseUnlessOk<'a>(&'a AtomicBool, bool);
+                    impl Drop for RaiseUnlessOk<'_> {
+                        fn drop(&mut self) {
+                            if !self.1 {
+                                self.0.store(true, Ordering::Relaxed);
+                            }
+                        }
                     }
+                    let mut guard = RaiseUnlessOk(failed, false);
+                    let r = cut(dir, layout, src, share, stage, failed);
+                    guard.1 = r.is_ok();
                     r
                 })
             })
@@ -208,8 +217,9 @@ pub fn tile_epochs(
             })
             .collect()
     });
-    // Record what finished even when the other failed (a rerun then resumes from it), and
-    // report the first epoch's error first.
+    // Record what finished even when the other failed (a rerun then resumes from it). The error
+    // reported is the one that stopped the run: the before epoch's when both failed on their own
+    // (a split stopped by the other's failure returns no error).
     let mut first_error = None;
     for (((epoch, _, hash), dir), result) in todo.iter().zip(&dirs).zip(results) {
         match result {
