@@ -38,19 +38,22 @@ pub fn morton(c: &Cell) -> u64 {
     spread(o(c[0])) | spread(o(c[1])) << 1 | spread(o(c[2])) << 2
 }
 
-/// Indices into `points` of the chosen core points and their Morton keys, sorted by key.
-/// Only points for which `owned(i)` is true are candidates (a tile thins the points it owns).
+/// Indices of the chosen core points among the `n` points `point(0..n)`, with their Morton keys,
+/// sorted by key. Only points for which `owned(i)` is true are candidates (a tile thins the
+/// points it owns).
 pub fn thin(
-    points: &[Point3],
+    n: usize,
+    point: impl Fn(usize) -> Point3,
     anchor: &Point3,
     spacing: f64,
     owned: impl Fn(usize) -> bool,
 ) -> Vec<(u64, usize)> {
     let mut best: HashMap<Cell, (usize, f64)> = HashMap::new();
-    for (i, p) in points.iter().enumerate() {
+    for i in 0..n {
         if !owned(i) {
             continue;
         }
+        let p = &point(i);
         let c = cell_of(p, anchor, spacing);
         let mut d2 = 0.0;
         for k in 0..3 {
@@ -77,14 +80,14 @@ mod tests {
 
     #[test]
     fn one_point_per_cell_nearest_the_centre() {
-        let pts = vec![
+        let pts = [
             [0.1, 0.1, 0.1],
             [0.5, 0.5, 0.5], // centre of cell (0,0,0)
             [0.9, 0.9, 0.9],
             [1.4, 0.5, 0.5], // cell (1,0,0)
             [1.6, 0.5, 0.5], // same distance to centre (1.5, .5, .5): earlier one wins
         ];
-        let t = thin(&pts, &[0.0; 3], 1.0, |_| true);
+        let t = thin(pts.len(), |i| pts[i], &[0.0; 3], 1.0, |_| true);
         let idx: Vec<usize> = t.iter().map(|x| x.1).collect();
         assert_eq!(idx.len(), 2);
         assert!(idx.contains(&1) && idx.contains(&3));

@@ -365,10 +365,11 @@ fn volumes(
                     &tiled.after
                 };
                 let t = tiles::read_tile(dir, id)?;
-                for (p, &own) in t.points.iter().zip(&t.owned) {
+                for (i, &own) in t.owned.iter().enumerate() {
                     if !own {
                         continue;
                     }
+                    let p = &t.point(i);
                     let mut owner = None;
                     for &e in grid.candidates(p[0], p[1]) {
                         let (h, b) = &boxes[e];

@@ -326,17 +326,19 @@ fn compute_tile(
     let origin = layout.anchor;
     let m = params.m3c2();
     let cell = m3c2::column_width(&m);
-    let (before, after) = rayon::join(
-        || Columns::new(&w.before.points, origin, cell),
-        || Columns::new(&w.after.points, origin, cell),
-    );
+    let index = |t: &TilePoints| Columns::from_fn(t.len(), |i| t.point(i), origin, cell);
+    let (before, after) = rayon::join(|| index(&w.before), || index(&w.after));
     let keyed: Vec<(u64, Point3)> = match user_cores {
         Some(c) => c.to_vec(),
-        None => core_points::thin(&w.before.points, &layout.anchor, layout.core_spacing, |i| {
-            w.before.owned[i]
-        })
+        None => core_points::thin(
+            w.before.len(),
+            |i| w.before.point(i),
+            &layout.anchor,
+            layout.core_spacing,
+            |i| w.before.owned[i],
+        )
         .into_iter()
-        .map(|(k, i)| (k, w.before.points[i]))
+        .map(|(k, i)| (k, w.before.point(i)))
         .collect(),
     };
     if keyed.is_empty() {

@@ -366,10 +366,31 @@ fn split_checksum(dir: &Path, grid: &TileGrid) -> talus_tiling::Result<String> {
     Ok(format!("fnv-crc32:{}", h.hex()))
 }
 
-/// The points of one tile: global coordinates and whether the tile owns each one.
+/// The points of one tile: global coordinates, as the columns the tile file holds (no copy into
+/// another layout), and whether the tile owns each one.
 pub struct TilePoints {
-    pub points: Vec<Point3>,
+    pub x: Vec<f64>,
+    pub y: Vec<f64>,
+    pub z: Vec<f64>,
     pub owned: Vec<bool>,
+}
+
+impl TilePoints {
+    /// Number of points.
+    pub fn len(&self) -> usize {
+        self.x.len()
+    }
+
+    /// True when the tile holds no point.
+    pub fn is_empty(&self) -> bool {
+        self.x.is_empty()
+    }
+
+    /// Point `i`.
+    #[inline]
+    pub fn point(&self, i: usize) -> Point3 {
+        [self.x[i], self.y[i], self.z[i]]
+    }
 }
 
 /// Read one tile of a split.
@@ -386,8 +407,10 @@ pub fn read_tile_raw(dir: &Path, id: TileId) -> talus_tiling::Result<TilePoints>
         Some(talus_tiling::ColumnData::U8(v)) => v.iter().map(|&o| o == 1).collect(),
         _ => vec![true; cols.len()],
     };
-    let points = (0..cols.len())
-        .map(|i| [cols.x[i], cols.y[i], cols.z[i]])
-        .collect();
-    Ok(TilePoints { points, owned })
+    Ok(TilePoints {
+        x: cols.x,
+        y: cols.y,
+        z: cols.z,
+        owned,
+    })
 }

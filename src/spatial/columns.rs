@@ -36,21 +36,30 @@ impl Columns {
     /// `cell` wide (wider when the extent is large for the number of points). Memory: the index
     /// (24 bytes a point) and nothing else.
     pub fn new(points: &[Point3], origin: Point3, cell: f64) -> Self {
+        Self::from_fn(points.len(), |i| points[i], origin, cell)
+    }
+
+    /// [`Columns::new`] over the `n` points `point(0..n)`, whatever their storage (a tile keeps
+    /// its coordinates as columns).
+    pub fn from_fn(n: usize, point: impl Fn(usize) -> Point3, origin: Point3, cell: f64) -> Self {
         assert!(cell > 0.0 && cell.is_finite(), "column width {cell}");
-        let local = |p: &Point3| [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]];
+        let local = |i: usize| {
+            let p = point(i);
+            [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]]
+        };
         let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-        for p in points.iter().map(local) {
+        for p in (0..n).map(local) {
             for a in 0..2 {
                 lo[a] = lo[a].min(p[a]);
                 hi[a] = hi[a].max(p[a]);
             }
         }
-        if points.is_empty() {
+        if n == 0 {
             lo = [0.0; 2];
             hi = [0.0; 2];
         }
         let span = [hi[0] - lo[0], hi[1] - lo[1]];
-        let budget = (MAX_COLUMNS_PER_POINT * points.len()).max(1) as f64;
+        let budget = (MAX_COLUMNS_PER_POINT * n).max(1) as f64;
         // No narrower than a billionth of the extent (nor subnormal): the growth below must be
         // able to move it.
         let mut cell = cell.max(1e-9 * span[0].max(span[1])).max(f64::MIN_POSITIVE);
@@ -76,7 +85,7 @@ impl Columns {
         };
         // Counting sort by column (the column is computed twice rather than stored), then each
         // column by height.
-        for p in points.iter().map(local) {
+        for p in (0..n).map(local) {
             let c = index.column_of(p[0], p[1]);
             index.starts[c + 1] += 1;
         }
@@ -84,8 +93,8 @@ impl Columns {
             index.starts[k] += index.starts[k - 1];
         }
         let mut next = index.starts.clone();
-        let mut sorted = vec![[0.0; 3]; points.len()];
-        for p in points.iter().map(local) {
+        let mut sorted = vec![[0.0; 3]; n];
+        for p in (0..n).map(local) {
             let c = index.column_of(p[0], p[1]);
             sorted[next[c]] = p;
             next[c] += 1;
