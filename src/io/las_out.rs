@@ -96,9 +96,10 @@ impl CoordinateGrid {
     /// The grid for points within `min..=max` that come from files with the coordinate quanta
     /// `input_scales`: per axis the finest of those, but never coarser than a millimetre, so that
     /// input coordinates are written back exactly (a core point of a 0.1 mm survey keeps its
-    /// 0.1 mm) when the files' grids nest (scales that are powers of ten, offsets on them). Offsets at the centre rounded to a whole kilometre (a multiple of every usual
-    /// scale). An axis whose extent would overflow the i32 records at that scale is coarsened
-    /// tenfold until it fits.
+    /// 0.1 mm) when the files' grids nest (scales that are powers of ten, offsets on them).
+    /// Offsets at the centre rounded to a whole kilometre (a multiple of every usual scale). An
+    /// axis whose extent would overflow the i32 records at that scale is coarsened tenfold until
+    /// it fits.
     pub fn for_extent(min: [f64; 3], max: [f64; 3], input_scales: &[[f64; 3]]) -> Self {
         let mut grid = CoordinateGrid::millimetre([0.0; 3]);
         for a in 0..3 {

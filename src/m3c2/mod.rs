@@ -74,7 +74,7 @@ pub fn column_width(params: &M3c2Params) -> f64 {
 }
 
 /// A processing order of `cores` along a Z-order curve (cells of size `cell`): consecutive
-/// queries then touch the same tree nodes and cache lines, several times faster than a random
+/// queries then touch the same columns and cache lines, several times faster than a random
 /// order (a `--core-points` file may come in any order). Results are scattered back, so the
 /// output order is the input order.
 fn spatial_order(cores: &[Point3], cell: f64) -> Vec<usize> {
@@ -95,18 +95,13 @@ fn spatial_order(cores: &[Point3], cell: f64) -> Vec<usize> {
 }
 
 /// Run `f` on every core point in spatial order, in parallel; results in input order.
-fn in_spatial_order<T: Send + Copy + Default, S: Send>(
+fn in_spatial_order<T: Send + Copy + Default>(
     cores: &[Point3],
     cell: f64,
-    init: impl Fn() -> S + Sync + Send,
-    f: impl Fn(&mut S, usize) -> T + Sync + Send,
+    f: impl Fn(usize) -> T + Sync + Send,
 ) -> Vec<T> {
     let order = spatial_order(cores, cell);
-    let computed: Vec<T> = order
-        .par_iter()
-        .with_min_len(256)
-        .map_init(&init, |s, &i| f(s, i))
-        .collect();
+    let computed: Vec<T> = order.par_iter().with_min_len(256).map(|&i| f(i)).collect();
     let mut out = vec![T::default(); cores.len()];
     for (k, &i) in order.iter().enumerate() {
         out[i] = computed[k];
@@ -116,16 +111,11 @@ fn in_spatial_order<T: Send + Copy + Default, S: Send>(
 
 /// Normals at `cores` (local frame of `before`), oriented as `params.orientation` says.
 pub fn normals(before: &Columns, cores: &[Point3], params: &M3c2Params) -> Vec<Point3> {
-    let mut normals: Vec<Point3> = in_spatial_order(
-        cores,
-        params.normal_radius,
-        || (),
-        |_, i| {
-            normals::normal_at(before, &cores[i], params.normal_radius)
-                .map(|(n, _)| n)
-                .unwrap_or([f64::NAN; 3])
-        },
-    );
+    let mut normals: Vec<Point3> = in_spatial_order(cores, params.normal_radius, |i| {
+        normals::normal_at(before, &cores[i], params.normal_radius)
+            .map(|(n, _)| n)
+            .unwrap_or([f64::NAN; 3])
+    });
     orientation::orient(
         cores,
         &mut normals,
@@ -138,7 +128,7 @@ pub fn normals(before: &Columns, cores: &[Point3], params: &M3c2Params) -> Vec<P
 
 /// M3C2 at each core point, given its oriented normal. `before` and `after` must share the local
 /// frame of `cores`. Work is split over rayon's pool; the result does not depend on the thread
-/// count (each core point is computed alone, and its cylinder's sums in a fixed order).
+/// count (each core point is computed alone, with exact sums).
 pub fn distances(
     before: &Columns,
     after: &Columns,
@@ -147,45 +137,48 @@ pub fn distances(
     params: &M3c2Params,
 ) -> Vec<CoreResult> {
     debug_assert_eq!(before.origin(), after.origin());
-    in_spatial_order(
-        cores,
-        params.cyl_radius.max(params.normal_radius),
-        || (),
-        |_, i| {
-            let (q, n) = (&cores[i], &normals[i]);
-            {
-                if !n[0].is_finite() {
-                    return CoreResult::undefined(*n);
-                }
-                let (r, h) = (params.cyl_radius, params.cyl_halflen);
-                let c1 = cylinder::cylinder_stats(before, q, n, r, h);
-                let c2 = cylinder::cylinder_stats(after, q, n, r, h);
-                let need = params.min_points.max(1);
-                if c1.count < need || c2.count < need {
-                    return CoreResult {
-                        count1: c1.count,
-                        count2: c2.count,
-                        std_dev1: c1.std_dev,
-                        std_dev2: c2.std_dev,
-                        ..CoreResult::undefined(*n)
-                    };
-                }
-                let distance = c2.mean - c1.mean;
-                let se = (c1.std_dev * c1.std_dev / c1.count as f64
-                    + c2.std_dev * c2.std_dev / c2.count as f64)
-                    .sqrt();
-                let lod = 1.96 * (se + params.reg_error);
-                CoreResult {
-                    distance,
-                    uncertainty: lod,
-                    significant: distance.abs() > lod,
-                    std_dev1: c1.std_dev,
-                    std_dev2: c2.std_dev,
-                    count1: c1.count,
-                    count2: c2.count,
-                    normal: *n,
-                }
-            }
-        },
-    )
+    in_spatial_order(cores, params.cyl_radius.max(params.normal_radius), |i| {
+        core_result(before, after, &cores[i], &normals[i], params)
+    })
+}
+
+/// M3C2 at one core point `q` with oriented normal `n`.
+fn core_result(
+    before: &Columns,
+    after: &Columns,
+    q: &Point3,
+    n: &Point3,
+    params: &M3c2Params,
+) -> CoreResult {
+    if !n[0].is_finite() {
+        return CoreResult::undefined(*n);
+    }
+    let (r, h) = (params.cyl_radius, params.cyl_halflen);
+    let c1 = cylinder::cylinder_stats(before, q, n, r, h);
+    let c2 = cylinder::cylinder_stats(after, q, n, r, h);
+    let need = params.min_points.max(1);
+    if c1.count < need || c2.count < need {
+        return CoreResult {
+            count1: c1.count,
+            count2: c2.count,
+            std_dev1: c1.std_dev,
+            std_dev2: c2.std_dev,
+            ..CoreResult::undefined(*n)
+        };
+    }
+    let distance = c2.mean - c1.mean;
+    let se = (c1.std_dev * c1.std_dev / c1.count as f64
+        + c2.std_dev * c2.std_dev / c2.count as f64)
+        .sqrt();
+    let lod = 1.96 * (se + params.reg_error);
+    CoreResult {
+        distance,
+        uncertainty: lod,
+        significant: distance.abs() > lod,
+        std_dev1: c1.std_dev,
+        std_dev2: c2.std_dev,
+        count1: c1.count,
+        count2: c2.count,
+        normal: *n,
+    }
 }

@@ -12,8 +12,9 @@
 //! stderr ([`progress`]).
 //!
 //! Tiling invariance: a tiled run writes the bytes of a whole-cloud run. Tiles are aligned to the
-//! core-point grid, every tile uses the same local frame, neighbourhood sums run in a sorted
-//! order, and the events stage works on global keys; `tests/tiling_invariance.rs` checks it.
+//! core-point grid, every tile uses the same local frame, M3C2's neighbourhood sums are exact
+//! (so free of visiting order), the smoothing's run in a sorted order, and the events stage works
+//! on global keys; `tests/tiling_invariance.rs` checks it.
 
 pub mod event_outputs;
 pub mod events_pass;
@@ -301,15 +302,13 @@ fn run_stages(
     let per_point = &ev.per_point;
     let mut terrain = view_export::TerrainSample::new(m3c2.count()?, layout.anchor);
     // Core points are C1 points or the user's: the finest coordinate quantum of the file they
-    // come from keeps them exact. The extent covers every input (the layout's).
-    let sources = [Some(before), cores];
-    let inputs = [Some(before), Some(after), cores];
-    let mut extent = io::Bounds::empty();
-    for info in inputs.iter().flatten() {
-        extent.grow(&info.bounds.min);
-        extent.grow(&info.bounds.max);
-    }
-    let scales: Vec<[f64; 3]> = sources.iter().flatten().filter_map(|i| i.scale).collect();
+    // come from keeps them exact.
+    let scales: Vec<[f64; 3]> = [Some(before), cores]
+        .iter()
+        .flatten()
+        .filter_map(|i| i.scale)
+        .collect();
+    let extent = &layout.extent;
     let written = outputs::write_m3c2_laz(
         wd,
         &m3c2,

@@ -8,9 +8,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use talus_tiling::{
-    BoundsXY, Column, ColumnData, TileColumns, TileGrid, TileId, TileSplitter, OWNED_COLUMN,
-};
+use talus_tiling::{BoundsXY, TileGrid, TileId, TileSplitter};
 
 use crate::error::{Error, Result};
 use crate::io::{self, Bounds, CloudInfo, Point3};
@@ -40,6 +38,8 @@ pub struct Layout {
     /// Origin of the core-point grid (global).
     pub anchor: Point3,
     pub core_spacing: f64,
+    /// The bounds of every input (both epochs and the core-point file).
+    pub extent: Bounds,
 }
 
 impl Layout {
@@ -91,6 +91,7 @@ impl Layout {
             halo,
             anchor,
             core_spacing: c,
+            extent: b,
         })
     }
 
@@ -192,19 +193,10 @@ pub fn tile_epochs(
             .map(|((_, src, _), dir)| {
                 let failed = &failed;
                 s.spawn(move || {
-                    // Raised on the way out whatever happens (an error, even a panic), so
-                    // the other split stops too.
-                    struct RaiseUnlessOk<'a>(&'a AtomicBool, bool);
-                    impl Drop for RaiseUnlessOk<'_> {
-                        fn drop(&mut self) {
-                            if !self.1 {
-                                self.0.store(true, Ordering::Relaxed);
-                            }
-                        }
-                    }
-                    let mut guard = RaiseUnlessOk(failed, false);
                     let r = cut(dir, layout, src, share, stage, failed);
-                    guard.1 = r.is_ok();
+                    if r.is_err() {
+                        failed.store(true, Ordering::Relaxed);
+                    }
                     r
                 })
             })
@@ -337,14 +329,8 @@ fn cut(
     }
     for id in layout.grid.tiles() {
         if !has_file[layout.grid.index(id)] {
-            let empty = TileColumns {
-                extra: vec![Column {
-                    name: OWNED_COLUMN.into(),
-                    data: ColumnData::U8(Vec::new()),
-                }],
-                ..TileColumns::default()
-            };
-            talus_tiling::write_tile(&talus_tiling::tile_path(dir, id), &empty)
+            let path = talus_tiling::tile_path(dir, id);
+            talus_tiling::write_tile(&path, &talus_tiling::empty_columns())
                 .map_err(tiling_error)?;
         }
     }

@@ -84,22 +84,6 @@ impl Index {
             .visit(|it| f(it.item as usize, it.distance));
     }
 
-    /// Call `f(point)` with the coordinates (local frame) of every point within `radius` of `q`.
-    /// The coordinates come from the tree's own leaves, which the search has just read: no
-    /// random access into [`Index::points`] (a cache miss per neighbour on unsorted input).
-    #[inline]
-    pub fn for_each_point_within(&self, q: &Point3, radius: f64, mut f: impl FnMut(&Point3)) {
-        if self.points.is_empty() {
-            return;
-        }
-        self.tree
-            .query(q)
-            .within::<SquaredEuclidean<f64>>(radius * radius)
-            .unsorted()
-            .with_points()
-            .visit(|it| f(&it.point));
-    }
-
     /// The `k` nearest points to `q` (local frame) as (index, squared distance), nearest first;
     /// ties keep kiddo's order, then we sort by (distance, index) for determinism.
     pub fn nearest(&self, q: &Point3, k: usize) -> Vec<(usize, f64)> {

@@ -246,7 +246,9 @@ impl TileSplitter {
     }
 }
 
-fn empty_columns() -> TileColumns {
+/// The columns of a tile without points (x, y, z and an empty owned column): what a tile file
+/// holds when no point falls in its halo box.
+pub fn empty_columns() -> TileColumns {
     TileColumns {
         extra: vec![Column {
             name: OWNED_COLUMN.into(),
