@@ -261,8 +261,8 @@ impl Territory {
     }
     fn owner(&self, p: &Point3) -> u32 {
         let q = self.index.to_local(p);
-        match self.index.nearest(&q, 1).first() {
-            Some(&(i, d2)) if d2 <= self.reach * self.reach => self.ids[i],
+        match self.index.nearest_one(&q) {
+            Some((i, d2)) if d2 <= self.reach * self.reach => self.ids[i],
             _ => 0,
         }
     }
@@ -396,18 +396,8 @@ fn volumes(
             }
         }
     }
-    // Gathered tile by tile, the points come in an order that depends on the tiling; the
-    // triangulation of points on a lattice (ties) and the sums depend on it. Sort them, so the
-    // volumes are the same bytes whatever the tiling.
-    let by_xyz = |a: &Point3, b: &Point3| {
-        a[0].total_cmp(&b[0])
-            .then(a[1].total_cmp(&b[1]))
-            .then(a[2].total_cmp(&b[2]))
-    };
-    before
-        .par_iter_mut()
-        .chain(after.par_iter_mut())
-        .for_each(|v| v.sort_unstable_by(by_xyz));
+    // Gathered tile by tile, the points come in an order that depends on the tiling;
+    // `volume::epoch_tin` sorts what it triangulates, so the volumes do not.
     let spacing = params.point_spacing;
     let records = described
         .into_par_iter()

@@ -84,6 +84,20 @@ impl Index {
             .visit(|it| f(it.item as usize, it.distance));
     }
 
+    /// The nearest point to `q` (local frame) as (index, squared distance); None when nothing is
+    /// indexed. No allocation (a per-point lookup of the volume gather).
+    pub fn nearest_one(&self, q: &Point3) -> Option<(usize, f64)> {
+        if self.points.is_empty() {
+            return None;
+        }
+        let it = self
+            .tree
+            .query(q)
+            .nearest_one::<SquaredEuclidean<f64>>()
+            .execute();
+        Some((it.item as usize, it.distance))
+    }
+
     /// The `k` nearest points to `q` (local frame) as (index, squared distance), nearest first;
     /// ties keep kiddo's order, then we sort by (distance, index) for determinism.
     pub fn nearest(&self, q: &Point3, k: usize) -> Vec<(usize, f64)> {

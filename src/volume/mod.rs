@@ -96,7 +96,9 @@ fn check_params(obb: &Obb, margin: f64, spacing: f64) -> Result<()> {
 }
 
 /// The TIN of one epoch's (global) points in the event frame, covering `r`: points beyond
-/// `r` grown by 3 spacings are dropped. Returns the TIN and the number of points used.
+/// `r` grown by 3 spacings are dropped. Returns the TIN and the number of points used. The
+/// points may come in any order (a tiled run gathers them tile by tile): they are sorted first,
+/// because the triangulation of ties (points sharing u, v) depends on the insertion order.
 pub fn epoch_tin(
     frame: &Frame,
     r: &Footprint,
@@ -105,11 +107,16 @@ pub fn epoch_tin(
     epoch: &str,
 ) -> Result<(Tin, usize)> {
     let keep = r.grown(3.0 * spacing);
-    let local: Vec<[f64; 3]> = points
+    let mut local: Vec<[f64; 3]> = points
         .iter()
         .map(|p| frame.to_local(p))
         .filter(|l| l.iter().all(|x| x.is_finite()) && keep.contains(l[0], l[1]))
         .collect();
+    local.sort_unstable_by(|a, b| {
+        a[0].total_cmp(&b[0])
+            .then(a[1].total_cmp(&b[1]))
+            .then(a[2].total_cmp(&b[2]))
+    });
     let n = local.len();
     let mut tin = Tin::new(&local)
         .map_err(|e| Error::Epochs(format!("{epoch} epoch around the event: {e}")))?;
