@@ -20,7 +20,7 @@ use std::path::Path;
 
 use serde_json::Value;
 use talus::synth::Truth;
-use talus::volume::{check_watertight, read_ply_mesh, Mesh};
+use talus::volume::{check_watertight, read_ply_mesh};
 
 /// Relative volume tolerance of the issue: 2 % of the true volume.
 const REL_TOL: f64 = 0.02;
@@ -93,17 +93,11 @@ fn vec3(v: &Value) -> [f64; 3] {
 /// Run `talus compare BEFORE AFTER --out RES` (defaults only), read events.geojson, and check
 /// every written solid (see [`check_solids`]).
 fn compare(before: &Path, after: &Path, res: &Path) -> Vec<Found> {
-    let args = [
-        "compare",
-        before.to_str().expect("utf-8 path"),
-        after.to_str().expect("utf-8 path"),
-        "--out",
-        res.to_str().expect("utf-8 path"),
-    ];
-    let o = common::run(&args);
+    let o = common::run_compare(before, after, res, &[]);
     assert!(
         o.status.success(),
-        "talus {args:?} failed: {}",
+        "talus compare {} failed: {}",
+        before.display(),
         String::from_utf8_lossy(&o.stderr)
     );
     let text = std::fs::read_to_string(res.join("events.geojson")).expect("events.geojson");
@@ -134,30 +128,6 @@ fn compare(before: &Path, after: &Path, res: &Path) -> Vec<Found> {
     found
 }
 
-/// Signed volume of a closed triangle mesh by the divergence theorem, Σ (a · (b × c)) / 6 over
-/// its faces, relative to the first vertex (large UTM coordinates). Written here so the check
-/// does not rely on the pipeline's own volume code.
-fn mesh_volume(m: &Mesh) -> f64 {
-    let o = m.vertices[0];
-    let rel = |i: u32| -> [f64; 3] {
-        let p = m.vertices[i as usize];
-        [p[0] - o[0], p[1] - o[1], p[2] - o[2]]
-    };
-    m.faces
-        .iter()
-        .map(|f| {
-            let (a, b, c) = (rel(f[0]), rel(f[1]), rel(f[2]));
-            let bxc = [
-                b[1] * c[2] - b[2] * c[1],
-                b[2] * c[0] - b[0] * c[2],
-                b[0] * c[1] - b[1] * c[0],
-            ];
-            a[0] * bxc[0] + a[1] * bxc[1] + a[2] * bxc[2]
-        })
-        .sum::<f64>()
-        / 6.0
-}
-
 /// Issue item 3: both solids of every event are watertight (every edge shared by exactly two
 /// faces, once in each direction, positive volume), and V(after) − V(before) of the written
 /// solids is the reported volume_m3.
@@ -173,7 +143,7 @@ fn check_solids(res: &Path, found: &[Found]) {
             if let Err(why) = check_watertight(&mesh) {
                 panic!("{} is not a watertight solid: {why}", path.display());
             }
-            v[k] = mesh_volume(&mesh);
+            v[k] = talus::volume::solid::signed_volume(&mesh);
         }
         let dv = v[1] - v[0];
         assert!(

@@ -17,8 +17,9 @@ mod pipeline_common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use common::run_compare;
 use pipeline_common::{
-    assert_same_outputs, chunk_mtimes, cliff, compare, compare_output, done_m3c2_tiles, stage_line,
+    assert_same_outputs, chunk_mtimes, cliff, compare, done_m3c2_tiles, stage_line,
 };
 use talus::pipeline::progress::Stage;
 use talus::pipeline::{m3c2_pass, tiles, workdir::WorkDir, CompareOptions};
@@ -32,6 +33,11 @@ fn flip_last_byte(path: &Path) {
     let n = b.len();
     b[n - 1] ^= 0x5a;
     std::fs::write(path, b).unwrap();
+}
+
+/// `compare ARGS --resume` into `dir`, whatever its outcome.
+fn resume(before: &Path, after: &Path, dir: &Path) -> std::process::Output {
+    run_compare(before, after, dir, &[ARGS, &["--resume"]].concat())
 }
 
 fn stderr(o: &std::process::Output) -> String {
@@ -50,7 +56,7 @@ fn damaged_tile_and_result_files_are_rebuilt() {
     // A flipped byte in a tile of the after epoch: that epoch is cut again; its tiles come out
     // the same, so every M3C2 unit stays valid.
     flip_last_byte(&dir.join(".talus/tiles/after/t_0001_0001.tile"));
-    let out = compare_output(&before, &after, &dir, &[ARGS, &["--resume"]].concat());
+    let out = resume(&before, &after, &dir);
     assert!(out.status.success(), "{}", stderr(&out));
     assert_eq!(stage_line(&out.stderr, "pass 1: tiling"), (50_000, false));
     assert_eq!(
@@ -63,7 +69,7 @@ fn damaged_tile_and_result_files_are_rebuilt() {
     let times = chunk_mtimes(&dir);
     let damaged = "t_0002_0001.00000.tile";
     flip_last_byte(&dir.join(".talus/m3c2").join(damaged));
-    let out = compare_output(&before, &after, &dir, &[ARGS, &["--resume"]].concat());
+    let out = resume(&before, &after, &dir);
     assert!(out.status.success(), "{}", stderr(&out));
     assert_eq!(stage_line(&out.stderr, "pass 1: tiling"), (0, true));
     let (redone, reused) = stage_line(&out.stderr, "pass 2: normals and M3C2");
@@ -161,7 +167,7 @@ fn an_unwritable_work_directory_stops_the_run_cleanly_and_resume_finishes_it() {
     // DIR is a file.
     let file = tmp.path().join("a-file");
     std::fs::write(&file, b"not a directory").unwrap();
-    let out = compare_output(&before, &after, &file, ARGS);
+    let out = run_compare(&before, &after, &file, ARGS);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
     assert!(
         stderr(&out).contains(file.to_str().unwrap()),
@@ -177,7 +183,7 @@ fn an_unwritable_work_directory_stops_the_run_cleanly_and_resume_finishes_it() {
         eprintln!("chattr +i is not available here: the unwritable-directory cases are not tested");
         return;
     };
-    let out = compare_output(&before, &after, &dir, &[ARGS, &["--resume"]].concat());
+    let out = resume(&before, &after, &dir);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
     assert!(
         stderr(&out).contains(dir.to_str().unwrap()),
@@ -190,7 +196,7 @@ fn an_unwritable_work_directory_stops_the_run_cleanly_and_resume_finishes_it() {
     std::fs::create_dir_all(dir.join(".talus/m3c2")).unwrap();
     let m3c2 = dir.join(".talus/m3c2");
     let guard = Immutable::set(&m3c2).expect("chattr worked a moment ago");
-    let out = compare_output(&before, &after, &dir, &[ARGS, &["--resume"]].concat());
+    let out = resume(&before, &after, &dir);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
     assert!(
         stderr(&out).contains(m3c2.to_str().unwrap()),
@@ -199,7 +205,7 @@ fn an_unwritable_work_directory_stops_the_run_cleanly_and_resume_finishes_it() {
     );
     assert!(!dir.join("m3c2.laz").exists());
     drop(guard);
-    let out = compare_output(&before, &after, &dir, &[ARGS, &["--resume"]].concat());
+    let out = resume(&before, &after, &dir);
     assert!(out.status.success(), "{}", stderr(&out));
     assert_eq!(stage_line(&out.stderr, "pass 1: tiling"), (0, true));
     assert_same_outputs(&reference, &dir);
@@ -223,7 +229,7 @@ fn a_full_disk_stops_the_run_cleanly_and_resume_finishes_it() {
     std::fs::create_dir_all(&m3c2).unwrap();
     let tmp_name = m3c2.join("t_0001_0001.00000.tile.tmp");
     std::os::unix::fs::symlink(full, &tmp_name).unwrap();
-    let out = compare_output(&before, &after, &dir, &[ARGS, &["--resume"]].concat());
+    let out = resume(&before, &after, &dir);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
     let msg = stderr(&out);
     assert!(msg.contains(tmp_name.to_str().unwrap()), "{msg}");
@@ -238,7 +244,7 @@ fn a_full_disk_stops_the_run_cleanly_and_resume_finishes_it() {
     let times = chunk_mtimes(&dir);
     // Space is free again (talus removed its temporary, here the link).
     assert!(std::fs::symlink_metadata(&tmp_name).is_err());
-    let out = compare_output(&before, &after, &dir, &[ARGS, &["--resume"]].concat());
+    let out = resume(&before, &after, &dir);
     assert!(out.status.success(), "{}", stderr(&out));
     let now = chunk_mtimes(&dir);
     for tile in &done {
@@ -259,7 +265,7 @@ fn a_full_disk_stops_the_run_cleanly_and_resume_finishes_it() {
     std::fs::write(&before, &bytes).unwrap(); // new mtime: the before tiles must be redone
     let link = dir.join(".talus/manifest.json.tmp");
     std::os::unix::fs::symlink(full, &link).unwrap();
-    let out = compare_output(&before, &after, &dir, &[ARGS, &["--resume"]].concat());
+    let out = resume(&before, &after, &dir);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
     assert!(
         stderr(&out).contains(link.to_str().unwrap()),
@@ -267,7 +273,7 @@ fn a_full_disk_stops_the_run_cleanly_and_resume_finishes_it() {
         stderr(&out)
     );
     assert_eq!(std::fs::read(&manifest).unwrap(), saved);
-    let out = compare_output(&before, &after, &dir, &[ARGS, &["--resume"]].concat());
+    let out = resume(&before, &after, &dir);
     assert!(out.status.success(), "{}", stderr(&out));
     assert_same_outputs(&reference, &dir);
 }

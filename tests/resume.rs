@@ -13,10 +13,10 @@ use std::path::Path;
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 
+use common::run_compare;
 use common::Rng;
 use pipeline_common::{
-    assert_same_outputs, chunk_mtimes, cliff, compare, compare_output, compare_passes,
-    done_m3c2_tiles,
+    assert_same_outputs, chunk_mtimes, cliff, compare, compare_passes, done_m3c2_tiles,
 };
 
 /// Small tiles, so that pass 2 has many units to be killed between.
@@ -78,7 +78,7 @@ fn sigkill_at_random_moments_then_resume_gives_the_uninterrupted_result() {
         !finished.is_empty(),
         "no kill came after a finished M3C2 unit"
     );
-    let out = compare_output(&before, &after, &dir, &[ARGS, &["--resume"]].concat());
+    let out = run_compare(&before, &after, &dir, &[ARGS, &["--resume"]].concat());
     assert!(
         out.status.success(),
         "{}",
@@ -124,7 +124,7 @@ fn a_changed_parameter_or_input_redoes_exactly_what_depends_on_it() {
         [(120_000, false), (120_000, false)]
     );
     // A DIR holding a run is not overwritten without --resume or --force.
-    let out = compare_output(&before, &after, &dir, ARGS);
+    let out = run_compare(&before, &after, &dir, ARGS);
     assert_eq!(out.status.code(), Some(2));
 
     // Events parameters (threshold, eps) reuse the tiles and every M3C2 unit, and give what a
@@ -147,13 +147,10 @@ fn a_changed_parameter_or_input_redoes_exactly_what_depends_on_it() {
 
     // An M3C2 parameter that does not change the halo (the registration error) redoes pass 2
     // only.
+    let m3c2_params = [ARGS, &events_params, &["--reg-error", "0.01"]].concat();
+    let resumed = [m3c2_params.as_slice(), &["--resume"]].concat();
     assert_eq!(
-        compare_passes(
-            &before,
-            &after,
-            &dir,
-            &[ARGS, &events_params, &["--reg-error", "0.01", "--resume"]].concat()
-        ),
+        compare_passes(&before, &after, &dir, &resumed),
         [(0, true), (120_000, false)]
     );
 
@@ -163,20 +160,10 @@ fn a_changed_parameter_or_input_redoes_exactly_what_depends_on_it() {
     std::thread::sleep(Duration::from_millis(20));
     std::fs::write(&before, &bytes).unwrap();
     assert_eq!(
-        compare_passes(
-            &before,
-            &after,
-            &dir,
-            &[ARGS, &events_params, &["--reg-error", "0.01", "--resume"]].concat()
-        ),
+        compare_passes(&before, &after, &dir, &resumed),
         [(60_000, false), (120_000, false)]
     );
     let fresh2 = tmp.path().join("fresh2");
-    compare(
-        &before,
-        &after,
-        &fresh2,
-        &[ARGS, &events_params, &["--reg-error", "0.01"]].concat(),
-    );
+    compare(&before, &after, &fresh2, &m3c2_params);
     assert_same_outputs(&fresh2, &dir);
 }

@@ -3,7 +3,6 @@
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
-use std::process::Output;
 
 use crate::common::{run, run_compare};
 
@@ -111,15 +110,10 @@ pub fn assert_same_outputs(reference: &Path, other: &Path) {
     }
 }
 
-/// Run `talus compare` and return its output, whatever the exit status.
-pub fn compare_output(before: &Path, after: &Path, out: &Path, extra: &[&str]) -> Output {
-    run_compare(before, after, out, extra)
-}
-
 /// `compare` that must succeed; returns the stage lines of its two passes, tiling and M3C2, as
 /// [`stage_line`] reads them.
 pub fn compare_passes(before: &Path, after: &Path, out: &Path, extra: &[&str]) -> [(u64, bool); 2] {
-    let o = compare_output(before, after, out, extra);
+    let o = run_compare(before, after, out, extra);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     [
         stage_line(&o.stderr, "pass 1: tiling"),
