@@ -118,12 +118,10 @@ fn unit_name(id: TileId) -> String {
 /// The number of chunk files recorded for a finished unit whose files all still carry their
 /// recorded checksum; None when the unit must be (re)done.
 fn reusable(wd: &WorkDir, dir: &Path, id: TileId, hash: &str) -> Option<usize> {
-    let e = wd.entry(&unit_name(id))?;
-    if e.inputs_hash != hash {
-        return None;
-    }
-    let n: usize = e.file.parse().ok()?;
-    (chunks_checksum(dir, id, n).ok()? == e.checksum).then_some(n)
+    let e = wd.intact(&unit_name(id), hash, |e| {
+        chunks_checksum(dir, id, e.file.parse().ok()?).ok()
+    })?;
+    e.file.parse().ok()
 }
 
 /// FNV-1a over the CRC-32 of every chunk file of a tile.

@@ -260,9 +260,10 @@ fn unit_name(epoch: Epoch) -> String {
 /// still has its recorded checksum.
 fn reusable(wd: &WorkDir, layout: &Layout, epoch: Epoch, hash: &str) -> bool {
     let dir = wd.work.join(split_file(epoch));
-    wd.entry(&unit_name(epoch)).is_some_and(|e| {
-        e.inputs_hash == hash && split_checksum(&dir, &layout.grid).ok() == Some(e.checksum.clone())
+    wd.intact(&unit_name(epoch), hash, |_| {
+        split_checksum(&dir, &layout.grid).ok()
     })
+    .is_some()
 }
 
 /// The directory of an epoch's split, relative to the work directory.

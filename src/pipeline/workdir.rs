@@ -82,16 +82,10 @@ impl WorkDir {
         // the run key is not used to discard the manifest (a changed threshold must not redo
         // M3C2). A manifest that cannot be read at all (permissions, I/O) is an error.
         let mut manifest = if resume {
-            match Manifest::load(&manifest_path) {
-                Ok(m) if m.version == talus_tiling::manifest::MANIFEST_VERSION => m,
-                Ok(_) | Err(talus_tiling::Error::Corrupt { .. }) => Manifest::new(key_hash),
-                Err(talus_tiling::Error::Io { source, .. })
-                    if source.kind() == std::io::ErrorKind::NotFound =>
-                {
-                    Manifest::new(key_hash)
-                }
-                Err(e) => return Err(crate::pipeline::tiles::tiling_error(e)),
-            }
+            Manifest::load_or_new(&manifest_path, key_hash, |m| {
+                m.version == talus_tiling::manifest::MANIFEST_VERSION
+            })
+            .map_err(crate::pipeline::tiles::tiling_error)?
         } else {
             Manifest::new(key_hash)
         };
@@ -150,14 +144,23 @@ impl WorkDir {
             .map_err(crate::pipeline::tiles::tiling_error)
     }
 
-    /// Is `unit` done from exactly `inputs_hash`?
-    pub fn is_done(&self, unit: &str, inputs_hash: &str) -> bool {
-        self.manifest.is_done(unit, inputs_hash)
-    }
-
     /// The manifest entry of `unit`, if any.
     pub fn entry(&self, unit: &str) -> Option<&talus_tiling::UnitEntry> {
         self.manifest.units.get(unit)
+    }
+
+    /// The entry of `unit` when it can be reused: recorded as made from `inputs_hash`, and its
+    /// files' checksum now (`checksum` of the entry; None when they cannot be read) is the
+    /// recorded one.
+    pub fn intact(
+        &self,
+        unit: &str,
+        inputs_hash: &str,
+        checksum: impl FnOnce(&talus_tiling::UnitEntry) -> Option<String>,
+    ) -> Option<&talus_tiling::UnitEntry> {
+        let e = self.entry(unit)?;
+        (e.inputs_hash == inputs_hash && checksum(e).as_deref() == Some(e.checksum.as_str()))
+            .then_some(e)
     }
 
     /// After a failure: remove DIR again if this run created it and nothing is worth resuming.

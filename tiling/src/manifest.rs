@@ -58,8 +58,21 @@ impl Manifest {
     /// format version and `key_hash`; otherwise a fresh empty one (the run starts over). Only
     /// real I/O failures (e.g. permission denied) are errors.
     pub fn open(path: &Path, key_hash: &str) -> Result<Self> {
+        Self::load_or_new(path, key_hash, |m| {
+            m.version == MANIFEST_VERSION && m.key_hash == key_hash
+        })
+    }
+
+    /// The manifest at `path` when it exists, is readable and `keep` accepts it; otherwise a
+    /// fresh empty one for `key_hash` (a missing or damaged manifest only costs the redo of its
+    /// units). Only real I/O failures (e.g. permission denied) are errors.
+    pub fn load_or_new(
+        path: &Path,
+        key_hash: &str,
+        keep: impl FnOnce(&Manifest) -> bool,
+    ) -> Result<Self> {
         match Manifest::load(path) {
-            Ok(m) if m.version == MANIFEST_VERSION && m.key_hash == key_hash => Ok(m),
+            Ok(m) if keep(&m) => Ok(m),
             Ok(_) | Err(Error::Corrupt { .. }) => Ok(Manifest::new(key_hash)),
             Err(Error::Io { source, .. }) if source.kind() == std::io::ErrorKind::NotFound => {
                 Ok(Manifest::new(key_hash))
