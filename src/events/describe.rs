@@ -196,11 +196,13 @@ fn tighten_in_plane(
             [axes[0].dot(&d), axes[1].dot(&d)]
         })
         .collect();
-    let hull = convex_hull(pts.clone());
+    let hull = convex_hull(pts);
     if hull.len() < 3 {
         return axes;
     }
-    let mut best = (f64::INFINITY, 0.0f64);
+    // (area, cos, sin, extent along the side, extent across it) of the smallest rectangle. The
+    // hull's extremes are the points' extremes, so the hull alone measures every rectangle.
+    let mut best = (f64::INFINITY, 1.0, 0.0, 0.0, 0.0);
     for i in 0..hull.len() {
         let (a, b) = (hull[i], hull[(i + 1) % hull.len()]);
         let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
@@ -209,51 +211,44 @@ fn tighten_in_plane(
             continue;
         }
         let (c, s) = (dx / len, dy / len);
-        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-        for p in &hull {
-            let u = c * p[0] + s * p[1];
-            let v = -s * p[0] + c * p[1];
-            lo = [lo[0].min(u), lo[1].min(v)];
-            hi = [hi[0].max(u), hi[1].max(v)];
-        }
-        let area = (hi[0] - lo[0]) * (hi[1] - lo[1]);
+        let (du, dv) = extent(&hull, c, s);
         // Prefer the PCA orientation unless the rectangle is really smaller (stable for
         // elongated clusters, where PCA already gives the long side).
-        if area < best.0 * (1.0 - 1e-9) {
-            best = (area, s.atan2(c));
+        if du * dv < best.0 * (1.0 - 1e-9) {
+            best = (du * dv, c, s, du, dv);
         }
     }
-    let pca_area = {
-        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-        for p in &hull {
-            lo = [lo[0].min(p[0]), lo[1].min(p[1])];
-            hi = [hi[0].max(p[0]), hi[1].max(p[1])];
-        }
-        (hi[0] - lo[0]) * (hi[1] - lo[1])
-    };
-    if best.0.is_nan() || best.0 >= pca_area * 0.999 {
+    let (pu, pv) = extent(&hull, 1.0, 0.0);
+    if best.0.is_nan() || best.0 >= pu * pv * 0.999 {
         return axes;
     }
-    let (c, s) = (best.1.cos(), best.1.sin());
-    let mut e1 = axes[0] * c + axes[1] * s;
+    let (_, c, s, du, dv) = best;
     let e3 = axes[2];
+    let e1 = axes[0] * c + axes[1] * s;
     // Of the rectangle's two side directions take the longer as the first axis.
+    close_frame(if dv > du { e3.cross(&e1) } else { e1 }, e3)
+}
+
+/// Extents (along, across) of `pts` in the direction (c, s) and its perpendicular.
+fn extent(pts: &[[f64; 2]], c: f64, s: f64) -> (f64, f64) {
     let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-    for p in &pts {
+    for p in pts {
         let u = c * p[0] + s * p[1];
         let v = -s * p[0] + c * p[1];
         lo = [lo[0].min(u), lo[1].min(v)];
         hi = [hi[0].max(u), hi[1].max(v)];
     }
-    if hi[1] - lo[1] > hi[0] - lo[0] {
-        e1 = e3.cross(&e1);
-    }
+    (hi[0] - lo[0], hi[1] - lo[1])
+}
+
+/// A right-handed frame from a first axis and the third: the first axis made deterministic in
+/// sign (its largest component positive), re-orthogonalised to the third, the second closing
+/// the frame.
+fn close_frame(e1: Vector3<f64>, e3: Vector3<f64>) -> [Vector3<f64>; 3] {
     let imax = (0..3)
         .max_by(|&a, &b| e1[a].abs().total_cmp(&e1[b].abs()))
         .unwrap_or(0);
-    if e1[imax] < 0.0 {
-        e1 = -e1;
-    }
+    let e1 = if e1[imax] < 0.0 { -e1 } else { e1 };
     let e1 = (e1 - e3 * e3.dot(&e1)).normalize();
     [e1, e3.cross(&e1), e3]
 }
@@ -293,20 +288,8 @@ fn pca_axes(cov: &Matrix3<f64>, outward: &Vector3<f64>) -> [Vector3<f64>; 3] {
     let mut order = [0usize, 1, 2];
     order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
     let col = |i: usize| -> Vector3<f64> { eig.eigenvectors.column(order[i]).into_owned() };
-    let mut e1 = col(0);
-    let mut e3 = col(2);
-    if e3.dot(outward) < 0.0 {
-        e3 = -e3;
-    }
-    // Deterministic sign of the first axis: its largest component positive.
-    let imax = (0..3)
-        .max_by(|&a, &b| e1[a].abs().total_cmp(&e1[b].abs()))
-        .unwrap_or(0);
-    if e1[imax] < 0.0 {
-        e1 = -e1;
-    }
-    // Re-orthonormalise (the solver's vectors are orthogonal to rounding) and close the frame.
-    e1 = (e1 - e3 * e3.dot(&e1)).normalize();
-    let e2 = e3.cross(&e1);
-    [e1, e2, e3]
+    let e3 = col(2);
+    let e3 = if e3.dot(outward) < 0.0 { -e3 } else { e3 };
+    // The solver's vectors are orthogonal to rounding: close_frame re-orthonormalises.
+    close_frame(col(0), e3)
 }
