@@ -43,6 +43,13 @@ pub(crate) enum Scalar {
 }
 
 impl Scalar {
+    /// Read one binary value of this type from `r`.
+    pub(crate) fn read(self, r: &mut impl Read, enc: Encoding) -> std::io::Result<f64> {
+        let mut b = [0u8; 8];
+        r.read_exact(&mut b[..self.size()])?;
+        Ok(self.decode(&b, enc))
+    }
+
     pub(crate) fn parse(name: &str) -> Option<Scalar> {
         Some(match name {
             "char" | "int8" => Scalar::I8,
@@ -344,9 +351,7 @@ impl Pass {
     }
 
     fn read_binary_scalar(&mut self, s: Scalar, enc: Encoding) -> std::io::Result<f64> {
-        let mut b = [0u8; 8];
-        self.r.read_exact(&mut b[..s.size()])?;
-        Ok(s.decode(&b, enc))
+        s.read(&mut self.r, enc)
     }
 
     fn read_ascii_line(&mut self) -> std::io::Result<()> {

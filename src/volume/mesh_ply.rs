@@ -82,12 +82,9 @@ pub fn read_ply_mesh(path: &Path) -> Result<Mesh> {
                 t.parse::<f64>()
                     .map_err(|_| bad(format!("bad number '{t}' in PLY body")))
             }
-            _ => {
-                let mut b = [0u8; 8];
-                r.read_exact(&mut b[..s.size()])
-                    .map_err(|_| bad("PLY body ends early".into()))?;
-                Ok(s.decode(&b, enc))
-            }
+            _ => s
+                .read(r, enc)
+                .map_err(|_| bad("PLY body ends early".into())),
         }
     };
     for el in &elements {
