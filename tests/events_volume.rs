@@ -207,7 +207,7 @@ fn volume_of(
     after: &[[f64; 3]],
     spacing: f64,
 ) -> EventVolume {
-    let v = event_volume(&event.obb, margin, before, after, spacing).expect("volume");
+    let v = event_volume(&event.obb, margin, before, after, spacing, &|_| true).expect("volume");
     check_watertight(&v.before_solid).expect("before solid watertight");
     check_watertight(&v.after_solid).expect("after solid watertight");
     v
@@ -442,9 +442,10 @@ fn stable_pair_gives_no_volume() {
 }
 
 #[test]
-fn uncertainty_is_area_times_lod() {
+fn footprint_is_the_grown_box() {
     let (_, v) = box_case(1.0, 8);
-    assert!((v.uncertainty_m3(0.02) - 0.02 * v.footprint_area_m2).abs() < 1e-12);
+    assert_eq!(v.coverage, 1.0);
+    assert!((v.region_area_m2 - v.footprint_area_m2).abs() < 1e-9);
     // Footprint = the box's core-point extents grown by the 0.6 margin.
     assert!((v.footprint_area_m2 - (2.0 * 2.4) * (2.0 * 2.0)).abs() < 0.2);
 }
@@ -452,9 +453,16 @@ fn uncertainty_is_area_times_lod() {
 #[test]
 fn too_few_points_is_an_error_not_a_panic() {
     let ev = box_case_event();
-    let r = event_volume(&ev.obb, 0.5, &[[0.0, 0.0, 0.0]], &[[1.0, 1.0, 1.0]], 0.1);
+    let r = event_volume(
+        &ev.obb,
+        0.5,
+        &[[0.0, 0.0, 0.0]],
+        &[[1.0, 1.0, 1.0]],
+        0.1,
+        &|_| true,
+    );
     assert!(r.is_err());
-    let r = event_volume(&ev.obb, 0.5, &[], &[], 0.0);
+    let r = event_volume(&ev.obb, 0.5, &[], &[], 0.0, &|_| true);
     assert!(r.is_err());
 }
 
@@ -534,7 +542,7 @@ fn user_meshes_through_ply_give_the_box_volume() {
         UserMesh::new(&m1, &frame, &r),
         UserMesh::new(&m2, &frame, &r),
     );
-    let v = event_volume_from_surfaces(&ev.obb, 0.6, &s1, &s2, SPACING).unwrap();
+    let v = event_volume_from_surfaces(&ev.obb, 0.6, &s1, &s2, SPACING, &|_| true).unwrap();
     check_watertight(&v.before_solid).unwrap();
     check_watertight(&v.after_solid).unwrap();
     let err = report("user meshes, box 4x3x1.5", 18.0, &v);

@@ -1,13 +1,17 @@
 //! Event description (SPEC.md §1 "Event description"; Gorup & Bohak §3.4): statistics of a
 //! cluster and its PCA oriented bounding box.
 //!
-//! OBB by principal component analysis (Jolliffe 2002): the axes are the eigenvectors of the
-//! cluster's covariance matrix sorted by decreasing eigenvalue, so the third axis (smallest
-//! variance) approximates the surface normal. That axis is flipped to agree with the
-//! cluster's mean M3C2 normal ("out of the terrain", so below the surface = inside the
-//! material), the first axis is given a deterministic sign, and the second is their cross
-//! product, making the rows a right-handed orthonormal frame. Half extents are half the
-//! range of the projections on each axis, the centre the middle of those ranges.
+//! OBB: the third axis is the cluster's mean M3C2 normal, the direction its distances were
+//! measured along and "out of the terrain" (so below the surface = inside the material). The
+//! paper takes PCA's smallest-variance axis instead; for a small or elongated cluster (a dozen
+//! core points along a dune foot) the two smaller eigenvalues are about equal and that axis
+//! turns at random, up to 65° from the surface normal on the St Leonards beach. The volume stage
+//! may extrude along z instead ([`box_along`], `crate::volume::axis`). The first two axes are
+//! the principal components (Jolliffe 2002) of the points projected on the plane across the
+//! third, turned to the cluster's minimum-area rectangle; the first is given a deterministic
+//! sign and the second closes a right-handed orthonormal frame. Without usable normals the PCA
+//! axes are used. Half extents are half the range of the projections on each axis, the centre
+//! the middle of those ranges.
 
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use serde::{Deserialize, Serialize};
@@ -99,24 +103,7 @@ pub fn describe(
         return None;
     }
     let nf = n as f64;
-    // Centroid in two steps (local offsets from the first point) to keep precision with
-    // survey coordinates.
-    let o = points[0];
-    let mut c = [0.0; 3];
-    for p in points {
-        for k in 0..3 {
-            c[k] += p[k] - o[k];
-        }
-    }
-    let c_local = c.map(|x| x / nf);
-    let centroid = std::array::from_fn(|k| o[k] + c_local[k]);
-
-    let mut cov = Matrix3::<f64>::zeros();
-    for p in points {
-        let d = Vector3::new(p[0] - centroid[0], p[1] - centroid[1], p[2] - centroid[2]);
-        cov += d * d.transpose();
-    }
-    cov /= nf;
+    let (centroid, cov) = centroid_cov(points);
 
     let mut mn = Vector3::zeros();
     for nm in normals {
@@ -124,38 +111,14 @@ pub fn describe(
             mn += Vector3::new(nm[0], nm[1], nm[2]);
         }
     }
-    // Without usable normals, "out of the terrain" defaults to up.
-    let mean_normal = if mn.norm() > 1e-12 {
-        mn.normalize()
+    // Without usable normals, "out of the terrain" defaults to up and PCA gives the normal.
+    let (mean_normal, axes) = if mn.norm() > 1e-12 {
+        let n = mn.normalize();
+        (n, normal_axes(&cov, &n))
     } else {
-        Vector3::z()
+        (Vector3::z(), pca_axes(&cov, &Vector3::z()))
     };
-
-    let axes = pca_axes(&cov, &mean_normal);
-    // The in-plane axes: PCA's are arbitrary for a square or round cluster (two equal
-    // eigenvalues), and a box turned 45° grows its footprint's corners into the neighbours.
-    // Keep the third axis and turn the first two to the cluster's minimum-area rectangle.
-    let axes = tighten_in_plane(axes, points, &centroid);
-    // Extents of the projections.
-    let mut lo = [f64::INFINITY; 3];
-    let mut hi = [f64::NEG_INFINITY; 3];
-    for p in points {
-        let d = Vector3::new(p[0] - centroid[0], p[1] - centroid[1], p[2] - centroid[2]);
-        for k in 0..3 {
-            let t = axes[k].dot(&d);
-            lo[k] = lo[k].min(t);
-            hi[k] = hi[k].max(t);
-        }
-    }
-    let mid: [f64; 3] = std::array::from_fn(|k| 0.5 * (lo[k] + hi[k]));
-    let center = std::array::from_fn(|k| {
-        centroid[k] + mid[0] * axes[0][k] + mid[1] * axes[1][k] + mid[2] * axes[2][k]
-    });
-    let obb = Obb {
-        center,
-        axes: axes.map(|a| [a.x, a.y, a.z]),
-        half_extents: std::array::from_fn(|k| 0.5 * (hi[k] - lo[k])),
-    };
+    let obb = fit_box(axes, points, &centroid);
 
     let finite = |v: &[f64]| -> (f64, usize) {
         v.iter()
@@ -179,6 +142,66 @@ pub fn describe(
         obb,
         mean_normal: [mean_normal.x, mean_normal.y, mean_normal.z],
     })
+}
+
+/// The box of a cluster with `axis` (unit) as its third axis: the same construction as
+/// [`describe`]'s, for another extrusion direction.
+pub fn box_along(points: &[[f64; 3]], axis: [f64; 3]) -> Option<Obb> {
+    if points.is_empty() {
+        return None;
+    }
+    let (centroid, cov) = centroid_cov(points);
+    let a = Vector3::new(axis[0], axis[1], axis[2]).normalize();
+    Some(fit_box(normal_axes(&cov, &a), points, &centroid))
+}
+
+/// Centroid and covariance of a non-empty point set. The centroid in two steps (local offsets
+/// from the first point) to keep precision with survey coordinates.
+fn centroid_cov(points: &[[f64; 3]]) -> ([f64; 3], Matrix3<f64>) {
+    let nf = points.len() as f64;
+    let o = points[0];
+    let mut c = [0.0; 3];
+    for p in points {
+        for k in 0..3 {
+            c[k] += p[k] - o[k];
+        }
+    }
+    let centroid = std::array::from_fn(|k| o[k] + c[k] / nf);
+    let mut cov = Matrix3::<f64>::zeros();
+    for p in points {
+        let d = Vector3::new(p[0] - centroid[0], p[1] - centroid[1], p[2] - centroid[2]);
+        cov += d * d.transpose();
+    }
+    (centroid, cov / nf)
+}
+
+/// The box of `points` with the third of `axes` kept and the first two turned to the
+/// minimum-area rectangle.
+fn fit_box(axes: [Vector3<f64>; 3], points: &[[f64; 3]], centroid: &[f64; 3]) -> Obb {
+    // The in-plane axes: PCA's are arbitrary for a square or round cluster (two equal
+    // eigenvalues), and a box turned 45° grows its footprint's corners into the neighbours.
+    // Keep the third axis and turn the first two to the cluster's minimum-area rectangle.
+    let axes = tighten_in_plane(axes, points, centroid);
+    // Extents of the projections.
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for p in points {
+        let d = Vector3::new(p[0] - centroid[0], p[1] - centroid[1], p[2] - centroid[2]);
+        for k in 0..3 {
+            let t = axes[k].dot(&d);
+            lo[k] = lo[k].min(t);
+            hi[k] = hi[k].max(t);
+        }
+    }
+    let mid: [f64; 3] = std::array::from_fn(|k| 0.5 * (lo[k] + hi[k]));
+    let center = std::array::from_fn(|k| {
+        centroid[k] + mid[0] * axes[0][k] + mid[1] * axes[1][k] + mid[2] * axes[2][k]
+    });
+    Obb {
+        center,
+        axes: axes.map(|a| [a.x, a.y, a.z]),
+        half_extents: std::array::from_fn(|k| 0.5 * (hi[k] - lo[k])),
+    }
 }
 
 /// Turn the first two axes about the third to the minimum-area enclosing rectangle of the points
@@ -280,6 +303,26 @@ fn convex_hull(mut p: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
     // The upper chain ends where the lower one started.
     h.pop();
     h
+}
+
+/// Right-handed axes with `normal` as the third and the principal direction of the covariance
+/// across it as the first.
+fn normal_axes(cov: &Matrix3<f64>, normal: &Vector3<f64>) -> [Vector3<f64>; 3] {
+    let p = Matrix3::identity() - normal * normal.transpose();
+    let eig = SymmetricEigen::new(p * cov * p);
+    let first = (0..3)
+        .max_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]))
+        .unwrap_or(0);
+    let e1 = eig.eigenvectors.column(first).into_owned();
+    // A cluster of one point (or all on the normal's line) has no direction across it.
+    let e1 = if (e1 - normal * normal.dot(&e1)).norm() > 1e-9 {
+        e1
+    } else if normal.x.abs() < 0.9 {
+        Vector3::x()
+    } else {
+        Vector3::y()
+    };
+    close_frame(e1, *normal)
 }
 
 /// Right-handed PCA axes: decreasing variance, third axis agreeing with `outward`.

@@ -31,6 +31,8 @@ fn properties(r: &EventRecord) -> Value {
         "n_points": e.n_points,
         "area_m2": e.area_m2,
         "footprint_area_m2": opt(r.footprint_area_m2),
+        "region_area_m2": opt(r.region_area_m2),
+        "coverage": opt(r.coverage),
         "mean_distance_m": e.mean_distance,
         "max_abs_distance_m": e.max_abs_distance,
         "mean_lod95_m": e.mean_lod95,
@@ -61,6 +63,40 @@ pub fn write_meshes(wd: &WorkDir, events: &[EventRecord]) -> Result<Vec<(u32, Ev
     Ok(out)
 }
 
+/// Write event_regions.geojson: per event the outline of the region its volume was integrated
+/// over (Polygon or MultiPolygon, 3-D coordinates in the footprint plane; null geometry for an
+/// event without a volume).
+pub fn write_regions(wd: &WorkDir, events: &[EventRecord], crs: &Crs) -> Result<()> {
+    let features: Vec<Value> = events
+        .iter()
+        .map(|r| {
+            let geometry = match r.region.len() {
+                0 => Value::Null,
+                1 => json!({ "type": "Polygon", "coordinates": r.region[0] }),
+                _ => json!({ "type": "MultiPolygon", "coordinates": r.region }),
+            };
+            json!({
+                "type": "Feature",
+                "geometry": geometry,
+                "properties": {
+                    "id": r.event.id,
+                    "kind": r.event.kind.as_str(),
+                    "volume_m3": opt(r.volume_m3),
+                    "region_area_m2": opt(r.region_area_m2),
+                    "coverage": opt(r.coverage),
+                },
+            })
+        })
+        .collect();
+    let fc = json!({
+        "type": "FeatureCollection",
+        "crs_name": crs.describe(),
+        "features": features,
+    });
+    let text = serde_json::to_string(&fc).map_err(|e| Error::Internal(e.to_string()))?;
+    write_atomic(&wd.out.join("event_regions.geojson"), text.as_bytes())
+}
+
 /// Write events.geojson and events.csv.
 pub fn write_tables(wd: &WorkDir, events: &[EventRecord], crs: &Crs) -> Result<()> {
     let features: Vec<Value> = events
@@ -83,7 +119,7 @@ pub fn write_tables(wd: &WorkDir, events: &[EventRecord], crs: &Crs) -> Result<(
 
     let mut csv = String::from(
         "id,kind,x,y,z,volume_m3,volume_uncertainty_m3,gain_m3,loss_m3,n_points,area_m2,\
-         mean_distance_m,max_abs_distance_m,mean_lod95_m,obb_center_x,obb_center_y,obb_center_z,\
+         mean_distance_m,max_abs_distance_m,mean_lod95_m,coverage,region_area_m2,obb_center_x,obb_center_y,obb_center_z,\
          obb_axis1_x,obb_axis1_y,obb_axis1_z,obb_axis2_x,obb_axis2_y,obb_axis2_z,\
          obb_axis3_x,obb_axis3_y,obb_axis3_z,obb_half_1,obb_half_2,obb_half_3\n",
     );
@@ -106,6 +142,8 @@ pub fn write_tables(wd: &WorkDir, events: &[EventRecord], crs: &Crs) -> Result<(
             format!("{:.6}", e.mean_distance),
             format!("{:.6}", e.max_abs_distance),
             format!("{:.6}", e.mean_lod95),
+            f(r.coverage),
+            f(r.region_area_m2),
         ];
         row.extend(o.center.iter().map(|v| format!("{v:.4}")));
         for a in &o.axes {

@@ -16,11 +16,12 @@ use serde::Serialize;
 use crate::error::Result;
 use crate::events::{self, dbscan, Event, Kind, Obb};
 use crate::io::Point3;
+use crate::m3c2::orientation::STEEP_NZ;
 use crate::params::Params;
 use crate::pipeline::m3c2_pass::M3c2Results;
 use crate::pipeline::outputs::MergedResults;
 use crate::pipeline::tiles::{self, Layout, Tiled};
-use crate::spatial::Index;
+use crate::spatial::BoxIndex;
 use crate::volume::{self, EventVolume, Mesh};
 
 /// A kept core point.
@@ -43,10 +44,52 @@ pub struct EventRecord {
     pub gain_m3: Option<f64>,
     pub loss_m3: Option<f64>,
     pub footprint_area_m2: Option<f64>,
+    /// Area of the region the volume was integrated over.
+    pub region_area_m2: Option<f64>,
+    /// Share of the footprint both epochs cover.
+    pub coverage: Option<f64>,
     /// Why there is no volume, when there is none.
     pub volume_note: Option<String>,
     #[serde(skip)]
     pub solids: Option<(Mesh, Mesh)>,
+    /// The region's outline: polygons of rings of global points (see `EventVolume::outline`).
+    #[serde(skip)]
+    pub region: Vec<Vec<Vec<Point3>>>,
+}
+
+impl EventRecord {
+    /// The record of event `e` from its volume (or why it has none).
+    fn new(e: Event, v: Result<EventVolume>) -> EventRecord {
+        match v {
+            Ok(v) => EventRecord {
+                volume_m3: Some(v.volume_m3),
+                // The conservative bound: region area × mean LoD95.
+                volume_uncertainty_m3: Some(v.region_area_m2 * e.mean_lod95),
+                gain_m3: Some(v.gain_m3),
+                loss_m3: Some(v.loss_m3),
+                footprint_area_m2: Some(v.footprint_area_m2),
+                region_area_m2: Some(v.region_area_m2),
+                coverage: Some(v.coverage),
+                volume_note: None,
+                region: v.outline(),
+                solids: Some((v.before_solid, v.after_solid)),
+                event: e,
+            },
+            Err(err) => EventRecord {
+                volume_m3: None,
+                volume_uncertainty_m3: None,
+                gain_m3: None,
+                loss_m3: None,
+                footprint_area_m2: None,
+                region_area_m2: None,
+                coverage: None,
+                volume_note: Some(err.to_string()),
+                region: Vec::new(),
+                solids: None,
+                event: e,
+            },
+        }
+    }
 }
 
 /// What the events stage produced.
@@ -241,81 +284,61 @@ pub fn margin(params: &Params) -> f64 {
     params.cyl_radius.value + 2.0 * params.point_spacing
 }
 
-/// Which event, if any, a point near the events belongs to: the event of the nearest clustered
-/// core point within `reach` (3-D distance, so it works on cliffs too).
-struct Territory {
-    index: Index,
-    ids: Vec<u32>,
-    reach: f64,
-}
-
-impl Territory {
-    fn new(labelled: &[(Point3, u32)], reach: f64) -> Self {
-        let pts: Vec<Point3> = labelled.iter().map(|l| l.0).collect();
-        let origin = pts.first().copied().unwrap_or_default();
-        Territory {
-            index: Index::new(&pts, origin),
-            ids: labelled.iter().map(|l| l.1).collect(),
-            reach,
-        }
+/// The boxes an event's volume may be extruded along: its mean normal's, and straight up's
+/// where the normal is not steep (see `volume::axis`).
+fn candidate_boxes(e: &Event, cluster: &[Point3]) -> Vec<Obb> {
+    let mut boxes = vec![e.obb];
+    let n = e.mean_normal;
+    if n[2] >= STEEP_NZ && n[2] < 1.0 - 1e-9 {
+        boxes.extend(events::describe::box_along(cluster, [0.0, 0.0, 1.0]));
     }
-    fn owner(&self, p: &Point3) -> u32 {
-        let q = self.index.to_local(p);
-        match self.index.nearest_one(&q) {
-            Some((i, d2)) if d2 <= self.reach * self.reach => self.ids[i],
-            _ => 0,
+    boxes
+}
+
+/// Each event's points of both epochs inside any of its search boxes, from the tiles the boxes
+/// touch (owned points only: no duplicates from halos).
+#[allow(clippy::type_complexity)]
+fn gather(
+    boxes: &[Vec<([f64; 3], [f64; 4], Obb)>],
+    layout: &Layout,
+    tiled: &Tiled,
+) -> Result<(Vec<Vec<Point3>>, Vec<Vec<Point3>>)> {
+    let mut before: Vec<Vec<Point3>> = vec![Vec::new(); boxes.len()];
+    let mut after: Vec<Vec<Point3>> = vec![Vec::new(); boxes.len()];
+    let flat: Vec<(usize, &([f64; 3], [f64; 4], Obb))> = boxes
+        .iter()
+        .enumerate()
+        .flat_map(|(e, b)| b.iter().map(move |x| (e, x)))
+        .collect();
+    let index = BoxIndex::new(&flat.iter().map(|(_, b)| b.1).collect::<Vec<_>>());
+    for id in layout.grid.tiles() {
+        let sq = layout.grid.square(id);
+        if !index.any_overlaps(&[sq.min[0], sq.min[1], sq.max[0], sq.max[1]]) {
+            continue;
         }
-    }
-}
-
-/// A coarse XY grid over the events' search boxes: which events may contain a point.
-struct BoxGrid {
-    origin: [f64; 2],
-    cell: f64,
-    cells: HashMap<(i64, i64), Vec<usize>>,
-}
-
-impl BoxGrid {
-    fn new(boxes: &[[f64; 4]]) -> Self {
-        let mut ext: Vec<f64> = boxes
-            .iter()
-            .map(|b| (b[2] - b[0]).max(b[3] - b[1]))
-            .collect();
-        ext.sort_by(|a, b| a.total_cmp(b));
-        let cell = ext.get(ext.len() / 2).copied().unwrap_or(1.0).max(1e-6);
-        let origin = [
-            boxes.iter().map(|b| b[0]).fold(f64::INFINITY, f64::min),
-            boxes.iter().map(|b| b[1]).fold(f64::INFINITY, f64::min),
-        ];
-        let mut cells: HashMap<(i64, i64), Vec<usize>> = HashMap::new();
-        for (e, b) in boxes.iter().enumerate() {
-            let (x0, y0) = (
-                ((b[0] - origin[0]) / cell) as i64,
-                ((b[1] - origin[1]) / cell) as i64,
-            );
-            let (x1, y1) = (
-                ((b[2] - origin[0]) / cell) as i64,
-                ((b[3] - origin[1]) / cell) as i64,
-            );
-            for x in x0..=x1 {
-                for y in y0..=y1 {
-                    cells.entry((x, y)).or_default().push(e);
+        for (dir, out) in [(&tiled.before, &mut before), (&tiled.after, &mut after)] {
+            let t = tiles::read_tile(dir, id)?;
+            for (i, &own) in t.owned.iter().enumerate() {
+                if !own {
+                    continue;
+                }
+                let p = t.point(i);
+                let mut last = usize::MAX;
+                for k in index.containing(p[0], p[1]) {
+                    let (e, (h, _, obb)) = flat[k];
+                    if e == last {
+                        continue;
+                    }
+                    let l = obb.to_local(&p);
+                    if l[0].abs() <= h[0] && l[1].abs() <= h[1] && l[2].abs() <= h[2] {
+                        out[e].push(p);
+                        last = e;
+                    }
                 }
             }
         }
-        BoxGrid {
-            origin,
-            cell,
-            cells,
-        }
     }
-    fn candidates(&self, x: f64, y: f64) -> &[usize] {
-        let k = (
-            ((x - self.origin[0]) / self.cell).floor() as i64,
-            ((y - self.origin[1]) / self.cell).floor() as i64,
-        );
-        self.cells.get(&k).map(|v| v.as_slice()).unwrap_or(&[])
-    }
+    Ok((before, after))
 }
 
 fn volumes(
@@ -327,10 +350,7 @@ fn volumes(
     meshes: (Option<&Path>, Option<&Path>),
 ) -> Result<Vec<EventRecord>> {
     let margin = margin(params);
-    let boxes: Vec<([f64; 3], [f64; 4])> = described
-        .iter()
-        .map(|e| search_box(&e.obb, margin, params))
-        .collect();
+    let spacing = params.point_spacing;
     let user = match meshes {
         (Some(b), Some(a)) => Some((volume::read_ply_mesh(b)?, volume::read_ply_mesh(a)?)),
         (Some(p), None) | (None, Some(p)) => {
@@ -341,100 +361,98 @@ fn volumes(
         }
         (None, None) => None,
     };
-    // Gather each event's points from the tiles its box touches (owned points only: no
-    // duplicates from halos). Where a point lies in another event's territory, that event's
-    // change is taken out: event i sees the C1 surface there in both epochs.
-    let mut before: Vec<Vec<Point3>> = vec![Vec::new(); described.len()];
-    let mut after: Vec<Vec<Point3>> = vec![Vec::new(); described.len()];
-    if user.is_none() && !described.is_empty() {
-        let xy: Vec<[f64; 4]> = boxes.iter().map(|b| b.1).collect();
-        let grid = BoxGrid::new(&xy);
-        let territory = Territory::new(labelled, margin);
-        for id in layout.grid.tiles() {
-            let sq = layout.grid.square(id);
-            let touches = xy.iter().any(|b| {
-                b[0] <= sq.max[0] && b[2] >= sq.min[0] && b[1] <= sq.max[1] && b[3] >= sq.min[1]
-            });
-            if !touches {
-                continue;
-            }
-            for epoch in [0, 1] {
-                let dir = if epoch == 0 {
-                    &tiled.before
-                } else {
-                    &tiled.after
-                };
-                let t = tiles::read_tile(dir, id)?;
-                for (i, &own) in t.owned.iter().enumerate() {
-                    if !own {
-                        continue;
-                    }
-                    let p = &t.point(i);
-                    let mut owner = None;
-                    for &e in grid.candidates(p[0], p[1]) {
-                        let (h, b) = &boxes[e];
-                        if p[0] < b[0] || p[0] > b[2] || p[1] < b[1] || p[1] > b[3] {
-                            continue;
-                        }
-                        let l = described[e].obb.to_local(p);
-                        if l[0].abs() > h[0] || l[1].abs() > h[1] || l[2].abs() > h[2] {
-                            continue;
-                        }
-                        let o = *owner.get_or_insert_with(|| territory.owner(p));
-                        let foreign = o != 0 && o != described[e].id;
-                        match (epoch, foreign) {
-                            (0, false) => before[e].push(*p),
-                            (0, true) => {
-                                before[e].push(*p);
-                                after[e].push(*p);
-                            }
-                            (_, false) => after[e].push(*p),
-                            (_, true) => {}
-                        }
-                    }
-                }
-            }
-        }
+    let mut cores: HashMap<u32, Vec<Point3>> = HashMap::new();
+    for &(p, id) in labelled {
+        cores.entry(id).or_default().push(p);
     }
+    let no_cores = Vec::new();
+    let cluster = |e: &Event| cores.get(&e.id).unwrap_or(&no_cores);
+    // Points for every candidate box (user meshes: none, and the mean normal's box).
+    let candidates: Vec<Vec<Obb>> = described
+        .iter()
+        .map(|e| match user {
+            Some(_) => vec![e.obb],
+            None => candidate_boxes(e, cluster(e)),
+        })
+        .collect();
+    let boxes: Vec<Vec<([f64; 3], [f64; 4], Obb)>> = candidates
+        .iter()
+        .map(|c| {
+            c.iter()
+                .map(|o| {
+                    let (h, xy) = search_box(o, margin, params);
+                    (h, xy, *o)
+                })
+                .collect()
+        })
+        .collect();
+    let (before, after) = match user {
+        Some(_) => (
+            vec![Vec::new(); described.len()],
+            vec![Vec::new(); described.len()],
+        ),
+        None => gather(&boxes, layout, tiled)?,
+    };
+    // The extrusion axis: the candidate in which both epochs have the fewest points on walls or
+    // fold-overs (volume::axis); the mean normal on a tie.
+    let described: Vec<Event> = described
+        .into_par_iter()
+        .zip(&boxes)
+        .enumerate()
+        .map(|(i, (mut e, cands))| {
+            let walls = |(h, _, o): &([f64; 3], [f64; 4], Obb)| {
+                let frame = volume::Frame::of_obb(o);
+                let r = volume::Footprint::of_obb(o, margin);
+                volume::axis::wall_points(&frame, &r, h[2], &before[i], spacing)
+                    + volume::axis::wall_points(&frame, &r, h[2], &after[i], spacing)
+            };
+            if cands.len() > 1 {
+                let counts: Vec<usize> = cands.iter().map(walls).collect();
+                let best = (0..cands.len())
+                    .min_by_key(|&k| (counts[k], k))
+                    .unwrap_or(0);
+                e.obb = cands[best].2;
+            }
+            e
+        })
+        .collect();
+    // Each event claims its search box; a location in several boxes belongs to the event with
+    // the nearest clustered core point (volume::ownership).
+    let claims: Vec<volume::Claim> = described
+        .iter()
+        .map(|e| {
+            let (h, _) = search_box(&e.obb, margin, params);
+            volume::Claim::new(
+                e.id,
+                volume::Frame::of_obb(&e.obb),
+                volume::Footprint::of_obb(&e.obb, margin),
+                h[2],
+                cluster(e),
+            )
+        })
+        .collect();
+    let ownership = volume::Ownership::new(claims);
     // Gathered tile by tile, the points come in an order that depends on the tiling;
     // `volume::epoch_tin` sorts what it triangulates, so the volumes do not.
-    let spacing = params.point_spacing;
     let records = described
         .into_par_iter()
         .enumerate()
         .map(|(i, e)| {
+            let id = e.id;
+            let owned = |x: &Point3| ownership.owner(x) == Some(id);
             let v: Result<EventVolume> = match &user {
                 Some((mb, ma)) => {
                     let frame = volume::Frame::of_obb(&e.obb);
                     let r = volume::Footprint::of_obb(&e.obb, margin);
                     let sb = volume::UserMesh::new(mb, &frame, &r);
                     let sa = volume::UserMesh::new(ma, &frame, &r);
-                    volume::event_volume_from_surfaces(&e.obb, margin, &sb, &sa, spacing)
+                    volume::event_volume_from_surfaces(&e.obb, margin, &sb, &sa, spacing, &owned)
                 }
-                None => volume::event_volume(&e.obb, margin, &before[i], &after[i], spacing),
+                None => {
+                    volume::event_volume(&e.obb, margin, &before[i], &after[i], spacing, &owned)
+                }
             };
-            match v {
-                Ok(v) => EventRecord {
-                    volume_m3: Some(v.volume_m3),
-                    volume_uncertainty_m3: Some(v.uncertainty_m3(e.mean_lod95)),
-                    gain_m3: Some(v.gain_m3),
-                    loss_m3: Some(v.loss_m3),
-                    footprint_area_m2: Some(v.footprint_area_m2),
-                    volume_note: None,
-                    solids: Some((v.before_solid, v.after_solid)),
-                    event: e,
-                },
-                Err(err) => EventRecord {
-                    volume_m3: None,
-                    volume_uncertainty_m3: None,
-                    gain_m3: None,
-                    loss_m3: None,
-                    footprint_area_m2: None,
-                    volume_note: Some(err.to_string()),
-                    solids: None,
-                    event: e,
-                },
-            }
+            EventRecord::new(e, v)
         })
         .collect();
     Ok(records)

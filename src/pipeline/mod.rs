@@ -322,6 +322,7 @@ fn run_stages(
     } else {
         let meshes = event_outputs::write_meshes(wd, &ev.events)?;
         event_outputs::write_tables(wd, &ev.events, &before.crs)?;
+        event_outputs::write_regions(wd, &ev.events, &before.crs)?;
         meshes
     };
     terrain.write(wd, &before.crs, &meshes)?;

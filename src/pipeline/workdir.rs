@@ -14,6 +14,7 @@ pub const OUTPUTS: &[&str] = &[
     "m3c2.laz",
     "events.geojson",
     "events.csv",
+    "event_regions.geojson",
     "summary.json",
     "view.json",
     "terrain.bin",

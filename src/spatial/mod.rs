@@ -5,9 +5,12 @@
 //!   (spacing, smoothing, DBSCAN, volumes).
 //! - [`Columns`]: a grid of vertical point columns sorted by height, for the two queries M3C2 makes
 //!   at every core point: a sphere (normals) and a cylinder along an arbitrary axis.
+//! - [`BoxIndex`]: which of many xy boxes contain a point (events' search boxes and claims).
 
+mod boxes;
 mod columns;
 mod kdtree;
 
+pub use boxes::BoxIndex;
 pub use columns::Columns;
 pub use kdtree::{median_nn_distance, Index};

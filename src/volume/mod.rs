@@ -1,58 +1,74 @@
-//! Event volumes (SPEC.md §1 "Volume"; Gorup & Bohak §3.5, with the fixes of SPEC.md §4):
-//! the volume between the before (C1) and after (C2) surfaces over the event's footprint.
+//! Event volumes (SPEC.md §1 "Volume" and "Volume accounting"; Gorup & Bohak §3.5, with the
+//! fixes of SPEC.md §4): the volume between the before (C1) and after (C2) surfaces over the
+//! event's region.
 //!
 //! Method, per event:
 //! 1. Frame: the event's OBB axes (u, v, w), w = outward normal ([`frame`]).
 //! 2. Footprint: the OBB's first two extents grown by `margin` on every side, so the rim of
 //!    the change lies inside; the same rectangle R for both epochs.
 //! 3. Surfaces: each epoch's points near the event, in (u, v, w), triangulated in (u, v)
-//!    (2.5-D Delaunay TIN, [`surface`]); outside the data's hull, the nearest vertex's height.
-//! 4. Solids: each TIN clipped exactly to R, closed by walls down to one common base plane
-//!    below both surfaces and a bottom: two watertight solids ([`solid`]).
-//! 5. Volume of each solid by the divergence theorem; V = V(after) − V(before), positive for
+//!    (2.5-D Delaunay TIN, [`surface`]); no height outside the data's hull.
+//! 4. Region ([`region`]): the cells of R that both epochs cover (no hole, nothing beyond the
+//!    data) and that no other event owns ([`ownership`]).
+//! 5. Solids: each TIN clipped exactly to the region's cells, closed by walls down to one common
+//!    base plane below both surfaces and a bottom: two watertight solids ([`solid`]).
+//! 6. Volume of each solid by the divergence theorem; V = V(after) − V(before), positive for
 //!    gain (the after surface lies further out along w). The base cancels in the difference.
-//! 6. Gross gain and loss: ∫ max(Δw, 0) and ∫ min(Δw, 0) over R, Δw = w_after − w_before,
-//!    by the midpoint rule on cells of spacing/2 (at most 1 M cells). (Net V is exact for the
+//! 7. Gross gain and loss: ∫ max(Δw, 0) and ∫ min(Δw, 0) over the region, Δw = w_after −
+//!    w_before, by the midpoint rule on sub-cells of about spacing/2. (Net V is exact for the
 //!    TINs; gain + loss equals it up to the sampling of the steps.)
-//!
-//! Uncertainty ([`EventVolume::uncertainty_m3`]): the conservative bound footprint area ×
-//! mean LoD95 of the event, i.e. every square metre compared could be off by the level of
-//! detection, all errors of the same sign (the registration error part of LoD95 is indeed
-//! fully correlated over an event).
 //!
 //! Callers pass each epoch's points around the event: at least R grown by a few spacings in
 //! (u, v) (extra points are ignored beyond 3 spacings), and along w far enough to hold both
-//! surfaces (at least the M3C2 cylinder half-length, since a distance can reach it).
-//! Everything here is a pure function of its inputs (Send + Sync), for rayon.
+//! surfaces (at least the M3C2 cylinder half-length, since a distance can reach it), and say
+//! which locations the event owns. Everything here is a pure function of its inputs (Send +
+//! Sync), for rayon.
 
+pub mod axis;
+pub mod boundary;
 pub mod frame;
 pub mod mesh_ply;
+pub mod ownership;
+pub mod region;
 pub mod solid;
 pub mod surface;
 pub mod user_mesh;
 
 pub use frame::{Footprint, Frame};
 pub use mesh_ply::{check_watertight, read_ply_mesh, write_ply};
+pub use ownership::{Claim, Ownership};
+pub use region::{Cells, Polygon, Region};
 pub use solid::Mesh;
 pub use surface::{Surface, Tin};
 pub use user_mesh::UserMesh;
 
+use rayon::prelude::*;
+
 use crate::error::{Error, Result};
 use crate::events::Obb;
+
+/// Which locations (global coordinates, on the before surface) an event may count.
+pub type Owned<'a> = &'a (dyn Fn(&[f64; 3]) -> bool + Sync);
 
 /// The volume of one event and its two solids.
 #[derive(Debug, Clone, PartialEq)]
 pub struct EventVolume {
-    /// V(after) − V(before), m³ for metric input (loss < 0).
+    /// V(after) − V(before) over the region, m³ for metric input (loss < 0).
     pub volume_m3: f64,
-    /// ∫ max(Δw, 0) over the footprint (≥ 0).
+    /// ∫ max(Δw, 0) over the region (≥ 0).
     pub gain_m3: f64,
-    /// ∫ min(Δw, 0) over the footprint (≤ 0).
+    /// ∫ min(Δw, 0) over the region (≤ 0).
     pub loss_m3: f64,
     /// Area of the footprint rectangle.
     pub footprint_area_m2: f64,
+    /// Area of the region the volume is integrated over.
+    pub region_area_m2: f64,
+    /// Share of the footprint both epochs cover (0..1).
+    pub coverage: f64,
     /// The footprint in the event frame.
     pub footprint: Footprint,
+    /// The region's cells.
+    pub region: Region,
     /// The frame (origin, axes) the footprint is expressed in.
     pub frame: Frame,
     /// The common base plane, w = base_w in the frame.
@@ -69,9 +85,28 @@ pub struct EventVolume {
 }
 
 impl EventVolume {
-    /// Conservative volume uncertainty: footprint area × the event's mean LoD95.
-    pub fn uncertainty_m3(&self, mean_lod95: f64) -> f64 {
-        self.footprint_area_m2 * mean_lod95
+    /// The region's outline in global coordinates: polygons (outer ring, holes) in the
+    /// footprint plane (w = 0 of the frame), each ring closed (first vertex repeated).
+    pub fn outline(&self) -> Vec<Vec<Vec<[f64; 3]>>> {
+        let ring = |r: &[[f64; 2]]| -> Vec<[f64; 3]> {
+            let mut g: Vec<[f64; 3]> = r
+                .iter()
+                .map(|p| self.frame.to_global(&[p[0], p[1], 0.0]))
+                .collect();
+            if let Some(&first) = g.first() {
+                g.push(first);
+            }
+            g
+        };
+        self.region
+            .outline()
+            .iter()
+            .map(|p| {
+                std::iter::once(ring(&p.outer))
+                    .chain(p.holes.iter().map(|h| ring(h)))
+                    .collect()
+            })
+            .collect()
     }
 }
 
@@ -95,17 +130,17 @@ fn check_params(obb: &Obb, margin: f64, spacing: f64) -> Result<()> {
     Ok(())
 }
 
-/// The TIN of one epoch's (global) points in the event frame, covering `r`: points beyond
-/// `r` grown by 3 spacings are dropped. Returns the TIN and the number of points used. The
-/// points may come in any order (a tiled run gathers them tile by tile): they are sorted first,
-/// because the triangulation of ties (points sharing u, v) depends on the insertion order.
+/// The TIN of one epoch's (global) points in the event frame, over `r`: points beyond `r` grown
+/// by 3 spacings are dropped. Returns the TIN and the local points it was made from. The points
+/// may come in any order (a tiled run gathers them tile by tile): they are sorted first, because
+/// the triangulation of ties (points sharing u, v) depends on the insertion order.
 pub fn epoch_tin(
     frame: &Frame,
     r: &Footprint,
     points: &[[f64; 3]],
     spacing: f64,
     epoch: &str,
-) -> Result<(Tin, usize)> {
+) -> Result<(Tin, Vec<[f64; 3]>)> {
     let keep = r.grown(3.0 * spacing);
     let mut local: Vec<[f64; 3]> = points
         .iter()
@@ -117,65 +152,129 @@ pub fn epoch_tin(
             .then(a[1].total_cmp(&b[1]))
             .then(a[2].total_cmp(&b[2]))
     });
-    let n = local.len();
-    let mut tin = Tin::new(&local)
+    let tin = Tin::new(&local)
         .map_err(|e| Error::Epochs(format!("{epoch} epoch around the event: {e}")))?;
-    tin.cover(&r.grown(2.0 * spacing), spacing);
-    Ok((tin, n))
+    Ok((tin, local))
+}
+
+/// The region of footprint `r`: cells of about one `spacing` whose four corners both surfaces
+/// cover (`surface_covers` at a node, per epoch), that pass `cell_covered` (e.g. a point of each
+/// epoch near the centre), and whose location (the centre on the before surface, global) is
+/// `owned`.
+fn region_of(
+    frame: &Frame,
+    r: &Footprint,
+    spacing: f64,
+    before: &dyn Surface,
+    after: &dyn Surface,
+    cell_covered: &(dyn Fn([f64; 2]) -> bool + Sync),
+    owned: Owned,
+) -> Region {
+    let cells = Cells::new(r, spacing);
+    let (nu, nv) = (cells.nu, cells.nv);
+    // Nodes covered by both surfaces, row by row in parallel.
+    let nodes: Vec<bool> = (0..=nv)
+        .into_par_iter()
+        .flat_map_iter(|j| {
+            (0..=nu).map(move |i| {
+                let (u, v) = (cells.u(i), cells.v(j));
+                before.height_at(u, v).is_some() && after.height_at(u, v).is_some()
+            })
+        })
+        .collect();
+    let node = |i: usize, j: usize| nodes[j * (nu + 1) + i];
+    let flags: Vec<(bool, bool)> = (0..nv)
+        .into_par_iter()
+        .flat_map_iter(|j| {
+            (0..nu).map(move |i| {
+                let c = cells.centre(i, j);
+                let covered = node(i, j)
+                    && node(i + 1, j)
+                    && node(i, j + 1)
+                    && node(i + 1, j + 1)
+                    && cell_covered(c);
+                let own = covered
+                    && before
+                        .height_at(c[0], c[1])
+                        .is_some_and(|w| owned(&frame.to_global(&[c[0], c[1], w])));
+                (covered, own)
+            })
+        })
+        .collect();
+    let covered = flags.iter().map(|f| f.0).collect();
+    let own: Vec<bool> = flags.iter().map(|f| f.1).collect();
+    Region::new(cells, covered, &own)
 }
 
 /// Volume change of one event from the two epochs' points around it (global coordinates;
-/// extra points are tolerated), `spacing` = point spacing of the clouds.
+/// extra points are tolerated), `spacing` = point spacing of the clouds, over the part of the
+/// footprint both epochs cover and the event owns.
 pub fn event_volume(
     obb: &Obb,
     margin: f64,
     before: &[[f64; 3]],
     after: &[[f64; 3]],
     spacing: f64,
+    owned: Owned,
 ) -> Result<EventVolume> {
     check_params(obb, margin, spacing)?;
     let frame = Frame::of_obb(obb);
     let r = Footprint::of_obb(obb, margin);
-    let (tin1, n1) = epoch_tin(&frame, &r, before, spacing, "before")?;
-    let (tin2, n2) = epoch_tin(&frame, &r, after, spacing, "after")?;
+    let (tin1, local1) = epoch_tin(&frame, &r, before, spacing, "before")?;
+    let (tin2, local2) = epoch_tin(&frame, &r, after, spacing, "after")?;
+    let radius = region::COVER_RADIUS * spacing;
+    let uv =
+        |l: &Vec<[f64; 3]>| region::PointCoverage::new(l.iter().map(|p| [p[0], p[1]]), &r, radius);
+    let (cov1, cov2) = (uv(&local1), uv(&local2));
+    let near_points =
+        |c: [f64; 2]| cov1.covers(c[0], c[1], radius) && cov2.covers(c[0], c[1], radius);
+    let region = region_of(&frame, &r, spacing, &tin1, &tin2, &near_points, owned);
     let top = |tin: &Tin| {
         let (v, f) = tin.mesh();
-        solid::clipped_top(&v, &f, &r)
+        solid::clipped_top(&v, &f, &region)
     };
     let (top1, top2) = (top(&tin1), top(&tin2));
-    if top1.faces.is_empty() || top2.faces.is_empty() {
-        return Err(Error::Epochs(
-            "event footprint not covered by a surface".into(),
-        ));
-    }
-    finish(&frame, &r, top1, top2, &tin1, &tin2, spacing, n1, n2)
+    finish(
+        &frame,
+        region,
+        top1,
+        top2,
+        &tin1,
+        &tin2,
+        spacing,
+        local1.len(),
+        local2.len(),
+    )
 }
 
 /// Volume change of one event between two arbitrary surfaces (e.g. the user's meshes,
-/// [`UserMesh`], or a [`Tin`] from [`epoch_tin`]) sampled on a grid of cells ≤ spacing/2 over
-/// the footprint, node heights averaged over their cells (see [`solid::grid_top`]).
+/// [`UserMesh`]): the region is where both surfaces have a height and the event owns the
+/// location; the tops are sampled on squares of half a cell (see [`solid::grid_top`]).
 pub fn event_volume_from_surfaces(
     obb: &Obb,
     margin: f64,
     before: &dyn Surface,
     after: &dyn Surface,
     spacing: f64,
+    owned: Owned,
 ) -> Result<EventVolume> {
     check_params(obb, margin, spacing)?;
     let frame = Frame::of_obb(obb);
     let r = Footprint::of_obb(obb, margin);
-    // The grid samples SUB² = 16 heights per node: cap at 1 M nodes.
-    let cell = (0.5 * spacing).max((r.area() / 1.0e6).sqrt());
+    let both = |c: [f64; 2]| {
+        before.height_at(c[0], c[1]).is_some() && after.height_at(c[0], c[1]).is_some()
+    };
+    let region = region_of(&frame, &r, spacing, before, after, &both, owned);
     let none = || Error::Epochs("event footprint not covered by a surface".into());
-    let top1 = solid::grid_top(before, &r, cell).ok_or_else(none)?;
-    let top2 = solid::grid_top(after, &r, cell).ok_or_else(none)?;
-    finish(&frame, &r, top1, top2, before, after, spacing, 0, 0)
+    let top1 = solid::grid_top(before, &region, 2).ok_or_else(none)?;
+    let top2 = solid::grid_top(after, &region, 2).ok_or_else(none)?;
+    finish(&frame, region, top1, top2, before, after, spacing, 0, 0)
 }
 
 #[allow(clippy::too_many_arguments)]
 fn finish(
     frame: &Frame,
-    r: &Footprint,
+    region: Region,
     top1: Mesh,
     top2: Mesh,
     s1: &dyn Surface,
@@ -184,15 +283,21 @@ fn finish(
     n1: usize,
     n2: usize,
 ) -> Result<EventVolume> {
+    if region.is_empty() || top1.faces.is_empty() || top2.faces.is_empty() {
+        return Err(Error::Epochs(format!(
+            "no part of the footprint is covered by both epochs and free of other events (coverage {:.0} %)",
+            100.0 * region.coverage()
+        )));
+    }
+    let r = region.cells.r;
     // One base plane below both surfaces, one spacing lower still so no wall is flat.
     let base = solid::min_height(&top1).min(solid::min_height(&top2)) - spacing;
-    let solid1 = solid::close(&top1, base, r);
-    let solid2 = solid::close(&top2, base, r);
+    let solid1 = solid::close(&top1, base, &r);
+    let solid2 = solid::close(&top2, base, &r);
     let (v1, v2) = (solid::signed_volume(&solid1), solid::signed_volume(&solid2));
-    // Gross terms (reported, not part of V) by the midpoint rule on cells of spacing/2 (a step
-    // is misplaced by at most half a cell), at most 1 M cells: finer cells cost more than the
-    // whole M3C2 pass on events of tens of m².
-    let (gain, loss) = gross(s1, s2, r, (spacing / 2.0).max((r.area() / 1.0e6).sqrt()));
+    // Gross terms (reported, not part of V) by the midpoint rule on sub-cells of about
+    // spacing/2 (a step is misplaced by at most half a sub-cell).
+    let (gain, loss) = gross(s1, s2, &region, spacing / 2.0);
     let to_global = |m: Mesh| Mesh {
         vertices: m.vertices.iter().map(|l| frame.to_global(l)).collect(),
         faces: m.faces,
@@ -202,7 +307,10 @@ fn finish(
         gain_m3: gain,
         loss_m3: loss,
         footprint_area_m2: r.area(),
-        footprint: *r,
+        region_area_m2: region.area(),
+        coverage: region.coverage(),
+        footprint: r,
+        region,
         frame: *frame,
         base_w: base,
         before_solid_m3: v1,
@@ -214,27 +322,36 @@ fn finish(
     })
 }
 
-/// Midpoint-rule gross gain and loss over `r`.
-fn gross(s1: &dyn Surface, s2: &dyn Surface, r: &Footprint, cell: f64) -> (f64, f64) {
-    use rayon::prelude::*;
-    let nu = (((r.u1 - r.u0) / cell).ceil() as usize).max(1);
-    let nv = (((r.v1 - r.v0) / cell).ceil() as usize).max(1);
-    let (du, dv) = ((r.u1 - r.u0) / nu as f64, (r.v1 - r.v0) / nv as f64);
+/// Midpoint-rule gross gain and loss over the region's cells, each cut into sub-cells of at
+/// most `sub` a side.
+fn gross(s1: &dyn Surface, s2: &dyn Surface, region: &Region, sub: f64) -> (f64, f64) {
+    let c = &region.cells;
+    let du = (c.r.u1 - c.r.u0) / c.nu as f64;
+    let dv = (c.r.v1 - c.r.v0) / c.nv as f64;
+    let k = ((du.max(dv) / sub).ceil() as usize).clamp(1, 8);
+    let w = c.cell_area() / (k * k) as f64;
     // Rows in parallel, then summed in row order: rayon's `reduce` would add the floats in an
     // order that depends on the thread count and on work stealing.
-    let rows: Vec<(f64, f64)> = (0..nv)
+    let rows: Vec<(f64, f64)> = (0..c.nv)
         .into_par_iter()
         .map(|j| {
-            let v = r.v0 + (j as f64 + 0.5) * dv;
             let (mut g, mut l) = (0.0, 0.0);
-            for i in 0..nu {
-                let u = r.u0 + (i as f64 + 0.5) * du;
-                if let (Some(a), Some(b)) = (s1.height_at(u, v), s2.height_at(u, v)) {
-                    let d = b - a;
-                    if d > 0.0 {
-                        g += d;
-                    } else {
-                        l += d;
+            for i in 0..c.nu {
+                if !region.contains(i, j) {
+                    continue;
+                }
+                for b in 0..k {
+                    let v = c.v(j) + dv * (b as f64 + 0.5) / k as f64;
+                    for a in 0..k {
+                        let u = c.u(i) + du * (a as f64 + 0.5) / k as f64;
+                        if let (Some(h1), Some(h2)) = (s1.height_at(u, v), s2.height_at(u, v)) {
+                            let d = h2 - h1;
+                            if d > 0.0 {
+                                g += d;
+                            } else {
+                                l += d;
+                            }
+                        }
                     }
                 }
             }
@@ -242,5 +359,5 @@ fn gross(s1: &dyn Surface, s2: &dyn Surface, r: &Footprint, cell: f64) -> (f64, 
         })
         .collect();
     let (g, l) = rows.iter().fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
-    (g * du * dv, l * du * dv)
+    (g * w, l * w)
 }

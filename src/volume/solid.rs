@@ -1,32 +1,37 @@
 //! Closed solids between a surface and a base plane, and their volumes.
 //!
-//! A *top* is a triangulated height field over the footprint rectangle R, facing +w. It is
-//! closed into a solid by vertical walls under its boundary edges, down to a base plane
-//! w = base below both epochs, and a bottom (a fan from the base centre). Every edge of the
-//! result is shared by exactly two faces with opposite directions: walls pair with the top's
-//! boundary edges, the bottom fan with the walls' lower edges. The volume is then exact by the
-//! divergence theorem, V = Σ v0·(v1×v2)/6 over the faces (the solid's signed volume).
+//! A *top* is a triangulated height field over an event's region (a union of the footprint's
+//! cells, [`Region`]), facing +w. It is closed into a solid by vertical walls under its boundary
+//! edges, down to a base plane w = base below both epochs, and a bottom (a fan from the base
+//! centre). Every edge of the result is shared by exactly two faces with opposite directions:
+//! walls pair with the top's boundary edges, the bottom fan with the walls' lower edges. The
+//! volume is then exact by the divergence theorem, V = Σ v0·(v1×v2)/6 over the faces (the
+//! solid's signed volume), whatever the region's shape (holes, several parts, parts touching at
+//! a corner); the fan's triangles may overlap in the base plane, where their signed areas still
+//! add up to the region's.
 //!
 //! Two tops:
-//! - [`clipped_top`] (points → [`Tin`](super::surface::Tin)): every TIN triangle clipped to R
-//!   (Sutherland & Hodgman 1974). The volume is the exact integral of the piecewise-linear
-//!   TIN over R, so vertical steps (box sides, cliff scars) are kept where the wall points put
-//!   them. (A plain grid resampling would move each step to the nearest grid line: up to
-//!   height × cell/2 per metre of wall, i.e. up to 3 % on the 4 × 3 × 1.5 m test box at
-//!   cell = spacing/2; that is why points are not resampled.) What remains is a zero-mean
-//!   sampling error: the triangles joining the last top (or ground) points to the wall
-//!   points take the random heights of those wall points over about half a spacing; on the
-//!   test box (10 cm spacing) its standard deviation is 0.35 % of the volume.
-//!   New vertices are labelled by what they are (a TIN vertex, a TIN edge ∩ a side of R, a
-//!   corner of R) and shared by label, so neighbouring triangles share them exactly and the
-//!   top is watertight by construction. Heights on clipped edges are interpolated along the
-//!   edge (never through a triangle's area, so slivers cannot blow up).
+//! - [`clipped_top`] (points → [`Tin`](super::surface::Tin)): every TIN triangle clipped to each
+//!   region cell it overlaps (Sutherland & Hodgman 1974). The volume is the exact integral of the
+//!   piecewise-linear TIN over the region, so vertical steps (box sides, cliff scars) are kept
+//!   where the wall points put them. (A plain grid resampling would move each step to the nearest
+//!   grid line: up to height × cell/2 per metre of wall, i.e. up to 3 % on the 4 × 3 × 1.5 m test
+//!   box at cell = spacing/2; that is why points are not resampled.) What remains is a zero-mean
+//!   sampling error: the triangles joining the last top (or ground) points to the wall points
+//!   take the random heights of those wall points over about half a spacing; on the test box
+//!   (10 cm spacing) its standard deviation is 0.35 % of the volume.
+//!   New vertices are labelled by what they are (a TIN vertex, a TIN edge ∩ a grid line, a grid
+//!   node) and shared by label, so neighbouring pieces share them exactly and the top is
+//!   watertight by construction. Heights on clipped edges are interpolated along the edge (never
+//!   through a triangle's area, so slivers cannot blow up).
 //! - [`grid_top`] (any [`Surface`], e.g. a user mesh): heights sampled on a regular grid over
-//!   R (2 triangles per cell).
+//!   the region (2 triangles per square).
 
 use std::collections::HashMap;
 
+use super::boundary;
 use super::frame::Footprint;
+use super::region::Region;
 use super::surface::Surface;
 
 /// A triangle mesh (local or global coordinates, counter-clockwise = outward).
@@ -61,45 +66,55 @@ pub fn signed_volume(mesh: &Mesh) -> f64 {
         / 6.0
 }
 
+/// A grid line of the region's cells: u = cells.u(i) or v = cells.v(j).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+enum Line {
+    U(u32),
+    V(u32),
+}
+
 /// What a clipped vertex is; equal labels are the same vertex.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 enum Label {
     Vertex(u32),
-    /// TIN edge (a < b) ∩ side s of R.
-    EdgeSide(u32, u32, u8),
-    /// Corner of R where sides s < t meet.
-    Corner(u8, u8),
+    /// TIN edge (a < b) ∩ a grid line.
+    Cross(u32, u32, Line),
+    /// Grid node (i, j).
+    Node(u32, u32),
 }
 
 /// The line a polygon edge lies on.
 #[derive(Debug, Clone, Copy)]
 enum Carrier {
     Edge(u32, u32),
-    Side(u8),
+    Line(Line),
 }
 
-/// Sides of R: 0: u ≥ u0, 1: u ≤ u1, 2: v ≥ v0, 3: v ≤ v1.
-fn side_value(r: &Footprint, s: u8) -> (usize, f64) {
-    match s {
-        0 => (0, r.u0),
-        1 => (0, r.u1),
-        2 => (1, r.v0),
-        _ => (1, r.v1),
-    }
+/// One side of a cell: the half-plane p[axis] ≥ value (`lower`) or ≤ value.
+#[derive(Debug, Clone, Copy)]
+struct Side {
+    line: Line,
+    axis: usize,
+    value: f64,
+    lower: bool,
 }
 
-fn inside(r: &Footprint, s: u8, p: &[f64; 3]) -> bool {
-    let (k, c) = side_value(r, s);
-    if s.is_multiple_of(2) {
-        p[k] >= c
-    } else {
-        p[k] <= c
+impl Side {
+    fn inside(&self, p: &[f64; 3]) -> bool {
+        if self.lower {
+            p[self.axis] >= self.value
+        } else {
+            p[self.axis] <= self.value
+        }
     }
 }
 
 /// Top surface: the triangles of `tin_vertices`/`tin_faces` (counter-clockwise in (u, v))
-/// clipped to `r`. Returns local vertices and faces.
-pub fn clipped_top(tin_vertices: &[[f64; 3]], tin_faces: &[[u32; 3]], r: &Footprint) -> Mesh {
+/// clipped to the cells of `region` (Sutherland & Hodgman 1974, one cell at a time). The integral
+/// of the result is the exact integral of the TIN over the region. Returns local vertices and
+/// faces.
+pub fn clipped_top(tin_vertices: &[[f64; 3]], tin_faces: &[[u32; 3]], region: &Region) -> Mesh {
+    let cells = &region.cells;
     let mut index: HashMap<Label, u32> = HashMap::new();
     let mut top = Mesh::default();
     let mut id_of = |label: Label, pos: [f64; 3], top: &mut Mesh| -> u32 {
@@ -108,99 +123,137 @@ pub fn clipped_top(tin_vertices: &[[f64; 3]], tin_faces: &[[u32; 3]], r: &Footpr
             (top.vertices.len() - 1) as u32
         })
     };
-    let edge_side = |a: u32, b: u32, s: u8| -> [f64; 3] {
-        // Always from the smaller index, so both triangles of an edge get the same bits.
+    // TIN edge ∩ grid line, always computed from the smaller index so that both triangles of an
+    // edge get the same bits; an end of the edge when the line passes through it.
+    let cross = |a: u32, b: u32, side: &Side| -> (Label, [f64; 3]) {
         let (a, b) = (a.min(b), a.max(b));
         let (pa, pb) = (tin_vertices[a as usize], tin_vertices[b as usize]);
-        let (k, c) = side_value(r, s);
+        let k = side.axis;
         let den = pb[k] - pa[k];
         let t = if den != 0.0 {
-            ((c - pa[k]) / den).clamp(0.0, 1.0)
+            ((side.value - pa[k]) / den).clamp(0.0, 1.0)
         } else {
             0.5
         };
-        let mut p: [f64; 3] = std::array::from_fn(|i| pa[i] + t * (pb[i] - pa[i]));
-        p[k] = c;
-        p
-    };
-    let corner = |s: u8, t: u8, tin_w: f64| -> [f64; 3] {
-        let (ks, cs) = side_value(r, s);
-        let (_, ct) = side_value(r, t);
-        if ks == 0 {
-            [cs, ct, tin_w]
-        } else {
-            [ct, cs, tin_w]
+        if t == 0.0 {
+            return (Label::Vertex(a), pa);
         }
+        if t == 1.0 {
+            return (Label::Vertex(b), pb);
+        }
+        let mut p: [f64; 3] = std::array::from_fn(|i| pa[i] + t * (pb[i] - pa[i]));
+        p[k] = side.value;
+        (Label::Cross(a, b, side.line), p)
+    };
+    let line_value = |l: Line| match l {
+        Line::U(i) => cells.u(i as usize),
+        Line::V(j) => cells.v(j as usize),
     };
     for f in tin_faces {
         let pts = f.map(|i| tin_vertices[i as usize]);
-        let all_in = pts.iter().all(|p| r.contains(p[0], p[1]));
-        let all_out = (0..4u8).any(|s| pts.iter().all(|p| !inside(r, s, p)));
-        if all_out {
-            continue;
-        }
-        let mut poly: Vec<(Label, [f64; 3], Carrier)> = (0..3)
-            .map(|k| {
-                (
-                    Label::Vertex(f[k]),
-                    pts[k],
-                    Carrier::Edge(f[k], f[(k + 1) % 3]),
-                )
-            })
-            .collect();
-        if !all_in {
-            for s in 0..4u8 {
-                let mut out = Vec::with_capacity(poly.len() + 2);
-                for i in 0..poly.len() {
-                    let (pl, pp, pc) = poly[i];
-                    let (_, qp, _) = poly[(i + 1) % poly.len()];
-                    let (pin, qin) = (inside(r, s, &pp), inside(r, s, &qp));
-                    let cut = || -> (Label, [f64; 3]) {
-                        match pc {
-                            Carrier::Edge(a, b) => {
-                                (Label::EdgeSide(a.min(b), a.max(b), s), edge_side(a, b, s))
+        let lo = |k: usize| pts.iter().map(|p| p[k]).fold(f64::INFINITY, f64::min);
+        let hi = |k: usize| pts.iter().map(|p| p[k]).fold(f64::NEG_INFINITY, f64::max);
+        let (iu, iv) = cells.overlapping(lo(0), hi(0), lo(1), hi(1));
+        for j in iv {
+            for i in iu.clone() {
+                if !region.contains(i, j) {
+                    continue;
+                }
+                let sides = [
+                    Side {
+                        line: Line::U(i as u32),
+                        axis: 0,
+                        value: cells.u(i),
+                        lower: true,
+                    },
+                    Side {
+                        line: Line::U(i as u32 + 1),
+                        axis: 0,
+                        value: cells.u(i + 1),
+                        lower: false,
+                    },
+                    Side {
+                        line: Line::V(j as u32),
+                        axis: 1,
+                        value: cells.v(j),
+                        lower: true,
+                    },
+                    Side {
+                        line: Line::V(j as u32 + 1),
+                        axis: 1,
+                        value: cells.v(j + 1),
+                        lower: false,
+                    },
+                ];
+                let mut poly: Vec<(Label, [f64; 3], Carrier)> = (0..3)
+                    .map(|k| {
+                        (
+                            Label::Vertex(f[k]),
+                            pts[k],
+                            Carrier::Edge(f[k], f[(k + 1) % 3]),
+                        )
+                    })
+                    .collect();
+                for side in &sides {
+                    if poly.iter().all(|p| side.inside(&p.1)) {
+                        continue;
+                    }
+                    let mut out = Vec::with_capacity(poly.len() + 2);
+                    for n in 0..poly.len() {
+                        let (pl, pp, pc) = poly[n];
+                        let (_, qp, _) = poly[(n + 1) % poly.len()];
+                        let (pin, qin) = (side.inside(&pp), side.inside(&qp));
+                        let cut = || -> (Label, [f64; 3]) {
+                            match pc {
+                                Carrier::Edge(a, b) => cross(a, b, side),
+                                Carrier::Line(l0) => {
+                                    // A grid node: its height on this triangle's plane (it lies
+                                    // inside it; every triangle sharing it agrees up to rounding,
+                                    // and the first one wins).
+                                    let (ni, nj) = match (l0, side.line) {
+                                        (Line::U(i), Line::V(j)) | (Line::V(j), Line::U(i)) => {
+                                            (i, j)
+                                        }
+                                        // Parallel lines never cross inside a cell.
+                                        _ => unreachable!("a cell side cut by a parallel line"),
+                                    };
+                                    let (u, v) = (line_value(Line::U(ni)), line_value(Line::V(nj)));
+                                    (Label::Node(ni, nj), [u, v, plane_height(&pts, u, v)])
+                                }
                             }
-                            Carrier::Side(s0) => {
-                                // Height of a corner: interpolated in this triangle (the
-                                // corner lies inside it); it is the same for every triangle
-                                // sharing the corner up to rounding, and the first one wins.
-                                let c = corner(s0, s, 0.0);
-                                let w = plane_height(&pts, c[0], c[1]);
-                                (Label::Corner(s0.min(s), s0.max(s)), corner(s0, s, w))
+                        };
+                        match (pin, qin) {
+                            (true, true) => out.push((pl, pp, pc)),
+                            (true, false) => {
+                                out.push((pl, pp, pc));
+                                let (l, p) = cut();
+                                out.push((l, p, Carrier::Line(side.line)));
                             }
+                            (false, true) => {
+                                let (l, p) = cut();
+                                out.push((l, p, pc));
+                            }
+                            (false, false) => {}
                         }
-                    };
-                    match (pin, qin) {
-                        (true, true) => out.push((pl, pp, pc)),
-                        (true, false) => {
-                            out.push((pl, pp, pc));
-                            let (l, p) = cut();
-                            out.push((l, p, Carrier::Side(s)));
-                        }
-                        (false, true) => {
-                            let (l, p) = cut();
-                            out.push((l, p, pc));
-                        }
-                        (false, false) => {}
+                    }
+                    poly = out;
+                    if poly.len() < 3 {
+                        break;
                     }
                 }
-                poly = out;
                 if poly.len() < 3 {
-                    break;
+                    continue;
                 }
-            }
-        }
-        if poly.len() < 3 {
-            continue;
-        }
-        let ids: Vec<u32> = poly
-            .iter()
-            .map(|&(l, p, _)| id_of(l, p, &mut top))
-            .collect();
-        for k in 1..ids.len() - 1 {
-            let tri = [ids[0], ids[k], ids[k + 1]];
-            if tri[0] != tri[1] && tri[1] != tri[2] && tri[0] != tri[2] {
-                top.faces.push(tri);
+                let ids: Vec<u32> = poly
+                    .iter()
+                    .map(|&(l, p, _)| id_of(l, p, &mut top))
+                    .collect();
+                for k in 1..ids.len() - 1 {
+                    let tri = [ids[0], ids[k], ids[k + 1]];
+                    if tri[0] != tri[1] && tri[1] != tri[2] && tri[0] != tri[2] {
+                        top.faces.push(tri);
+                    }
+                }
             }
         }
     }
@@ -208,7 +261,7 @@ pub fn clipped_top(tin_vertices: &[[f64; 3]], tin_faces: &[[u32; 3]], r: &Footpr
 }
 
 /// Height at (u, v) on the plane through a triangle; a degenerate triangle gives the mean of
-/// its vertex heights (a corner of R inside a sliver: any value on the sliver is as good).
+/// its vertex heights (a node inside a sliver: any value on the sliver is as good).
 fn plane_height(t: &[[f64; 3]; 3], u: f64, v: f64) -> f64 {
     let (a, b, c) = (t[0], t[1], t[2]);
     let det = (b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1]);
@@ -226,93 +279,86 @@ fn plane_height(t: &[[f64; 3]; 3], u: f64, v: f64) -> f64 {
 /// Sub-samples per grid node along each axis (see [`grid_top`]).
 const SUB: usize = 4;
 
-/// Top surface sampled from `surface` on a grid over `r` with cells of at most `cell`
-/// (2 triangles per cell). Each node takes the mean height over its dual cell (the
-/// cell-sized square around it, clipped to R), sampled at SUB × SUB midpoints: the integral
-/// of the triangulated grid is Σ node height × dual-cell area, so it equals a midpoint-rule
-/// integral SUB times finer, and a vertical step is misplaced by at most cell/(2·SUB)
-/// instead of cell/2. Nodes where the surface has no height take the mean of their known
-/// neighbours (filled ring by ring). `None` when no node has a height.
-pub fn grid_top(surface: &dyn Surface, r: &Footprint, cell: f64) -> Option<Mesh> {
+/// Top surface sampled from `surface` over the region's cells, each cut into `split × split`
+/// squares (2 triangles each). Each node takes the mean height over its dual cell (the square
+/// around it, clipped to the region), sampled at SUB × SUB midpoints: the integral of the
+/// triangulated grid is Σ node height × dual-cell area, so it equals a midpoint-rule integral SUB
+/// times finer, and a vertical step is misplaced by at most a square's side / (2·SUB) instead of
+/// half of it. `None` when a node of the region has no height (the region must be covered).
+pub fn grid_top(surface: &dyn Surface, region: &Region, split: usize) -> Option<Mesh> {
     use rayon::prelude::*;
-    let nu = (((r.u1 - r.u0) / cell).ceil() as usize).max(1);
-    let nv = (((r.v1 - r.v0) / cell).ceil() as usize).max(1);
-    let (du, dv) = ((r.u1 - r.u0) / nu as f64, (r.v1 - r.v0) / nv as f64);
+    let c = &region.cells;
+    let split = split.max(1);
+    let (nu, nv) = (c.nu * split, c.nv * split);
+    let (du, dv) = ((c.r.u1 - c.r.u0) / nu as f64, (c.r.v1 - c.r.v0) / nv as f64);
+    let fine_in = |i: usize, j: usize| i < nu && j < nv && region.contains(i / split, j / split);
+    let node_used = |i: usize, j: usize| {
+        (0..2).any(|a| (0..2).any(|b| i + a >= 1 && j + b >= 1 && fine_in(i + a - 1, j + b - 1)))
+    };
     let node = |i: usize, j: usize| j * (nu + 1) + i;
-    let mut h: Vec<Option<f64>> = (0..(nu + 1) * (nv + 1))
+    let h: Vec<Option<f64>> = (0..(nu + 1) * (nv + 1))
         .into_par_iter()
         .map(|k| {
             let (i, j) = (k % (nu + 1), k / (nu + 1));
-            let (uc, vc) = (r.u0 + i as f64 * du, r.v0 + j as f64 * dv);
+            if !node_used(i, j) {
+                return Some(0.0);
+            }
+            let (uc, vc) = (c.r.u0 + i as f64 * du, c.r.v0 + j as f64 * dv);
             let (mut s, mut n) = (0.0, 0usize);
             for b in 0..SUB {
-                let v = vc + dv * ((b as f64 + 0.5) / SUB as f64 - 0.5);
+                let fb = (b as f64 + 0.5) / SUB as f64 - 0.5;
                 for a in 0..SUB {
-                    let u = uc + du * ((a as f64 + 0.5) / SUB as f64 - 0.5);
-                    if !r.contains(u, v) {
+                    let fa = (a as f64 + 0.5) / SUB as f64 - 0.5;
+                    // The fine square this sample falls in must be in the region.
+                    let (si, sj) = (
+                        if fa < 0.0 { i.wrapping_sub(1) } else { i },
+                        if fb < 0.0 { j.wrapping_sub(1) } else { j },
+                    );
+                    if !fine_in(si, sj) {
                         continue;
                     }
-                    if let Some(w) = surface.height_at(u, v).filter(|w| w.is_finite()) {
+                    if let Some(w) = surface
+                        .height_at(uc + du * fa, vc + dv * fb)
+                        .filter(|w| w.is_finite())
+                    {
                         s += w;
                         n += 1;
                     }
                 }
             }
-            (n > 0).then(|| s / n as f64)
+            if n > 0 {
+                Some(s / n as f64)
+            } else {
+                surface.height_at(uc, vc).filter(|w| w.is_finite())
+            }
         })
         .collect();
-    if h.iter().all(|x| x.is_none()) {
+    if h.iter().any(|x| x.is_none()) {
         return None;
     }
-    // Fill the holes by dilation: each pass gives a missing node the mean of its known
-    // 4-neighbours of the previous pass.
-    while h.iter().any(|x| x.is_none()) {
-        let prev = h.clone();
-        for j in 0..=nv {
-            for i in 0..=nu {
-                if prev[node(i, j)].is_some() {
-                    continue;
-                }
-                let mut s = (0.0, 0);
-                let nb = [
-                    (i.wrapping_sub(1), j),
-                    (i + 1, j),
-                    (i, j.wrapping_sub(1)),
-                    (i, j + 1),
-                ];
-                for (a, b) in nb {
-                    if a <= nu && b <= nv {
-                        if let Some(w) = prev[node(a, b)] {
-                            s = (s.0 + w, s.1 + 1);
-                        }
-                    }
-                }
-                if s.1 > 0 {
-                    h[node(i, j)] = Some(s.0 / s.1 as f64);
-                }
-            }
-        }
-    }
     let mut top = Mesh::default();
-    for j in 0..=nv {
-        for i in 0..=nu {
+    let mut id: HashMap<usize, u32> = HashMap::new();
+    let mut vertex = |i: usize, j: usize, top: &mut Mesh| -> u32 {
+        *id.entry(node(i, j)).or_insert_with(|| {
             top.vertices.push([
-                r.u0 + i as f64 * du,
-                r.v0 + j as f64 * dv,
+                c.r.u0 + i as f64 * du,
+                c.r.v0 + j as f64 * dv,
                 h[node(i, j)].unwrap_or(0.0),
             ]);
-        }
-    }
+            (top.vertices.len() - 1) as u32
+        })
+    };
     for j in 0..nv {
         for i in 0..nu {
-            let (a, b, c, d) = (
-                node(i, j),
-                node(i + 1, j),
-                node(i + 1, j + 1),
-                node(i, j + 1),
-            );
-            top.faces.push([a as u32, b as u32, c as u32]);
-            top.faces.push([a as u32, c as u32, d as u32]);
+            if !fine_in(i, j) {
+                continue;
+            }
+            let a = vertex(i, j, &mut top);
+            let b = vertex(i + 1, j, &mut top);
+            let cc = vertex(i + 1, j + 1, &mut top);
+            let d = vertex(i, j + 1, &mut top);
+            top.faces.push([a, b, cc]);
+            top.faces.push([a, cc, d]);
         }
     }
     Some(top)
@@ -327,7 +373,9 @@ pub fn min_height(top: &Mesh) -> f64 {
 }
 
 /// Close a top into a solid: walls under its boundary edges down to w = `base`, and a
-/// bottom fan from the base point under the centre of `r`.
+/// bottom fan from the base point under the centre of `r`. A top vertex where two parts of the
+/// region touch (a pinch) gets one base vertex per loop through it (see [`boundary`]), so every
+/// edge of the solid has exactly one face on each side.
 pub fn close(top: &Mesh, base: f64, r: &Footprint) -> Mesh {
     let mut directed: HashMap<(u32, u32), u32> = HashMap::with_capacity(top.faces.len() * 3);
     for f in &top.faces {
@@ -335,16 +383,33 @@ pub fn close(top: &Mesh, base: f64, r: &Footprint) -> Mesh {
             *directed.entry((f[k], f[(k + 1) % 3])).or_insert(0) += 1;
         }
     }
-    let mut boundary: Vec<(u32, u32)> = directed
+    let mut edges: Vec<(u32, u32)> = directed
         .keys()
         .filter(|&&(a, b)| !directed.contains_key(&(b, a)))
         .copied()
         .collect();
-    boundary.sort_unstable();
+    edges.sort_unstable();
+    let next = boundary::successors(&edges, |v| {
+        let p = top.vertices[v as usize];
+        [p[0], p[1]]
+    });
+    let mut pred = vec![None; edges.len()];
+    for (k, n) in next.iter().enumerate() {
+        if let Some(n) = *n {
+            pred[n] = Some(k);
+        }
+    }
+    /// Which base vertex: the one at the end of boundary edge k, or a vertex's own where the
+    /// boundary is not a closed loop.
+    #[derive(Clone, Copy, PartialEq, Eq, Hash)]
+    enum Corner {
+        End(usize),
+        Loose(u32),
+    }
     let mut solid = top.clone();
-    let mut below: HashMap<u32, u32> = HashMap::new();
-    let mut base_of = |a: u32, solid: &mut Mesh| -> u32 {
-        *below.entry(a).or_insert_with(|| {
+    let mut below: HashMap<Corner, u32> = HashMap::new();
+    let mut base_of = |corner: Corner, a: u32, solid: &mut Mesh| -> u32 {
+        *below.entry(corner).or_insert_with(|| {
             let p = solid.vertices[a as usize];
             solid.vertices.push([p[0], p[1], base]);
             (solid.vertices.len() - 1) as u32
@@ -354,8 +419,14 @@ pub fn close(top: &Mesh, base: f64, r: &Footprint) -> Mesh {
         .vertices
         .push([0.5 * (r.u0 + r.u1), 0.5 * (r.v0 + r.v1), base]);
     let centre = (solid.vertices.len() - 1) as u32;
-    for (a, b) in boundary {
-        let (a2, b2) = (base_of(a, &mut solid), base_of(b, &mut solid));
+    for (k, &(a, b)) in edges.iter().enumerate() {
+        let start = pred[k].map_or(Corner::Loose(a), Corner::End);
+        let end = if next[k].is_some() {
+            Corner::End(k)
+        } else {
+            Corner::Loose(b)
+        };
+        let (a2, b2) = (base_of(start, a, &mut solid), base_of(end, b, &mut solid));
         solid.faces.push([a, a2, b2]);
         solid.faces.push([a, b2, b]);
         solid.faces.push([centre, b2, a2]);
@@ -368,8 +439,9 @@ mod tests {
     use super::*;
     use crate::volume::surface::Tin;
 
-    #[test]
-    fn flat_tin_clipped_solid_volume() {
+    use crate::volume::region::Cells;
+
+    fn random_flat_tin(w: f64) -> Tin {
         let mut pts = Vec::new();
         let mut s = 12345u64;
         let mut f = || {
@@ -379,19 +451,13 @@ mod tests {
             (s >> 11) as f64 / (1u64 << 53) as f64
         };
         for _ in 0..4000 {
-            pts.push([f() * 10.0 - 5.0, f() * 10.0 - 5.0, 0.5]);
+            pts.push([f() * 10.0 - 5.0, f() * 10.0 - 5.0, w]);
         }
-        let tin = Tin::new(&pts).unwrap();
-        let (v, fc) = tin.mesh();
-        let r = Footprint {
-            u0: -2.31,
-            u1: 2.31,
-            v0: -1.9,
-            v1: 1.9,
-        };
-        let top = clipped_top(&v, &fc, &r);
-        let area: f64 = top
-            .faces
+        Tin::new(&pts).unwrap()
+    }
+
+    fn projected_area(top: &Mesh) -> f64 {
+        top.faces
             .iter()
             .map(|t| {
                 let (a, b, c) = (
@@ -401,15 +467,61 @@ mod tests {
                 );
                 0.5 * ((b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1]))
             })
-            .sum();
+            .sum()
+    }
+
+    #[test]
+    fn flat_tin_clipped_solid_volume() {
+        let tin = random_flat_tin(0.5);
+        let (v, fc) = tin.mesh();
+        let r = Footprint {
+            u0: -2.31,
+            u1: 2.31,
+            v0: -1.9,
+            v1: 1.9,
+        };
+        let cells = Cells::new(&r, 0.37);
+        let all = vec![true; cells.len()];
+        let region = Region::new(cells, all.clone(), &all);
+        let top = clipped_top(&v, &fc, &region);
         let solid = close(&top, 0.0, &r);
-        let vol = signed_volume(&solid);
-        eprintln!(
-            "area {area} vs {}, vol {vol} vs {}",
-            r.area(),
-            0.5 * r.area()
-        );
-        assert!((area - r.area()).abs() < 1e-9);
-        assert!((vol - 0.5 * r.area()).abs() < 1e-9);
+        crate::volume::check_watertight(&solid).unwrap();
+        assert!((projected_area(&top) - r.area()).abs() < 1e-9);
+        assert!((signed_volume(&solid) - 0.5 * r.area()).abs() < 1e-9);
+    }
+
+    #[test]
+    fn region_with_holes_and_pinches_is_watertight_and_exact() {
+        let tin = random_flat_tin(0.25);
+        let (v, fc) = tin.mesh();
+        let r = Footprint {
+            u0: -3.0,
+            u1: 3.0,
+            v0: -2.0,
+            v1: 2.5,
+        };
+        let cells = Cells::new(&r, 0.5);
+        // A checkerboard in one corner (pinches everywhere), a hole in the middle, the rest in.
+        let owned: Vec<bool> = (0..cells.len())
+            .map(|k| {
+                let (i, j) = (k % cells.nu, k / cells.nu);
+                if i < 4 && j < 4 {
+                    (i + j) % 2 == 0
+                } else {
+                    !((6..8).contains(&i) && (5..7).contains(&j))
+                }
+            })
+            .collect();
+        let region = Region::new(cells, vec![true; cells.len()], &owned);
+        let top = clipped_top(&v, &fc, &region);
+        let solid = close(&top, -1.0, &r);
+        crate::volume::check_watertight(&solid).unwrap();
+        assert!((projected_area(&top) - region.area()).abs() < 1e-9);
+        assert!((signed_volume(&solid) - 1.25 * region.area()).abs() < 1e-9);
+        // The grid top over the same region closes the same way.
+        let grid = grid_top(&tin, &region, 2).unwrap();
+        let solid = close(&grid, -1.0, &r);
+        crate::volume::check_watertight(&solid).unwrap();
+        assert!((signed_volume(&solid) - 1.25 * region.area()).abs() < 1e-9);
     }
 }

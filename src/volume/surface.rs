@@ -7,14 +7,11 @@
 //! a line) valid, and the interpolation never divides by a triangle's area on the exact
 //! volume path (see [`super::solid`]).
 //!
-//! Outside the data's convex hull a TIN has no height; [`Tin::cover`] adds a ring of
-//! vertices around the footprint, outside the hull only, carrying the height of their
-//! nearest data vertex, so the footprint is covered by triangles and the surface there is the
-//! nearest-vertex height blended linearly towards the data.
+//! Outside the data's convex hull a TIN has no height: nothing is extrapolated (SPEC.md §1
+//! "Coverage"; the region of an event keeps only what both epochs cover).
 
 use spade::{DelaunayTriangulation, FloatTriangulation, HasPosition, Point2, Triangulation};
 
-use super::frame::Footprint;
 use crate::error::{Error, Result};
 
 /// A surface that gives a height along the frame's w axis at (u, v).
@@ -81,47 +78,9 @@ impl Tin {
         Ok(Tin { tri })
     }
 
-    /// Add vertices every `step` along `rect`'s boundary wherever it lies outside the
-    /// convex hull, with the height of the nearest data vertex, so that `rect` is covered.
-    pub fn cover(&mut self, rect: &Footprint, step: f64) {
-        // At most ~100 k ring vertices, whatever the footprint.
-        let perimeter = 2.0 * ((rect.u1 - rect.u0) + (rect.v1 - rect.v0));
-        let step = step.max(perimeter / 1.0e5);
-        if !(step.is_finite() && step > 0.0) {
-            return;
-        }
-        let nu = (((rect.u1 - rect.u0) / step).ceil() as usize).max(1);
-        let nv = (((rect.v1 - rect.v0) / step).ceil() as usize).max(1);
-        let mut ring = Vec::with_capacity(2 * (nu + nv));
-        for i in 0..nu {
-            let u = rect.u0 + (rect.u1 - rect.u0) * i as f64 / nu as f64;
-            ring.push((u, rect.v0));
-            ring.push((rect.u1 + rect.u0 - u, rect.v1));
-        }
-        for j in 0..nv {
-            let v = rect.v0 + (rect.v1 - rect.v0) * j as f64 / nv as f64;
-            ring.push((rect.u1, v));
-            ring.push((rect.u0, rect.v1 + rect.v0 - v));
-        }
-        // Decide and take heights against the data only, then insert.
-        let mut add = Vec::new();
-        for (u, v) in ring {
-            let p = Point2::new(snap(u), snap(v));
-            if self
-                .tri
-                .barycentric()
-                .interpolate(|h| h.data().w, p)
-                .is_none()
-            {
-                if let Some(n) = self.tri.nearest_neighbor(p) {
-                    add.push(Vertex { p, w: n.data().w });
-                }
-            }
-        }
-        for v in add {
-            // Cannot fail: coordinates are finite and snapped.
-            let _ = self.tri.insert(v);
-        }
+    /// Is (u, v) inside the triangulated area (the convex hull of the points)?
+    pub fn contains(&self, u: f64, v: f64) -> bool {
+        self.height_at(u, v).is_some()
     }
 
     /// Vertices (u, v, w) by spade's fixed index, and the triangles (counter-clockwise in
@@ -155,12 +114,9 @@ impl Tin {
 }
 
 impl Surface for Tin {
-    /// Linear (barycentric) interpolation inside the hull, nearest vertex outside.
+    /// Linear (barycentric) interpolation inside the hull, None outside.
     fn height_at(&self, u: f64, v: f64) -> Option<f64> {
         let p = Point2::new(snap(u), snap(v));
-        self.tri
-            .barycentric()
-            .interpolate(|h| h.data().w, p)
-            .or_else(|| self.tri.nearest_neighbor(p).map(|n| n.data().w))
+        self.tri.barycentric().interpolate(|h| h.data().w, p)
     }
 }

@@ -1,0 +1,147 @@
+//! The axis an event's volume is extruded along.
+//!
+//! A volume between two surfaces over a region is defined along an axis in which both surfaces
+//! are height fields there; where the change vanishes at the region's rim, any such axis gives the
+//! same volume. Two candidates: the cluster's mean M3C2 normal (the direction its distances were
+//! measured along: the only one on a cliff face or under an overhang) and straight up (every
+//! gentle surface is a height field along z, a DSM by construction). Neither is always right:
+//! - the mean normal of a cluster on the flank of a dune or a boulder is tilted by 50° and more;
+//!   in that frame the footprint's far side (the other flank, seen from behind) folds over;
+//! - a debris fan against a cliff foot has the vertical face inside its footprint; along z the
+//!   face is a wall of points stacked in one column, and the triangulation ramps from the beach
+//!   to random heights on it.
+//!
+//! Both failures show in the points as the same thing: two points almost on top of each other in
+//! the frame's (u, v) but far apart along w, i.e. a part of the surface seen edge-on or from
+//! behind. [`wall_points`] counts such points in a candidate frame; the volume takes the
+//! candidate with fewer of them (the mean normal on a tie).
+
+use super::frame::{Footprint, Frame};
+
+/// A pair of points whose w differs by more than this many times their (u, v) distance, plus one
+/// point spacing (so that noise on a flat surface never counts), lies on a part steeper than
+/// 75° in the frame (tan 75° ≈ 3.73).
+pub const WALL_SLOPE: f64 = 3.73;
+
+/// How many of `points` (global) within `r` grown by one spacing and within `depth` of the
+/// frame's (u, v) plane have another point within one `spacing` in (u, v) and a w difference
+/// beyond [`WALL_SLOPE`] × their distance + `spacing`.
+pub fn wall_points(
+    frame: &Frame,
+    r: &Footprint,
+    depth: f64,
+    points: &[[f64; 3]],
+    spacing: f64,
+) -> usize {
+    let g = r.grown(spacing);
+    let local: Vec<[f64; 3]> = points
+        .iter()
+        .map(|p| frame.to_local(p))
+        .filter(|l| g.contains(l[0], l[1]) && l[2].abs() <= depth)
+        .collect();
+    if local.is_empty() || !(spacing > 0.0) {
+        return 0;
+    }
+    let rho = spacing;
+    let nx = (((g.u1 - g.u0) / rho).ceil() as usize).clamp(1, 1 << 15);
+    let ny = (((g.v1 - g.v0) / rho).ceil() as usize).clamp(1, 1 << 15);
+    let bucket = |l: &[f64; 3]| {
+        let bx = (((l[0] - g.u0) / rho) as usize).min(nx - 1);
+        let by = (((l[1] - g.v0) / rho) as usize).min(ny - 1);
+        (bx, by)
+    };
+    // Counting sort of the points into buckets.
+    let mut start = vec![0u32; nx * ny + 1];
+    for l in &local {
+        let (bx, by) = bucket(l);
+        start[by * nx + bx + 1] += 1;
+    }
+    for b in 0..nx * ny {
+        start[b + 1] += start[b];
+    }
+    let mut fill = start.clone();
+    let mut sorted = vec![[0.0; 3]; local.len()];
+    for l in &local {
+        let (bx, by) = bucket(l);
+        let b = by * nx + bx;
+        sorted[fill[b] as usize] = *l;
+        fill[b] += 1;
+    }
+    let mut walls = 0;
+    for p in &sorted {
+        let (bx, by) = bucket(p);
+        let mut wall = false;
+        'search: for y in by.saturating_sub(1)..=(by + 1).min(ny - 1) {
+            for x in bx.saturating_sub(1)..=(bx + 1).min(nx - 1) {
+                let b = y * nx + x;
+                for q in &sorted[start[b] as usize..start[b + 1] as usize] {
+                    let d = (q[0] - p[0]).hypot(q[1] - p[1]);
+                    if d <= rho && (q[2] - p[2]).abs() > WALL_SLOPE * d + spacing {
+                        wall = true;
+                        break 'search;
+                    }
+                }
+            }
+        }
+        walls += wall as usize;
+    }
+    walls
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frame(axes: [[f64; 3]; 3]) -> Frame {
+        Frame {
+            origin: [0.0; 3],
+            axes,
+        }
+    }
+
+    const UP: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    /// w = −y: looking at a face in the plane y = 0 from y < 0.
+    const FACE: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]];
+
+    #[test]
+    fn a_vertical_face_is_a_wall_along_z_and_a_height_field_across() {
+        let mut pts = Vec::new();
+        for i in 0..40 {
+            for k in 0..30 {
+                // Face y = 0 (tiny jitter), x ∈ [0, 4], z ∈ [0, 3].
+                let jitter = 0.003 * (((i * 7 + k * 13) % 11) as f64 / 11.0 - 0.5);
+                pts.push([i as f64 * 0.1, jitter, k as f64 * 0.1]);
+            }
+        }
+        let r = Footprint {
+            u0: 0.0,
+            u1: 4.0,
+            v0: -1.0,
+            v1: 4.0,
+        };
+        let along_z = wall_points(&frame(UP), &r, 10.0, &pts, 0.1);
+        let across = wall_points(&frame(FACE), &r, 10.0, &pts, 0.1);
+        assert_eq!(across, 0);
+        assert!(along_z > pts.len() / 2, "{along_z} of {}", pts.len());
+    }
+
+    #[test]
+    fn a_noisy_slope_of_60_degrees_is_a_height_field() {
+        let mut pts = Vec::new();
+        let slope = 60f64.to_radians().tan();
+        for i in 0..30 {
+            for j in 0..30 {
+                let (x, y) = (i as f64 * 0.1, j as f64 * 0.1);
+                let noise = 0.01 * ((((i * 31 + j * 17) % 13) as f64) / 13.0 - 0.5);
+                pts.push([x, y, slope * x + noise]);
+            }
+        }
+        let r = Footprint {
+            u0: 0.0,
+            u1: 3.0,
+            v0: 0.0,
+            v1: 3.0,
+        };
+        assert_eq!(wall_points(&frame(UP), &r, 100.0, &pts, 0.1), 0);
+    }
+}
