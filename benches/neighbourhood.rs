@@ -52,7 +52,6 @@ fn benches(c: &mut Criterion) {
         normal_radius: 1.0,
         cyl_radius: 0.5,
         cyl_halflen: 3.0,
-        reg_error: 0.0,
         min_points: 1,
         orientation: Orientation::Up,
     };

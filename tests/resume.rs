@@ -145,9 +145,25 @@ fn a_changed_parameter_or_input_redoes_exactly_what_depends_on_it() {
     compare(&before, &after, &fresh, &[ARGS, &events_params].concat());
     assert_same_outputs(&fresh, &dir);
 
-    // An M3C2 parameter that does not change the halo (the registration error) redoes pass 2
-    // only.
-    let m3c2_params = [ARGS, &events_params, &["--reg-error", "0.01"]].concat();
+    // The registration error enters after M3C2 (LoD95, threshold, volume uncertainty): every
+    // unit is reused and the result is a fresh run's.
+    let reg_params = [ARGS, &events_params, &["--reg-error", "0.01"]].concat();
+    assert_eq!(
+        compare_passes(
+            &before,
+            &after,
+            &dir,
+            &[reg_params.as_slice(), &["--resume"]].concat()
+        ),
+        [(0, true), (0, true)]
+    );
+    let fresh_reg = tmp.path().join("fresh_reg");
+    compare(&before, &after, &fresh_reg, &reg_params);
+    assert_same_outputs(&fresh_reg, &dir);
+
+    // An M3C2 parameter that does not change the halo (the points a cylinder needs) redoes
+    // pass 2 only.
+    let m3c2_params = [reg_params.as_slice(), &["--min-points", "3"]].concat();
     let resumed = [m3c2_params.as_slice(), &["--resume"]].concat();
     assert_eq!(
         compare_passes(&before, &after, &dir, &resumed),

@@ -11,6 +11,7 @@ pub mod dbscan;
 pub mod describe;
 pub mod filter;
 pub mod smooth;
+pub mod stable;
 pub mod union_find;
 
 pub use describe::{describe, Event, Kind, Obb};

@@ -20,7 +20,6 @@ pub struct M3c2Params {
     pub normal_radius: f64,
     pub cyl_radius: f64,
     pub cyl_halflen: f64,
-    pub reg_error: f64,
     /// Fewer points than this in either cylinder → distance NaN.
     pub min_points: u32,
     pub orientation: Orientation,
@@ -31,7 +30,9 @@ pub struct M3c2Params {
 pub struct CoreResult {
     /// `m3c2_distance`: t₂ − t₁ (NaN when not computable).
     pub distance: f64,
-    /// `m3c2_uncertainty`: LoD95 = 1.96 (√(σ₁²/n₁ + σ₂²/n₂) + reg_error).
+    /// `m3c2_uncertainty`: LoD95 = 1.96 (√(σ₁²/n₁ + σ₂²/n₂) + reg_error). M3C2 computes it with
+    /// reg_error 0 (the registration error is measured afterwards, on all the distances:
+    /// `events::stable`); [`CoreResult::with_registration`] adds it.
     pub uncertainty: f64,
     /// `m3c2_significant`: |d| > LoD95.
     pub significant: bool,
@@ -50,6 +51,15 @@ impl Default for CoreResult {
 }
 
 impl CoreResult {
+    /// The result with the registration error `reg_error` in its LoD95 and significance.
+    pub fn with_registration(mut self, reg_error: f64) -> Self {
+        if self.distance.is_finite() {
+            self.uncertainty += 1.96 * reg_error;
+            self.significant = self.distance.abs() > self.uncertainty;
+        }
+        self
+    }
+
     fn undefined(normal: Point3) -> Self {
         CoreResult {
             distance: f64::NAN,
@@ -170,7 +180,7 @@ fn core_result(
     let se = (c1.std_dev * c1.std_dev / c1.count as f64
         + c2.std_dev * c2.std_dev / c2.count as f64)
         .sqrt();
-    let lod = 1.96 * (se + params.reg_error);
+    let lod = 1.96 * se;
     CoreResult {
         distance,
         uncertainty: lod,

@@ -26,6 +26,12 @@ fn properties(r: &EventRecord) -> Value {
         "kind": e.kind.as_str(),
         "volume_m3": opt(r.volume_m3),
         "volume_uncertainty_m3": opt(r.volume_uncertainty_m3),
+        "significant": r.significant,
+        "uncertainty_parts_m3": r.uncertainty.map(|u| json!({
+            "random": u.random_m3,
+            "correlated": u.correlated_m3,
+            "systematic": u.systematic_m3,
+        })),
         "gain_m3": opt(r.gain_m3),
         "loss_m3": opt(r.loss_m3),
         "n_points": e.n_points,
@@ -45,10 +51,35 @@ fn properties(r: &EventRecord) -> Value {
     })
 }
 
+/// Is `name` a mesh file talus writes (`event_NNNN_before.ply` / `event_NNNN_after.ply`)?
+fn is_event_mesh(name: &str) -> bool {
+    let Some(rest) = name.strip_prefix("event_") else {
+        return false;
+    };
+    let (digits, tail) = rest.split_at(rest.find('_').unwrap_or(rest.len()));
+    !digits.is_empty()
+        && digits.bytes().all(|b| b.is_ascii_digit())
+        && (tail == "_before.ply" || tail == "_after.ply")
+}
+
 /// Write meshes/event_NNNN_{before,after}.ply for every event with solids; returns their names.
+/// Event meshes of an earlier run that this run does not write are removed (only talus's own
+/// names: anything else in meshes/ is the user's).
 pub fn write_meshes(wd: &WorkDir, events: &[EventRecord]) -> Result<Vec<(u32, EventMeshes)>> {
     let dir = wd.out.join("meshes");
     std::fs::create_dir_all(&dir).map_err(|e| Error::output(&dir, e))?;
+    let keep: std::collections::HashSet<String> = events
+        .iter()
+        .filter(|r| r.solids.is_some())
+        .flat_map(|r| ["before", "after"].map(|w| format!("event_{:04}_{w}.ply", r.event.id)))
+        .collect();
+    for entry in std::fs::read_dir(&dir).map_err(|e| Error::output(&dir, e))? {
+        let entry = entry.map_err(|e| Error::output(&dir, e))?;
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if is_event_mesh(&name) && !keep.contains(&name) {
+            std::fs::remove_file(entry.path()).map_err(|e| Error::output(entry.path(), e))?;
+        }
+    }
     let mut out = Vec::new();
     for r in events {
         let Some((b, a)) = &r.solids else { continue };
@@ -118,7 +149,7 @@ pub fn write_tables(wd: &WorkDir, events: &[EventRecord], crs: &Crs) -> Result<(
     write_atomic(&wd.out.join("events.geojson"), text.as_bytes())?;
 
     let mut csv = String::from(
-        "id,kind,x,y,z,volume_m3,volume_uncertainty_m3,gain_m3,loss_m3,n_points,area_m2,\
+        "id,kind,x,y,z,volume_m3,volume_uncertainty_m3,significant,gain_m3,loss_m3,n_points,area_m2,\
          mean_distance_m,max_abs_distance_m,mean_lod95_m,coverage,region_area_m2,obb_center_x,obb_center_y,obb_center_z,\
          obb_axis1_x,obb_axis1_y,obb_axis1_z,obb_axis2_x,obb_axis2_y,obb_axis2_z,\
          obb_axis3_x,obb_axis3_y,obb_axis3_z,obb_half_1,obb_half_2,obb_half_3\n",
@@ -135,6 +166,7 @@ pub fn write_tables(wd: &WorkDir, events: &[EventRecord], crs: &Crs) -> Result<(
             format!("{:.4}", e.centroid[2]),
             f(r.volume_m3),
             f(r.volume_uncertainty_m3),
+            r.significant.to_string(),
             f(r.gain_m3),
             f(r.loss_m3),
             e.n_points.to_string(),

@@ -31,6 +31,39 @@ struct Kept {
     d: f64,
     lod: f64,
     normal: Point3,
+    std_dev: [f64; 2],
+}
+
+/// Core points sampled for the stable ground's measurement: enough for the fit and the
+/// variogram, few enough to hold (≈ 80 bytes each).
+pub const STABLE_SAMPLES: u64 = 1_000_000;
+
+/// Measure the noise and registration error on the stable ground from (an evenly spread sample
+/// of) the M3C2 results, and resolve the parameters that depend on them.
+pub fn measure_stable(
+    results: &M3c2Results,
+    params: Params,
+) -> Result<(Option<events::stable::Stable>, Params)> {
+    let total = results.count()?;
+    let step = total.div_ceil(STABLE_SAMPLES).max(1);
+    let mut samples = Vec::with_capacity(total.min(STABLE_SAMPLES) as usize);
+    let mut merged = MergedResults::new(results)?;
+    let mut n = 0u64;
+    while let Some(k) = merged.next_result()? {
+        if n % step == 0 && k.r.distance.is_finite() {
+            samples.push(events::stable::Sample {
+                xyz: k.xyz,
+                normal: k.r.normal,
+                distance: k.r.distance,
+                std_dev: [k.r.std_dev1, k.r.std_dev2],
+                lod: k.r.uncertainty,
+            });
+        }
+        n += 1;
+    }
+    let stable = events::stable::measure(&samples, params.core_spacing.value);
+    let params = params.with_stable(stable.as_ref());
+    Ok((stable, params))
 }
 
 /// One event with its volume.
@@ -41,6 +74,10 @@ pub struct EventRecord {
     /// V(C2) − V(C1); None when the footprint had no surface in one epoch.
     pub volume_m3: Option<f64>,
     pub volume_uncertainty_m3: Option<f64>,
+    /// The uncertainty's parts (one standard deviation each).
+    pub uncertainty: Option<volume::uncertainty::VolumeUncertainty>,
+    /// |V| exceeds its 95 % half-width.
+    pub significant: bool,
     pub gain_m3: Option<f64>,
     pub loss_m3: Option<f64>,
     pub footprint_area_m2: Option<f64>,
@@ -59,25 +96,35 @@ pub struct EventRecord {
 
 impl EventRecord {
     /// The record of event `e` from its volume (or why it has none).
-    fn new(e: Event, v: Result<EventVolume>) -> EventRecord {
+    fn new(
+        e: Event,
+        v: Result<EventVolume>,
+        model: impl FnOnce(&EventVolume) -> volume::uncertainty::ErrorModel,
+    ) -> EventRecord {
         match v {
-            Ok(v) => EventRecord {
-                volume_m3: Some(v.volume_m3),
-                // The conservative bound: region area × mean LoD95.
-                volume_uncertainty_m3: Some(v.region_area_m2 * e.mean_lod95),
-                gain_m3: Some(v.gain_m3),
-                loss_m3: Some(v.loss_m3),
-                footprint_area_m2: Some(v.footprint_area_m2),
-                region_area_m2: Some(v.region_area_m2),
-                coverage: Some(v.coverage),
-                volume_note: None,
-                region: v.outline(),
-                solids: Some((v.before_solid, v.after_solid)),
-                event: e,
-            },
+            Ok(v) => {
+                let u = volume::uncertainty::propagate(&v.region, &model(&v));
+                EventRecord {
+                    volume_m3: Some(v.volume_m3),
+                    volume_uncertainty_m3: Some(u.half_width_95_m3),
+                    uncertainty: Some(u),
+                    significant: v.volume_m3.abs() > u.half_width_95_m3,
+                    gain_m3: Some(v.gain_m3),
+                    loss_m3: Some(v.loss_m3),
+                    footprint_area_m2: Some(v.footprint_area_m2),
+                    region_area_m2: Some(v.region_area_m2),
+                    coverage: Some(v.coverage),
+                    volume_note: None,
+                    region: v.outline(),
+                    solids: Some((v.before_solid, v.after_solid)),
+                    event: e,
+                }
+            }
             Err(err) => EventRecord {
                 volume_m3: None,
                 volume_uncertainty_m3: None,
+                uncertainty: None,
+                significant: false,
                 gain_m3: None,
                 loss_m3: None,
                 footprint_area_m2: None,
@@ -101,25 +148,30 @@ pub struct EventsOut {
     pub kept_points: usize,
 }
 
-/// Run the events stage over the merged M3C2 results.
+/// Run the events stage over the merged M3C2 results, with the parameters `measure_stable`
+/// resolved.
 pub fn run(
     results: &M3c2Results,
     layout: &Layout,
     tiled: &Tiled,
     params: &Params,
+    stable: Option<&events::stable::Stable>,
     meshes: (Option<&Path>, Option<&Path>),
 ) -> Result<EventsOut> {
     let tau = params.threshold.value;
+    let reg = params.reg_error.value;
     let mut kept = Vec::new();
     let mut merged = MergedResults::new(results)?;
     while let Some(k) = merged.next_result()? {
-        if events::filter::is_kept(k.r.distance, k.r.uncertainty, tau) {
+        let r = k.r.with_registration(reg);
+        if events::filter::is_kept(r.distance, r.uncertainty, tau) {
             kept.push(Kept {
                 key: k.key,
                 xyz: k.xyz,
-                d: k.r.distance,
-                lod: k.r.uncertainty,
-                normal: k.r.normal,
+                d: r.distance,
+                lod: r.uncertainty,
+                normal: r.normal,
+                std_dev: [r.std_dev1, r.std_dev2],
             });
         }
     }
@@ -183,13 +235,18 @@ pub fn run(
     }
     // The clustered core points with their event: the volume of one event must not count its
     // neighbour's change where their grown footprints overlap.
-    let labelled: Vec<(Point3, u32)> = clusters
+    let labelled: Vec<Labelled> = clusters
         .iter()
         .enumerate()
         .flat_map(|(n, (_, _, members))| members.iter().map(move |&i| (n as u32 + 1, i)))
-        .map(|(id, i)| (kept[i].xyz, id))
+        .map(|(id, i)| Labelled {
+            xyz: kept[i].xyz,
+            id,
+            normal: kept[i].normal,
+            std_dev: kept[i].std_dev,
+        })
         .collect();
-    let events = volumes(described, &labelled, layout, tiled, params, meshes)?;
+    let events = volumes(described, &labelled, layout, tiled, params, stable, meshes)?;
     Ok(EventsOut {
         events,
         per_point,
@@ -284,6 +341,58 @@ pub fn margin(params: &Params) -> f64 {
     params.cyl_radius.value + 2.0 * params.point_spacing
 }
 
+/// A clustered core point: where, which event, its normal and per-epoch spread.
+struct Labelled {
+    xyz: Point3,
+    id: u32,
+    normal: Point3,
+    std_dev: [f64; 2],
+}
+
+/// The error model of one event's volume (see `volume::uncertainty`): per epoch the area a point
+/// carries in the region and the mean per-point variance, the cluster's own over its core points'
+/// share of the region and the stable ground's over the rest; the stable ground's variogram; and
+/// the registration error along the event's core normals (the user's value if given).
+fn error_model(
+    v: &EventVolume,
+    members: &[&Labelled],
+    core_area: f64,
+    params: &Params,
+    stable: Option<&events::stable::Stable>,
+) -> volume::uncertainty::ErrorModel {
+    let area = v.region_area_m2;
+    let cluster_area = (members.len() as f64 * core_area).min(area);
+    let point_area = std::array::from_fn(|k| match v.region_points[k] {
+        0 => params.point_spacing * params.point_spacing,
+        n => area / n as f64,
+    });
+    let variance = std::array::from_fn(|k| {
+        let own: Vec<f64> = members
+            .iter()
+            .map(|m| m.std_dev[k].powi(2))
+            .filter(|x| x.is_finite())
+            .collect();
+        let own = own.iter().sum::<f64>() / own.len().max(1) as f64;
+        let rest = stable.map_or(own, |s| s.point_variance[k]);
+        (cluster_area * own + (area - cluster_area) * rest) / area.max(f64::MIN_POSITIVE)
+    });
+    let systematic = match stable {
+        Some(s) if params.reg_error.source != "user" => (members
+            .iter()
+            .map(|m| s.along(&m.normal).powi(2))
+            .sum::<f64>()
+            / members.len().max(1) as f64)
+            .sqrt(),
+        _ => params.reg_error.value,
+    };
+    volume::uncertainty::ErrorModel {
+        point_area,
+        variance,
+        variogram: stable.map(|s| s.variogram),
+        systematic,
+    }
+}
+
 /// The boxes an event's volume may be extruded along: its mean normal's, and straight up's
 /// where the normal is not steep (see `volume::axis`).
 fn candidate_boxes(e: &Event, cluster: &[Point3]) -> Vec<Obb> {
@@ -343,10 +452,11 @@ fn gather(
 
 fn volumes(
     described: Vec<Event>,
-    labelled: &[(Point3, u32)],
+    labelled: &[Labelled],
     layout: &Layout,
     tiled: &Tiled,
     params: &Params,
+    stable: Option<&events::stable::Stable>,
     meshes: (Option<&Path>, Option<&Path>),
 ) -> Result<Vec<EventRecord>> {
     let margin = margin(params);
@@ -362,9 +472,12 @@ fn volumes(
         (None, None) => None,
     };
     let mut cores: HashMap<u32, Vec<Point3>> = HashMap::new();
-    for &(p, id) in labelled {
-        cores.entry(id).or_default().push(p);
+    let mut members: HashMap<u32, Vec<&Labelled>> = HashMap::new();
+    for l in labelled {
+        cores.entry(l.id).or_default().push(l.xyz);
+        members.entry(l.id).or_default().push(l);
     }
+    let core_area = params.core_spacing.value.powi(2);
     let no_cores = Vec::new();
     let cluster = |e: &Event| cores.get(&e.id).unwrap_or(&no_cores);
     // Points for every candidate box (user meshes: none, and the mean normal's box).
@@ -452,7 +565,8 @@ fn volumes(
                     volume::event_volume(&e.obb, margin, &before[i], &after[i], spacing, &owned)
                 }
             };
-            EventRecord::new(e, v)
+            let m = members.get(&id).map(|v| v.as_slice()).unwrap_or(&[]);
+            EventRecord::new(e, v, |v| error_model(v, m, core_area, params, stable))
         })
         .collect();
     Ok(records)

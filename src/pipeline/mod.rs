@@ -98,6 +98,8 @@ pub struct Summary {
     pub core_points_file: Option<PathBuf>,
     pub spacing: sampling::Spacing,
     pub parameters: Params,
+    /// Noise and registration error measured on the stable ground (None: too little of it).
+    pub stable: Option<crate::events::stable::Stable>,
     pub tiles: usize,
     pub tile_size: f64,
     pub core_points: u64,
@@ -108,9 +110,11 @@ pub struct Summary {
     pub events: usize,
     pub gain_events: usize,
     pub loss_events: usize,
-    /// Sum of the positive event volumes, m³.
+    /// Events whose |volume| exceeds its 95 % uncertainty (the others stay out of the totals).
+    pub significant_events: usize,
+    /// Sum of the positive volumes of the significant events, m³.
     pub total_gain_m3: f64,
-    /// Sum of the negative event volumes, m³ (≤ 0).
+    /// Sum of the negative volumes of the significant events, m³ (≤ 0).
     pub total_loss_m3: f64,
     pub stages: Vec<StageTime>,
 }
@@ -119,11 +123,12 @@ impl Summary {
     /// One line for the terminal.
     pub fn one_line(&self) -> String {
         format!(
-            "talus: {} core points ({} with a distance, {} significant), {} event(s): {} gain {:+.3} m³, {} loss {:+.3} m³; {} tile(s)",
+            "talus: {} core points ({} with a distance, {} significant), {} event(s), {} significant: {} gain {:+.3} m³, {} loss {:+.3} m³; {} tile(s)",
             self.core_points,
             self.computed_points,
             self.significant_points,
             self.events,
+            self.significant_events,
             self.gain_events,
             self.total_gain_m3,
             self.loss_events,
@@ -279,6 +284,24 @@ fn run_stages(
         seconds: stage.finish(if m3c2.reused { "reused" } else { "" }),
         reused: m3c2.reused,
     });
+    let stage = Stage::start(
+        "stable ground: noise and registration",
+        None,
+        "core points sampled",
+    );
+    let (stable, params) = events_pass::measure_stable(&m3c2, params)?;
+    stage.inc(stable.as_ref().map_or(0, |s| s.sampled_points as u64));
+    stages.push(StageTime {
+        stage: "stable ground".into(),
+        seconds: stage.finish(&match &stable {
+            Some(s) => format!(
+                "reg_error {:.4}, σ_d {:.4}, threshold {:.4} ({} stable core points)",
+                params.reg_error.value, s.sigma_d, params.threshold.value, s.stable_points
+            ),
+            None => "too few stable core points".into(),
+        }),
+        reused: false,
+    });
     let ev = if opts.m3c2_only {
         events_pass::EventsOut::default()
     } else {
@@ -288,6 +311,7 @@ fn run_stages(
             &layout,
             &tiled,
             &params,
+            stable.as_ref(),
             (opts.before_mesh.as_deref(), opts.after_mesh.as_deref()),
         )?;
         stage.inc(ev.events.len() as u64);
@@ -312,6 +336,7 @@ fn run_stages(
     let written = outputs::write_m3c2_laz(
         wd,
         &m3c2,
+        params.reg_error.value,
         &before.crs,
         CoordinateGrid::for_extent(extent.min, extent.max, &scales),
         &|k| per_point.get(&k).copied().unwrap_or((f64::NAN, 0)),
@@ -343,6 +368,7 @@ fn run_stages(
         core_points_file: opts.core_points.clone(),
         spacing,
         parameters: params,
+        stable,
         tiles: layout.grid.len(),
         tile_size: layout.grid.tile_size(),
         core_points: written.core_points,
@@ -360,15 +386,18 @@ fn run_stages(
             .iter()
             .filter(|e| e.event.kind == crate::events::Kind::Loss)
             .count(),
+        significant_events: ev.events.iter().filter(|e| e.significant).count(),
         total_gain_m3: ev
             .events
             .iter()
+            .filter(|e| e.significant)
             .filter_map(|e| e.volume_m3)
             .filter(|v| *v > 0.0)
             .sum(),
         total_loss_m3: ev
             .events
             .iter()
+            .filter(|e| e.significant)
             .filter_map(|e| e.volume_m3)
             .filter(|v| *v < 0.0)
             .sum(),

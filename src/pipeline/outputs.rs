@@ -142,6 +142,7 @@ impl<'a> MergedResults<'a> {
 pub fn write_m3c2_laz(
     wd: &WorkDir,
     results: &M3c2Results,
+    reg_error: f64,
     crs: &Crs,
     grid: CoordinateGrid,
     event_of: &dyn Fn(u64) -> (f64, u32),
@@ -155,7 +156,8 @@ pub fn write_m3c2_laz(
         computed: 0,
         significant: 0,
     };
-    while let Some(k) = merged.next_result()? {
+    while let Some(mut k) = merged.next_result()? {
+        k.r = k.r.with_registration(reg_error);
         each(&k);
         let r = &k.r;
         let (smoothed, event) = event_of(k.key);

@@ -24,8 +24,7 @@ use super::frame::{Footprint, Frame};
 pub const WALL_SLOPE: f64 = 3.73;
 
 /// How many of `points` (global) within `r` grown by one spacing and within `depth` of the
-/// frame's (u, v) plane have another point within one `spacing` in (u, v) and a w difference
-/// beyond [`WALL_SLOPE`] × their distance + `spacing`.
+/// frame's (u, v) plane lie on a wall (see [`wall_flags`]).
 pub fn wall_points(
     frame: &Frame,
     r: &Footprint,
@@ -39,20 +38,38 @@ pub fn wall_points(
         .map(|p| frame.to_local(p))
         .filter(|l| g.contains(l[0], l[1]) && l[2].abs() <= depth)
         .collect();
+    wall_flags(&local, spacing).iter().filter(|&&w| w).count()
+}
+
+/// Per local point (u, v, w): does another point lie within one `spacing` in (u, v) with a w
+/// difference beyond [`WALL_SLOPE`] × their distance + `spacing`?
+pub fn wall_flags(local: &[[f64; 3]], spacing: f64) -> Vec<bool> {
     if local.is_empty() || !(spacing > 0.0) {
-        return 0;
+        return vec![false; local.len()];
     }
     let rho = spacing;
-    let nx = (((g.u1 - g.u0) / rho).ceil() as usize).clamp(1, 1 << 15);
-    let ny = (((g.v1 - g.v0) / rho).ceil() as usize).clamp(1, 1 << 15);
+    let (mut u0, mut v0, mut u1, mut v1) = (
+        f64::INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::NEG_INFINITY,
+    );
+    for l in local {
+        u0 = u0.min(l[0]);
+        v0 = v0.min(l[1]);
+        u1 = u1.max(l[0]);
+        v1 = v1.max(l[1]);
+    }
+    let nx = (((u1 - u0) / rho).ceil() as usize).clamp(1, 1 << 15);
+    let ny = (((v1 - v0) / rho).ceil() as usize).clamp(1, 1 << 15);
     let bucket = |l: &[f64; 3]| {
-        let bx = (((l[0] - g.u0) / rho) as usize).min(nx - 1);
-        let by = (((l[1] - g.v0) / rho) as usize).min(ny - 1);
+        let bx = (((l[0] - u0) / rho) as usize).min(nx - 1);
+        let by = (((l[1] - v0) / rho) as usize).min(ny - 1);
         (bx, by)
     };
-    // Counting sort of the points into buckets.
+    // Counting sort of the point indices into buckets.
     let mut start = vec![0u32; nx * ny + 1];
-    for l in &local {
+    for l in local {
         let (bx, by) = bucket(l);
         start[by * nx + bx + 1] += 1;
     }
@@ -60,32 +77,32 @@ pub fn wall_points(
         start[b + 1] += start[b];
     }
     let mut fill = start.clone();
-    let mut sorted = vec![[0.0; 3]; local.len()];
-    for l in &local {
+    let mut sorted = vec![0u32; local.len()];
+    for (i, l) in local.iter().enumerate() {
         let (bx, by) = bucket(l);
         let b = by * nx + bx;
-        sorted[fill[b] as usize] = *l;
+        sorted[fill[b] as usize] = i as u32;
         fill[b] += 1;
     }
-    let mut walls = 0;
-    for p in &sorted {
-        let (bx, by) = bucket(p);
-        let mut wall = false;
-        'search: for y in by.saturating_sub(1)..=(by + 1).min(ny - 1) {
-            for x in bx.saturating_sub(1)..=(bx + 1).min(nx - 1) {
-                let b = y * nx + x;
-                for q in &sorted[start[b] as usize..start[b + 1] as usize] {
-                    let d = (q[0] - p[0]).hypot(q[1] - p[1]);
-                    if d <= rho && (q[2] - p[2]).abs() > WALL_SLOPE * d + spacing {
-                        wall = true;
-                        break 'search;
+    local
+        .iter()
+        .map(|p| {
+            let (bx, by) = bucket(p);
+            for y in by.saturating_sub(1)..=(by + 1).min(ny - 1) {
+                for x in bx.saturating_sub(1)..=(bx + 1).min(nx - 1) {
+                    let b = y * nx + x;
+                    for &j in &sorted[start[b] as usize..start[b + 1] as usize] {
+                        let q = &local[j as usize];
+                        let d = (q[0] - p[0]).hypot(q[1] - p[1]);
+                        if d <= rho && (q[2] - p[2]).abs() > WALL_SLOPE * d + spacing {
+                            return true;
+                        }
                     }
                 }
             }
-        }
-        walls += wall as usize;
-    }
-    walls
+            false
+        })
+        .collect()
 }
 
 #[cfg(test)]

@@ -32,6 +32,7 @@ pub mod ownership;
 pub mod region;
 pub mod solid;
 pub mod surface;
+pub mod uncertainty;
 pub mod user_mesh;
 
 pub use frame::{Footprint, Frame};
@@ -82,6 +83,8 @@ pub struct EventVolume {
     /// Points of each epoch used (inside the footprint grown by 3 spacings).
     pub n_before: usize,
     pub n_after: usize,
+    /// Points of each epoch inside the region (0 for user meshes).
+    pub region_points: [usize; 2],
 }
 
 impl EventVolume {
@@ -234,7 +237,18 @@ pub fn event_volume(
         solid::clipped_top(&v, &f, &region)
     };
     let (top1, top2) = (top(&tin1), top(&tin2));
-    finish(
+    let inside = |l: &Vec<[f64; 3]>| {
+        l.iter()
+            .filter(|p| {
+                region
+                    .cells
+                    .cell_of(p[0], p[1])
+                    .is_some_and(|(i, j)| region.contains(i, j))
+            })
+            .count()
+    };
+    let counts = [inside(&local1), inside(&local2)];
+    let mut v = finish(
         &frame,
         region,
         top1,
@@ -244,7 +258,9 @@ pub fn event_volume(
         spacing,
         local1.len(),
         local2.len(),
-    )
+    )?;
+    v.region_points = counts;
+    Ok(v)
 }
 
 /// Volume change of one event between two arbitrary surfaces (e.g. the user's meshes,
@@ -319,6 +335,7 @@ fn finish(
         after_solid: to_global(solid2),
         n_before: n1,
         n_after: n2,
+        region_points: [0; 2],
     })
 }
 

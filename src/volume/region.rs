@@ -79,6 +79,16 @@ impl Cells {
         j * self.nu + i
     }
 
+    /// The cell (i, j) that (u, v) falls in, None outside the footprint.
+    pub fn cell_of(&self, u: f64, v: f64) -> Option<(usize, usize)> {
+        if !self.r.contains(u, v) {
+            return None;
+        }
+        let i = ((u - self.r.u0) / (self.r.u1 - self.r.u0) * self.nu as f64) as usize;
+        let j = ((v - self.r.v0) / (self.r.v1 - self.r.v0) * self.nv as f64) as usize;
+        Some((i.min(self.nu - 1), j.min(self.nv - 1)))
+    }
+
     /// Centre of cell (i, j).
     pub fn centre(&self, i: usize, j: usize) -> [f64; 2] {
         [
