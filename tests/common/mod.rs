@@ -98,4 +98,5 @@ pub fn shared_data(sub: &str) -> Option<PathBuf> {
         None
     }
 }
+pub mod dod;
 pub mod laspy;
