@@ -123,7 +123,7 @@ pub fn demo(out: &Path, view: bool) -> Result<()> {
         );
     }
     println!(
-        "{} core points, {} tile(s); outputs in {} (m3c2.laz, events.geojson, events.csv, meshes/, summary.json)",
+        "{} core points, {} tile(s); outputs in {} (m3c2.laz, events.geojson, event_regions.geojson, events.csv, meshes/, summary.json)",
         summary.core_points,
         summary.tiles,
         result.display()
