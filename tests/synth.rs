@@ -93,6 +93,7 @@ fn same_truth(a: &Truth, b: &Truth) {
         (&b.scene, b.seed, &b.epochs, b.points)
     );
     assert_eq!((a.crs_epsg, &a.crs_wkt), (b.crs_epsg, &b.crs_wkt));
+    assert!((0..3).all(|k| close(a.shift_m[k], b.shift_m[k])));
     assert!(close(a.noise_m, b.noise_m) && close(a.total_gain_m3, b.total_gain_m3));
     assert!(close(a.total_loss_m3, b.total_loss_m3));
     assert_eq!(a.events.len(), b.events.len());
@@ -587,4 +588,90 @@ fn cliff_scars_are_hollowed_into_the_face() {
         (2100..2500).contains(&on_ellipsoid),
         "ellipsoid {on_ellipsoid}"
     );
+}
+
+/// `--shift`: epoch 1 is untouched and every epoch-2 point moves by exactly the shift (the same
+/// random streams), for every small scene, with and without rotation (the shift is in global axes,
+/// after the rotation); the truth keeps its volumes and centres and records the shift.
+#[test]
+fn shift_moves_epoch_two_exactly() {
+    let shift = [0.3, -0.2, 0.05];
+    for (i, kind) in SMALL.into_iter().enumerate() {
+        let o = SynthOptions {
+            rotate_deg: if i % 2 == 0 { 0.0 } else { 30.0 },
+            ..opts()
+        };
+        let s = SynthOptions {
+            shift_m: shift,
+            ..o.clone()
+        };
+        for epoch in 0..2 {
+            let a: Vec<[f64; 3]> = epoch_chunks(kind, &o, epoch).unwrap().flatten().collect();
+            let b: Vec<[f64; 3]> = epoch_chunks(kind, &s, epoch).unwrap().flatten().collect();
+            assert_eq!(a.len(), b.len());
+            let d = if epoch == 1 { shift } else { [0.0; 3] };
+            let worst = a
+                .iter()
+                .zip(&b)
+                .flat_map(|(p, q)| (0..3).map(move |k| (q[k] - p[k] - d[k]).abs()))
+                .fold(0.0, f64::max);
+            assert!(worst < 1e-6, "{kind} epoch {epoch}: off by {worst}");
+        }
+    }
+    // Through the files: before.las byte-identical, after.las moved by the shift to within the
+    // 1 mm quantisation, truth.json records it.
+    let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let o = SynthOptions {
+        laz: false,
+        rotate_deg: 30.0,
+        ..opts()
+    };
+    let s = SynthOptions {
+        shift_m: shift,
+        ..o.clone()
+    };
+    let t0 = synth(SceneKind::Cliff, &o, a.path()).unwrap();
+    let t1 = synth(SceneKind::Cliff, &s, b.path()).unwrap();
+    assert_eq!(t0.shift_m, [0.0; 3]);
+    assert_eq!(t1.shift_m, shift);
+    let back: Truth =
+        serde_json::from_slice(&std::fs::read(b.path().join("truth.json")).unwrap()).unwrap();
+    same_truth(&back, &t1);
+    assert_eq!(t0.events, t1.events);
+    assert_eq!(
+        std::fs::read(a.path().join("before.las")).unwrap(),
+        std::fs::read(b.path().join("before.las")).unwrap()
+    );
+    let (_, p0) = read_points(&a.path().join("after.las"));
+    let (_, p1) = read_points(&b.path().join("after.las"));
+    assert_eq!(p0.len(), p1.len());
+    for (p, q) in p0.iter().zip(&p1) {
+        for k in 0..3 {
+            assert!((q[k] - p[k] - shift[k]).abs() < 0.0011, "{p:?} → {q:?}");
+        }
+    }
+    // A truth.json without the field (older files) reads as no shift.
+    let old = String::from_utf8(std::fs::read(a.path().join("truth.json")).unwrap()).unwrap();
+    let start = old.find("\"shift_m\"").unwrap();
+    let end = start + old[start..].find(']').unwrap() + 2;
+    let t: Truth = serde_json::from_str(&(old[..start].to_string() + &old[end..])).unwrap();
+    assert_eq!(t.shift_m, [0.0; 3]);
+}
+
+#[test]
+fn shift_parses_and_is_checked() {
+    use talus::synth::parse_shift;
+    assert_eq!(parse_shift("0.1,-0.2, 3").unwrap(), [0.1, -0.2, 3.0]);
+    for bad in ["1,2", "1,2,3,4", "a,b,c", ""] {
+        assert_eq!(parse_shift(bad).unwrap_err().exit_code(), 2, "{bad}");
+    }
+    let dir = tempfile::tempdir().unwrap();
+    for shift in [[f64::NAN, 0.0, 0.0], [0.0, 0.0, 1e6]] {
+        let o = SynthOptions {
+            shift_m: shift,
+            ..opts()
+        };
+        let e = synth(SceneKind::Hill, &o, dir.path()).unwrap_err();
+        assert_eq!(e.exit_code(), 2, "{e}");
+    }
 }

@@ -15,7 +15,8 @@
 //!
 //! Evaluating the scenes is the point: the volumes follow Gorup & Bohak's synthetic tests (a hill,
 //! a cube, spheres, mixed cubes) plus a cliff with rockfall scars and a debris fan, a stable pair
-//! (false-positive check) and a large pair for the out-of-core path.
+//! (false-positive check) and a large pair for the out-of-core path. `--shift` moves every epoch-2
+//! point rigidly (a registration error the comparison must absorb; the truth is unchanged).
 
 mod output;
 pub(crate) mod rng;
@@ -124,6 +125,9 @@ pub struct SynthOptions {
     pub rotate_deg: f64,
     /// Epoch-2 density relative to epoch 1.
     pub density2: f64,
+    /// Rigid translation (m, global axes) of every epoch-2 point after sampling and rotation: a
+    /// registration error between the surveys, not a change (the truth volumes ignore it).
+    pub shift_m: [f64; 3],
     /// Write LAZ (true) or LAS.
     pub laz: bool,
 }
@@ -136,6 +140,7 @@ impl Default for SynthOptions {
             noise: None,
             rotate_deg: 0.0,
             density2: 1.0,
+            shift_m: [0.0; 3],
             laz: true,
         }
     }
@@ -146,6 +151,18 @@ impl Default for SynthOptions {
 const MAX_POINTS: u64 = 100_000_000_000;
 /// Smallest point count per epoch accepted for the small scenes.
 const MIN_POINTS: u64 = 100;
+/// Largest accepted |component| of `--shift` (m): a registration error, not a relocation.
+const MAX_SHIFT: f64 = 1000.0;
+
+/// Parse `--shift DX,DY,DZ` (metres).
+pub fn parse_shift(s: &str) -> Result<[f64; 3]> {
+    let bad = || Error::Usage(format!("expected DX,DY,DZ in metres, got '{s}'"));
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|t| t.trim().parse::<f64>().map_err(|_| bad()))
+        .collect::<Result<_>>()?;
+    <[f64; 3]>::try_from(v).map_err(|_| bad())
+}
 
 /// The checked, resolved parameters of a run.
 struct Resolved {
@@ -169,6 +186,16 @@ fn resolve(kind: SceneKind, opts: &SynthOptions) -> Result<Resolved> {
     if !(noise.is_finite() && (0.0..=1.0).contains(&noise)) {
         return Err(Error::Usage(format!(
             "synth: --noise must be between 0 and 1 m, got {noise}"
+        )));
+    }
+    if !opts
+        .shift_m
+        .iter()
+        .all(|d| d.is_finite() && d.abs() <= MAX_SHIFT)
+    {
+        return Err(Error::Usage(format!(
+            "synth: --shift components must be finite and at most {MAX_SHIFT} m, got {:?}",
+            opts.shift_m
         )));
     }
     if !opts.rotate_deg.is_finite() {
@@ -213,8 +240,12 @@ pub fn epoch_chunks(kind: SceneKind, opts: &SynthOptions, epoch: usize) -> Resul
     Ok(chunks_of(&model, &r, opts, epoch))
 }
 
-fn placement(model: &SceneModel, opts: &SynthOptions) -> Placement {
-    Placement::new(model.centre, opts.rotate_deg, ORIGIN)
+/// Where epoch `epoch`'s local points go: rotated about the scene's centre, moved to the global
+/// origin, and for epoch 2 shifted by `--shift`.
+fn placement(model: &SceneModel, opts: &SynthOptions, epoch: usize) -> Placement {
+    let shift = if epoch == 1 { opts.shift_m } else { [0.0; 3] };
+    let origin = [0, 1, 2].map(|k| ORIGIN[k] + shift[k]);
+    Placement::new(model.centre, opts.rotate_deg, origin)
 }
 
 fn chunks_of(model: &SceneModel, r: &Resolved, opts: &SynthOptions, epoch: usize) -> Chunks {
@@ -224,7 +255,7 @@ fn chunks_of(model: &SceneModel, r: &Resolved, opts: &SynthOptions, epoch: usize
         opts.seed,
         epoch as u64,
         r.noise,
-        placement(model, opts),
+        placement(model, opts, epoch),
     )
 }
 
@@ -256,7 +287,7 @@ pub fn synth(kind: SceneKind, opts: &SynthOptions, out_dir: &Path) -> Result<Tru
             )));
         }
     }
-    let place = placement(&model, opts);
+    let place = placement(&model, opts, 0);
     let events: Vec<TruthEvent> = model
         .events
         .iter()
@@ -281,6 +312,7 @@ pub fn synth(kind: SceneKind, opts: &SynthOptions, out_dir: &Path) -> Result<Tru
         rotate_deg: opts.rotate_deg,
         rotation_centre: [ORIGIN[0] + model.centre[0], ORIGIN[1] + model.centre[1]],
         density2: opts.density2,
+        shift_m: opts.shift_m,
         crs_epsg: CRS_EPSG,
         crs_wkt: UTM33N_WKT.into(),
         total_gain_m3: events.iter().map(|e| e.volume_m3.max(0.0)).sum(),

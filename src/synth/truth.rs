@@ -43,6 +43,10 @@ pub struct Truth {
     pub rotation_centre: [f64; 2],
     /// Epoch-2 density relative to epoch 1.
     pub density2: f64,
+    /// Rigid translation (m) of every epoch-2 point, applied after the rotation: a registration
+    /// error, not a change (the volumes are the real changes). Absent in older files: zero.
+    #[serde(default)]
+    pub shift_m: [f64; 3],
     /// EPSG code of the CRS written in both files.
     pub crs_epsg: u32,
     /// The OGC WKT (version 1) written in both files' WKT CRS VLR.
