@@ -1,20 +1,23 @@
 //! Tests of `talus synth`: files read back by las-rs (an independent reader), closed-form volumes
 //! checked against numerical integration of the two analytic surfaces, volumes re-measured from the
-//! written points, noise and density statistics, determinism, rotation, density2 and streaming.
+//! written points, noise and density statistics, determinism, rotation, shift, density2, holes
+//! and streaming.
 
 use std::path::Path;
 
 use talus::synth::{
-    epoch_chunks, scene_model, synth, Footprint, SceneKind, SynthOptions, Truth, CHUNK_POINTS,
-    CRS_EPSG, ORIGIN, UTM33N_WKT,
+    epoch_chunks, scene_model, synth, Footprint, ModelEvent, SceneKind, SceneModel, SynthOptions,
+    Truth, CHUNK_POINTS, CRS_EPSG, ORIGIN, UTM33N_WKT,
 };
 
-const SMALL: [SceneKind; 6] = [
+const SMALL: [SceneKind; 8] = [
     SceneKind::Hill,
     SceneKind::Cube,
     SceneKind::Spheres,
     SceneKind::Cubes,
     SceneKind::Cliff,
+    SceneKind::Deposit,
+    SceneKind::Hole,
     SceneKind::Stable,
 ];
 
@@ -103,6 +106,10 @@ fn same_truth(a: &Truth, b: &Truth) {
             (f.id, &f.kind, &f.description)
         );
         assert!(close(e.volume_m3, f.volume_m3) && close(e.radius_m, f.radius_m));
+        assert_eq!(e.covered_volume_m3.is_some(), f.covered_volume_m3.is_some());
+        if let (Some(x), Some(y)) = (e.covered_volume_m3, f.covered_volume_m3) {
+            assert!(close(x, y));
+        }
         assert!((0..3).all(|k| close(e.centre[k], f.centre[k])));
     }
 }
@@ -121,7 +128,14 @@ fn each_scene_writes_readable_las() {
         };
         let truth = synth(kind, &o, dir.path()).unwrap();
         assert_eq!(truth.scene, kind.name());
-        assert_eq!(truth.points, [kind.default_points(); 2]);
+        // The hole scene's epoch 1 misses 160 m² of its 1600 m²: 10 % fewer points.
+        let n = kind.default_points();
+        let n1 = if kind == SceneKind::Hole {
+            n * 9 / 10
+        } else {
+            n
+        };
+        assert_eq!(truth.points, [n1, n]);
         let json = std::fs::read(dir.path().join("truth.json")).unwrap();
         let back: Truth = serde_json::from_slice(&json).unwrap();
         same_truth(&back, &truth);
@@ -198,6 +212,48 @@ fn integrate(x0: f64, x1: f64, y0: f64, y1: f64, n: usize, f: impl Fn(f64, f64) 
     s * dx * dy
 }
 
+/// The numerical integral of event `ev`'s change, the difference of the two analytic surfaces,
+/// over its footprint grown by 0.5 m (so that it holds the whole change) on an n × n grid, where
+/// `keep` holds: ∫∫(z2 − z1) dx dy on the ground, −∫∫(d2 − d1) dx dz into the face.
+fn integrated_volume(
+    m: &SceneModel,
+    ev: &ModelEvent,
+    n: usize,
+    keep: impl Fn(f64, f64) -> bool,
+) -> f64 {
+    let g = 0.5;
+    let (min, max, sign) = match ev.footprint {
+        Footprint::Ground { min, max } => (min, max, 1.0),
+        Footprint::Face { min, max } => (min, max, -1.0),
+    };
+    let change = |x: f64, y: f64| match ev.footprint {
+        Footprint::Ground { .. } => m.height(1, x, y).unwrap() - m.height(0, x, y).unwrap(),
+        Footprint::Face { .. } => m.face_depth(1, x, y).unwrap() - m.face_depth(0, x, y).unwrap(),
+    };
+    sign * integrate(min[0] - g, max[0] + g, min[1] - g, max[1] + g, n, |x, y| {
+        if keep(x, y) {
+            change(x, y)
+        } else {
+            0.0
+        }
+    })
+}
+
+/// Every event's closed-form volume is within 0.5 % of the numerical integral of its change.
+fn check_volumes(kind: SceneKind, m: &SceneModel, n: usize) -> usize {
+    for ev in m.events() {
+        let num = integrated_volume(m, ev, n, |_, _| true);
+        let rel = (num - ev.volume_m3).abs() / ev.volume_m3.abs();
+        assert!(
+            rel < 0.005,
+            "{kind} {}: closed form {} vs integral {num}",
+            ev.description,
+            ev.volume_m3
+        );
+    }
+    m.events().len()
+}
+
 /// The closed-form volume of every event equals the numerical integral of the difference of the
 /// two analytic surfaces over its footprint grown by 0.5 m (so the footprint holds the whole
 /// change), within 0.5 %: ∫∫(z2 − z1) dx dy on the ground, −∫∫(d2 − d1) dx dz into the face.
@@ -214,58 +270,45 @@ fn truth_volumes_match_numerical_integration() {
     let mut checked = 0;
     for (kind, o) in scenes {
         let m = scene_model(kind, &o).unwrap();
-        for ev in m.events() {
-            let g = 0.5;
-            let num = match ev.footprint {
-                Footprint::Ground { min, max } => integrate(
-                    min[0] - g,
-                    max[0] + g,
-                    min[1] - g,
-                    max[1] + g,
-                    1500,
-                    |x, y| m.height(1, x, y).unwrap() - m.height(0, x, y).unwrap(),
-                ),
-                Footprint::Face { min, max } => -integrate(
-                    min[0] - g,
-                    max[0] + g,
-                    min[1] - g,
-                    max[1] + g,
-                    1500,
-                    |x, z| m.face_depth(1, x, z).unwrap() - m.face_depth(0, x, z).unwrap(),
-                ),
-            };
-            let rel = (num - ev.volume_m3).abs() / ev.volume_m3.abs();
-            assert!(
-                rel < 0.005,
-                "{kind} {}: closed form {} vs integral {num}",
-                ev.description,
-                ev.volume_m3
-            );
-            assert!(ev.volume_m3.abs() > 1.0, "{kind}: realistic volumes");
-            checked += 1;
-        }
+        checked += check_volumes(kind, &m, 1500);
+        assert!(
+            m.events().iter().all(|e| e.volume_m3.abs() > 1.0),
+            "{kind}: realistic volumes"
+        );
     }
-    // hill 1, cube 1, spheres 5, cubes 4, cliff 3, large (2M points: 150 m² … 3 × 3 grid) 9.
-    assert_eq!(checked, 1 + 1 + 5 + 4 + 3 + 9);
+    // hill 1, cube 1, spheres 5, cubes 4, cliff 3, deposit 1, hole 1, large (2M points: 150 m²
+    // … 3 × 3 grid) 9.
+    assert_eq!(checked, 1 + 1 + 5 + 4 + 3 + 1 + 1 + 9);
 }
 
-/// Outside the events nothing changes: the whole-scene integral of z2 − z1 equals the sum of the
-/// event volumes (heightfield scenes), and the stable scene differs by exactly its 5 mm shift.
+/// Outside the events nothing changes: the whole-ground integral of z2 − z1 equals the sum of
+/// the event volumes (heightfield scenes; the deposit scene's beach), within 0.5 % of the summed
+/// absolute volumes, and the stable scene differs by exactly its 5 mm shift.
 #[test]
 fn no_change_outside_events() {
-    for (kind, size) in [
-        (SceneKind::Hill, 40.0),
-        (SceneKind::Cube, 30.0),
-        (SceneKind::Spheres, 50.0),
-        (SceneKind::Cubes, 40.0),
+    for kind in [
+        SceneKind::Hill,
+        SceneKind::Cube,
+        SceneKind::Spheres,
+        SceneKind::Cubes,
+        SceneKind::Hole,
+        SceneKind::Deposit,
     ] {
         let m = scene_model(kind, &opts()).unwrap();
+        // The heightfield scenes span [0, 2 × centre]; the deposit scene's beach [0, 60] × [−20, 0].
+        let [cx, cy] = m.centre();
+        let (min, max) = if kind == SceneKind::Deposit {
+            ([0.0, -20.0], [60.0, 0.0])
+        } else {
+            ([0.0, 0.0], [2.0 * cx, 2.0 * cy])
+        };
         let total: f64 = m.events().iter().map(|e| e.volume_m3).sum();
-        let num = integrate(0.0, size, 0.0, size, 3000, |x, y| {
+        let scale: f64 = m.events().iter().map(|e| e.volume_m3.abs()).sum();
+        let num = integrate(min[0], max[0], min[1], max[1], 3000, |x, y| {
             m.height(1, x, y).unwrap() - m.height(0, x, y).unwrap()
         });
         assert!(
-            (num - total).abs() < 0.005 * total.abs().max(1.0),
+            (num - total).abs() < 0.005 * scale.max(1.0),
             "{kind}: {num} vs {total}"
         );
     }
@@ -417,32 +460,43 @@ fn noise_and_density_on_surfaces() {
 /// Same seed → identical bytes (also when run on one thread); another seed → other points.
 #[test]
 fn same_seed_same_bytes() {
-    let (a, b, c) = (
-        tempfile::tempdir().unwrap(),
-        tempfile::tempdir().unwrap(),
-        tempfile::tempdir().unwrap(),
-    );
-    synth(SceneKind::Cliff, &opts(), a.path()).unwrap();
-    // The second run on one thread: the bytes must not depend on the thread count.
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(1)
-        .build()
-        .unwrap()
-        .install(|| synth(SceneKind::Cliff, &opts(), b.path()))
-        .unwrap();
-    let other = SynthOptions { seed: 2, ..opts() };
-    synth(SceneKind::Cliff, &other, c.path()).unwrap();
-    for f in ["before.laz", "after.laz", "truth.json"] {
-        let x = std::fs::read(a.path().join(f)).unwrap();
-        assert_eq!(x, std::fs::read(b.path().join(f)).unwrap(), "{f}");
-        if f != "truth.json" {
-            assert_ne!(x, std::fs::read(c.path().join(f)).unwrap(), "{f}");
+    for kind in [SceneKind::Cliff, SceneKind::Deposit, SceneKind::Hole] {
+        let (a, b, c) = (
+            tempfile::tempdir().unwrap(),
+            tempfile::tempdir().unwrap(),
+            tempfile::tempdir().unwrap(),
+        );
+        // The hole scene shifted: the shift is part of the determinism.
+        let o = SynthOptions {
+            shift_m: if kind == SceneKind::Hole {
+                [0.1, 0.0, -0.02]
+            } else {
+                [0.0; 3]
+            },
+            ..opts()
+        };
+        synth(kind, &o, a.path()).unwrap();
+        // The second run on one thread: the bytes must not depend on the thread count.
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap()
+            .install(|| synth(kind, &o, b.path()))
+            .unwrap();
+        let other = SynthOptions { seed: 2, ..o };
+        synth(kind, &other, c.path()).unwrap();
+        for f in ["before.laz", "after.laz", "truth.json"] {
+            let x = std::fs::read(a.path().join(f)).unwrap();
+            assert_eq!(x, std::fs::read(b.path().join(f)).unwrap(), "{kind} {f}");
+            if f != "truth.json" {
+                assert_ne!(x, std::fs::read(c.path().join(f)).unwrap(), "{kind} {f}");
+            }
         }
+        // The two epochs of one run come from different random streams.
+        let (_, p1) = read_points(&a.path().join("before.laz"));
+        let (_, p2) = read_points(&a.path().join("after.laz"));
+        assert_ne!(p1[..100], p2[..100]);
     }
-    // The two epochs of one run come from different random streams.
-    let (_, p1) = read_points(&a.path().join("before.laz"));
-    let (_, p2) = read_points(&a.path().join("after.laz"));
-    assert_ne!(p1[..100], p2[..100]);
 }
 
 /// Rotating the scene keeps volumes, rotates the event centres about the rotation centre, and
@@ -588,6 +642,126 @@ fn cliff_scars_are_hollowed_into_the_face() {
         (2100..2500).contains(&on_ellipsoid),
         "ellipsoid {on_ellipsoid}"
     );
+}
+
+/// The deposit scene: the cliff's frame, its face and plateau unchanged, one gain on the beach
+/// whose edge stays 1.5 m in front of the face foot (the beach is unchanged over the gap).
+#[test]
+fn deposit_lies_on_the_beach_clear_of_the_face() {
+    let m = scene_model(SceneKind::Deposit, &opts()).unwrap();
+    let [ev] = m.events() else {
+        panic!("one event")
+    };
+    assert!(ev.volume_m3 > 0.0);
+    let Footprint::Ground { min, max } = ev.footprint else {
+        panic!("a ground event")
+    };
+    assert!(
+        (max[1] + 1.5).abs() < 1e-9,
+        "gap to the face foot {}",
+        -max[1]
+    );
+    assert!(min[1] > -20.0 + 5.0 && min[0] > 5.0 && max[0] < 55.0);
+    for i in 0..=600 {
+        let x = i as f64 * 0.1;
+        for y in [-1.5, -1.0, -0.5, -1e-9] {
+            assert_eq!(m.height(0, x, y), m.height(1, x, y), "beach at ({x}, {y})");
+        }
+        for z in [100.0, 103.0, 115.0, 130.0] {
+            assert_eq!(m.face_depth(1, x, z), Some(0.0));
+        }
+    }
+    // The deposit rises above the beach: 1.2 m at its centre.
+    let c = [(min[0] + max[0]) / 2.0, (min[1] + max[1]) / 2.0];
+    let dz = m.height(1, c[0], c[1]).unwrap() - m.height(0, c[0], c[1]).unwrap();
+    assert!((dz - 1.2).abs() < 1e-9, "height {dz}");
+}
+
+/// The hole scene: epoch 1 has no points over the hole (x ∈ [20, 30), y ∈ [12, 28)), epoch 2 has
+/// its share there; epoch 1's density elsewhere is epoch 2's (its points are sampled only outside
+/// the hole, 90 % of them); the hole covers half of the event's footprint; `covered_volume_m3`
+/// equals the integral of the change outside the hole and is in truth.json for that event only.
+#[test]
+fn hole_is_empty_in_epoch_one_and_halves_the_event() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = SynthOptions {
+        laz: false,
+        ..opts()
+    };
+    let t = synth(SceneKind::Hole, &o, dir.path()).unwrap();
+    let m = scene_model(SceneKind::Hole, &o).unwrap();
+    let [ev] = m.events() else {
+        panic!("one event")
+    };
+    let covered = ev.covered_volume_m3.expect("a covered volume");
+    assert_eq!(t.events[0].covered_volume_m3, Some(covered));
+    let num = integrated_volume(&m, ev, 2000, |x, y| !m.unobserved(0, x, y));
+    assert!(
+        (num - covered).abs() < 0.005 * covered,
+        "covered {covered} vs integral {num}"
+    );
+    // Half of the footprint's disk (radius 4 m about (20, 20)) lies in the hole.
+    let disk = |x: f64, y: f64| (x - 20.0).hypot(y - 20.0) < 4.0;
+    let inside = integrate(16.0, 24.0, 16.0, 24.0, 2000, |x, y| {
+        f64::from(u8::from(disk(x, y) && m.unobserved(0, x, y)))
+    });
+    let all = integrate(16.0, 24.0, 16.0, 24.0, 2000, |x, y| {
+        f64::from(u8::from(disk(x, y)))
+    });
+    assert!((inside / all - 0.5).abs() < 0.002, "{inside} of {all}");
+    assert!(!m.unobserved(1, 25.0, 20.0) && m.unobserved(0, 25.0, 20.0));
+    let text = std::fs::read_to_string(dir.path().join("truth.json")).unwrap();
+    assert_eq!(text.matches("covered_volume_m3").count(), 1);
+
+    let (_, p1) = read_points(&dir.path().join(&t.epochs[0]));
+    let (_, p2) = read_points(&dir.path().join(&t.epochs[1]));
+    let local = |p: &[f64; 3]| [p[0] - ORIGIN[0], p[1] - ORIGIN[1]];
+    // 3 mm inside the hole's edges: the noise moves points by at most 0.02 × 4 × 5 mm
+    // horizontally, the 1 mm quantisation by 0.5 mm.
+    let e = 0.003;
+    let in_hole = |p: &[f64; 3]| {
+        let [x, y] = local(p);
+        x > 20.0 + e && x < 30.0 - e && y > 12.0 + e && y < 28.0 - e
+    };
+    assert_eq!(p1.iter().filter(|p| in_hole(p)).count(), 0);
+    // Epoch 2's share of points in a region is its share of the surface area (the area element
+    // sqrt(1 + |∇z|²) by central differences); binomial bounds at 4σ.
+    let area = |x0: f64, x1: f64, y0: f64, y1: f64| {
+        let z = |x: f64, y: f64| m.height(1, x, y).unwrap();
+        let h = 1e-4;
+        integrate(x0, x1, y0, y1, 800, |x, y| {
+            let gx = (z(x + h, y) - z(x - h, y)) / (2.0 * h);
+            let gy = (z(x, y + h) - z(x, y - h)) / (2.0 * h);
+            (1.0 + gx * gx + gy * gy).sqrt()
+        })
+    };
+    let total = area(0.0, 40.0, 0.0, 40.0);
+    let expect = |n: usize, share: f64| {
+        let mean = n as f64 * share;
+        (mean, 4.0 * (mean * (1.0 - share)).sqrt())
+    };
+    let count =
+        |pts: &[[f64; 3]], f: &dyn Fn(&[f64; 3]) -> bool| pts.iter().filter(|p| f(p)).count();
+    let (mean, bound) = expect(
+        p2.len(),
+        area(20.0 + e, 30.0 - e, 12.0 + e, 28.0 - e) / total,
+    );
+    let n2 = count(&p2, &in_hole) as f64;
+    assert!(
+        (n2 - mean).abs() < bound,
+        "epoch 2 in the hole: {n2} vs {mean}"
+    );
+    // The same density elsewhere: in x < 15 (600 m², clear of the bump) epoch 1 expects
+    // 144000 × 600 / 1440 = 60 000 points (its area element is constant), epoch 2 its share of
+    // the surface. Sampling all 160 000 points of epoch 1 outside the hole would give 66 667.
+    let west = |p: &[f64; 3]| local(p)[0] < 15.0;
+    let (mean, bound) = expect(p1.len(), 600.0 / 1440.0);
+    let w1 = count(&p1, &west) as f64;
+    assert!((w1 - mean).abs() < bound, "epoch 1 west {w1} vs {mean}");
+    let (mean, bound) = expect(p2.len(), area(0.0, 15.0, 0.0, 40.0) / total);
+    let w2 = count(&p2, &west) as f64;
+    assert!((w2 - mean).abs() < bound, "epoch 2 west {w2} vs {mean}");
+    assert!((w1 / w2 - 1.0).abs() < 0.02, "densities {w1} vs {w2}");
 }
 
 /// `--shift`: epoch 1 is untouched and every epoch-2 point moves by exactly the shift (the same

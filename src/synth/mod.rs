@@ -14,8 +14,10 @@
 //! ([`Truth`]). Every file is written under a temporary name and renamed when complete.
 //!
 //! Evaluating the scenes is the point: the volumes follow Gorup & Bohak's synthetic tests (a hill,
-//! a cube, spheres, mixed cubes) plus a cliff with rockfall scars and a debris fan, a stable pair
-//! (false-positive check) and a large pair for the out-of-core path. `--shift` moves every epoch-2
+//! a cube, spheres, mixed cubes) plus a cliff with rockfall scars and a debris fan, the same cliff
+//! with a debris deposit on the beach just clear of the face (`deposit`), a bump half hidden from
+//! epoch 1 by a hole in its coverage (`hole`: truth gives the whole and the observed volume), a
+//! stable pair (false-positive check) and a large pair for the out-of-core path. `--shift` moves every epoch-2
 //! point rigidly (a registration error the comparison must absorb; the truth is unchanged).
 
 mod output;
@@ -50,18 +52,22 @@ pub enum SceneKind {
     Spheres,
     Cubes,
     Cliff,
+    Deposit,
+    Hole,
     Stable,
     Large,
 }
 
 impl SceneKind {
     /// All scenes, in the order of their names.
-    pub const ALL: [SceneKind; 7] = [
+    pub const ALL: [SceneKind; 9] = [
         SceneKind::Hill,
         SceneKind::Cube,
         SceneKind::Spheres,
         SceneKind::Cubes,
         SceneKind::Cliff,
+        SceneKind::Deposit,
+        SceneKind::Hole,
         SceneKind::Stable,
         SceneKind::Large,
     ];
@@ -74,6 +80,8 @@ impl SceneKind {
             SceneKind::Spheres => "spheres",
             SceneKind::Cubes => "cubes",
             SceneKind::Cliff => "cliff",
+            SceneKind::Deposit => "deposit",
+            SceneKind::Hole => "hole",
             SceneKind::Stable => "stable",
             SceneKind::Large => "large",
         }
@@ -116,7 +124,8 @@ impl FromStr for SceneKind {
 /// Options of [`synth`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct SynthOptions {
-    /// Points per epoch (epoch 2 gets `points · density2`); None = the scene's default.
+    /// Points per epoch (epoch 2 gets `points · density2`; an epoch with holes its observed share
+    /// of them); None = the scene's default.
     pub points: Option<u64>,
     pub seed: u64,
     /// Noise standard deviation (m) along the surface normal; None = the scene's default.
@@ -248,10 +257,16 @@ fn placement(model: &SceneModel, opts: &SynthOptions, epoch: usize) -> Placement
     Placement::new(model.centre, opts.rotate_deg, origin)
 }
 
+/// Points of epoch `epoch`: the requested count times the share of its surface that is observed
+/// (so that holes keep the density of the rest).
+fn epoch_points(model: &SceneModel, r: &Resolved, epoch: usize) -> u64 {
+    (r.points[epoch] as f64 * model.observed[epoch]).round() as u64
+}
+
 fn chunks_of(model: &SceneModel, r: &Resolved, opts: &SynthOptions, epoch: usize) -> Chunks {
     Chunks::new(
         model.patches[epoch].clone(),
-        r.points[epoch],
+        epoch_points(model, r, epoch),
         opts.seed,
         epoch as u64,
         r.noise,
@@ -280,10 +295,11 @@ pub fn synth(kind: SceneKind, opts: &SynthOptions, out_dir: &Path) -> Result<Tru
             epoch as u16 + 1,
             opts.laz,
         )?;
-        if written[epoch] != r.points[epoch] {
+        let planned = epoch_points(&model, &r, epoch);
+        if written[epoch] != planned {
             return Err(Error::Internal(format!(
-                "synth wrote {} points, planned {}",
-                written[epoch], r.points[epoch]
+                "synth wrote {} points, planned {planned}",
+                written[epoch]
             )));
         }
     }
@@ -296,6 +312,7 @@ pub fn synth(kind: SceneKind, opts: &SynthOptions, out_dir: &Path) -> Result<Tru
             id: i as u32 + 1,
             kind: if e.volume_m3 >= 0.0 { "gain" } else { "loss" }.into(),
             volume_m3: e.volume_m3,
+            covered_volume_m3: e.covered_volume_m3,
             centre: place.apply(e.centre),
             radius_m: e.radius_m,
             description: e.description.clone(),

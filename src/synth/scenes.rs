@@ -35,6 +35,9 @@ pub struct ModelEvent {
     /// Radius of a circle around `centre` that contains the footprint.
     pub radius_m: f64,
     pub footprint: Footprint,
+    /// The part of `volume_m3` over ground that both epochs observed, when epoch 1 has a hole over
+    /// part of the event (None: all of it is observed).
+    pub covered_volume_m3: Option<f64>,
     pub description: String,
 }
 
@@ -85,17 +88,21 @@ pub struct SceneModel {
     scars: [Vec<Scar>; 2],
     face: Option<([f64; 2], [f64; 2])>,
     pub(crate) events: Vec<ModelEvent>,
+    /// Fraction of each epoch's surface that is sampled (1 unless it has holes): an epoch gets
+    /// this fraction of the requested points, so holes keep the density of the rest.
+    pub(crate) observed: [f64; 2],
     /// Centre of the scene's footprint: the vertical rotation axis of `--rotate`.
     pub(crate) centre: [f64; 2],
     pub(crate) summary: String,
 }
 
-/// Default points per epoch of each scene (about 0.1 m spacing for the small ones).
+/// Default points per epoch of each scene (about 0.1 m spacing for the small ones; holes are left
+/// out of the count: see [`SceneModel::observed`]).
 pub(crate) fn default_points(kind: SceneKind) -> u64 {
     match kind {
-        SceneKind::Hill | SceneKind::Cubes | SceneKind::Stable => 160_000,
+        SceneKind::Hill | SceneKind::Cubes | SceneKind::Stable | SceneKind::Hole => 160_000,
         SceneKind::Cube => 100_000,
-        SceneKind::Spheres | SceneKind::Cliff => 250_000,
+        SceneKind::Spheres | SceneKind::Cliff | SceneKind::Deposit => 250_000,
         SceneKind::Large => 120_000_000,
     }
 }
@@ -127,7 +134,12 @@ fn square(c: [f64; 2], r: f64) -> Footprint {
 }
 
 fn height_patch(field: Heightfield, min: [f64; 2], max: [f64; 2]) -> Patch {
-    Patch::Height { field, min, max }
+    Patch::Height {
+        field,
+        min,
+        max,
+        holes: Vec::new(),
+    }
 }
 
 impl SceneModel {
@@ -139,6 +151,8 @@ impl SceneModel {
             SceneKind::Spheres => spheres(),
             SceneKind::Cubes => cubes(),
             SceneKind::Cliff => cliff(),
+            SceneKind::Deposit => deposit(),
+            SceneKind::Hole => hole(),
             SceneKind::Stable => stable(),
             SceneKind::Large => large(points),
         }
@@ -150,15 +164,25 @@ impl SceneModel {
     }
 
     /// Height of epoch `epoch` (0 = before, 1 = after) at local (x, y), where the epoch's surface
-    /// is a heightfield there (ground, box tops, plateau); None elsewhere.
+    /// is a heightfield there (ground, box tops, plateau), also over holes the epoch did not
+    /// observe; None elsewhere.
     pub fn height(&self, epoch: usize, x: f64, y: f64) -> Option<f64> {
         self.patches[epoch].iter().find_map(|p| match p {
-            Patch::Height { field, min, max }
-                if x >= min[0] && x <= max[0] && y >= min[1] && y <= max[1] =>
-            {
+            Patch::Height {
+                field, min, max, ..
+            } if x >= min[0] && x <= max[0] && y >= min[1] && y <= max[1] => {
                 Some(field.eval(x, y).0)
             }
             _ => None,
+        })
+    }
+
+    /// Whether local (x, y) lies in a hole of one of epoch `epoch`'s heightfields (ground that
+    /// epoch has no points on).
+    pub fn unobserved(&self, epoch: usize, x: f64, y: f64) -> bool {
+        self.patches[epoch].iter().any(|p| match p {
+            Patch::Height { holes, .. } => holes.iter().any(|h| h.contains(x, y)),
+            _ => false,
         })
     }
 
@@ -195,6 +219,7 @@ impl SceneModel {
             scars: [Vec::new(), Vec::new()],
             face: None,
             events,
+            observed: [1.0; 2],
             centre: [size[0] / 2.0, size[1] / 2.0],
             summary: summary.to_string(),
         }
@@ -206,15 +231,20 @@ fn z_at(field: &Heightfield, c: [f64; 2]) -> f64 {
     field.eval(c[0], c[1]).0
 }
 
-/// hill: a 40 m × 40 m tilted plane; epoch 2 adds h·cos²(πr/2R), R = 6 m, h = 1.5 m at the centre.
-/// V = h·R²·(π/2 − 2/π) ≈ 50.44 m³.
-fn hill() -> SceneModel {
-    let base = Base {
+/// The plane of the hill and hole scenes: z = 100 + 0.02 x + 0.01 y.
+fn tilted_plane() -> Base {
+    Base {
         z0: 100.0,
         gx: 0.02,
         gy: 0.01,
         waves: Vec::new(),
-    };
+    }
+}
+
+/// hill: a 40 m × 40 m tilted plane; epoch 2 adds h·cos²(πr/2R), R = 6 m, h = 1.5 m at the centre.
+/// V = h·R²·(π/2 − 2/π) ≈ 50.44 m³.
+fn hill() -> SceneModel {
+    let base = tilted_plane();
     let (c, radius, height) = ([20.0, 20.0], 6.0, 1.5);
     let f1 = Heightfield::new(base.clone(), Vec::new());
     let f2 = Heightfield::new(base, vec![Feature::Bump { c, radius, height }]);
@@ -223,6 +253,7 @@ fn hill() -> SceneModel {
         centre: [c[0], c[1], z_at(&f1, c)],
         radius_m: radius,
         footprint: square(c, radius),
+        covered_volume_m3: None,
         description: format!("hill: h·cos²(πr/2R) bump, R = {radius} m, h = {height} m"),
     }];
     SceneModel::heightfield_scene(
@@ -252,6 +283,7 @@ fn cube() -> SceneModel {
         centre: [15.0, 15.0, 100.0],
         radius_m: 8f64.sqrt(),
         footprint: ground(min, max),
+        covered_volume_m3: None,
         description: "cube: 4 × 4 × 1.5 m box raised from the plane".into(),
     }];
     SceneModel::heightfield_scene(
@@ -299,6 +331,7 @@ fn spheres() -> SceneModel {
                 centre: [c[0], c[1], z_at(&f1, c)],
                 radius_m: a,
                 footprint: square(c, a),
+                covered_volume_m3: None,
                 description: format!(
                     "spherical {} R = {rs} m, h = {} m",
                     if h > 0.0 { "cap" } else { "dent" },
@@ -388,6 +421,7 @@ fn cubes() -> SceneModel {
                 centre: [c[0], c[1], z0 + b.h[0]],
                 radius_m: dx.hypot(dy) / 2.0,
                 footprint: ground(b.min, b.max),
+                covered_volume_m3: None,
                 description: b.name.to_string(),
             }
         })
@@ -405,6 +439,74 @@ fn cubes() -> SceneModel {
     )
 }
 
+/// The frame of the cliff scenes: a beach (x ∈ [0, width], y ∈ [−beach, 0], sloping 2 % seaward
+/// to −y) at the foot of a vertical face of `height` in the plane y = 0 (rock at y > 0, face normal
+/// −y) rising from z0, with a plateau `plateau` deep on top.
+struct CliffFrame {
+    width: f64,
+    height: f64,
+    beach: f64,
+    plateau: f64,
+    z0: f64,
+}
+
+const CLIFF: CliffFrame = CliffFrame {
+    width: 60.0,
+    height: 30.0,
+    beach: 20.0,
+    plateau: 10.0,
+    z0: 100.0,
+};
+
+impl CliffFrame {
+    fn beach_base(&self) -> Base {
+        Base {
+            z0: self.z0,
+            gx: 0.0,
+            gy: 0.02,
+            waves: Vec::new(),
+        }
+    }
+
+    /// Beach (with `features`), plateau and face (minus `holes`), in that order.
+    fn patches(&self, features: Vec<Feature>, holes: Vec<Hole>) -> Vec<Patch> {
+        let top = Heightfield::new(Base::plane(self.z0 + self.height), Vec::new());
+        vec![
+            height_patch(
+                Heightfield::new(self.beach_base(), features),
+                [0.0, -self.beach],
+                [self.width, 0.0],
+            ),
+            height_patch(top, [0.0, 0.0], [self.width, self.plateau]),
+            Patch::Plane {
+                origin: [0.0, 0.0, self.z0],
+                eu: [1.0, 0.0, 0.0],
+                ev: [0.0, 0.0, 1.0],
+                len: [self.width, self.height],
+                holes,
+            },
+        ]
+    }
+
+    fn model(
+        &self,
+        patches: [Vec<Patch>; 2],
+        scars: [Vec<Scar>; 2],
+        events: Vec<ModelEvent>,
+        summary: &str,
+    ) -> SceneModel {
+        SceneModel {
+            patches,
+            scars,
+            face: Some(([0.0, self.z0], [self.width, self.z0 + self.height])),
+            events,
+            observed: [1.0; 2],
+            centre: [self.width / 2.0, (self.plateau - self.beach) / 2.0],
+            summary: summary.into(),
+        }
+    }
+}
+
 /// cliff: a beach (x ∈ [0, 60], y ∈ [−20, 0], sloping 2 % seaward to −y) at the foot of a 30 m
 /// vertical face in the plane y = 0 (rock at y > 0, face normal −y), with a 10 m deep plateau on
 /// top. Epoch 2: a box scar 4 m wide × 3 m high × 1 m deep (V = −12 m³), a half-ellipsoid scar with
@@ -413,14 +515,7 @@ fn cubes() -> SceneModel {
 /// face, half of which lies in front of it (V = πR²H/6 ≈ 45.81 m³; it hides the face below its
 /// profile).
 fn cliff() -> SceneModel {
-    let (width, height, beach, plateau) = (60.0, 30.0, 20.0, 10.0);
-    let z0 = 100.0;
-    let beach_base = Base {
-        z0,
-        gx: 0.0,
-        gy: 0.02,
-        waves: Vec::new(),
-    };
+    let z0 = CLIFF.z0;
     let (fan_c, fan_r, fan_h) = ([26.0, 0.0], 5.0, 3.5);
     let box_scar = Scar::Box {
         min: [10.0, z0 + 15.0],
@@ -434,38 +529,14 @@ fn cliff() -> SceneModel {
         b: ell_b,
         cz: ell_cz,
     };
-    let top = Heightfield::new(Base::plane(z0 + height), Vec::new());
-    let face = |holes: Vec<Hole>| Patch::Plane {
-        origin: [0.0, 0.0, z0],
-        eu: [1.0, 0.0, 0.0],
-        ev: [0.0, 0.0, 1.0],
-        len: [width, height],
-        holes,
-    };
-    let p1 = vec![
-        height_patch(
-            Heightfield::new(beach_base.clone(), Vec::new()),
-            [0.0, -beach],
-            [width, 0.0],
-        ),
-        height_patch(top.clone(), [0.0, 0.0], [width, plateau]),
-        face(Vec::new()),
-    ];
-    let mut p2 = vec![
-        height_patch(
-            Heightfield::new(
-                beach_base.clone(),
-                vec![Feature::Cone {
-                    c: fan_c,
-                    radius: fan_r,
-                    height: fan_h,
-                }],
-            ),
-            [0.0, -beach],
-            [width, 0.0],
-        ),
-        height_patch(top, [0.0, 0.0], [width, plateau]),
-        face(vec![
+    let p1 = CLIFF.patches(Vec::new(), Vec::new());
+    let mut p2 = CLIFF.patches(
+        vec![Feature::Cone {
+            c: fan_c,
+            radius: fan_r,
+            height: fan_h,
+        }],
+        vec![
             Hole::Rect {
                 min: [10.0, 15.0],
                 max: [14.0, 18.0],
@@ -480,8 +551,8 @@ fn cliff() -> SceneModel {
                 peak: fan_h,
                 slope: fan_h / fan_r,
             },
-        ]),
-    ];
+        ],
+    );
     // The box scar's back wall, floor, ceiling and two side walls.
     let (bx0, bx1, bz0, bz1, d) = (10.0, 14.0, z0 + 15.0, z0 + 18.0, 1.0);
     let plane = |origin, eu, ev, len| Patch::Plane {
@@ -511,6 +582,7 @@ fn cliff() -> SceneModel {
                 min: [bx0, bz0],
                 max: [bx1, bz1],
             },
+            covered_volume_m3: None,
             description: "rockfall scar: box 4 m wide, 3 m high, 1 m deep into the face".into(),
         },
         ModelEvent {
@@ -521,6 +593,7 @@ fn cliff() -> SceneModel {
                 min: [ell_c[0] - ell_a, ell_c[1] - ell_cz],
                 max: [ell_c[0] + ell_a, ell_c[1] + ell_cz],
             },
+            covered_volume_m3: None,
             description: "rockfall scar: half-ellipsoid 3 m × 2.5 m semi-axes, 1.5 m deep".into(),
         },
         ModelEvent {
@@ -528,22 +601,99 @@ fn cliff() -> SceneModel {
             centre: [
                 fan_c[0],
                 fan_centroid_y,
-                z0 + beach_base.gy * fan_centroid_y,
+                z0 + CLIFF.beach_base().gy * fan_centroid_y,
             ],
             radius_m: fan_r,
             footprint: ground([fan_c[0] - fan_r, -fan_r], [fan_c[0] + fan_r, 0.0]),
+            covered_volume_m3: None,
             description: "debris fan: half-cone R = 5 m, H = 3.5 m against the face foot".into(),
         },
     ];
-    SceneModel {
-        patches: [p1, p2],
-        scars: [Vec::new(), vec![box_scar, ell_scar]],
-        face: Some(([0.0, z0], [width, z0 + height])),
+    CLIFF.model(
+        [p1, p2],
+        [Vec::new(), vec![box_scar, ell_scar]],
         events,
-        centre: [width / 2.0, (plateau - beach) / 2.0],
-        summary: "vertical cliff face with beach and plateau; rockfall scars and a debris fan"
-            .into(),
-    }
+        "vertical cliff face with beach and plateau; rockfall scars and a debris fan",
+    )
+}
+
+/// deposit: the cliff scene's frame without scars; epoch 2 has one debris deposit on the beach, a
+/// cos² bump of radius 2.5 m and height 1.2 m whose edge stays 1.5 m in front of the face foot
+/// (centre 4 m from it): V = h·R²(π/2 − 2/π) ≈ 7.01 m³. Horizontal M3C2 cylinders from the face
+/// foot reach it though it does not touch the face.
+fn deposit() -> SceneModel {
+    let (radius, height, gap) = (2.5, 1.2, 1.5);
+    let c = [CLIFF.width / 2.0, -(gap + radius)];
+    let bump = Feature::Bump { c, radius, height };
+    let events = vec![ModelEvent {
+        volume_m3: bump_volume(radius, height),
+        centre: [
+            c[0],
+            c[1],
+            z_at(&Heightfield::new(CLIFF.beach_base(), Vec::new()), c),
+        ],
+        radius_m: radius,
+        footprint: square(c, radius),
+        covered_volume_m3: None,
+        description: format!(
+            "debris deposit on the beach: cos² bump R = {radius} m, h = {height} m, {gap} m in \
+             front of the face foot"
+        ),
+    }];
+    CLIFF.model(
+        [
+            CLIFF.patches(Vec::new(), Vec::new()),
+            CLIFF.patches(vec![bump], Vec::new()),
+        ],
+        [Vec::new(), Vec::new()],
+        events,
+        "vertical cliff face with beach and plateau; a debris deposit on the beach near the foot",
+    )
+}
+
+/// hole: the hill scene's 40 m × 40 m tilted plane; epoch 2 adds h·cos²(πr/2R), R = 4 m, h = 1 m at (20, 20)
+/// (V = h·R²(π/2 − 2/π) ≈ 14.95 m³). Epoch 1 has no points over x ∈ [20, 30), y ∈ [12, 28) (a
+/// water body or an occlusion): the hole's edge x = 20 runs through the bump's centre, so epoch 1
+/// sees the half x < 20 of the event, and by the bump's symmetry that half holds V/2. Epoch 1 is
+/// sampled only outside the hole, with 90 % of the requested points (the plane's area outside it),
+/// so its density matches epoch 2's.
+fn hole() -> SceneModel {
+    let size = 40.0;
+    let base = tilted_plane();
+    let (c, radius, height) = ([20.0, 20.0], 4.0, 1.0);
+    let (hole_min, hole_max) = ([c[0], 12.0], [30.0, 28.0]);
+    let f1 = Heightfield::new(base.clone(), Vec::new());
+    let f2 = Heightfield::new(base, vec![Feature::Bump { c, radius, height }]);
+    let volume = bump_volume(radius, height);
+    let events = vec![ModelEvent {
+        volume_m3: volume,
+        centre: [c[0], c[1], z_at(&f1, c)],
+        radius_m: radius,
+        footprint: square(c, radius),
+        covered_volume_m3: Some(volume / 2.0),
+        description: format!(
+            "cos² bump R = {radius} m, h = {height} m, its half x > {} m unseen by epoch 1",
+            c[0]
+        ),
+    }];
+    let mut model = SceneModel::heightfield_scene(
+        [size, size],
+        [f1, f2],
+        [Vec::new(), Vec::new()],
+        events,
+        "smooth bump on a tilted plane, half of it in a hole of epoch 1",
+    );
+    let Patch::Height { holes, .. } = &mut model.patches[0][0] else {
+        unreachable!("a heightfield scene's first patch is its ground")
+    };
+    holes.push(Hole::Rect {
+        min: hole_min,
+        max: hole_max,
+    });
+    // A plane's area element is constant: the observed share is the share of the footprint.
+    let hole_area = (hole_max[0] - hole_min[0]) * (hole_max[1] - hole_min[1]);
+    model.observed[0] = 1.0 - hole_area / (size * size);
+    model
 }
 
 /// A smooth wave of wavelengths (lx, ly) (∞ = constant along that axis).
@@ -638,6 +788,7 @@ fn large(points: u64) -> SceneModel {
                 centre: [c[0], c[1], z_at(&f1, c)],
                 radius_m: radius,
                 footprint: square(c, radius),
+                covered_volume_m3: None,
                 description: what,
             });
         }

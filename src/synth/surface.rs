@@ -7,8 +7,8 @@
 //! parts (holes) have Jacobian 0. The number of points per patch is proportional to its area.
 //!
 //! Patches: heightfields z = f(x, y) (base plane or smooth waves plus bumps, spherical caps, flat
-//! blocks and cones; Jacobian sqrt(1 + |∇f|²)), planar rectangles with holes (box walls, the
-//! cliff face; Jacobian 1), and half-ellipsoids (rockfall scars; sampled through the unit
+//! blocks and cones; Jacobian sqrt(1 + |∇f|²)), optionally with holes (ground a survey did not
+//! see), planar rectangles with holes (box walls, the cliff face; Jacobian 1), and half-ellipsoids (rockfall scars; sampled through the unit
 //! hemisphere, whose area element in (φ, w = cos θ) is dφ dw by Archimedes' hat-box theorem, mapped
 //! by diag(a, b, c), whose area scale at unit normal s is abc·|diag(1/a, 1/b, 1/c)·s|).
 
@@ -325,7 +325,7 @@ pub(crate) enum Hole {
 }
 
 impl Hole {
-    fn contains(&self, u: f64, v: f64) -> bool {
+    pub(crate) fn contains(&self, u: f64, v: f64) -> bool {
         match *self {
             Hole::Rect { min, max } => u >= min[0] && u < max[0] && v >= min[1] && v < max[1],
             Hole::Ellipse { c, a, b } => {
@@ -340,11 +340,12 @@ impl Hole {
 /// A piece of an epoch's surface; see the module documentation.
 #[derive(Debug, Clone)]
 pub(crate) enum Patch {
-    /// The heightfield over [x0, x1] × [y0, y1].
+    /// The heightfield over [x0, x1] × [y0, y1], minus holes (in (x, y)).
     Height {
         field: Heightfield,
         min: [f64; 2],
         max: [f64; 2],
+        holes: Vec<Hole>,
     },
     /// origin + u·eu + v·ev for u ∈ [0, len_u], v ∈ [0, len_v] (eu, ev orthonormal), minus holes.
     Plane {
@@ -389,17 +390,16 @@ impl Patch {
     /// The Jacobian at (u, v); 0 inside holes.
     pub(crate) fn jac(&self, u: f64, v: f64) -> f64 {
         match self {
+            Patch::Height { holes, .. } | Patch::Plane { holes, .. }
+                if holes.iter().any(|h| h.contains(u, v)) =>
+            {
+                0.0
+            }
             Patch::Height { field, .. } => {
                 let (_, g) = field.eval(u, v);
                 (1.0 + g[0] * g[0] + g[1] * g[1]).sqrt()
             }
-            Patch::Plane { holes, .. } => {
-                if holes.iter().any(|h| h.contains(u, v)) {
-                    0.0
-                } else {
-                    1.0
-                }
-            }
+            Patch::Plane { .. } => 1.0,
             Patch::HalfEllipsoid {
                 radii: [a, b, c], ..
             } => {
