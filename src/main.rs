@@ -126,7 +126,7 @@ struct CompareArgs {
 
 #[derive(Args)]
 struct SynthArgs {
-    /// hill | cube | spheres | cubes | cliff | deposit | hole | stable | large
+    /// hill | cube | spheres | cubes | cliff | deposit | hole | events | stable | large
     scene: String,
     #[arg(long)]
     out: PathBuf,

@@ -17,7 +17,8 @@
 //! a cube, spheres, mixed cubes) plus a cliff with rockfall scars and a debris fan, the same cliff
 //! with a debris deposit on the beach just clear of the face (`deposit`), a bump half hidden from
 //! epoch 1 by a hole in its coverage (`hole`: truth gives the whole and the observed volume), a
-//! stable pair (false-positive check) and a large pair for the out-of-core path. `--shift` moves every epoch-2
+//! dozen small events laid out by the seed for calibration statistics (`events`), a stable pair
+//! (false-positive check) and a large pair for the out-of-core path. `--shift` moves every epoch-2
 //! point rigidly (a registration error the comparison must absorb; the truth is unchanged).
 
 mod output;
@@ -54,13 +55,14 @@ pub enum SceneKind {
     Cliff,
     Deposit,
     Hole,
+    Events,
     Stable,
     Large,
 }
 
 impl SceneKind {
     /// All scenes, in the order of their names.
-    pub const ALL: [SceneKind; 9] = [
+    pub const ALL: [SceneKind; 10] = [
         SceneKind::Hill,
         SceneKind::Cube,
         SceneKind::Spheres,
@@ -68,6 +70,7 @@ impl SceneKind {
         SceneKind::Cliff,
         SceneKind::Deposit,
         SceneKind::Hole,
+        SceneKind::Events,
         SceneKind::Stable,
         SceneKind::Large,
     ];
@@ -82,6 +85,7 @@ impl SceneKind {
             SceneKind::Cliff => "cliff",
             SceneKind::Deposit => "deposit",
             SceneKind::Hole => "hole",
+            SceneKind::Events => "events",
             SceneKind::Stable => "stable",
             SceneKind::Large => "large",
         }
@@ -92,7 +96,8 @@ impl SceneKind {
         scenes::default_points(self)
     }
 
-    /// Noise standard deviation (m) when none is asked for: 1 cm for `stable`, else 5 mm.
+    /// Noise standard deviation (m) when none is asked for: 1 cm for `stable` and `events`, else
+    /// 5 mm.
     pub fn default_noise(self) -> f64 {
         scenes::default_noise(self)
     }
@@ -231,10 +236,10 @@ fn resolve(kind: SceneKind, opts: &SynthOptions) -> Result<Resolved> {
 }
 
 /// The analytic model of a scene as [`synth`] would build it for `opts` (the large scene's size
-/// depends on the point count).
+/// depends on the point count, the events scene's layout on the seed).
 pub fn scene_model(kind: SceneKind, opts: &SynthOptions) -> Result<SceneModel> {
     let r = resolve(kind, opts)?;
-    Ok(SceneModel::new(kind, r.points[0]))
+    Ok(SceneModel::new(kind, r.points[0], opts.seed))
 }
 
 /// The points of epoch `epoch` (0 = before, 1 = after) as [`synth`] writes them (global
@@ -245,7 +250,7 @@ pub fn epoch_chunks(kind: SceneKind, opts: &SynthOptions, epoch: usize) -> Resul
         return Err(Error::Usage(format!("epoch must be 0 or 1, got {epoch}")));
     }
     let r = resolve(kind, opts)?;
-    let model = SceneModel::new(kind, r.points[0]);
+    let model = SceneModel::new(kind, r.points[0], opts.seed);
     Ok(chunks_of(&model, &r, opts, epoch))
 }
 
@@ -279,7 +284,7 @@ fn chunks_of(model: &SceneModel, r: &Resolved, opts: &SynthOptions, epoch: usize
 pub fn synth(kind: SceneKind, opts: &SynthOptions, out_dir: &Path) -> Result<Truth> {
     let r = resolve(kind, opts)?;
     std::fs::create_dir_all(out_dir).map_err(|e| Error::output(out_dir, e))?;
-    let model = SceneModel::new(kind, r.points[0]);
+    let model = SceneModel::new(kind, r.points[0], opts.seed);
     let ext = if opts.laz { "laz" } else { "las" };
     let names = [
         PathBuf::from(format!("before.{ext}")),

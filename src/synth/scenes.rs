@@ -9,9 +9,10 @@
 
 use std::f64::consts::{PI, TAU};
 
+use super::rng::Rng;
 use super::surface::{
-    box_walls, bump_volume, cap_footprint, cap_volume, Base, Feature, Heightfield, Hole, Patch,
-    Wave,
+    box_walls, box_walls_on, bump_volume, cap_footprint, cap_volume, Base, Feature, Heightfield,
+    Hole, Patch, Wave,
 };
 use super::SceneKind;
 
@@ -103,6 +104,8 @@ pub(crate) fn default_points(kind: SceneKind) -> u64 {
         SceneKind::Hill | SceneKind::Cubes | SceneKind::Stable | SceneKind::Hole => 160_000,
         SceneKind::Cube => 100_000,
         SceneKind::Spheres | SceneKind::Cliff | SceneKind::Deposit => 250_000,
+        // 2173 m² at about 0.08 m spacing.
+        SceneKind::Events => 350_000,
         SceneKind::Large => 120_000_000,
     }
 }
@@ -110,7 +113,7 @@ pub(crate) fn default_points(kind: SceneKind) -> u64 {
 /// Default noise (standard deviation, m) of each scene.
 pub(crate) fn default_noise(kind: SceneKind) -> f64 {
     match kind {
-        SceneKind::Stable => 0.01,
+        SceneKind::Stable | SceneKind::Events => 0.01,
         _ => 0.005,
     }
 }
@@ -143,8 +146,9 @@ fn height_patch(field: Heightfield, min: [f64; 2], max: [f64; 2]) -> Patch {
 }
 
 impl SceneModel {
-    /// The model of `kind`; `points` is the per-epoch count (used by the large scene for its size).
-    pub fn new(kind: SceneKind, points: u64) -> Self {
+    /// The model of `kind`; `points` is the per-epoch count (used by the large scene for its size),
+    /// `seed` lays out the events scene.
+    pub fn new(kind: SceneKind, points: u64, seed: u64) -> Self {
         match kind {
             SceneKind::Hill => hill(),
             SceneKind::Cube => cube(),
@@ -153,6 +157,7 @@ impl SceneModel {
             SceneKind::Cliff => cliff(),
             SceneKind::Deposit => deposit(),
             SceneKind::Hole => hole(),
+            SceneKind::Events => events(seed),
             SceneKind::Stable => stable(),
             SceneKind::Large => large(points),
         }
@@ -800,5 +805,155 @@ fn large(points: u64) -> SceneModel {
         [Vec::new(), Vec::new()],
         events,
         "undulating terrain with a 50 m grid of bumps and pits",
+    )
+}
+
+/// Grid of cells of the events scene (x, y): one event per cell.
+const EVENTS_GRID: [usize; 2] = [4, 3];
+/// Side of an events cell (m).
+const EVENTS_PITCH: f64 = 12.0;
+/// Least distance between two events' footprints, and from a footprint to the scene's border (m):
+/// each footprint stays half of it inside its cell, and the cells lie half of it inside the border.
+const EVENTS_GAP: f64 = 5.0;
+/// Range of the events' volumes (m³, absolute).
+const EVENTS_VOLUME: [f64; 2] = [0.2, 6.0];
+/// Random stream of the events scene's layout (the sampling streams are (epoch << 32) | strip).
+const EVENTS_STREAM: u64 = u64::MAX;
+
+/// Side lengths (x, y) of the events scene.
+fn events_size() -> [f64; 2] {
+    [0, 1].map(|k| EVENTS_GRID[k] as f64 * EVENTS_PITCH + EVENTS_GAP)
+}
+
+/// events: gently undulating ground (a tilt and two waves whose phases the seed draws; slopes
+/// below 0.018 + 0.049 + 0.030 < 10 %) with a dozen events drawn from the seed, one per cell of a
+/// 4 × 3 grid of 12 m cells: each of six kinds (box raised, box dug, spherical cap, spherical
+/// dent, cos² bump, cos² dent) twice, in shuffled cells; volumes stratified over [0.2, 6] m³ on a
+/// log scale (one per twelfth of the range, shuffled); shapes solved for the volume from a random
+/// aspect (bump h/R and cap h/a in [0.2, 0.5], box height 0.3–0.8 m and side ratio 0.5–1), so
+/// that footprints reach at most 3.2 m from their centre along x and y and fit in their cell with
+/// 2.5 m to spare; centres uniform where they fit. Truth: bump ±h·R²(π/2 − 2/π), cap
+/// ±πh²(3R − h)/3, box w·d·h, computed from the drawn dimensions.
+fn events(seed: u64) -> SceneModel {
+    #[derive(Clone, Copy)]
+    enum Shape {
+        Box,
+        Cap,
+        Bump,
+    }
+    let mut rng = Rng::new(seed, EVENTS_STREAM);
+    let base = Base {
+        z0: 100.0,
+        gx: 0.015,
+        gy: -0.01,
+        waves: vec![
+            wave(0.25, 40.0, 55.0, rng.range(0.0, TAU)),
+            wave(0.07, -18.0, 25.0, rng.range(0.0, TAU)),
+        ],
+    };
+    let n = EVENTS_GRID[0] * EVENTS_GRID[1];
+    let [v0, v1] = EVENTS_VOLUME;
+    let mut volumes: Vec<f64> = (0..n)
+        .map(|k| v0 * (v1 / v0).powf((k as f64 + rng.uniform()) / n as f64))
+        .collect();
+    rng.shuffle(&mut volumes);
+    let mut kinds: Vec<(Shape, f64)> = [Shape::Box, Shape::Cap, Shape::Bump]
+        .into_iter()
+        .flat_map(|s| [(s, 1.0), (s, -1.0)])
+        .cycle()
+        .take(n)
+        .collect();
+    rng.shuffle(&mut kinds);
+    let f1 = Heightfield::new(base.clone(), Vec::new());
+    let (mut features, mut walls, mut events) = (Vec::new(), Vec::new(), Vec::new());
+    for (cell, (&(shape, sign), &volume)) in kinds.iter().zip(&volumes).enumerate() {
+        // The feature centred on the origin and its description.
+        let (feature, description) = match shape {
+            Shape::Bump => {
+                let aspect = rng.range(0.2, 0.5);
+                let radius = (volume / (bump_volume(1.0, 1.0) * aspect)).cbrt();
+                let height = sign * aspect * radius;
+                let word = if sign > 0.0 { "bump" } else { "dent" };
+                (
+                    Feature::Bump {
+                        c: [0.0; 2],
+                        radius,
+                        height,
+                    },
+                    format!("cos² {word} R = {radius:.3} m, h = {:.3} m", height.abs()),
+                )
+            }
+            Shape::Cap => {
+                // Footprint radius a and height h = t·a: V = πh(3a² + h²)/6 = πa³t(3 + t²)/6.
+                let t = rng.range(0.2, 0.5);
+                let a = (6.0 * volume / (PI * t * (3.0 + t * t))).cbrt();
+                let h = t * a;
+                let sphere_radius = (a * a + h * h) / (2.0 * h);
+                let word = if sign > 0.0 { "cap" } else { "dent" };
+                (
+                    Feature::Cap {
+                        c: [0.0; 2],
+                        sphere_radius,
+                        height: sign * h,
+                    },
+                    format!("spherical {word} R = {sphere_radius:.3} m, h = {h:.3} m"),
+                )
+            }
+            Shape::Box => {
+                let h = rng.range(0.3, 0.8);
+                let ratio = rng.range(0.5, 1.0);
+                let long = (volume / (h * ratio)).sqrt();
+                let mut side = [long, ratio * long];
+                if rng.uniform() < 0.5 {
+                    side.swap(0, 1);
+                }
+                let word = if sign > 0.0 { "raised" } else { "dug" };
+                (
+                    Feature::Block {
+                        min: side.map(|s| -s / 2.0),
+                        max: side.map(|s| s / 2.0),
+                        height: sign * h,
+                    },
+                    format!("box {word} {:.3} × {:.3} × {h:.3} m", side[0], side[1]),
+                )
+            }
+        };
+        let half = feature.bbox().1;
+        let ij = [cell % EVENTS_GRID[0], cell / EVENTS_GRID[0]];
+        let c = [0, 1].map(|k| {
+            let lo = EVENTS_GAP + ij[k] as f64 * EVENTS_PITCH + half[k];
+            let span = (EVENTS_PITCH - EVENTS_GAP - 2.0 * half[k]).max(0.0);
+            lo + span * rng.uniform()
+        });
+        let feature = feature.moved(c);
+        if let Feature::Block { min, max, height } = feature {
+            walls.extend(box_walls_on(
+                &base,
+                min,
+                max,
+                [height.min(0.0), height.max(0.0)],
+            ));
+        }
+        features.push(feature);
+        events.push(ModelEvent {
+            volume_m3: feature.volume(),
+            centre: [c[0], c[1], z_at(&f1, c)],
+            radius_m: half[0].hypot(half[1]),
+            footprint: ground(
+                [c[0] - half[0], c[1] - half[1]],
+                [c[0] + half[0], c[1] + half[1]],
+            ),
+            covered_volume_m3: None,
+            description,
+        });
+    }
+    let f2 = Heightfield::new(base, features);
+    SceneModel::heightfield_scene(
+        events_size(),
+        [f1, f2],
+        [Vec::new(), walls],
+        events,
+        "undulating ground with a dozen seeded events: boxes raised and dug, spherical caps and \
+         dents, cos² bumps and dents",
     )
 }
