@@ -16,6 +16,7 @@ pub fn synth(
     noise: Option<f64>,
     rotate: f64,
     density2: f64,
+    shift: [f64; 3],
     laz: bool,
 ) -> Result<()> {
     let kind: SceneKind = scene.parse()?;
@@ -25,6 +26,7 @@ pub fn synth(
         noise,
         rotate_deg: rotate,
         density2,
+        shift_m: shift,
         laz,
     };
     let truth = crate::synth::synth(kind, &opts, out)?;

@@ -126,7 +126,7 @@ struct CompareArgs {
 
 #[derive(Args)]
 struct SynthArgs {
-    /// hill | cube | spheres | cubes | cliff | stable | large
+    /// hill | cube | spheres | cubes | cliff | deposit | hole | events | stable | large
     scene: String,
     #[arg(long)]
     out: PathBuf,
@@ -144,6 +144,10 @@ struct SynthArgs {
     /// Density of epoch 2 relative to epoch 1.
     #[arg(long, default_value_t = 1.0)]
     density2: f64,
+    /// Translate every epoch-2 point by DX,DY,DZ metres (a registration error, not a change).
+    #[arg(long, value_name = "DX,DY,DZ", default_value = "0,0,0", allow_hyphen_values = true,
+          value_parser = |s: &str| talus::synth::parse_shift(s).map_err(|e| e.to_string()))]
+    shift: [f64; 3],
     /// Write uncompressed LAS instead of LAZ.
     #[arg(long)]
     las: bool,
@@ -193,7 +197,7 @@ fn run(cli: Cli) -> talus::Result<()> {
         }
         Command::Info { files, json } => talus::info::print(&files, json),
         Command::Synth(s) => talus::commands::synth(
-            &s.scene, &s.out, s.points, s.seed, s.noise, s.rotate, s.density2, !s.las,
+            &s.scene, &s.out, s.points, s.seed, s.noise, s.rotate, s.density2, s.shift, !s.las,
         ),
         Command::View { dir, port, bind } => talus::commands::view(&dir, bind, port),
         Command::Demo { out, view } => talus::commands::demo(&out, view),

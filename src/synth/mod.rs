@@ -14,8 +14,12 @@
 //! ([`Truth`]). Every file is written under a temporary name and renamed when complete.
 //!
 //! Evaluating the scenes is the point: the volumes follow Gorup & Bohak's synthetic tests (a hill,
-//! a cube, spheres, mixed cubes) plus a cliff with rockfall scars and a debris fan, a stable pair
-//! (false-positive check) and a large pair for the out-of-core path.
+//! a cube, spheres, mixed cubes) plus a cliff with rockfall scars and a debris fan, the same cliff
+//! with a debris deposit on the beach just clear of the face (`deposit`), a bump half hidden from
+//! epoch 1 by a hole in its coverage (`hole`: truth gives the whole and the observed volume), a
+//! dozen small events laid out by the seed for calibration statistics (`events`), a stable pair
+//! (false-positive check) and a large pair for the out-of-core path. `--shift` moves every epoch-2
+//! point rigidly (a registration error the comparison must absorb; the truth is unchanged).
 
 mod output;
 pub(crate) mod rng;
@@ -49,18 +53,24 @@ pub enum SceneKind {
     Spheres,
     Cubes,
     Cliff,
+    Deposit,
+    Hole,
+    Events,
     Stable,
     Large,
 }
 
 impl SceneKind {
     /// All scenes, in the order of their names.
-    pub const ALL: [SceneKind; 7] = [
+    pub const ALL: [SceneKind; 10] = [
         SceneKind::Hill,
         SceneKind::Cube,
         SceneKind::Spheres,
         SceneKind::Cubes,
         SceneKind::Cliff,
+        SceneKind::Deposit,
+        SceneKind::Hole,
+        SceneKind::Events,
         SceneKind::Stable,
         SceneKind::Large,
     ];
@@ -73,6 +83,9 @@ impl SceneKind {
             SceneKind::Spheres => "spheres",
             SceneKind::Cubes => "cubes",
             SceneKind::Cliff => "cliff",
+            SceneKind::Deposit => "deposit",
+            SceneKind::Hole => "hole",
+            SceneKind::Events => "events",
             SceneKind::Stable => "stable",
             SceneKind::Large => "large",
         }
@@ -83,7 +96,8 @@ impl SceneKind {
         scenes::default_points(self)
     }
 
-    /// Noise standard deviation (m) when none is asked for: 1 cm for `stable`, else 5 mm.
+    /// Noise standard deviation (m) when none is asked for: 1 cm for `stable` and `events`, else
+    /// 5 mm.
     pub fn default_noise(self) -> f64 {
         scenes::default_noise(self)
     }
@@ -115,7 +129,8 @@ impl FromStr for SceneKind {
 /// Options of [`synth`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct SynthOptions {
-    /// Points per epoch (epoch 2 gets `points · density2`); None = the scene's default.
+    /// Points per epoch (epoch 2 gets `points · density2`; an epoch with holes its observed share
+    /// of them); None = the scene's default.
     pub points: Option<u64>,
     pub seed: u64,
     /// Noise standard deviation (m) along the surface normal; None = the scene's default.
@@ -124,6 +139,9 @@ pub struct SynthOptions {
     pub rotate_deg: f64,
     /// Epoch-2 density relative to epoch 1.
     pub density2: f64,
+    /// Rigid translation (m, global axes) of every epoch-2 point after sampling and rotation: a
+    /// registration error between the surveys, not a change (the truth volumes ignore it).
+    pub shift_m: [f64; 3],
     /// Write LAZ (true) or LAS.
     pub laz: bool,
 }
@@ -136,6 +154,7 @@ impl Default for SynthOptions {
             noise: None,
             rotate_deg: 0.0,
             density2: 1.0,
+            shift_m: [0.0; 3],
             laz: true,
         }
     }
@@ -146,6 +165,18 @@ impl Default for SynthOptions {
 const MAX_POINTS: u64 = 100_000_000_000;
 /// Smallest point count per epoch accepted for the small scenes.
 const MIN_POINTS: u64 = 100;
+/// Largest accepted |component| of `--shift` (m): a registration error, not a relocation.
+const MAX_SHIFT: f64 = 1000.0;
+
+/// Parse `--shift DX,DY,DZ` (metres).
+pub fn parse_shift(s: &str) -> Result<[f64; 3]> {
+    let bad = || Error::Usage(format!("expected DX,DY,DZ in metres, got '{s}'"));
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|t| t.trim().parse::<f64>().map_err(|_| bad()))
+        .collect::<Result<_>>()?;
+    <[f64; 3]>::try_from(v).map_err(|_| bad())
+}
 
 /// The checked, resolved parameters of a run.
 struct Resolved {
@@ -169,6 +200,16 @@ fn resolve(kind: SceneKind, opts: &SynthOptions) -> Result<Resolved> {
     if !(noise.is_finite() && (0.0..=1.0).contains(&noise)) {
         return Err(Error::Usage(format!(
             "synth: --noise must be between 0 and 1 m, got {noise}"
+        )));
+    }
+    if !opts
+        .shift_m
+        .iter()
+        .all(|d| d.is_finite() && d.abs() <= MAX_SHIFT)
+    {
+        return Err(Error::Usage(format!(
+            "synth: --shift components must be finite and at most {MAX_SHIFT} m, got {:?}",
+            opts.shift_m
         )));
     }
     if !opts.rotate_deg.is_finite() {
@@ -195,10 +236,10 @@ fn resolve(kind: SceneKind, opts: &SynthOptions) -> Result<Resolved> {
 }
 
 /// The analytic model of a scene as [`synth`] would build it for `opts` (the large scene's size
-/// depends on the point count).
+/// depends on the point count, the events scene's layout on the seed).
 pub fn scene_model(kind: SceneKind, opts: &SynthOptions) -> Result<SceneModel> {
     let r = resolve(kind, opts)?;
-    Ok(SceneModel::new(kind, r.points[0]))
+    Ok(SceneModel::new(kind, r.points[0], opts.seed))
 }
 
 /// The points of epoch `epoch` (0 = before, 1 = after) as [`synth`] writes them (global
@@ -209,22 +250,32 @@ pub fn epoch_chunks(kind: SceneKind, opts: &SynthOptions, epoch: usize) -> Resul
         return Err(Error::Usage(format!("epoch must be 0 or 1, got {epoch}")));
     }
     let r = resolve(kind, opts)?;
-    let model = SceneModel::new(kind, r.points[0]);
+    let model = SceneModel::new(kind, r.points[0], opts.seed);
     Ok(chunks_of(&model, &r, opts, epoch))
 }
 
-fn placement(model: &SceneModel, opts: &SynthOptions) -> Placement {
-    Placement::new(model.centre, opts.rotate_deg, ORIGIN)
+/// Where epoch `epoch`'s local points go: rotated about the scene's centre, moved to the global
+/// origin, and for epoch 2 shifted by `--shift`.
+fn placement(model: &SceneModel, opts: &SynthOptions, epoch: usize) -> Placement {
+    let shift = if epoch == 1 { opts.shift_m } else { [0.0; 3] };
+    let origin = [0, 1, 2].map(|k| ORIGIN[k] + shift[k]);
+    Placement::new(model.centre, opts.rotate_deg, origin)
+}
+
+/// Points of epoch `epoch`: the requested count times the share of its surface that is observed
+/// (so that holes keep the density of the rest).
+fn epoch_points(model: &SceneModel, r: &Resolved, epoch: usize) -> u64 {
+    (r.points[epoch] as f64 * model.observed[epoch]).round() as u64
 }
 
 fn chunks_of(model: &SceneModel, r: &Resolved, opts: &SynthOptions, epoch: usize) -> Chunks {
     Chunks::new(
         model.patches[epoch].clone(),
-        r.points[epoch],
+        epoch_points(model, r, epoch),
         opts.seed,
         epoch as u64,
         r.noise,
-        placement(model, opts),
+        placement(model, opts, epoch),
     )
 }
 
@@ -233,7 +284,7 @@ fn chunks_of(model: &SceneModel, r: &Resolved, opts: &SynthOptions, epoch: usize
 pub fn synth(kind: SceneKind, opts: &SynthOptions, out_dir: &Path) -> Result<Truth> {
     let r = resolve(kind, opts)?;
     std::fs::create_dir_all(out_dir).map_err(|e| Error::output(out_dir, e))?;
-    let model = SceneModel::new(kind, r.points[0]);
+    let model = SceneModel::new(kind, r.points[0], opts.seed);
     let ext = if opts.laz { "laz" } else { "las" };
     let names = [
         PathBuf::from(format!("before.{ext}")),
@@ -249,14 +300,15 @@ pub fn synth(kind: SceneKind, opts: &SynthOptions, out_dir: &Path) -> Result<Tru
             epoch as u16 + 1,
             opts.laz,
         )?;
-        if written[epoch] != r.points[epoch] {
+        let planned = epoch_points(&model, &r, epoch);
+        if written[epoch] != planned {
             return Err(Error::Internal(format!(
-                "synth wrote {} points, planned {}",
-                written[epoch], r.points[epoch]
+                "synth wrote {} points, planned {planned}",
+                written[epoch]
             )));
         }
     }
-    let place = placement(&model, opts);
+    let place = placement(&model, opts, 0);
     let events: Vec<TruthEvent> = model
         .events
         .iter()
@@ -265,6 +317,7 @@ pub fn synth(kind: SceneKind, opts: &SynthOptions, out_dir: &Path) -> Result<Tru
             id: i as u32 + 1,
             kind: if e.volume_m3 >= 0.0 { "gain" } else { "loss" }.into(),
             volume_m3: e.volume_m3,
+            covered_volume_m3: e.covered_volume_m3,
             centre: place.apply(e.centre),
             radius_m: e.radius_m,
             description: e.description.clone(),
@@ -281,6 +334,7 @@ pub fn synth(kind: SceneKind, opts: &SynthOptions, out_dir: &Path) -> Result<Tru
         rotate_deg: opts.rotate_deg,
         rotation_centre: [ORIGIN[0] + model.centre[0], ORIGIN[1] + model.centre[1]],
         density2: opts.density2,
+        shift_m: opts.shift_m,
         crs_epsg: CRS_EPSG,
         crs_wkt: UTM33N_WKT.into(),
         total_gain_m3: events.iter().map(|e| e.volume_m3.max(0.0)).sum(),

@@ -60,6 +60,19 @@ impl Rng {
         (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
     }
 
+    /// Uniform in [lo, hi).
+    pub(crate) fn range(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * self.uniform()
+    }
+
+    /// Shuffle `items` in place (Fisher–Yates; Knuth's algorithm P).
+    pub(crate) fn shuffle<T>(&mut self, items: &mut [T]) {
+        for i in (1..items.len()).rev() {
+            let j = ((self.uniform() * (i + 1) as f64) as usize).min(i);
+            items.swap(i, j);
+        }
+    }
+
     /// Standard normal N(0, 1) by the Box–Muller transform (Box & Muller 1958).
     pub(crate) fn normal(&mut self) -> f64 {
         if let Some(z) = self.spare.take() {
@@ -108,6 +121,16 @@ mod tests {
         // Standard errors: 1/sqrt(n) = 0.0022 for the mean, sqrt(2/n) = 0.0032 for the variance.
         assert!(mean.abs() < 0.01, "mean {mean}");
         assert!((var - 1.0).abs() < 0.015, "var {var}");
+    }
+
+    #[test]
+    fn shuffle_permutes() {
+        let mut r = Rng::new(3, 0);
+        let mut v: Vec<u32> = (0..20).collect();
+        r.shuffle(&mut v);
+        assert_ne!(v, (0..20).collect::<Vec<_>>());
+        v.sort_unstable();
+        assert_eq!(v, (0..20).collect::<Vec<_>>());
     }
 
     #[test]

@@ -9,9 +9,10 @@
 
 use std::f64::consts::{PI, TAU};
 
+use super::rng::Rng;
 use super::surface::{
-    box_walls, bump_volume, cap_footprint, cap_volume, Base, Feature, Heightfield, Hole, Patch,
-    Wave,
+    box_walls, box_walls_on, bump_volume, cap_footprint, cap_volume, Base, Feature, Heightfield,
+    Hole, Patch, Wave,
 };
 use super::SceneKind;
 
@@ -35,6 +36,9 @@ pub struct ModelEvent {
     /// Radius of a circle around `centre` that contains the footprint.
     pub radius_m: f64,
     pub footprint: Footprint,
+    /// The part of `volume_m3` over ground that both epochs observed, when epoch 1 has a hole over
+    /// part of the event (None: all of it is observed).
+    pub covered_volume_m3: Option<f64>,
     pub description: String,
 }
 
@@ -85,17 +89,23 @@ pub struct SceneModel {
     scars: [Vec<Scar>; 2],
     face: Option<([f64; 2], [f64; 2])>,
     pub(crate) events: Vec<ModelEvent>,
+    /// Fraction of each epoch's surface that is sampled (1 unless it has holes): an epoch gets
+    /// this fraction of the requested points, so holes keep the density of the rest.
+    pub(crate) observed: [f64; 2],
     /// Centre of the scene's footprint: the vertical rotation axis of `--rotate`.
     pub(crate) centre: [f64; 2],
     pub(crate) summary: String,
 }
 
-/// Default points per epoch of each scene (about 0.1 m spacing for the small ones).
+/// Default points per epoch of each scene (about 0.1 m spacing for the small ones; holes are left
+/// out of the count: see [`SceneModel::observed`]).
 pub(crate) fn default_points(kind: SceneKind) -> u64 {
     match kind {
-        SceneKind::Hill | SceneKind::Cubes | SceneKind::Stable => 160_000,
+        SceneKind::Hill | SceneKind::Cubes | SceneKind::Stable | SceneKind::Hole => 160_000,
         SceneKind::Cube => 100_000,
-        SceneKind::Spheres | SceneKind::Cliff => 250_000,
+        SceneKind::Spheres | SceneKind::Cliff | SceneKind::Deposit => 250_000,
+        // 2173 m² at about 0.08 m spacing.
+        SceneKind::Events => 350_000,
         SceneKind::Large => 120_000_000,
     }
 }
@@ -103,7 +113,7 @@ pub(crate) fn default_points(kind: SceneKind) -> u64 {
 /// Default noise (standard deviation, m) of each scene.
 pub(crate) fn default_noise(kind: SceneKind) -> f64 {
     match kind {
-        SceneKind::Stable => 0.01,
+        SceneKind::Stable | SceneKind::Events => 0.01,
         _ => 0.005,
     }
 }
@@ -127,18 +137,27 @@ fn square(c: [f64; 2], r: f64) -> Footprint {
 }
 
 fn height_patch(field: Heightfield, min: [f64; 2], max: [f64; 2]) -> Patch {
-    Patch::Height { field, min, max }
+    Patch::Height {
+        field,
+        min,
+        max,
+        holes: Vec::new(),
+    }
 }
 
 impl SceneModel {
-    /// The model of `kind`; `points` is the per-epoch count (used by the large scene for its size).
-    pub fn new(kind: SceneKind, points: u64) -> Self {
+    /// The model of `kind`; `points` is the per-epoch count (used by the large scene for its size),
+    /// `seed` lays out the events scene.
+    pub fn new(kind: SceneKind, points: u64, seed: u64) -> Self {
         match kind {
             SceneKind::Hill => hill(),
             SceneKind::Cube => cube(),
             SceneKind::Spheres => spheres(),
             SceneKind::Cubes => cubes(),
             SceneKind::Cliff => cliff(),
+            SceneKind::Deposit => deposit(),
+            SceneKind::Hole => hole(),
+            SceneKind::Events => events(seed),
             SceneKind::Stable => stable(),
             SceneKind::Large => large(points),
         }
@@ -150,15 +169,25 @@ impl SceneModel {
     }
 
     /// Height of epoch `epoch` (0 = before, 1 = after) at local (x, y), where the epoch's surface
-    /// is a heightfield there (ground, box tops, plateau); None elsewhere.
+    /// is a heightfield there (ground, box tops, plateau), also over holes the epoch did not
+    /// observe; None elsewhere.
     pub fn height(&self, epoch: usize, x: f64, y: f64) -> Option<f64> {
         self.patches[epoch].iter().find_map(|p| match p {
-            Patch::Height { field, min, max }
-                if x >= min[0] && x <= max[0] && y >= min[1] && y <= max[1] =>
-            {
+            Patch::Height {
+                field, min, max, ..
+            } if x >= min[0] && x <= max[0] && y >= min[1] && y <= max[1] => {
                 Some(field.eval(x, y).0)
             }
             _ => None,
+        })
+    }
+
+    /// Whether local (x, y) lies in a hole of one of epoch `epoch`'s heightfields (ground that
+    /// epoch has no points on).
+    pub fn unobserved(&self, epoch: usize, x: f64, y: f64) -> bool {
+        self.patches[epoch].iter().any(|p| match p {
+            Patch::Height { holes, .. } => holes.iter().any(|h| h.contains(x, y)),
+            _ => false,
         })
     }
 
@@ -195,6 +224,7 @@ impl SceneModel {
             scars: [Vec::new(), Vec::new()],
             face: None,
             events,
+            observed: [1.0; 2],
             centre: [size[0] / 2.0, size[1] / 2.0],
             summary: summary.to_string(),
         }
@@ -206,15 +236,20 @@ fn z_at(field: &Heightfield, c: [f64; 2]) -> f64 {
     field.eval(c[0], c[1]).0
 }
 
-/// hill: a 40 m × 40 m tilted plane; epoch 2 adds h·cos²(πr/2R), R = 6 m, h = 1.5 m at the centre.
-/// V = h·R²·(π/2 − 2/π) ≈ 50.44 m³.
-fn hill() -> SceneModel {
-    let base = Base {
+/// The plane of the hill and hole scenes: z = 100 + 0.02 x + 0.01 y.
+fn tilted_plane() -> Base {
+    Base {
         z0: 100.0,
         gx: 0.02,
         gy: 0.01,
         waves: Vec::new(),
-    };
+    }
+}
+
+/// hill: a 40 m × 40 m tilted plane; epoch 2 adds h·cos²(πr/2R), R = 6 m, h = 1.5 m at the centre.
+/// V = h·R²·(π/2 − 2/π) ≈ 50.44 m³.
+fn hill() -> SceneModel {
+    let base = tilted_plane();
     let (c, radius, height) = ([20.0, 20.0], 6.0, 1.5);
     let f1 = Heightfield::new(base.clone(), Vec::new());
     let f2 = Heightfield::new(base, vec![Feature::Bump { c, radius, height }]);
@@ -223,6 +258,7 @@ fn hill() -> SceneModel {
         centre: [c[0], c[1], z_at(&f1, c)],
         radius_m: radius,
         footprint: square(c, radius),
+        covered_volume_m3: None,
         description: format!("hill: h·cos²(πr/2R) bump, R = {radius} m, h = {height} m"),
     }];
     SceneModel::heightfield_scene(
@@ -252,6 +288,7 @@ fn cube() -> SceneModel {
         centre: [15.0, 15.0, 100.0],
         radius_m: 8f64.sqrt(),
         footprint: ground(min, max),
+        covered_volume_m3: None,
         description: "cube: 4 × 4 × 1.5 m box raised from the plane".into(),
     }];
     SceneModel::heightfield_scene(
@@ -299,6 +336,7 @@ fn spheres() -> SceneModel {
                 centre: [c[0], c[1], z_at(&f1, c)],
                 radius_m: a,
                 footprint: square(c, a),
+                covered_volume_m3: None,
                 description: format!(
                     "spherical {} R = {rs} m, h = {} m",
                     if h > 0.0 { "cap" } else { "dent" },
@@ -388,6 +426,7 @@ fn cubes() -> SceneModel {
                 centre: [c[0], c[1], z0 + b.h[0]],
                 radius_m: dx.hypot(dy) / 2.0,
                 footprint: ground(b.min, b.max),
+                covered_volume_m3: None,
                 description: b.name.to_string(),
             }
         })
@@ -405,6 +444,74 @@ fn cubes() -> SceneModel {
     )
 }
 
+/// The frame of the cliff scenes: a beach (x ∈ [0, width], y ∈ [−beach, 0], sloping 2 % seaward
+/// to −y) at the foot of a vertical face of `height` in the plane y = 0 (rock at y > 0, face normal
+/// −y) rising from z0, with a plateau `plateau` deep on top.
+struct CliffFrame {
+    width: f64,
+    height: f64,
+    beach: f64,
+    plateau: f64,
+    z0: f64,
+}
+
+const CLIFF: CliffFrame = CliffFrame {
+    width: 60.0,
+    height: 30.0,
+    beach: 20.0,
+    plateau: 10.0,
+    z0: 100.0,
+};
+
+impl CliffFrame {
+    fn beach_base(&self) -> Base {
+        Base {
+            z0: self.z0,
+            gx: 0.0,
+            gy: 0.02,
+            waves: Vec::new(),
+        }
+    }
+
+    /// Beach (with `features`), plateau and face (minus `holes`), in that order.
+    fn patches(&self, features: Vec<Feature>, holes: Vec<Hole>) -> Vec<Patch> {
+        let top = Heightfield::new(Base::plane(self.z0 + self.height), Vec::new());
+        vec![
+            height_patch(
+                Heightfield::new(self.beach_base(), features),
+                [0.0, -self.beach],
+                [self.width, 0.0],
+            ),
+            height_patch(top, [0.0, 0.0], [self.width, self.plateau]),
+            Patch::Plane {
+                origin: [0.0, 0.0, self.z0],
+                eu: [1.0, 0.0, 0.0],
+                ev: [0.0, 0.0, 1.0],
+                len: [self.width, self.height],
+                holes,
+            },
+        ]
+    }
+
+    fn model(
+        &self,
+        patches: [Vec<Patch>; 2],
+        scars: [Vec<Scar>; 2],
+        events: Vec<ModelEvent>,
+        summary: &str,
+    ) -> SceneModel {
+        SceneModel {
+            patches,
+            scars,
+            face: Some(([0.0, self.z0], [self.width, self.z0 + self.height])),
+            events,
+            observed: [1.0; 2],
+            centre: [self.width / 2.0, (self.plateau - self.beach) / 2.0],
+            summary: summary.into(),
+        }
+    }
+}
+
 /// cliff: a beach (x ∈ [0, 60], y ∈ [−20, 0], sloping 2 % seaward to −y) at the foot of a 30 m
 /// vertical face in the plane y = 0 (rock at y > 0, face normal −y), with a 10 m deep plateau on
 /// top. Epoch 2: a box scar 4 m wide × 3 m high × 1 m deep (V = −12 m³), a half-ellipsoid scar with
@@ -413,14 +520,7 @@ fn cubes() -> SceneModel {
 /// face, half of which lies in front of it (V = πR²H/6 ≈ 45.81 m³; it hides the face below its
 /// profile).
 fn cliff() -> SceneModel {
-    let (width, height, beach, plateau) = (60.0, 30.0, 20.0, 10.0);
-    let z0 = 100.0;
-    let beach_base = Base {
-        z0,
-        gx: 0.0,
-        gy: 0.02,
-        waves: Vec::new(),
-    };
+    let z0 = CLIFF.z0;
     let (fan_c, fan_r, fan_h) = ([26.0, 0.0], 5.0, 3.5);
     let box_scar = Scar::Box {
         min: [10.0, z0 + 15.0],
@@ -434,38 +534,14 @@ fn cliff() -> SceneModel {
         b: ell_b,
         cz: ell_cz,
     };
-    let top = Heightfield::new(Base::plane(z0 + height), Vec::new());
-    let face = |holes: Vec<Hole>| Patch::Plane {
-        origin: [0.0, 0.0, z0],
-        eu: [1.0, 0.0, 0.0],
-        ev: [0.0, 0.0, 1.0],
-        len: [width, height],
-        holes,
-    };
-    let p1 = vec![
-        height_patch(
-            Heightfield::new(beach_base.clone(), Vec::new()),
-            [0.0, -beach],
-            [width, 0.0],
-        ),
-        height_patch(top.clone(), [0.0, 0.0], [width, plateau]),
-        face(Vec::new()),
-    ];
-    let mut p2 = vec![
-        height_patch(
-            Heightfield::new(
-                beach_base.clone(),
-                vec![Feature::Cone {
-                    c: fan_c,
-                    radius: fan_r,
-                    height: fan_h,
-                }],
-            ),
-            [0.0, -beach],
-            [width, 0.0],
-        ),
-        height_patch(top, [0.0, 0.0], [width, plateau]),
-        face(vec![
+    let p1 = CLIFF.patches(Vec::new(), Vec::new());
+    let mut p2 = CLIFF.patches(
+        vec![Feature::Cone {
+            c: fan_c,
+            radius: fan_r,
+            height: fan_h,
+        }],
+        vec![
             Hole::Rect {
                 min: [10.0, 15.0],
                 max: [14.0, 18.0],
@@ -480,8 +556,8 @@ fn cliff() -> SceneModel {
                 peak: fan_h,
                 slope: fan_h / fan_r,
             },
-        ]),
-    ];
+        ],
+    );
     // The box scar's back wall, floor, ceiling and two side walls.
     let (bx0, bx1, bz0, bz1, d) = (10.0, 14.0, z0 + 15.0, z0 + 18.0, 1.0);
     let plane = |origin, eu, ev, len| Patch::Plane {
@@ -511,6 +587,7 @@ fn cliff() -> SceneModel {
                 min: [bx0, bz0],
                 max: [bx1, bz1],
             },
+            covered_volume_m3: None,
             description: "rockfall scar: box 4 m wide, 3 m high, 1 m deep into the face".into(),
         },
         ModelEvent {
@@ -521,6 +598,7 @@ fn cliff() -> SceneModel {
                 min: [ell_c[0] - ell_a, ell_c[1] - ell_cz],
                 max: [ell_c[0] + ell_a, ell_c[1] + ell_cz],
             },
+            covered_volume_m3: None,
             description: "rockfall scar: half-ellipsoid 3 m × 2.5 m semi-axes, 1.5 m deep".into(),
         },
         ModelEvent {
@@ -528,22 +606,99 @@ fn cliff() -> SceneModel {
             centre: [
                 fan_c[0],
                 fan_centroid_y,
-                z0 + beach_base.gy * fan_centroid_y,
+                z0 + CLIFF.beach_base().gy * fan_centroid_y,
             ],
             radius_m: fan_r,
             footprint: ground([fan_c[0] - fan_r, -fan_r], [fan_c[0] + fan_r, 0.0]),
+            covered_volume_m3: None,
             description: "debris fan: half-cone R = 5 m, H = 3.5 m against the face foot".into(),
         },
     ];
-    SceneModel {
-        patches: [p1, p2],
-        scars: [Vec::new(), vec![box_scar, ell_scar]],
-        face: Some(([0.0, z0], [width, z0 + height])),
+    CLIFF.model(
+        [p1, p2],
+        [Vec::new(), vec![box_scar, ell_scar]],
         events,
-        centre: [width / 2.0, (plateau - beach) / 2.0],
-        summary: "vertical cliff face with beach and plateau; rockfall scars and a debris fan"
-            .into(),
-    }
+        "vertical cliff face with beach and plateau; rockfall scars and a debris fan",
+    )
+}
+
+/// deposit: the cliff scene's frame without scars; epoch 2 has one debris deposit on the beach, a
+/// cos² bump of radius 2.5 m and height 1.2 m whose edge stays 1.5 m in front of the face foot
+/// (centre 4 m from it): V = h·R²(π/2 − 2/π) ≈ 7.01 m³. Horizontal M3C2 cylinders from the face
+/// foot reach it though it does not touch the face.
+fn deposit() -> SceneModel {
+    let (radius, height, gap) = (2.5, 1.2, 1.5);
+    let c = [CLIFF.width / 2.0, -(gap + radius)];
+    let bump = Feature::Bump { c, radius, height };
+    let events = vec![ModelEvent {
+        volume_m3: bump_volume(radius, height),
+        centre: [
+            c[0],
+            c[1],
+            z_at(&Heightfield::new(CLIFF.beach_base(), Vec::new()), c),
+        ],
+        radius_m: radius,
+        footprint: square(c, radius),
+        covered_volume_m3: None,
+        description: format!(
+            "debris deposit on the beach: cos² bump R = {radius} m, h = {height} m, {gap} m in \
+             front of the face foot"
+        ),
+    }];
+    CLIFF.model(
+        [
+            CLIFF.patches(Vec::new(), Vec::new()),
+            CLIFF.patches(vec![bump], Vec::new()),
+        ],
+        [Vec::new(), Vec::new()],
+        events,
+        "vertical cliff face with beach and plateau; a debris deposit on the beach near the foot",
+    )
+}
+
+/// hole: the hill scene's 40 m × 40 m tilted plane; epoch 2 adds h·cos²(πr/2R), R = 4 m, h = 1 m at (20, 20)
+/// (V = h·R²(π/2 − 2/π) ≈ 14.95 m³). Epoch 1 has no points over x ∈ [20, 30), y ∈ [12, 28) (a
+/// water body or an occlusion): the hole's edge x = 20 runs through the bump's centre, so epoch 1
+/// sees the half x < 20 of the event, and by the bump's symmetry that half holds V/2. Epoch 1 is
+/// sampled only outside the hole, with 90 % of the requested points (the plane's area outside it),
+/// so its density matches epoch 2's.
+fn hole() -> SceneModel {
+    let size = 40.0;
+    let base = tilted_plane();
+    let (c, radius, height) = ([20.0, 20.0], 4.0, 1.0);
+    let (hole_min, hole_max) = ([c[0], 12.0], [30.0, 28.0]);
+    let f1 = Heightfield::new(base.clone(), Vec::new());
+    let f2 = Heightfield::new(base, vec![Feature::Bump { c, radius, height }]);
+    let volume = bump_volume(radius, height);
+    let events = vec![ModelEvent {
+        volume_m3: volume,
+        centre: [c[0], c[1], z_at(&f1, c)],
+        radius_m: radius,
+        footprint: square(c, radius),
+        covered_volume_m3: Some(volume / 2.0),
+        description: format!(
+            "cos² bump R = {radius} m, h = {height} m, its half x > {} m unseen by epoch 1",
+            c[0]
+        ),
+    }];
+    let mut model = SceneModel::heightfield_scene(
+        [size, size],
+        [f1, f2],
+        [Vec::new(), Vec::new()],
+        events,
+        "smooth bump on a tilted plane, half of it in a hole of epoch 1",
+    );
+    let Patch::Height { holes, .. } = &mut model.patches[0][0] else {
+        unreachable!("a heightfield scene's first patch is its ground")
+    };
+    holes.push(Hole::Rect {
+        min: hole_min,
+        max: hole_max,
+    });
+    // A plane's area element is constant: the observed share is the share of the footprint.
+    let hole_area = (hole_max[0] - hole_min[0]) * (hole_max[1] - hole_min[1]);
+    model.observed[0] = 1.0 - hole_area / (size * size);
+    model
 }
 
 /// A smooth wave of wavelengths (lx, ly) (∞ = constant along that axis).
@@ -638,6 +793,7 @@ fn large(points: u64) -> SceneModel {
                 centre: [c[0], c[1], z_at(&f1, c)],
                 radius_m: radius,
                 footprint: square(c, radius),
+                covered_volume_m3: None,
                 description: what,
             });
         }
@@ -649,5 +805,155 @@ fn large(points: u64) -> SceneModel {
         [Vec::new(), Vec::new()],
         events,
         "undulating terrain with a 50 m grid of bumps and pits",
+    )
+}
+
+/// Grid of cells of the events scene (x, y): one event per cell.
+const EVENTS_GRID: [usize; 2] = [4, 3];
+/// Side of an events cell (m).
+const EVENTS_PITCH: f64 = 12.0;
+/// Least distance between two events' footprints, and from a footprint to the scene's border (m):
+/// each footprint stays half of it inside its cell, and the cells lie half of it inside the border.
+const EVENTS_GAP: f64 = 5.0;
+/// Range of the events' volumes (m³, absolute).
+const EVENTS_VOLUME: [f64; 2] = [0.2, 6.0];
+/// Random stream of the events scene's layout (the sampling streams are (epoch << 32) | strip).
+const EVENTS_STREAM: u64 = u64::MAX;
+
+/// Side lengths (x, y) of the events scene.
+fn events_size() -> [f64; 2] {
+    [0, 1].map(|k| EVENTS_GRID[k] as f64 * EVENTS_PITCH + EVENTS_GAP)
+}
+
+/// events: gently undulating ground (a tilt and two waves whose phases the seed draws; slopes
+/// below 0.018 + 0.049 + 0.030 < 10 %) with a dozen events drawn from the seed, one per cell of a
+/// 4 × 3 grid of 12 m cells: each of six kinds (box raised, box dug, spherical cap, spherical
+/// dent, cos² bump, cos² dent) twice, in shuffled cells; volumes stratified over [0.2, 6] m³ on a
+/// log scale (one per twelfth of the range, shuffled); shapes solved for the volume from a random
+/// aspect (bump h/R and cap h/a in [0.2, 0.5], box height 0.3–0.8 m and side ratio 0.5–1), so
+/// that footprints reach at most 3.2 m from their centre along x and y and fit in their cell with
+/// 2.5 m to spare; centres uniform where they fit. Truth: bump ±h·R²(π/2 − 2/π), cap
+/// ±πh²(3R − h)/3, box w·d·h, computed from the drawn dimensions.
+fn events(seed: u64) -> SceneModel {
+    #[derive(Clone, Copy)]
+    enum Shape {
+        Box,
+        Cap,
+        Bump,
+    }
+    let mut rng = Rng::new(seed, EVENTS_STREAM);
+    let base = Base {
+        z0: 100.0,
+        gx: 0.015,
+        gy: -0.01,
+        waves: vec![
+            wave(0.25, 40.0, 55.0, rng.range(0.0, TAU)),
+            wave(0.07, -18.0, 25.0, rng.range(0.0, TAU)),
+        ],
+    };
+    let n = EVENTS_GRID[0] * EVENTS_GRID[1];
+    let [v0, v1] = EVENTS_VOLUME;
+    let mut volumes: Vec<f64> = (0..n)
+        .map(|k| v0 * (v1 / v0).powf((k as f64 + rng.uniform()) / n as f64))
+        .collect();
+    rng.shuffle(&mut volumes);
+    let mut kinds: Vec<(Shape, f64)> = [Shape::Box, Shape::Cap, Shape::Bump]
+        .into_iter()
+        .flat_map(|s| [(s, 1.0), (s, -1.0)])
+        .cycle()
+        .take(n)
+        .collect();
+    rng.shuffle(&mut kinds);
+    let f1 = Heightfield::new(base.clone(), Vec::new());
+    let (mut features, mut walls, mut events) = (Vec::new(), Vec::new(), Vec::new());
+    for (cell, (&(shape, sign), &volume)) in kinds.iter().zip(&volumes).enumerate() {
+        // The feature centred on the origin and its description.
+        let (feature, description) = match shape {
+            Shape::Bump => {
+                let aspect = rng.range(0.2, 0.5);
+                let radius = (volume / (bump_volume(1.0, 1.0) * aspect)).cbrt();
+                let height = sign * aspect * radius;
+                let word = if sign > 0.0 { "bump" } else { "dent" };
+                (
+                    Feature::Bump {
+                        c: [0.0; 2],
+                        radius,
+                        height,
+                    },
+                    format!("cos² {word} R = {radius:.3} m, h = {:.3} m", height.abs()),
+                )
+            }
+            Shape::Cap => {
+                // Footprint radius a and height h = t·a: V = πh(3a² + h²)/6 = πa³t(3 + t²)/6.
+                let t = rng.range(0.2, 0.5);
+                let a = (6.0 * volume / (PI * t * (3.0 + t * t))).cbrt();
+                let h = t * a;
+                let sphere_radius = (a * a + h * h) / (2.0 * h);
+                let word = if sign > 0.0 { "cap" } else { "dent" };
+                (
+                    Feature::Cap {
+                        c: [0.0; 2],
+                        sphere_radius,
+                        height: sign * h,
+                    },
+                    format!("spherical {word} R = {sphere_radius:.3} m, h = {h:.3} m"),
+                )
+            }
+            Shape::Box => {
+                let h = rng.range(0.3, 0.8);
+                let ratio = rng.range(0.5, 1.0);
+                let long = (volume / (h * ratio)).sqrt();
+                let mut side = [long, ratio * long];
+                if rng.uniform() < 0.5 {
+                    side.swap(0, 1);
+                }
+                let word = if sign > 0.0 { "raised" } else { "dug" };
+                (
+                    Feature::Block {
+                        min: side.map(|s| -s / 2.0),
+                        max: side.map(|s| s / 2.0),
+                        height: sign * h,
+                    },
+                    format!("box {word} {:.3} × {:.3} × {h:.3} m", side[0], side[1]),
+                )
+            }
+        };
+        let half = feature.bbox().1;
+        let ij = [cell % EVENTS_GRID[0], cell / EVENTS_GRID[0]];
+        let c = [0, 1].map(|k| {
+            let lo = EVENTS_GAP + ij[k] as f64 * EVENTS_PITCH + half[k];
+            let span = (EVENTS_PITCH - EVENTS_GAP - 2.0 * half[k]).max(0.0);
+            lo + span * rng.uniform()
+        });
+        let feature = feature.moved(c);
+        if let Feature::Block { min, max, height } = feature {
+            walls.extend(box_walls_on(
+                &base,
+                min,
+                max,
+                [height.min(0.0), height.max(0.0)],
+            ));
+        }
+        features.push(feature);
+        events.push(ModelEvent {
+            volume_m3: feature.volume(),
+            centre: [c[0], c[1], z_at(&f1, c)],
+            radius_m: half[0].hypot(half[1]),
+            footprint: ground(
+                [c[0] - half[0], c[1] - half[1]],
+                [c[0] + half[0], c[1] + half[1]],
+            ),
+            covered_volume_m3: None,
+            description,
+        });
+    }
+    let f2 = Heightfield::new(base, features);
+    SceneModel::heightfield_scene(
+        events_size(),
+        [f1, f2],
+        [Vec::new(), walls],
+        events,
+        "undulating ground with a dozen seeded events: boxes raised and dug, spherical caps and \
+         dents, cos² bumps and dents",
     )
 }

@@ -7,8 +7,10 @@
 //! parts (holes) have Jacobian 0. The number of points per patch is proportional to its area.
 //!
 //! Patches: heightfields z = f(x, y) (base plane or smooth waves plus bumps, spherical caps, flat
-//! blocks and cones; Jacobian sqrt(1 + |∇f|²)), planar rectangles with holes (box walls, the
-//! cliff face; Jacobian 1), and half-ellipsoids (rockfall scars; sampled through the unit
+//! blocks and cones; Jacobian sqrt(1 + |∇f|²)), optionally with holes (ground a survey did not
+//! see), planar rectangles with holes (box walls, the cliff face; Jacobian 1), vertical walls
+//! standing on a base surface (box walls on undulating ground: (s + u·d, base(s + u·d) + v) for a
+//! horizontal unit d, whose ∂/∂v is vertical, so the Jacobian is 1), and half-ellipsoids (rockfall scars; sampled through the unit
 //! hemisphere, whose area element in (φ, w = cos θ) is dφ dw by Archimedes' hat-box theorem, mapped
 //! by diag(a, b, c), whose area scale at unit normal s is abc·|diag(1/a, 1/b, 1/c)·s|).
 
@@ -60,7 +62,7 @@ impl Base {
             waves: Vec::new(),
         }
     }
-    fn eval(&self, x: f64, y: f64) -> (f64, [f64; 2]) {
+    pub(crate) fn eval(&self, x: f64, y: f64) -> (f64, [f64; 2]) {
         let mut z = self.z0 + self.gx * x + self.gy * y;
         let mut g = [self.gx, self.gy];
         for w in &self.waves {
@@ -71,7 +73,8 @@ impl Base {
         }
         (z, g)
     }
-    fn max_slope(&self) -> f64 {
+    /// Upper bound of |∇z|.
+    pub(crate) fn max_slope(&self) -> f64 {
         self.gx.hypot(self.gy)
             + self
                 .waves
@@ -177,8 +180,54 @@ impl Feature {
 }
 
 impl Feature {
+    /// The same feature moved by d in (x, y).
+    pub(crate) fn moved(self, d: [f64; 2]) -> Self {
+        let add = |p: [f64; 2]| [p[0] + d[0], p[1] + d[1]];
+        match self {
+            Feature::Bump { c, radius, height } => Feature::Bump {
+                c: add(c),
+                radius,
+                height,
+            },
+            Feature::Cap {
+                c,
+                sphere_radius,
+                height,
+            } => Feature::Cap {
+                c: add(c),
+                sphere_radius,
+                height,
+            },
+            Feature::Block { min, max, height } => Feature::Block {
+                min: add(min),
+                max: add(max),
+                height,
+            },
+            Feature::Cone { c, radius, height } => Feature::Cone {
+                c: add(c),
+                radius,
+                height,
+            },
+        }
+    }
+
+    /// Closed-form volume between the feature and its base (signed): see the volume functions
+    /// below; a cone πR²H/3, a block w·d·h.
+    pub(crate) fn volume(&self) -> f64 {
+        match *self {
+            Feature::Bump { radius, height, .. } => bump_volume(radius, height),
+            Feature::Cap {
+                sphere_radius,
+                height,
+                ..
+            } => cap_volume(sphere_radius, height),
+            Feature::Block { min, max, height } => (max[0] - min[0]) * (max[1] - min[1]) * height,
+            Feature::Cone { radius, height, .. } => PI * radius * radius * height / 3.0,
+        }
+    }
+
     /// Axis-aligned bounding box of the footprint: (min, max).
-    fn bbox(&self) -> ([f64; 2], [f64; 2]) {
+    pub(crate) fn bbox(&self) -> ([f64; 2], [f64; 2]) {
         let around = |c: [f64; 2], r: f64| ([c[0] - r, c[1] - r], [c[0] + r, c[1] + r]);
         match *self {
             Feature::Bump { c, radius, .. } | Feature::Cone { c, radius, .. } => around(c, radius),
@@ -325,7 +374,7 @@ pub(crate) enum Hole {
 }
 
 impl Hole {
-    fn contains(&self, u: f64, v: f64) -> bool {
+    pub(crate) fn contains(&self, u: f64, v: f64) -> bool {
         match *self {
             Hole::Rect { min, max } => u >= min[0] && u < max[0] && v >= min[1] && v < max[1],
             Hole::Ellipse { c, a, b } => {
@@ -340,11 +389,12 @@ impl Hole {
 /// A piece of an epoch's surface; see the module documentation.
 #[derive(Debug, Clone)]
 pub(crate) enum Patch {
-    /// The heightfield over [x0, x1] × [y0, y1].
+    /// The heightfield over [x0, x1] × [y0, y1], minus holes (in (x, y)).
     Height {
         field: Heightfield,
         min: [f64; 2],
         max: [f64; 2],
+        holes: Vec<Hole>,
     },
     /// origin + u·eu + v·ev for u ∈ [0, len_u], v ∈ [0, len_v] (eu, ev orthonormal), minus holes.
     Plane {
@@ -353,6 +403,15 @@ pub(crate) enum Patch {
         ev: V3,
         len: [f64; 2],
         holes: Vec<Hole>,
+    },
+    /// A vertical wall along the horizontal segment start + u·dir, u ∈ [0, len] (dir a unit
+    /// vector), from base + z[0] to base + z[1] above each point of it: v ∈ [z[0], z[1]].
+    Wall {
+        base: Base,
+        start: [f64; 2],
+        dir: [f64; 2],
+        len: f64,
+        z: [f64; 2],
     },
     /// The half (local y ≥ 0) of the ellipsoid with semi-axes `radii` along x, y, z centred at
     /// `centre`: a scar hollowed into a face lying in the plane y = centre.y, rock at y > it.
@@ -371,6 +430,7 @@ impl Patch {
         match self {
             Patch::Height { min, max, .. } => [min[0], max[0], min[1], max[1]],
             Patch::Plane { len, .. } => [0.0, len[0], 0.0, len[1]],
+            Patch::Wall { len, z, .. } => [0.0, *len, z[0], z[1]],
             Patch::HalfEllipsoid { .. } => [0.0, TAU, 0.0, 1.0],
         }
     }
@@ -379,7 +439,7 @@ impl Patch {
     pub(crate) fn jac_max(&self) -> f64 {
         match self {
             Patch::Height { field, .. } => (1.0 + field.max_slope().powi(2)).sqrt(),
-            Patch::Plane { .. } => 1.0,
+            Patch::Plane { .. } | Patch::Wall { .. } => 1.0,
             Patch::HalfEllipsoid {
                 radii: [a, b, c], ..
             } => a * b * c * (1.0 / a).max(1.0 / b).max(1.0 / c),
@@ -389,17 +449,16 @@ impl Patch {
     /// The Jacobian at (u, v); 0 inside holes.
     pub(crate) fn jac(&self, u: f64, v: f64) -> f64 {
         match self {
+            Patch::Height { holes, .. } | Patch::Plane { holes, .. }
+                if holes.iter().any(|h| h.contains(u, v)) =>
+            {
+                0.0
+            }
             Patch::Height { field, .. } => {
                 let (_, g) = field.eval(u, v);
                 (1.0 + g[0] * g[0] + g[1] * g[1]).sqrt()
             }
-            Patch::Plane { holes, .. } => {
-                if holes.iter().any(|h| h.contains(u, v)) {
-                    0.0
-                } else {
-                    1.0
-                }
-            }
+            Patch::Plane { .. } | Patch::Wall { .. } => 1.0,
             Patch::HalfEllipsoid {
                 radii: [a, b, c], ..
             } => {
@@ -427,6 +486,16 @@ impl Patch {
                 ],
                 n: unit(cross(*eu, *ev)),
             },
+            Patch::Wall {
+                base, start, dir, ..
+            } => {
+                let (x, y) = (start[0] + u * dir[0], start[1] + u * dir[1]);
+                // ∂p/∂u × ∂p/∂v = (dx, dy, ∂base/∂u) × (0, 0, 1) = (dy, −dx, 0).
+                Sample {
+                    p: [x, y, base.eval(x, y).0 + v],
+                    n: [dir[1], -dir[0], 0.0],
+                }
+            }
             Patch::HalfEllipsoid {
                 centre,
                 radii: [a, b, c],
@@ -469,20 +538,25 @@ fn hemisphere(phi: f64, w: f64) -> V3 {
 
 /// The four vertical walls of a box with footprint [min, max] between heights zlo and zhi.
 pub(crate) fn box_walls(min: [f64; 2], max: [f64; 2], zlo: f64, zhi: f64) -> Vec<Patch> {
-    let (wx, wy, h) = (max[0] - min[0], max[1] - min[1], zhi - zlo);
-    let ez = [0.0, 0.0, 1.0];
-    let wall = |origin: V3, eu: V3, len_u: f64| Patch::Plane {
-        origin,
-        eu,
-        ev: ez,
-        len: [len_u, h],
-        holes: Vec::new(),
+    box_walls_on(&Base::plane(zlo), min, max, [0.0, zhi - zlo])
+}
+
+/// The four vertical walls of a box with footprint [min, max] standing on `base`: from
+/// base + z[0] to base + z[1] along each edge (a block raised or dug into sloping ground).
+pub(crate) fn box_walls_on(base: &Base, min: [f64; 2], max: [f64; 2], z: [f64; 2]) -> Vec<Patch> {
+    let wall = |start: [f64; 2], dir: [f64; 2], len: f64| Patch::Wall {
+        base: base.clone(),
+        start,
+        dir,
+        len,
+        z,
     };
+    let (wx, wy) = (max[0] - min[0], max[1] - min[1]);
     vec![
-        wall([min[0], min[1], zlo], [1.0, 0.0, 0.0], wx),
-        wall([min[0], max[1], zlo], [1.0, 0.0, 0.0], wx),
-        wall([min[0], min[1], zlo], [0.0, 1.0, 0.0], wy),
-        wall([max[0], min[1], zlo], [0.0, 1.0, 0.0], wy),
+        wall(min, [1.0, 0.0], wx),
+        wall([min[0], max[1]], [1.0, 0.0], wx),
+        wall(min, [0.0, 1.0], wy),
+        wall([max[0], min[1]], [0.0, 1.0], wy),
     ]
 }
 

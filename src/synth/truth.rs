@@ -13,6 +13,10 @@ pub struct TruthEvent {
     pub kind: String,
     /// Signed volume change V(after) − V(before), m³ (loss < 0), from the closed-form formula.
     pub volume_m3: f64,
+    /// The part of `volume_m3` over ground both epochs observed, closed form; only for events
+    /// partly inside a hole of one epoch (the `hole` scene), where it is what the points can show.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub covered_volume_m3: Option<f64>,
     /// Centre of the event's footprint on the epoch-1 surface, global coordinates.
     pub centre: [f64; 3],
     /// Radius (m) of a circle about `centre` containing the changed footprint.
@@ -43,6 +47,10 @@ pub struct Truth {
     pub rotation_centre: [f64; 2],
     /// Epoch-2 density relative to epoch 1.
     pub density2: f64,
+    /// Rigid translation (m) of every epoch-2 point, applied after the rotation: a registration
+    /// error, not a change (the volumes are the real changes). Absent in older files: zero.
+    #[serde(default)]
+    pub shift_m: [f64; 3],
     /// EPSG code of the CRS written in both files.
     pub crs_epsg: u32,
     /// The OGC WKT (version 1) written in both files' WKT CRS VLR.
