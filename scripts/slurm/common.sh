@@ -1,5 +1,6 @@
 # Shared by up.sh, down.sh and selftest.sh (sourced, not run). Defines the state-dir layout and the
 # pid-file helpers, so that the three scripts agree on where everything lives.
+# shellcheck disable=SC2034 # the paths are used by the scripts that source this file
 
 # Everything the cluster writes lives under one directory, so that a run never touches
 # /etc/slurm, /var/spool or /run and two state dirs never share a file.
@@ -9,6 +10,8 @@ case "$SLURM_STATE_DIR" in
   /*) ;;
   *) SLURM_STATE_DIR="$(pwd)/$SLURM_STATE_DIR" ;;
 esac
+# slurm.conf has no quoting: a path with blanks would be cut at the first one.
+[[ "$SLURM_STATE_DIR" != *[[:space:]]* ]] || { echo "talus slurm: ERROR: SLURM_STATE_DIR has blanks: '$SLURM_STATE_DIR'" >&2; exit 1; }
 state="$SLURM_STATE_DIR"
 conf="$state/slurm.conf"
 rundir="$state/run"          # pid files

@@ -70,6 +70,9 @@ if ! have_all; then
 fi
 
 # ---------------------------------------------------------------- state dir
+# From here on, a failure stops whatever daemons of this state dir are running (down.sh), so
+# that a failed start leaves no half cluster behind; the logs stay in the state dir.
+trap 'rc=$?; if ((rc != 0)); then note "start failed: stopping what was started"; bash "$here/down.sh" >&2 || true; fi; exit $rc' EXIT
 mkdir -p "$state" "$rundir" "$logdir" "$mungedir" "$keydir" "$state/spool/slurmctld" "$state/spool/slurmd"
 # munged refuses a socket dir that others cannot traverse, and a key dir/key others can read.
 chmod 755 "$state" "$mungedir"
