@@ -57,11 +57,12 @@ if ! have_all; then
   }
   # apt-get update only when the package lists are missing or the install fails with the ones
   # there (an old list names versions the mirror no longer has).
-  rc=0
+  apt_update() { apt-get update -q >"${TMPDIR:-/tmp}/talus-slurm-apt-update.log" 2>&1 || true; }
   if ! compgen -G '/var/lib/apt/lists/*Packages*' >/dev/null; then
-    apt-get update -q >"${TMPDIR:-/tmp}/talus-slurm-apt-update.log" 2>&1 || rc=$?
+    apt_update
   fi
-  apt_install || { apt-get update -q >"${TMPDIR:-/tmp}/talus-slurm-apt-update.log" 2>&1 && apt_install; } || rc=$?
+  rc=0
+  apt_install || { apt_update; apt_install; } || rc=$?
   [[ -n "$added_policy" ]] && rm -f /usr/sbin/policy-rc.d
   if [[ $rc != 0 ]] || ! have_all; then
     tail -n 20 "${TMPDIR:-/tmp}/talus-slurm-apt.log" >&2 || true
