@@ -10,6 +10,20 @@
 //! radius ≈ √(r² + h²), far more points than the cylinder's disc of radius r when h ≫ r. The
 //! column grid ([`Columns::for_each_in_cylinder`]) visits only the columns the cylinder crosses,
 //! and in each only the heights it can reach.
+//!
+//! **One surface per cylinder.** The cylinder is meant to meet one surface per epoch near the
+//! core point (Lague et al. choose its length so that it does). Where it reaches a second one —
+//! the beach in front of a cliff foot, a deposit lying on it, the far side of a fin — that
+//! surface's points are not a displacement of the first, and their share of the mean turns the
+//! face into a false "gain" that counts the deposit a second time. Along the axis, points of
+//! different surfaces are separated by empty space, while one surface's projections, however
+//! inclined or rough, follow each other closely (their gaps are of the order of the point
+//! spacing). So the projections are split at gaps wider than the cylinder's diameter
+//! ([`Projections::surface`]); C1 keeps the group holding the core point (the one nearest to
+//! t = 0) and C2 the group nearest to C1's. Where every point of a cylinder lies within one gap
+//! of the others — any single surface — this is the plain M3C2 mean, computed without a sort.
+
+use std::ops::Range;
 
 use super::moments::Moments1;
 use crate::io::Point3;
@@ -50,6 +64,77 @@ pub fn cylinder_stats_sphere(
         m.add(along, along.abs() <= h && radial2 <= r * r);
     });
     stats(&m)
+}
+
+/// The projections on the axis of one epoch's points inside a cylinder, kept for choosing the
+/// surface (reused between cylinders: no allocation per core point).
+#[derive(Debug, Default, Clone)]
+pub struct Projections {
+    t: Vec<f64>,
+    h: f64,
+}
+
+impl Projections {
+    /// Collect the projections of `index`'s points inside the cylinder at `q` (local frame)
+    /// with unit axis `n`, radius `r`, half-length `h`.
+    pub fn collect(&mut self, index: &Columns, q: &Point3, n: &Point3, r: f64, h: f64) {
+        self.t.clear();
+        self.h = h;
+        let t = &mut self.t;
+        index.visit_cylinder(q, n, r, h, |v, inside| {
+            if inside {
+                t.push(v);
+            }
+        });
+    }
+
+    /// Statistics of the group of projections, split at gaps wider than `gap`, nearest to the
+    /// interval `near` (see the module's "one surface per cylinder"), and that group's span.
+    /// Sums are exact, so the result does not depend on the order the points were visited in.
+    pub fn surface(&mut self, gap: f64, near: (f64, f64)) -> (CylinderStats, (f64, f64)) {
+        let (lo, hi) = self
+            .t
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+                (a.min(x), b.max(x))
+            });
+        let group = if hi - lo <= gap {
+            &self.t[..]
+        } else {
+            self.t.sort_unstable_by(|a, b| a.total_cmp(b));
+            let g = nearest_group(&self.t, gap, near);
+            &self.t[g]
+        };
+        let mut m = Moments1::new(self.h);
+        for &x in group {
+            m.add(x, true);
+        }
+        let span = group
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+                (a.min(x), b.max(x))
+            });
+        (stats(&m), span)
+    }
+}
+
+/// Split the sorted values at gaps wider than `gap`; the index range of the group nearest to
+/// the interval `near` (the gap between the two intervals; ties to the earlier group).
+pub fn nearest_group(sorted: &[f64], gap: f64, near: (f64, f64)) -> Range<usize> {
+    let mut best = (f64::INFINITY, 0..0);
+    let mut start = 0;
+    for k in 0..sorted.len() {
+        let last = k + 1 == sorted.len() || sorted[k + 1] - sorted[k] > gap;
+        if last {
+            let (a, b) = (sorted[start], sorted[k]);
+            let d = (a - near.1).max(near.0 - b).max(0.0);
+            if d < best.0 {
+                best = (d, start..k + 1);
+            }
+            start = k + 1;
+        }
+    }
+    best.1
 }
 
 fn stats(m: &Moments1) -> CylinderStats {
@@ -94,6 +179,46 @@ mod tests {
                 assert!((x.std_dev - y.std_dev).abs() < 1e-12);
             }
         }
+    }
+
+    #[test]
+    fn groups_split_at_gaps_and_the_nearest_is_chosen() {
+        let t = [-0.02, 0.0, 0.01, 0.03, 2.4, 2.5, 2.7];
+        assert_eq!(nearest_group(&t, 0.6, (0.0, 0.0)), 0..4);
+        assert_eq!(nearest_group(&t, 0.6, (2.0, 2.2)), 4..7);
+        assert_eq!(nearest_group(&t, 3.0, (0.0, 0.0)), 0..7);
+        assert_eq!(nearest_group(&[1.0], 0.6, (0.0, 0.0)), 0..1);
+    }
+
+    #[test]
+    fn a_second_surface_along_the_axis_is_left_out() {
+        // A face (the plane y = 0, points every 5 cm) and, 2 m in front of it, a patch of another
+        // surface inside the same horizontal cylinder (axis −y).
+        let mut pts = Vec::new();
+        for i in -20..=20 {
+            for k in -20..=20 {
+                pts.push([i as f64 * 0.05, 0.0, k as f64 * 0.05]);
+            }
+        }
+        let face_only = Columns::new(&pts, [0.0; 3], 0.2);
+        for i in -5..=5 {
+            for j in 0..10 {
+                pts.push([i as f64 * 0.05, -2.0 - j as f64 * 0.05, -0.2]);
+            }
+        }
+        let idx = Columns::new(&pts, [0.0; 3], 0.2);
+        let (q, n, r, h) = ([0.0, 0.0, 0.0], [0.0, -1.0, 0.0], 0.3, 3.0);
+        let mut p = Projections::default();
+        p.collect(&idx, &q, &n, r, h);
+        let (s, span) = p.surface(2.0 * r, (0.0, 0.0));
+        let plain = cylinder_stats(&face_only, &q, &n, r, h);
+        assert_eq!(s, plain);
+        assert_eq!(span, (0.0, 0.0));
+        // Without the split the mean moves out to the second surface.
+        assert!(cylinder_stats(&idx, &q, &n, r, h).mean > 0.3);
+        // Nearer to the second surface's span, that one is chosen.
+        p.collect(&idx, &q, &n, r, h);
+        assert!(p.surface(2.0 * r, (1.9, 2.0)).0.mean > 2.0);
     }
 
     #[test]

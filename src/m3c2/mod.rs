@@ -164,8 +164,19 @@ fn core_result(
         return CoreResult::undefined(*n);
     }
     let (r, h) = (params.cyl_radius, params.cyl_halflen);
-    let c1 = cylinder::cylinder_stats(before, q, n, r, h);
-    let c2 = cylinder::cylinder_stats(after, q, n, r, h);
+    // One surface per cylinder (see `cylinder`): projections split at gaps wider than the
+    // cylinder's diameter; C1's group is the core point's, C2's the one nearest to it.
+    thread_local! {
+        static SCRATCH: std::cell::RefCell<[cylinder::Projections; 2]> = Default::default();
+    }
+    let (c1, c2) = SCRATCH.with(|s| {
+        let [p1, p2] = &mut *s.borrow_mut();
+        p1.collect(before, q, n, r, h);
+        let (c1, span1) = p1.surface(2.0 * r, (0.0, 0.0));
+        p2.collect(after, q, n, r, h);
+        let (c2, _) = p2.surface(2.0 * r, span1);
+        (c1, c2)
+    });
     let need = params.min_points.max(1);
     if c1.count < need || c2.count < need {
         return CoreResult {
