@@ -175,3 +175,113 @@ fn a_good_pair_works() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(out.join("m3c2.laz").exists() && out.join("summary.json").exists());
 }
+
+/// The LAS 1.2–1.4 public header's fields used below (LAS 1.4 R15 Table 3): byte offsets.
+const OFFSET_TO_POINTS: usize = 96;
+const RECORD_LENGTH: usize = 105;
+const SCALE_X: usize = 131;
+const MAX_Z: usize = 211;
+
+fn read_u32(b: &[u8], at: usize) -> usize {
+    u32::from_le_bytes(b[at..at + 4].try_into().unwrap()) as usize
+}
+
+fn put_f64(b: &mut [u8], at: usize, v: f64) {
+    b[at..at + 8].copy_from_slice(&v.to_le_bytes());
+}
+
+/// Byte offset of point `i`'s record in an uncompressed LAS file.
+fn record(b: &[u8], i: usize) -> usize {
+    read_u32(b, OFFSET_TO_POINTS)
+        + i * usize::from(u16::from_le_bytes([b[RECORD_LENGTH], b[RECORD_LENGTH + 1]]))
+}
+
+#[test]
+fn las_point_outside_the_header_bounds() {
+    let c = Case::new();
+    let mut b = std::fs::read(c.p("good1.las")).unwrap();
+    // Point 1234's Z record (bytes 8..12 of every point format) far above the header's max z.
+    let z = record(&b, 1234) + 8;
+    b[z..z + 4].copy_from_slice(&2_000_000_000i32.to_le_bytes());
+    let f = c.p("spike.las");
+    std::fs::write(&f, b).unwrap();
+    c.fails(
+        &f,
+        &c.p("good2.las"),
+        &[],
+        &[
+            "spike.las",
+            "point 1234",
+            "z = ",
+            "above the header's maximum z",
+        ],
+    );
+}
+
+#[test]
+fn laz_points_outside_the_header_bounds() {
+    // Compressed points cannot be edited in place, so the header's bounds are narrowed instead:
+    // the decoded points then lie outside them, as garbage decoded from a damaged chunk does.
+    let c = Case::new();
+    let full = c.p("full.laz");
+    common::write_cloud(&full, &plane(3, 20_000, 0.0));
+    let mut b = std::fs::read(&full).unwrap();
+    put_f64(&mut b, MAX_Z, OFFSET[2]);
+    let f = c.p("narrow.laz");
+    std::fs::write(&f, b).unwrap();
+    c.fails(
+        &c.p("good1.las"),
+        &f,
+        &[],
+        &[
+            "narrow.laz",
+            " has z = ",
+            "above the header's maximum z 100 ",
+        ],
+    );
+}
+
+#[test]
+fn absurd_las_scale_factors() {
+    let c = Case::new();
+    let good = std::fs::read(c.p("good1.las")).unwrap();
+    for (i, scale) in [1e300, 0.0, f64::NAN, 5e-324, 1e-300, f64::INFINITY]
+        .into_iter()
+        .enumerate()
+    {
+        let mut b = good.clone();
+        put_f64(&mut b, SCALE_X + 16, scale); // z
+        let f = c.p(&format!("scale{i}.las"));
+        std::fs::write(&f, b).unwrap();
+        c.fails(
+            &f,
+            &c.p("good2.las"),
+            &[],
+            &[&format!("scale{i}.las"), "z scale factor"],
+        );
+    }
+}
+
+#[test]
+fn negative_las_scale_factor_is_read() {
+    // LAS 1.4 R15 only says coordinate = record × scale + offset: a negative scale with negated
+    // records is the same cloud.
+    let c = Case::new();
+    let good = c.p("good1.las");
+    let mut b = std::fs::read(&good).unwrap();
+    let scale = f64::from_le_bytes(b[SCALE_X..SCALE_X + 8].try_into().unwrap());
+    put_f64(&mut b, SCALE_X, -scale);
+    for i in 0..2000 {
+        let x = record(&b, i);
+        let v = i32::from_le_bytes(b[x..x + 4].try_into().unwrap());
+        b[x..x + 4].copy_from_slice(&(-v).to_le_bytes());
+    }
+    let f = c.p("mirrored.las");
+    std::fs::write(&f, b).unwrap();
+    let (_, want) = talus::io::read_all(&good).unwrap();
+    let (info, got) = talus::io::read_all(&f).unwrap();
+    assert_eq!(info.scale.unwrap()[0], scale);
+    assert_eq!(got, want);
+    let o = common::run(&["info", f.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
