@@ -285,3 +285,46 @@ fn negative_las_scale_factor_is_read() {
     let o = common::run(&["info", f.to_str().unwrap()]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 }
+
+/// `talus info --json FILE`'s report, which must succeed.
+fn info_json(path: &Path) -> serde_json::Value {
+    let o = common::run(&["info", "--json", path.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    serde_json::from_slice::<serde_json::Value>(&o.stdout).unwrap()[0].clone()
+}
+
+#[test]
+fn every_point_twice_has_the_spacing_of_one_copy() {
+    let c = Case::new();
+    let once = plane(7, 2000, 0.0);
+    let twice: Vec<Point3> = once.iter().flat_map(|p| [*p, *p]).collect();
+    let f = c.p("twice.las");
+    common::write_cloud(&f, &twice);
+    let g = c.p("once.las");
+    common::write_cloud(&g, &once);
+    let (a, b) = (info_json(&f), info_json(&g));
+    assert_eq!(a["points"], 4000);
+    assert_eq!(
+        a["spacing"]["effective_spacing"],
+        b["spacing"]["effective_spacing"]
+    );
+    assert_eq!(a["spacing"]["spacing"], b["spacing"]["spacing"]);
+    let o = common::run_compare(&f, &c.p("good2.las"), &c.out(), &[]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+#[test]
+fn a_cloud_at_one_position_is_refused() {
+    let c = Case::new();
+    let f = c.p("one_place.las");
+    common::write_cloud(
+        &f,
+        &vec![[OFFSET[0] + 5.0, OFFSET[1] + 5.0, OFFSET[2]]; 500],
+    );
+    c.fails(
+        &f,
+        &c.p("good2.las"),
+        &[],
+        &["one_place.las", "all points coincide"],
+    );
+}
