@@ -328,3 +328,34 @@ fn a_cloud_at_one_position_is_refused() {
         &["one_place.las", "all points coincide"],
     );
 }
+
+#[test]
+fn a_byte_order_mark_is_skipped() {
+    let c = Case::new();
+    let pts = plane(8, 300, 0.0);
+    let rows: String = pts
+        .iter()
+        .map(|p| format!("{:.4},{:.4},{:.4}\n", p[0], p[1], p[2]))
+        .collect();
+    let ply_rows: String = rows.replace(',', " ");
+    let ply = format!(
+        "ply\nformat ascii 1.0\nelement vertex {}\nproperty double x\nproperty double y\n\
+         property double z\nend_header\n{ply_rows}",
+        pts.len()
+    );
+    for (name, body) in [
+        ("header.csv", format!("X,Y,Z\n{rows}")),
+        ("quoted.csv", format!("\"X\",\"Y\",\"Z\"\n{rows}")),
+        ("plain.xyz", rows.clone()),
+        ("cloud.ply", ply),
+    ] {
+        let plain = c.p(name);
+        std::fs::write(&plain, &body).unwrap();
+        let bom = c.p(&format!("bom_{name}"));
+        std::fs::write(&bom, format!("\u{feff}{body}")).unwrap();
+        let (want, got) = (info_json(&plain), info_json(&bom));
+        assert_eq!(got["points"], 300, "{name}");
+        assert_eq!(got["bounds"], want["bounds"], "{name}");
+        assert_eq!(got["format_detail"], want["format_detail"], "{name}");
+    }
+}
