@@ -359,3 +359,90 @@ fn a_byte_order_mark_is_skipped() {
         assert_eq!(got["format_detail"], want["format_detail"], "{name}");
     }
 }
+
+#[test]
+fn config_errors_name_the_file_and_key() {
+    let c = Case::new();
+    let (b, a) = (c.p("good1.las"), c.p("good2.las"));
+    let cfg = c.p("cfg.toml");
+    let cfg_arg = cfg.to_str().unwrap();
+    for (text, needle) in [
+        (
+            "normal_radius = -1",
+            "cfg.toml: normal_radius: must be a positive number, got -1",
+        ),
+        (
+            "cyl_halflen = 1e300",
+            "cfg.toml: cyl_halflen: 1e300 is beyond",
+        ),
+        (
+            "reg_error = -0.5",
+            "cfg.toml: reg_error: must be zero or positive",
+        ),
+        ("smooth_k = 0", "cfg.toml: smooth_k: must be at least 1"),
+        ("threads = 100000", "cfg.toml: threads: 100000 is more than"),
+        ("memory = \"lots\"", "cfg.toml: memory: cannot read 'lots'"),
+        (
+            "orientation = \"sideways\"",
+            "cfg.toml: orientation: expected auto",
+        ),
+        (
+            "eps = 1e6",
+            "cfg.toml: eps: 1000000 is more than 10 times the data's extent",
+        ),
+        (
+            "eps = 1\nbogus = 1",
+            "cfg.toml: bad config: line 2: unknown field `bogus`",
+        ),
+    ] {
+        std::fs::write(&cfg, text).unwrap();
+        c.fails(&b, &a, &["--config", cfg_arg], &[needle]);
+    }
+    // A value given by flag names the flag, also when the config sets the same key.
+    std::fs::write(&cfg, "normal_radius = 1\ncyl_radius = 2").unwrap();
+    c.fails(
+        &b,
+        &a,
+        &["--config", cfg_arg, "--normal-radius=-1"],
+        &["--normal-radius: must be a positive number, got -1"],
+    );
+}
+
+#[test]
+fn absurd_lengths_are_refused_naming_the_flag() {
+    // The cloud is 10 × 10; a cylinder of radius 1e6 used to run for hours (the volume grid over
+    // a footprint grown by it), one of 1e300 to fail with an internal error.
+    let c = Case::new();
+    let (b, a) = (c.p("good1.las"), c.p("good2.las"));
+    for (flag, value) in [
+        ("--normal-radius", "1e300"),
+        ("--cyl-radius", "1e300"),
+        ("--cyl-radius", "1e6"),
+        ("--cyl-halflen", "1e12"),
+        ("--core-spacing", "1e300"),
+        ("--smooth-sigma", "1e9"),
+        ("--eps", "200"),
+        ("--reg-error", "1e300"),
+        ("--threshold", "1e300"),
+    ] {
+        c.fails(&b, &a, &[flag, value], &[&format!("{flag}: ")]);
+    }
+}
+
+#[test]
+fn absurd_thread_counts_are_refused() {
+    let c = Case::new();
+    let (b, a) = (c.p("good1.las"), c.p("good2.las"));
+    c.fails(
+        &b,
+        &a,
+        &["--threads", "100000"],
+        &["--threads: 100000 is more than talus accepts (1024)"],
+    );
+    c.fails(
+        &b,
+        &a,
+        &["--threads", "0"],
+        &["--threads: must be at least 1"],
+    );
+}
