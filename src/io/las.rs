@@ -28,7 +28,10 @@
 
 use std::fs::File;
 use std::io::{BufReader, Seek};
+use std::panic::AssertUnwindSafe;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Once;
 
 use crossbeam_channel::{bounded, Receiver, Sender};
 
@@ -65,13 +68,33 @@ impl LasReader {
             .map_err(|e| Error::input(path, format!("cannot read: {e}")))?
             .len();
         let mut read = BufReader::new(file);
-        let raw = las::raw::Header::read_from(&mut read)
-            .map_err(|e| Error::input(path, format!("unreadable LAS header: {e}")))?;
+        let raw = guarded(path, "LAS header", || {
+            las::raw::Header::read_from(&mut read)
+                .map_err(|e| Error::input(path, format!("unreadable LAS header: {e}")))
+        })?;
         let promised = if raw.number_of_point_records > 0 {
             u64::from(raw.number_of_point_records)
         } else {
             raw.large_file.map_or(0, |l| l.number_of_point_records)
         };
+        // Both counts enter the las crate's size arithmetic: refuse what overflows it.
+        let largest = raw
+            .large_file
+            .map_or(0, |l| l.number_of_point_records)
+            .max(u64::from(raw.number_of_point_records));
+        let end_of_points = largest
+            .checked_mul(u64::from(raw.point_data_record_length))
+            .and_then(|n| n.checked_add(u64::from(raw.offset_to_point_data)));
+        if end_of_points.is_none() {
+            return Err(Error::input(
+                path,
+                format!(
+                    "LAS header promises {largest} points of {} bytes: more than any file \
+                     holds; corrupt header",
+                    raw.point_data_record_length
+                ),
+            ));
+        }
         let compressed = raw.point_data_record_format & 0xC0 != 0;
         if !compressed {
             // Uncompressed points are fixed-size records, so truncation shows in the file size.
@@ -105,8 +128,10 @@ impl LasReader {
         }
         read.rewind()
             .map_err(|e| Error::input(path, format!("cannot read: {e}")))?;
-        let header = las::Header::new(&mut read)
-            .map_err(|e| Error::input(path, format!("unreadable LAS header: {e}")))?;
+        let header = guarded(path, "LAS header", || {
+            las::Header::new(&mut read)
+                .map_err(|e| Error::input(path, format!("unreadable LAS header: {e}")))
+        })?;
         let point_count = header.number_of_points();
         if point_count == 0 {
             return Err(Error::input(path, "contains no points"));
@@ -126,7 +151,7 @@ impl LasReader {
             max: [hb.max.x, hb.max.y, hb.max.z],
         };
         let scale = [t.x.scale.abs(), t.y.scale.abs(), t.z.scale.abs()];
-        let accepted = bounds_check(path, &bounds, scale)?;
+        let accepted = bounds_check(path, &bounds, [t.x, t.y, t.z])?;
         let info = CloudInfo {
             path: path.to_path_buf(),
             format: if is_laz {
@@ -172,6 +197,44 @@ impl LasReader {
     }
 }
 
+/// How many [`guarded`] calls are running: while any is, panics raised inside the las and laz
+/// crates are not printed (the guard reports them as one input error).
+static GUARDED: AtomicUsize = AtomicUsize::new(0);
+
+/// Run `f`, a call into the las/laz crates on an untrusted file, turning a panic inside it (a
+/// debug assertion of the decompressor, an overflow on absurd header values) into an input
+/// error naming the file. The panic's own message is kept off stderr by a hook installed once.
+fn guarded<T>(path: &Path, what: &str, f: impl FnOnce() -> Result<T>) -> Result<T> {
+    static HOOK: Once = Once::new();
+    HOOK.call_once(|| {
+        let default = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            let in_decoder = info.location().is_some_and(|l| {
+                let file = l.file().replace('\\', "/");
+                file.contains("/laz-") || file.contains("/las-")
+            });
+            if !(in_decoder && GUARDED.load(Ordering::SeqCst) > 0) {
+                default(info);
+            }
+        }));
+    });
+    GUARDED.fetch_add(1, Ordering::SeqCst);
+    let result = std::panic::catch_unwind(AssertUnwindSafe(f));
+    GUARDED.fetch_sub(1, Ordering::SeqCst);
+    result.unwrap_or_else(|panic| {
+        let why = panic
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| panic.downcast_ref::<String>().cloned())
+            .unwrap_or_default();
+        let why = why.lines().map(str::trim).collect::<Vec<_>>().join("; ");
+        Err(Error::input(
+            path,
+            format!("corrupt {what}: the decoder gave up ({why})"),
+        ))
+    })
+}
+
 /// The coarsest and the finest coordinate quantum accepted (the magnitude of a LAS scale factor).
 /// Real files use 0.01 to 1e-9 (degrees); anything outside these is a corrupt header, and would
 /// turn the 32-bit record values into coordinates beyond any survey (or into subnormal numbers).
@@ -188,8 +251,8 @@ fn check_transforms(path: &Path, t: [las::Transform; 3]) -> Result<()> {
             return Err(Error::input(
                 path,
                 format!(
-                    "LAS header {axis} scale factor is {}: not a coordinate quantum (it must lie \
-                     between {MIN_SCALE:e} and {MAX_SCALE:e}); corrupt header",
+                    "LAS header {axis} scale factor is {:?}: not a coordinate quantum (it must \
+                     lie between {MIN_SCALE:e} and {MAX_SCALE:e}); corrupt header",
                     t.scale
                 ),
             ));
@@ -197,7 +260,7 @@ fn check_transforms(path: &Path, t: [las::Transform; 3]) -> Result<()> {
         if !t.offset.is_finite() {
             return Err(Error::input(
                 path,
-                format!("LAS header {axis} offset is {}: corrupt header", t.offset),
+                format!("LAS header {axis} offset is {:?}: corrupt header", t.offset),
             ));
         }
     }
@@ -213,23 +276,36 @@ struct BoundsCheck {
     hi: Point3,
 }
 
-fn bounds_check(path: &Path, header: &Bounds, scale: Point3) -> Result<BoundsCheck> {
+/// Also refused: bounds that are not finite and ordered, or that reach beyond every coordinate
+/// the scale and offset can express (32-bit records): no point can lie there, so the header is
+/// corrupt, and tiling a grid over such bounds would not end.
+fn bounds_check(path: &Path, header: &Bounds, t: [las::Transform; 3]) -> Result<BoundsCheck> {
     let mut lo = [0.0; 3];
     let mut hi = [0.0; 3];
-    for k in 0..3 {
+    for (k, t) in t.iter().enumerate() {
+        let axis = ["x", "y", "z"][k];
         let (min, max) = (header.min[k], header.max[k]);
         if !(min.is_finite() && max.is_finite() && min <= max) {
             return Err(Error::input(
                 path,
+                format!("LAS header bounds of {axis} are {min:?} .. {max:?}: corrupt header"),
+            ));
+        }
+        let scale = t.scale.abs();
+        let tol = 0.5 * scale + 4.0 * f64::EPSILON * min.abs().max(max.abs());
+        lo[k] = min - tol;
+        hi[k] = max + tol;
+        let reach = scale * 2f64.powi(31);
+        let (first, last) = (t.offset - reach, t.offset + reach);
+        if lo[k] < first - tol || hi[k] > last + tol {
+            return Err(Error::input(
+                path,
                 format!(
-                    "LAS header bounds of {} are {min} .. {max}: corrupt header",
-                    ["x", "y", "z"][k]
+                    "LAS header bounds of {axis} ({min:?} .. {max:?}) reach beyond what its \
+                     scale and offset can express ({first:?} .. {last:?}): corrupt header"
                 ),
             ));
         }
-        let tol = 0.5 * scale[k] + 4.0 * f64::EPSILON * min.abs().max(max.abs());
-        lo[k] = min - tol;
-        hi[k] = max + tol;
     }
     Ok(BoundsCheck {
         header: *header,
@@ -264,7 +340,7 @@ fn out_of_bounds(path: &Path, index: u64, p: &Point3, b: &BoundsCheck) -> Error 
     Error::input(
         path,
         format!(
-            "point {index} has {axis} = {}, {side} {axis} {bound} (corrupt point data or \
+            "point {index} has {axis} = {:?}, {side} {axis} {bound:?} (corrupt point data or \
              header bounds)",
             p[k]
         ),
@@ -285,8 +361,11 @@ fn decode(
     let opened = File::open(&path)
         .map_err(|e| Error::input(&path, format!("cannot open: {e}")))
         .and_then(|f| {
-            las::Reader::new(BufReader::with_capacity(1 << 20, f))
-                .map_err(|e| Error::input(&path, format!("truncated or corrupt {kind} file: {e}")))
+            guarded(&path, &format!("{kind} file"), || {
+                las::Reader::new(BufReader::with_capacity(1 << 20, f)).map_err(|e| {
+                    Error::input(&path, format!("truncated or corrupt {kind} file: {e}"))
+                })
+            })
         });
     let mut reader = match opened {
         Ok(r) => {
@@ -305,16 +384,22 @@ fn decode(
         .build();
     let mut index = 0u64;
     loop {
-        let n = match reader.fill_points(CHUNK, &mut pd) {
-            Ok(n) => n,
-            Err(e) => {
-                let _ = tx.send(Err(Error::input(
+        let what = format!("{kind} data after {index} of {total} points");
+        let filled = guarded(&path, &what, || {
+            reader.fill_points(CHUNK, &mut pd).map_err(|e| {
+                Error::input(
                     &path,
                     format!(
                         "truncated or corrupt {kind} data: read failed after {index} of {total} \
                          points: {e}"
                     ),
-                )));
+                )
+            })
+        });
+        let n = match filled {
+            Ok(n) => n,
+            Err(e) => {
+                let _ = tx.send(Err(e));
                 return;
             }
         };
