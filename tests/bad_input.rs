@@ -236,7 +236,7 @@ fn laz_points_outside_the_header_bounds() {
         &[
             "narrow.laz",
             " has z = ",
-            "above the header's maximum z 100 ",
+            "above the header's maximum z 100.0 ",
         ],
     );
 }
@@ -444,5 +444,51 @@ fn absurd_thread_counts_are_refused() {
         &a,
         &["--threads", "0"],
         &["--threads: must be at least 1"],
+    );
+}
+
+#[test]
+fn info_into_a_closed_pipe_does_not_panic() {
+    // `talus info FILE | head -1`: the reader is gone before talus writes.
+    let c = Case::new();
+    let mut child = common::talus()
+        .args(["info", "--json", c.p("good1.las").to_str().unwrap()])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let o = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(o.status.code(), Some(0), "{err}");
+}
+
+#[test]
+fn absurd_las_point_counts_and_bounds() {
+    let c = Case::new();
+    let good = std::fs::read(c.p("good1.las")).unwrap();
+    // The LAS 1.4 point count (u64 at 247): its size arithmetic overflowed (a panic).
+    let mut b = good.clone();
+    b[247..255].copy_from_slice(&u64::MAX.to_le_bytes());
+    let f = c.p("count.las");
+    std::fs::write(&f, b).unwrap();
+    c.fails(
+        &f,
+        &c.p("good2.las"),
+        &[],
+        &["count.las", "more than any file holds"],
+    );
+    // Max x (at 179) far beyond what 32-bit records at this scale and offset can reach: the
+    // points all lie within it, but tiling a grid over it would not end.
+    let mut b = good.clone();
+    put_f64(&mut b, 179, 1e300);
+    let f = c.p("wide.las");
+    std::fs::write(&f, b).unwrap();
+    c.fails(
+        &f,
+        &c.p("good2.las"),
+        &[],
+        &["wide.las", "bounds of x", "1e300", "can express"],
     );
 }
