@@ -297,14 +297,7 @@ fn parse_size_problem(s: &str) -> std::result::Result<u64, String> {
 impl Params {
     /// Resolve every parameter from the user's values and the measured spacing `s`.
     pub fn resolve(user: &UserParams, s: f64) -> Result<Params> {
-        for (name, v) in [
-            ("core_spacing", user.core_spacing),
-            ("normal_radius", user.normal_radius),
-            ("cyl_radius", user.cyl_radius),
-            ("cyl_halflen", user.cyl_halflen),
-            ("smooth_sigma", user.smooth_sigma),
-            ("eps", user.eps),
-        ] {
+        for (name, v) in user.lengths() {
             check_length(user, name, v, false)?;
         }
         check_length(user, "reg_error", user.reg_error, true)?;

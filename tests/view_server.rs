@@ -260,8 +260,7 @@ fn only_the_two_three_directories_are_served() {
         "/src/",
         "/Cargo.toml",
     ] {
-        let r = get(f.addr, target);
-        assert_eq!(r.status, 404, "{target}");
+        assert_eq!(get(f.addr, target).status, 404, "{target}");
     }
 }
 
@@ -341,8 +340,7 @@ fn dotfiles_and_the_work_area_are_never_served() {
         "/src/.env",
         "/data/work/manifest.json",
     ] {
-        let r = get(f.addr, target);
-        assert_eq!(r.status, 404, "{target}");
+        assert_eq!(get(f.addr, target).status, 404, "{target}");
     }
     assert_eq!(get(f.addr, "/data/view.json").status, 200);
 }
