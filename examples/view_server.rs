@@ -1,8 +1,8 @@
 //! Serve the web viewer for one result directory on 127.0.0.1 and a free port.
 //!
 //! `cargo run --example view_server -- DIR` prints `talus viewer: http://127.0.0.1:PORT/` as its
-//! first stdout line (the browser tests read it) and serves until killed. It stands in for
-//! `talus view DIR --port 0` until the CLI is wired.
+//! first stdout line (the browser tests read it) and serves until killed: the viewer built into
+//! the binary, or `$TALUS_VIEWER_DIR`, as `talus view DIR --port 0` does.
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -12,12 +12,11 @@ fn main() {
         eprintln!("usage: view_server DIR");
         std::process::exit(2);
     };
-    let result = talus::view::viewer_root().and_then(|root| {
-        talus::view::serve(&dir, talus::view::DEFAULT_BIND, 0, &root, |addr| {
-            let mut out = std::io::stdout().lock();
-            let _ = writeln!(out, "talus viewer: http://{addr}/");
-            let _ = out.flush();
-        })
+    let viewer = talus::view::Viewer::from_env();
+    let result = talus::view::serve(&dir, talus::view::DEFAULT_BIND, 0, &viewer, |addr| {
+        let mut out = std::io::stdout().lock();
+        let _ = writeln!(out, "talus viewer: http://{addr}/");
+        let _ = out.flush();
     });
     if let Err(e) = result {
         eprintln!("view_server: {e}");

@@ -43,8 +43,7 @@ pub fn synth(
 
 /// `talus view DIR`.
 pub fn view(dir: &Path, bind: IpAddr, port: u16) -> Result<()> {
-    let root = crate::view::viewer_root()?;
-    crate::view::serve(dir, bind, port, &root, |addr| {
+    crate::view::serve(dir, bind, port, &crate::view::Viewer::from_env(), |addr| {
         println!("talus viewer: http://{addr}/");
         use std::io::Write;
         let _ = std::io::stdout().flush();

@@ -43,6 +43,14 @@ pub fn inspect(path: &Path) -> Result<CloudReport> {
     })
 }
 
+/// `println!` into a String.
+macro_rules! outln {
+    ($out:expr, $($arg:tt)*) => {{
+        use std::fmt::Write as _;
+        let _ = writeln!($out, $($arg)*);
+    }};
+}
+
 /// Print reports for `files` to stdout, as text or JSON.
 pub fn print(files: &[PathBuf], json: bool) -> Result<()> {
     let mut reports = Vec::new();
@@ -50,31 +58,42 @@ pub fn print(files: &[PathBuf], json: bool) -> Result<()> {
         reports.push(inspect(f)?);
     }
     if json {
-        let s = serde_json::to_string_pretty(&reports)
+        let text = serde_json::to_string_pretty(&reports)
             .map_err(|e| crate::Error::Internal(e.to_string()))?;
-        println!("{s}");
-        return Ok(());
+        return write_stdout(&(text + "\n"));
     }
+    let mut out = String::new();
     for r in &reports {
         let b = &r.bounds;
         let p = &r.derived;
-        println!("{}", r.path.display());
-        println!("  format         {}", r.format_detail);
-        println!("  points         {}", r.points);
-        println!(
+        outln!(out, "{}", r.path.display());
+        outln!(out, "  format         {}", r.format_detail);
+        outln!(out, "  points         {}", r.points);
+        outln!(
+            out,
             "  bounds         x {:.3} .. {:.3}  y {:.3} .. {:.3}  z {:.3} .. {:.3}",
-            b.min[0], b.max[0], b.min[1], b.max[1], b.min[2], b.max[2]
+            b.min[0],
+            b.max[0],
+            b.min[1],
+            b.max[1],
+            b.min[2],
+            b.max[2]
         );
-        println!("  crs            {}", r.crs);
-        println!(
+        outln!(out, "  crs            {}", r.crs);
+        outln!(
+            out,
             "  point spacing  {:.4} median nearest-neighbour distance ({}, {} points)",
-            r.spacing.spacing, r.spacing.method, r.spacing.measured_points
+            r.spacing.spacing,
+            r.spacing.method,
+            r.spacing.measured_points
         );
-        println!(
+        outln!(
+            out,
             "  density        {:.2} points per unit² (effective spacing {:.4})",
-            r.spacing.density, r.spacing.effective_spacing
+            r.spacing.density,
+            r.spacing.effective_spacing
         );
-        println!("  derived parameters:");
+        outln!(out, "  derived parameters:");
         for (name, v, src) in [
             ("core_spacing", p.core_spacing.value, &p.core_spacing.source),
             (
@@ -88,16 +107,38 @@ pub fn print(files: &[PathBuf], json: bool) -> Result<()> {
             ("smooth_sigma", p.smooth_sigma.value, &p.smooth_sigma.source),
             ("eps", p.eps.value, &p.eps.source),
         ] {
-            println!("    {name:<14} {v:<10.4} {src}");
+            outln!(out, "    {name:<14} {v:<10.4} {src}");
         }
-        println!(
+        outln!(
+            out,
             "    {:<14} {:<10} {}",
-            "smooth_k", p.smooth_k.value, p.smooth_k.source
+            "smooth_k",
+            p.smooth_k.value,
+            p.smooth_k.source
         );
-        println!(
+        outln!(
+            out,
             "    {:<14} {:<10} {}",
-            "cluster_min", p.cluster_min_points.value, p.cluster_min_points.source
+            "cluster_min",
+            p.cluster_min_points.value,
+            p.cluster_min_points.source
         );
     }
-    Ok(())
+    write_stdout(&out)
+}
+
+/// Write `text` to stdout. A reader that went away (`talus info | head`) is not an error and
+/// not a panic, as `println!` would make it.
+fn write_stdout(text: &str) -> Result<()> {
+    use std::io::Write;
+    let mut stdout = std::io::stdout().lock();
+    match stdout
+        .write_all(text.as_bytes())
+        .and_then(|()| stdout.flush())
+    {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => {
+            Err(crate::Error::output("stdout", e))
+        }
+        _ => Ok(()),
+    }
 }

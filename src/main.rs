@@ -170,6 +170,7 @@ impl CompareArgs {
             cluster_min_points: self.cluster_min_points,
             memory: self.memory.clone(),
             threads: self.threads,
+            config: None,
         }
     }
 }

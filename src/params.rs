@@ -19,11 +19,12 @@
 //! | eps | 2.5 × core_spacing | joins neighbouring core points (also diagonal ones, √2 × spacing) with room for a missing one |
 //! | cluster_min_points | 10 | the paper's value |
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
+use crate::io::Bounds;
 use crate::m3c2::{M3c2Params, Orientation};
 
 /// Values the user set, by flag or config file; `None` = derive.
@@ -44,6 +45,16 @@ pub struct UserParams {
     pub cluster_min_points: Option<u32>,
     pub memory: Option<String>,
     pub threads: Option<usize>,
+    /// The config file the values came from that no flag overrides; not a key of the file.
+    #[serde(skip)]
+    pub config: Option<ConfigSource>,
+}
+
+/// A config file and the keys whose values are still its own (a flag overrides a key).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ConfigSource {
+    pub path: PathBuf,
+    pub keys: Vec<String>,
 }
 
 impl UserParams {
@@ -51,16 +62,91 @@ impl UserParams {
     pub fn from_toml_file(path: &Path) -> Result<Self> {
         let text = std::fs::read_to_string(path)
             .map_err(|e| Error::input(path, format!("cannot read config: {e}")))?;
-        toml::from_str(&text).map_err(|e| {
-            Error::input(
-                path,
-                format!("bad config: {}", e.to_string().replace('\n', " ")),
-            )
-        })
+        let mut user: UserParams = toml::from_str(&text).map_err(|e| {
+            let line = e.span().map_or(String::new(), |s| {
+                format!("line {}: ", text[..s.start].matches('\n').count() + 1)
+            });
+            Error::input(path, format!("bad config: {line}{}", e.message()))
+        })?;
+        user.config = Some(ConfigSource {
+            path: path.to_path_buf(),
+            keys: user.keys_set(),
+        });
+        Ok(user)
+    }
+
+    /// The names of the values that are set.
+    fn keys_set(&self) -> Vec<String> {
+        match serde_json::to_value(self) {
+            Ok(serde_json::Value::Object(m)) => m
+                .into_iter()
+                .filter(|(_, v)| !v.is_null())
+                .map(|(k, _)| k)
+                .collect(),
+            _ => Vec::new(),
+        }
+    }
+
+    /// The error for a bad value of `key`: it names the config file and the key when the value
+    /// came from there, else the flag.
+    pub fn bad_value(&self, key: &str, problem: impl std::fmt::Display) -> Error {
+        match &self.config {
+            Some(c) if c.keys.iter().any(|k| k == key) => {
+                Error::input(&c.path, format!("{key}: {problem}"))
+            }
+            _ => Error::Usage(format!("--{}: {problem}", key.replace('_', "-"))),
+        }
+    }
+
+    /// Refuse lengths far beyond the data: more than [`MAX_EXTENT_FACTOR`] times the diagonal of
+    /// the epochs' bounds. A neighbourhood that wide holds every point (no use), and the work
+    /// that grows with it (the volume grid over a footprint grown by `cyl_radius`, neighbour
+    /// lists) would run for hours instead of failing.
+    pub fn check_lengths_within(&self, bounds: &[Bounds]) -> Result<()> {
+        let mut all = Bounds::empty();
+        for b in bounds {
+            all.grow(&b.min);
+            all.grow(&b.max);
+        }
+        let diagonal = (0..3)
+            .map(|k| (all.max[k] - all.min[k]).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        let limit = MAX_EXTENT_FACTOR * diagonal.max(MIN_LENGTH);
+        for (key, v) in self.lengths() {
+            if let Some(x) = v.filter(|&x| x > limit) {
+                return Err(self.bad_value(
+                    key,
+                    format!(
+                        "{} is more than {MAX_EXTENT_FACTOR} times the data's extent \
+                         ({diagonal:.3}, the diagonal of the epochs' bounds)",
+                        num(x)
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The lengths that size neighbourhoods, with their keys.
+    fn lengths(&self) -> [(&'static str, Option<f64>); 6] {
+        [
+            ("core_spacing", self.core_spacing),
+            ("normal_radius", self.normal_radius),
+            ("cyl_radius", self.cyl_radius),
+            ("cyl_halflen", self.cyl_halflen),
+            ("smooth_sigma", self.smooth_sigma),
+            ("eps", self.eps),
+        ]
     }
 
     /// `self` (flags) over `base` (config file).
     pub fn over(self, base: UserParams) -> UserParams {
+        let flags = self.keys_set();
+        let config = base.config.map(|mut c| {
+            c.keys.retain(|k| !flags.contains(k));
+            c
+        });
         UserParams {
             core_spacing: self.core_spacing.or(base.core_spacing),
             normal_radius: self.normal_radius.or(base.normal_radius),
@@ -76,6 +162,7 @@ impl UserParams {
             cluster_min_points: self.cluster_min_points.or(base.cluster_min_points),
             memory: self.memory.or(base.memory),
             threads: self.threads.or(base.threads),
+            config,
         }
     }
 }
@@ -127,16 +214,51 @@ fn pick<T: Copy>(user: Option<T>, derived: T, rule: &str) -> Resolved<T> {
 /// column grid towards subnormal numbers.
 pub const MIN_LENGTH: f64 = 1e-6;
 
-fn positive(name: &str, v: Option<f64>) -> Result<()> {
-    let flag = name.replace('_', "-");
-    match v {
-        Some(x) if !(x > 0.0 && x.is_finite()) => Err(Error::Usage(format!(
-            "--{flag}: must be a positive number, got {x}"
-        ))),
-        Some(x) if x < MIN_LENGTH => Err(Error::Usage(format!(
-            "--{flag}: {x} is below the shortest length talus accepts ({MIN_LENGTH})"
-        ))),
-        _ => Ok(()),
+/// The longest length a user may give: a million kilometres in metre units, beyond any survey
+/// (longer ones overflow the halo and grid arithmetic to infinity).
+pub const MAX_LENGTH: f64 = 1e9;
+
+/// See [`UserParams::check_lengths_within`].
+pub const MAX_EXTENT_FACTOR: f64 = 10.0;
+
+/// The most worker threads accepted. Results do not depend on the thread count, so more threads
+/// than cores only cost memory (a stack and tile buffers each); 1024 is beyond any machine talus
+/// runs on, and a typo like 100000 is refused rather than obeyed (or silently changed).
+pub const MAX_THREADS: usize = 1024;
+
+/// Check a length the user gave: finite and positive (or zero, when `zero_ok`), and within
+/// [`MIN_LENGTH`] (unless zero) ..= [`MAX_LENGTH`].
+fn check_length(user: &UserParams, name: &str, v: Option<f64>, zero_ok: bool) -> Result<()> {
+    let Some(x) = v else { return Ok(()) };
+    let problem = if !(x.is_finite() && (x > 0.0 || (zero_ok && x == 0.0))) {
+        let what = if zero_ok {
+            "zero or positive"
+        } else {
+            "a positive number"
+        };
+        format!("must be {what}, got {}", num(x))
+    } else if x != 0.0 && x < MIN_LENGTH {
+        format!(
+            "{} is below the shortest length talus accepts ({MIN_LENGTH})",
+            num(x)
+        )
+    } else if x > MAX_LENGTH {
+        format!(
+            "{} is beyond the longest length talus accepts ({MAX_LENGTH:e})",
+            num(x)
+        )
+    } else {
+        return Ok(());
+    };
+    Err(user.bad_value(name, problem))
+}
+
+/// A number for a message: plain when of everyday size, else in exponent form (`1e300`).
+fn num(x: f64) -> String {
+    if x != 0.0 && x.is_finite() && !(1e-4..1e7).contains(&x.abs()) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
     }
 }
 
@@ -149,16 +271,17 @@ pub const DEFAULT_MEMORY: u64 = 2 << 30;
 
 /// Parse a size like `2GiB`, `512MiB`, `1.5G`, `800M`, `4096` (bytes).
 pub fn parse_size(s: &str) -> Result<u64> {
+    parse_size_problem(s).map_err(|p| Error::Usage(format!("--memory: {p}")))
+}
+
+/// [`parse_size`] with the problem alone, for the caller to say whose value it was.
+fn parse_size_problem(s: &str) -> std::result::Result<u64, String> {
     let t = s.trim();
     let split = t
         .find(|c: char| !(c.is_ascii_digit() || c == '.'))
         .unwrap_or(t.len());
     let (num, unit) = t.split_at(split);
-    let bad = || {
-        Error::Usage(format!(
-            "--memory: cannot read '{s}' as a size (e.g. 2GiB, 512MiB)"
-        ))
-    };
+    let bad = || format!("cannot read '{s}' as a size (e.g. 2GiB, 512MiB)");
     let n: f64 = num.parse().map_err(|_| bad())?;
     let mul = match unit.trim().to_ascii_lowercase().as_str() {
         "" | "b" => 1.0,
@@ -170,9 +293,7 @@ pub fn parse_size(s: &str) -> Result<u64> {
     };
     let bytes = n * mul;
     if bytes.is_nan() || bytes < 64.0 * 1024.0 * 1024.0 {
-        return Err(Error::Usage(format!(
-            "--memory: {s} is too small; talus needs at least 64MiB"
-        )));
+        return Err(format!("{s} is too small; talus needs at least 64MiB"));
     }
     Ok(bytes as u64)
 }
@@ -180,43 +301,34 @@ pub fn parse_size(s: &str) -> Result<u64> {
 impl Params {
     /// Resolve every parameter from the user's values and the measured spacing `s`.
     pub fn resolve(user: &UserParams, s: f64) -> Result<Params> {
+        for (name, v) in user.lengths() {
+            check_length(user, name, v, false)?;
+        }
+        check_length(user, "reg_error", user.reg_error, true)?;
+        check_length(user, "threshold", user.threshold, true)?;
         for (name, v) in [
-            ("core_spacing", user.core_spacing),
-            ("normal_radius", user.normal_radius),
-            ("cyl_radius", user.cyl_radius),
-            ("cyl_halflen", user.cyl_halflen),
-            ("smooth_sigma", user.smooth_sigma),
-            ("eps", user.eps),
-        ] {
-            positive(name, v)?;
-        }
-        if let Some(x) = user.reg_error {
-            if !(x >= 0.0 && x.is_finite()) {
-                return Err(Error::Usage(format!(
-                    "--reg-error: must be zero or positive, got {x}"
-                )));
-            }
-        }
-        if let Some(x) = user.threshold {
-            if !(x >= 0.0 && x.is_finite()) {
-                return Err(Error::Usage(format!(
-                    "--threshold: must be zero or positive, got {x}"
-                )));
-            }
-        }
-        for (name, v) in [
-            ("smooth-k", user.smooth_k),
-            ("cluster-min-points", user.cluster_min_points),
+            ("smooth_k", user.smooth_k),
+            ("cluster_min_points", user.cluster_min_points),
         ] {
             if v == Some(0) {
-                return Err(Error::Usage(format!("--{name}: must be at least 1")));
+                return Err(user.bad_value(name, "must be at least 1"));
             }
         }
-        if user.threads == Some(0) {
-            return Err(Error::Usage("--threads: must be at least 1".into()));
+        match user.threads {
+            Some(0) => return Err(user.bad_value("threads", "must be at least 1")),
+            Some(n) if n > MAX_THREADS => {
+                return Err(user.bad_value(
+                    "threads",
+                    format!("{n} is more than talus accepts ({MAX_THREADS})"),
+                ))
+            }
+            _ => {}
         }
         let orientation = user.orientation.clone().unwrap_or_else(|| "auto".into());
-        orientation.parse::<Orientation>().map_err(Error::Usage)?;
+        orientation.parse::<Orientation>().map_err(|m| {
+            let problem = m.strip_prefix("--orientation: ").unwrap_or(&m);
+            user.bad_value("orientation", problem)
+        })?;
         if !(s > 0.0 && s.is_finite()) {
             return Err(Error::Internal(format!(
                 "point spacing {s} is not positive"
@@ -227,7 +339,7 @@ impl Params {
         let cyl_radius = pick(user.cyl_radius, 3.0 * s, "derived: 3 × effective spacing");
         let memory = match &user.memory {
             Some(m) => Resolved {
-                value: parse_size(m)?,
+                value: parse_size_problem(m).map_err(|p| user.bad_value("memory", p))?,
                 source: "user".into(),
             },
             None => Resolved {

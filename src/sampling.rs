@@ -6,7 +6,7 @@
 //! [`WINDOW_TARGET`] points (grown when it falls on a hole, shrunk when it is denser than
 //! expected): each try is one streaming pass, so memory stays bounded whatever the file's size
 //! and point order. Only points in the inner half of the window are measured, so that their
-//! nearest neighbour is inside the window.
+//! nearest neighbour is inside the window. Exact duplicates are measured once (see [`distinct`]).
 
 use std::path::Path;
 
@@ -53,8 +53,9 @@ pub fn measure(path: &Path) -> Result<Spacing> {
         while reader.fill(&mut buf, 1 << 16)? > 0 {
             all.extend_from_slice(&buf);
         }
-        let probes: Vec<usize> = (0..all.len()).collect();
         let origin = all.first().copied().unwrap_or_default();
+        distinct(&mut all);
+        let probes: Vec<usize> = (0..all.len()).collect();
         let index = Index::new(&all, origin);
         let (s, density) = stats(&index, &probes).ok_or_else(no_spacing)?;
         return Ok(Spacing {
@@ -77,13 +78,15 @@ pub fn measure(path: &Path) -> Result<Spacing> {
         match pts {
             None => half /= 2.0, // denser than expected: shrink
             Some(pts) if pts.len() < 1000 && half < max_half => half *= 3.0,
-            Some(pts) => {
+            Some(mut pts) => {
+                let origin = [cx, cy, pts[0][2]];
+                distinct(&mut pts);
                 let inner: Vec<usize> = (0..pts.len())
                     .filter(|&i| {
                         (pts[i][0] - cx).abs() <= half / 2.0 && (pts[i][1] - cy).abs() <= half / 2.0
                     })
                     .collect();
-                let index = Index::new(&pts, [cx, cy, pts[0][2]]);
+                let index = Index::new(&pts, origin);
                 let (s, density) = stats(&index, &inner).ok_or_else(no_spacing)?;
                 return Ok(Spacing {
                     spacing: s,
@@ -100,6 +103,17 @@ pub fn measure(path: &Path) -> Result<Spacing> {
         }
     }
     Err(no_spacing())
+}
+
+/// Keep one of each set of exactly coincident points: a cloud stored twice over (merged flight
+/// lines, an export repeated) has the spacing of its distinct positions, not zero.
+fn distinct(points: &mut Vec<Point3>) {
+    points.sort_unstable_by(|a, b| {
+        a[0].total_cmp(&b[0])
+            .then(a[1].total_cmp(&b[1]))
+            .then(a[2].total_cmp(&b[2]))
+    });
+    points.dedup();
 }
 
 /// Median nearest-neighbour distance and median local density over the `probes` of `index`.

@@ -31,16 +31,16 @@ fn start() -> Fixture {
     write(&viewer.join("src/main.js"), b"export const x = 1;\n");
     write(&viewer.join("src/style.css"), b"body{}\n");
     write(
-        &viewer.join("node_modules/three/build/three.module.js"),
+        &viewer.join("vendor/three/build/three.module.js"),
         b"export const REVISION = '0';\n",
     );
     write(
-        &viewer.join("node_modules/three/examples/jsm/controls/OrbitControls.js"),
+        &viewer.join("vendor/three/examples/jsm/controls/OrbitControls.js"),
         b"export class OrbitControls {}\n",
     );
-    // In node_modules/three but outside the two served directories.
+    // In vendor/three but outside the two served directories.
     write(
-        &viewer.join("node_modules/three/package.json"),
+        &viewer.join("vendor/three/package.json"),
         b"{\"name\":\"three\"}",
     );
     write(
@@ -73,7 +73,7 @@ fn start() -> Fixture {
     }
 
     let (tx, rx) = mpsc::channel();
-    let viewer_root = viewer.clone();
+    let viewer_root = talus::view::Viewer::Dir(viewer.clone());
     std::thread::spawn(move || {
         let result = talus::view::serve(
             &dir,
@@ -153,12 +153,12 @@ fn serves_viewer_three_and_result_files_with_types() {
         ("/src/main.js", "text/javascript", b"export const x = 1;\n"),
         ("/src/style.css", "text/css", b"body{}\n"),
         (
-            "/node_modules/three/build/three.module.js",
+            "/vendor/three/build/three.module.js",
             "text/javascript",
             b"export const REVISION = '0';\n",
         ),
         (
-            "/node_modules/three/examples/jsm/controls/OrbitControls.js",
+            "/vendor/three/examples/jsm/controls/OrbitControls.js",
             "text/javascript",
             b"export class OrbitControls {}\n",
         ),
@@ -224,9 +224,9 @@ fn traversal_attempts_are_refused() {
         "/data/.%2e/secret",
         "/data/..%2fsecret",
         "/..%2f..%2fetc/passwd",
-        "/node_modules/../../x",
-        "/node_modules/three/build/../../other/index.js",
-        "/node_modules/three/build/%2e%2e/%2e%2e/other/index.js",
+        "/vendor/../../x",
+        "/vendor/three/build/../../../node_modules/other/index.js",
+        "/vendor/three/build/%2e%2e/%2e%2e/%2e%2e/node_modules/other/index.js",
         "/src/../Cargo.toml",
         "/data//etc/passwd",
         "/data/%2fetc%2fpasswd",
@@ -252,16 +252,15 @@ fn traversal_attempts_are_refused() {
 fn only_the_two_three_directories_are_served() {
     let f = start();
     for target in [
-        "/node_modules/three/package.json",
+        "/vendor/three/package.json",
         "/node_modules/other/index.js",
-        "/node_modules/three/examples/jsm/controls", // a directory: no listing
+        "/vendor/three/examples/jsm/controls", // a directory: no listing
         "/data/meshes",
         "/data/",
         "/src/",
         "/Cargo.toml",
     ] {
-        let r = get(f.addr, target);
-        assert_eq!(r.status, 404, "{target}");
+        assert_eq!(get(f.addr, target).status, 404, "{target}");
     }
 }
 
@@ -302,12 +301,17 @@ fn serve_reports_missing_viewer_files_and_non_result_dirs() {
     let viewer = tmp.path().join("viewer");
     write(&viewer.join("index.html"), b"x");
     std::fs::create_dir_all(viewer.join("src")).unwrap();
+    let viewer = talus::view::Viewer::Dir(viewer);
     let dir = tmp.path().join("result");
     write(&dir.join("view.json"), b"{}");
     let lo = IpAddr::V4(Ipv4Addr::LOCALHOST);
 
     let err = talus::view::serve(&dir, lo, 0, &viewer, |_| panic!("must not start")).unwrap_err();
-    assert!(err.to_string().contains("npm ci"), "{err}");
+    assert!(
+        err.to_string()
+            .contains("vendor/three/build/three.module.js is missing"),
+        "{err}"
+    );
     assert_eq!(err.exit_code(), 2);
 
     let not_result = tmp.path().join("empty");
@@ -316,4 +320,203 @@ fn serve_reports_missing_viewer_files_and_non_result_dirs() {
         talus::view::serve(&not_result, lo, 0, &viewer, |_| panic!("must not start")).unwrap_err();
     assert!(err.to_string().contains("view.json"), "{err}");
     assert!(matches!(err, talus::Error::Input { .. }));
+}
+
+#[test]
+fn dotfiles_and_the_work_area_are_never_served() {
+    let f = start();
+    let data = f._tmp.path().join("result");
+    write(&data.join(".talus/tiles/before/t_0001_0001.tile"), b"tile");
+    write(&data.join(".talus/manifest.json"), b"{}");
+    write(&data.join(".hidden"), b"hidden");
+    write(&f._tmp.path().join("viewer/src/.env"), b"secret");
+    #[cfg(unix)]
+    std::os::unix::fs::symlink(data.join(".talus"), data.join("work")).unwrap();
+    for target in [
+        "/data/.talus/manifest.json",
+        "/data/.talus/tiles/before/t_0001_0001.tile",
+        "/data/%2etalus/manifest.json",
+        "/data/.hidden",
+        "/src/.env",
+        "/data/work/manifest.json",
+    ] {
+        assert_eq!(get(f.addr, target).status, 404, "{target}");
+    }
+    assert_eq!(get(f.addr, "/data/view.json").status, 200);
+}
+
+/// Open a connection that sends a request head one byte at a time, one byte per `every`, in a
+/// thread of its own, until the server closes it; returns when it was closed.
+fn trickle(
+    addr: SocketAddr,
+    every: Duration,
+) -> std::thread::JoinHandle<Option<std::time::Instant>> {
+    let mut s = TcpStream::connect(addr).unwrap();
+    std::thread::spawn(move || {
+        let head = b"GET /data/view.json HTTP/1.1\r\nHost: localhost\r\nX-Padding: ";
+        for byte in head.iter().chain(std::iter::repeat(&b'x')).take(200) {
+            if s.write_all(&[*byte]).is_err() {
+                return Some(std::time::Instant::now());
+            }
+            std::thread::sleep(every);
+        }
+        None
+    })
+}
+
+#[test]
+fn trickling_clients_cannot_lock_others_out() {
+    let f = start();
+    let t0 = std::time::Instant::now();
+    // More slow clients than the server serves at once, each still sending its head.
+    let slow: Vec<_> = (0..40)
+        .map(|_| trickle(f.addr, Duration::from_millis(500)))
+        .collect();
+    std::thread::sleep(Duration::from_millis(300));
+    let asked = std::time::Instant::now();
+    let r = get(f.addr, "/data/view.json");
+    assert_eq!(r.status, 200);
+    assert!(
+        asked.elapsed() < Duration::from_secs(2),
+        "served after {:?}",
+        asked.elapsed()
+    );
+    // The head has a deadline in total, not per read: every trickler is closed within it (or
+    // sooner, when its place was taken), however steadily it sends.
+    for h in slow {
+        let closed = h
+            .join()
+            .unwrap()
+            .expect("the server closed the slow client");
+        let after = closed - t0;
+        assert!(
+            after < talus::view::HEAD_DEADLINE + Duration::from_secs(3),
+            "closed after {after:?}"
+        );
+    }
+}
+
+/// A result directory the viewer accepts (view.json and the files the page loads).
+fn tiny_result(dir: &Path) {
+    write(&dir.join("view.json"), br#"{"version":1,"points":0}"#);
+    write(
+        &dir.join("events.geojson"),
+        br#"{"type":"FeatureCollection","features":[]}"#,
+    );
+}
+
+/// Run `talus view DIR --port 0 EXTRA...` from `exe`; returns the child, its address and its
+/// stderr reader.
+fn spawn_view(
+    exe: &Path,
+    cwd: &Path,
+    dir: &Path,
+    extra: &[&str],
+) -> (std::process::Child, SocketAddr) {
+    use std::io::BufRead;
+    let mut child = std::process::Command::new(exe)
+        .current_dir(cwd)
+        .env_remove("TALUS_VIEWER_DIR")
+        .arg("view")
+        .arg(dir)
+        .args(["--port", "0"])
+        .args(extra)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    std::io::BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let url = line
+        .split_whitespace()
+        .find(|w| w.starts_with("http://"))
+        .unwrap_or_else(|| panic!("no URL in {line:?}"));
+    let hostport = url
+        .trim_start_matches("http://")
+        .trim_end_matches('/')
+        .to_owned();
+    let port: u16 = hostport.rsplit(':').next().unwrap().parse().unwrap();
+    (child, SocketAddr::from((Ipv4Addr::LOCALHOST, port)))
+}
+
+#[test]
+fn the_binary_alone_serves_the_built_in_viewer() {
+    // A copy of the binary in a directory with no source tree beside it, as after
+    // `cargo install` or a copy to another machine.
+    let tmp = tempfile::tempdir().unwrap();
+    let exe = tmp.path().join("bin/talus");
+    std::fs::create_dir_all(exe.parent().unwrap()).unwrap();
+    std::fs::copy(env!("CARGO_BIN_EXE_talus"), &exe).unwrap();
+    let result = tmp.path().join("result");
+    tiny_result(&result);
+    let (mut child, addr) = spawn_view(&exe, tmp.path(), &result, &[]);
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("viewer");
+    for (target, file, ctype) in [
+        ("/", "index.html", "text/html"),
+        ("/src/main.js", "src/main.js", "text/javascript"),
+        ("/src/style.css", "src/style.css", "text/css"),
+        (
+            "/vendor/three/build/three.module.js",
+            "vendor/three/build/three.module.js",
+            "text/javascript",
+        ),
+        (
+            "/vendor/three/build/three.core.js",
+            "vendor/three/build/three.core.js",
+            "text/javascript",
+        ),
+        (
+            "/vendor/three/examples/jsm/controls/OrbitControls.js",
+            "vendor/three/examples/jsm/controls/OrbitControls.js",
+            "text/javascript",
+        ),
+    ] {
+        let r = get(addr, target);
+        assert_eq!(r.status, 200, "{target}");
+        assert!(
+            r.header("content-type").unwrap().starts_with(ctype),
+            "{target}"
+        );
+        assert!(
+            r.body == std::fs::read(repo.join(file)).unwrap(),
+            "{target} differs from viewer/{file}"
+        );
+    }
+    assert_eq!(get(addr, "/data/view.json").status, 200);
+    for target in ["/vendor/three/package.json", "/build.rs", "/vendor/three/"] {
+        assert_eq!(get(addr, target).status, 404, "{target}");
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+}
+
+#[test]
+fn binding_beyond_loopback_warns() {
+    let tmp = tempfile::tempdir().unwrap();
+    let result = tmp.path().join("result");
+    tiny_result(&result);
+    let exe = Path::new(env!("CARGO_BIN_EXE_talus"));
+    for (bind, warns) in [("0.0.0.0", true), ("127.0.0.1", false)] {
+        let (mut child, addr) = spawn_view(exe, tmp.path(), &result, &["--bind", bind]);
+        assert_eq!(get(addr, "/data/view.json").status, 200);
+        child.kill().unwrap();
+        child.wait().unwrap();
+        let mut err = String::new();
+        child
+            .stderr
+            .take()
+            .unwrap()
+            .read_to_string(&mut err)
+            .unwrap();
+        assert_eq!(
+            err.contains("warning") && err.contains("anyone"),
+            warns,
+            "--bind {bind}: {err}"
+        );
+        if warns {
+            assert_eq!(err.trim().lines().count(), 1, "{err}");
+        }
+    }
 }

@@ -10,11 +10,17 @@
 //! chunks of `[f64; 3]` over a bounded channel (capacity 2: back-pressure bounds memory to a few
 //! chunks). A side effect is that decoding overlaps with the consumer's work.
 //!
-//! Checks up front: a readable header, at least one point, finite scale/offset, and for
-//! uncompressed LAS that the file is long enough for the number of points the header promises
-//! (LAS 1.4 R15 §2.4: point data starts at `offset_to_point_data`, `point_data_record_length`
-//! bytes each). A truncated LAZ is only found while decompressing and is reported as a read
-//! error naming the point index reached.
+//! Checks up front: a readable header, at least one point, scale factors a survey could have
+//! (see [`MAX_SCALE`]), finite offsets, finite ordered bounds, and for uncompressed LAS that the
+//! file is long enough for the number of points the header promises (LAS 1.4 R15 §2.4: point
+//! data starts at `offset_to_point_data`, `point_data_record_length` bytes each). A truncated
+//! LAZ is only found while decompressing and is reported as a read error naming the point index
+//! reached.
+//!
+//! Every decoded point must lie within the header's bounds (widened by half a scale step and
+//! rounding): a flipped bit in compressed point data decodes to garbage coordinates without any
+//! error from the decompressor, and those would silently wreck the tiling and every result. The
+//! check is six comparisons per point on the decoding thread, next to the decompression.
 //!
 //! CRS: the WKT (LASF_Projection 2112) and GeoTIFF (34735/34736/34737) (E)VLRs are copied
 //! verbatim; the EPSG code is decoded from the GeoKeyDirectory (ProjectedCSTypeGeoKey 3072, else
@@ -22,7 +28,10 @@
 
 use std::fs::File;
 use std::io::{BufReader, Seek};
+use std::panic::AssertUnwindSafe;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Once;
 
 use crossbeam_channel::{bounded, Receiver, Sender};
 
@@ -59,13 +68,33 @@ impl LasReader {
             .map_err(|e| Error::input(path, format!("cannot read: {e}")))?
             .len();
         let mut read = BufReader::new(file);
-        let raw = las::raw::Header::read_from(&mut read)
-            .map_err(|e| Error::input(path, format!("unreadable LAS header: {e}")))?;
+        let raw = guarded(path, "LAS header", || {
+            las::raw::Header::read_from(&mut read)
+                .map_err(|e| Error::input(path, format!("unreadable LAS header: {e}")))
+        })?;
         let promised = if raw.number_of_point_records > 0 {
             u64::from(raw.number_of_point_records)
         } else {
             raw.large_file.map_or(0, |l| l.number_of_point_records)
         };
+        // Both counts enter the las crate's size arithmetic: refuse what overflows it.
+        let largest = raw
+            .large_file
+            .map_or(0, |l| l.number_of_point_records)
+            .max(u64::from(raw.number_of_point_records));
+        let end_of_points = largest
+            .checked_mul(u64::from(raw.point_data_record_length))
+            .and_then(|n| n.checked_add(u64::from(raw.offset_to_point_data)));
+        if end_of_points.is_none() {
+            return Err(Error::input(
+                path,
+                format!(
+                    "LAS header promises {largest} points of {} bytes: more than any file \
+                     holds; corrupt header",
+                    raw.point_data_record_length
+                ),
+            ));
+        }
         let compressed = raw.point_data_record_format & 0xC0 != 0;
         if !compressed {
             // Uncompressed points are fixed-size records, so truncation shows in the file size.
@@ -99,22 +128,16 @@ impl LasReader {
         }
         read.rewind()
             .map_err(|e| Error::input(path, format!("cannot read: {e}")))?;
-        let header = las::Header::new(&mut read)
-            .map_err(|e| Error::input(path, format!("unreadable LAS header: {e}")))?;
+        let header = guarded(path, "LAS header", || {
+            las::Header::new(&mut read)
+                .map_err(|e| Error::input(path, format!("unreadable LAS header: {e}")))
+        })?;
         let point_count = header.number_of_points();
         if point_count == 0 {
             return Err(Error::input(path, "contains no points"));
         }
         let t = header.transforms();
-        if [t.x, t.y, t.z]
-            .iter()
-            .any(|t| !t.scale.is_finite() || !t.offset.is_finite() || t.scale == 0.0)
-        {
-            return Err(Error::input(
-                path,
-                "LAS header has a zero, NaN or infinite scale or offset",
-            ));
-        }
+        check_transforms(path, [t.x, t.y, t.z])?;
         let is_laz = header.point_format().is_compressed
             || header
                 .vlrs()
@@ -123,6 +146,12 @@ impl LasReader {
         let kind = if is_laz { "LAZ" } else { "LAS" };
         let v = header.version();
         let hb = header.bounds();
+        let bounds = Bounds {
+            min: [hb.min.x, hb.min.y, hb.min.z],
+            max: [hb.max.x, hb.max.y, hb.max.z],
+        };
+        let scale = [t.x.scale.abs(), t.y.scale.abs(), t.z.scale.abs()];
+        let accepted = bounds_check(path, &bounds, [t.x, t.y, t.z])?;
         let info = CloudInfo {
             path: path.to_path_buf(),
             format: if is_laz {
@@ -137,12 +166,9 @@ impl LasReader {
                 raw.point_data_record_format & 0x3F
             ),
             point_count,
-            bounds: Bounds {
-                min: [hb.min.x, hb.min.y, hb.min.z],
-                max: [hb.max.x, hb.max.y, hb.max.z],
-            },
+            bounds,
             crs: crs_from_header(&header),
-            scale: Some([t.x.scale.abs(), t.y.scale.abs(), t.z.scale.abs()]),
+            scale: Some(scale),
         };
         drop(read);
 
@@ -152,7 +178,7 @@ impl LasReader {
         let owned = path.to_path_buf();
         std::thread::Builder::new()
             .name("talus-las-reader".into())
-            .spawn(move || decode(owned, kind, point_count, ready_tx, tx, recycle_rx))
+            .spawn(move || decode(owned, kind, point_count, accepted, ready_tx, tx, recycle_rx))
             .map_err(|e| Error::Internal(format!("cannot start the LAS reader thread: {e}")))?;
         match ready_rx.recv() {
             Ok(Ok(())) => {}
@@ -171,12 +197,163 @@ impl LasReader {
     }
 }
 
+/// How many [`guarded`] calls are running: while any is, panics raised inside the las and laz
+/// crates are not printed (the guard reports them as one input error).
+static GUARDED: AtomicUsize = AtomicUsize::new(0);
+
+/// Run `f`, a call into the las/laz crates on an untrusted file, turning a panic inside it (a
+/// debug assertion of the decompressor, an overflow on absurd header values) into an input
+/// error naming the file. The panic's own message is kept off stderr by a hook installed once.
+fn guarded<T>(path: &Path, what: &str, f: impl FnOnce() -> Result<T>) -> Result<T> {
+    static HOOK: Once = Once::new();
+    HOOK.call_once(|| {
+        let default = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            let in_decoder = info.location().is_some_and(|l| {
+                let file = l.file().replace('\\', "/");
+                file.contains("/laz-") || file.contains("/las-")
+            });
+            if !(in_decoder && GUARDED.load(Ordering::SeqCst) > 0) {
+                default(info);
+            }
+        }));
+    });
+    GUARDED.fetch_add(1, Ordering::SeqCst);
+    let result = std::panic::catch_unwind(AssertUnwindSafe(f));
+    GUARDED.fetch_sub(1, Ordering::SeqCst);
+    result.unwrap_or_else(|panic| {
+        let why = panic
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| panic.downcast_ref::<String>().cloned())
+            .unwrap_or_default();
+        let why = why.lines().map(str::trim).collect::<Vec<_>>().join("; ");
+        Err(Error::input(
+            path,
+            format!("corrupt {what}: the decoder gave up ({why})"),
+        ))
+    })
+}
+
+/// The coarsest and the finest coordinate quantum accepted (the magnitude of a LAS scale factor).
+/// Real files use 0.01 to 1e-9 (degrees); anything outside these is a corrupt header, and would
+/// turn the 32-bit record values into coordinates beyond any survey (or into subnormal numbers).
+/// A negative scale is accepted: LAS 1.4 R15 §2.4 only says the record value is multiplied by
+/// it, and the bounds remain the coordinates' minimum and maximum.
+const MAX_SCALE: f64 = 1e6;
+const MIN_SCALE: f64 = 1e-12;
+
+/// Refuse scale factors and offsets no survey has, naming the header field.
+fn check_transforms(path: &Path, t: [las::Transform; 3]) -> Result<()> {
+    for (axis, t) in ["x", "y", "z"].into_iter().zip(t) {
+        let scale = t.scale.abs();
+        if !(MIN_SCALE..=MAX_SCALE).contains(&scale) {
+            return Err(Error::input(
+                path,
+                format!(
+                    "LAS header {axis} scale factor is {:?}: not a coordinate quantum (it must \
+                     lie between {MIN_SCALE:e} and {MAX_SCALE:e}); corrupt header",
+                    t.scale
+                ),
+            ));
+        }
+        if !t.offset.is_finite() {
+            return Err(Error::input(
+                path,
+                format!("LAS header {axis} offset is {:?}: corrupt header", t.offset),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The header's bounds and the box every decoded point must lie in: the bounds widened by half
+/// a scale step (a writer may take them before quantising) plus a few ulps of rounding.
+#[derive(Debug, Clone, Copy)]
+struct BoundsCheck {
+    header: Bounds,
+    lo: Point3,
+    hi: Point3,
+}
+
+/// Also refused: bounds that are not finite and ordered, or that reach beyond every coordinate
+/// the scale and offset can express (32-bit records): no point can lie there, so the header is
+/// corrupt, and tiling a grid over such bounds would not end.
+fn bounds_check(path: &Path, header: &Bounds, t: [las::Transform; 3]) -> Result<BoundsCheck> {
+    let mut lo = [0.0; 3];
+    let mut hi = [0.0; 3];
+    for (k, t) in t.iter().enumerate() {
+        let axis = ["x", "y", "z"][k];
+        let (min, max) = (header.min[k], header.max[k]);
+        if !(min.is_finite() && max.is_finite() && min <= max) {
+            return Err(Error::input(
+                path,
+                format!("LAS header bounds of {axis} are {min:?} .. {max:?}: corrupt header"),
+            ));
+        }
+        let scale = t.scale.abs();
+        let tol = 0.5 * scale + 4.0 * f64::EPSILON * min.abs().max(max.abs());
+        lo[k] = min - tol;
+        hi[k] = max + tol;
+        let reach = scale * 2f64.powi(31);
+        let (first, last) = (t.offset - reach, t.offset + reach);
+        if lo[k] < first - tol || hi[k] > last + tol {
+            return Err(Error::input(
+                path,
+                format!(
+                    "LAS header bounds of {axis} ({min:?} .. {max:?}) reach beyond what its \
+                     scale and offset can express ({first:?} .. {last:?}): corrupt header"
+                ),
+            ));
+        }
+    }
+    Ok(BoundsCheck {
+        header: *header,
+        lo,
+        hi,
+    })
+}
+
+/// Whether `p` lies outside the accepted box (or has a NaN): six comparisons, which the
+/// compiler keeps branch-free; negligible beside decoding (see the module doc).
+#[inline]
+fn outside(b: &BoundsCheck, p: &Point3) -> bool {
+    !((p[0] >= b.lo[0])
+        & (p[0] <= b.hi[0])
+        & (p[1] >= b.lo[1])
+        & (p[1] <= b.hi[1])
+        & (p[2] >= b.lo[2])
+        & (p[2] <= b.hi[2]))
+}
+
+/// The error for point `index` at `p`, which [`outside`] refused: the first bound it violates.
+fn out_of_bounds(path: &Path, index: u64, p: &Point3, b: &BoundsCheck) -> Error {
+    let k = (0..3)
+        .find(|&k| !(p[k] >= b.lo[k] && p[k] <= b.hi[k]))
+        .unwrap_or(0);
+    let axis = ["x", "y", "z"][k];
+    let (side, bound) = if p[k] < b.lo[k] {
+        ("below the header's minimum", b.header.min[k])
+    } else {
+        ("above the header's maximum", b.header.max[k])
+    };
+    Error::input(
+        path,
+        format!(
+            "point {index} has {axis} = {:?}, {side} {axis} {bound:?} (corrupt point data or \
+             header bounds)",
+            p[k]
+        ),
+    )
+}
+
 /// The decoding thread: open the `las::Reader`, report readiness, then stream chunks until the
 /// end, an error, or the consumer hanging up.
 fn decode(
     path: PathBuf,
     kind: &'static str,
     total: u64,
+    accepted: BoundsCheck,
     ready: Sender<Result<()>>,
     tx: Sender<Result<Vec<Point3>>>,
     recycle: Receiver<Vec<Point3>>,
@@ -184,8 +361,11 @@ fn decode(
     let opened = File::open(&path)
         .map_err(|e| Error::input(&path, format!("cannot open: {e}")))
         .and_then(|f| {
-            las::Reader::new(BufReader::with_capacity(1 << 20, f))
-                .map_err(|e| Error::input(&path, format!("truncated or corrupt {kind} file: {e}")))
+            guarded(&path, &format!("{kind} file"), || {
+                las::Reader::new(BufReader::with_capacity(1 << 20, f)).map_err(|e| {
+                    Error::input(&path, format!("truncated or corrupt {kind} file: {e}"))
+                })
+            })
         });
     let mut reader = match opened {
         Ok(r) => {
@@ -204,16 +384,22 @@ fn decode(
         .build();
     let mut index = 0u64;
     loop {
-        let n = match reader.fill_points(CHUNK, &mut pd) {
-            Ok(n) => n,
-            Err(e) => {
-                let _ = tx.send(Err(Error::input(
+        let what = format!("{kind} data after {index} of {total} points");
+        let filled = guarded(&path, &what, || {
+            reader.fill_points(CHUNK, &mut pd).map_err(|e| {
+                Error::input(
                     &path,
                     format!(
                         "truncated or corrupt {kind} data: read failed after {index} of {total} \
                          points: {e}"
                     ),
-                )));
+                )
+            })
+        });
+        let n = match filled {
+            Ok(n) => n,
+            Err(e) => {
+                let _ = tx.send(Err(e));
                 return;
             }
         };
@@ -224,11 +410,15 @@ fn decode(
         chunk.clear();
         chunk.reserve(pd.len());
         chunk.extend(pd.x().zip(pd.y()).zip(pd.z()).map(|((x, y), z)| [x, y, z]));
-        for (i, p) in chunk.iter().enumerate() {
-            if let Err(e) = check_finite(&path, index + i as u64, p) {
-                let _ = tx.send(Err(e));
-                return;
-            }
+        // One pass of comparisons per point (NaN fails them too); the cost is in the noise of
+        // decoding, see `outside`.
+        if let Some(i) = chunk.iter().position(|p| outside(&accepted, p)) {
+            let p = &chunk[i];
+            let e = check_finite(&path, index + i as u64, p)
+                .err()
+                .unwrap_or_else(|| out_of_bounds(&path, index + i as u64, p, &accepted));
+            let _ = tx.send(Err(e));
+            return;
         }
         index += n;
         if tx.send(Ok(chunk)).is_err() {

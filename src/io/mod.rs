@@ -143,18 +143,31 @@ fn fill_from(
 }
 
 /// Open any supported point cloud, choosing the reader by content (LAS signature `LASF`, PLY
-/// magic `ply`) and falling back to text. A missing file, a file that is not a point cloud and
-/// a cloud with zero points are errors naming the file.
+/// magic `ply`, which may follow a byte order mark like any text) and falling back to text. A
+/// missing file, a file that is not a point cloud and a cloud with zero points are errors naming
+/// the file.
 pub fn open(path: &Path) -> Result<Box<dyn PointReader>> {
-    let mut magic = [0u8; 4];
-    let n = read_prefix(path, &mut magic)?;
-    let magic = &magic[..n];
-    if magic == b"LASF" {
+    let mut prefix = [0u8; 7];
+    let n = read_prefix(path, &mut prefix)?;
+    let prefix = &prefix[..n];
+    let text = prefix.strip_prefix(BOM.as_bytes()).unwrap_or(prefix);
+    if prefix.starts_with(b"LASF") {
         Ok(Box::new(las::LasReader::open(path)?))
-    } else if magic.starts_with(b"ply") && matches!(magic.get(3), Some(b'\n' | b'\r')) {
+    } else if text.starts_with(b"ply") && matches!(text.get(3), Some(b'\n' | b'\r')) {
         Ok(Box::new(ply::PlyReader::open(path)?))
     } else {
         Ok(Box::new(text::TextReader::open(path)?))
+    }
+}
+
+/// The UTF-8 byte order mark, which text written on Windows may start with (skipped by the text
+/// and PLY readers; Unicode 15 §23.8).
+const BOM: &str = "\u{feff}";
+
+/// Drop a leading byte order mark from the first line of a text file or PLY header.
+fn strip_bom(line: &mut String) {
+    if line.starts_with(BOM) {
+        line.drain(..BOM.len());
     }
 }
 

@@ -155,6 +155,9 @@ pub(crate) fn parse_elements(
             .map_err(|e| bad(format!("line {}: {e}", line_no + 1)))?;
         line_no += 1;
         read += n as u64;
+        if line_no == 1 {
+            super::strip_bom(&mut line);
+        }
         if n == 0 {
             return Err(bad("no end_header line".into()));
         }

@@ -6,6 +6,7 @@
 //!   marker: `X,Y,Z,Intensity`, `"X","Y","Z"`, `//X Y Z R G B`, `# x y z`; the X/Y/Z columns
 //!   are found by name and other columns are ignored (they may hold anything, e.g. `nan`);
 //! - no header: the first three columns are X, Y, Z;
+//! - a UTF-8 byte order mark at the start (Windows editors and spreadsheets write one) is skipped;
 //! - a leading line holding a single integer (the point count of the PTS format) is skipped, as
 //!   are blank lines and `#` or `//` comment lines.
 //!
@@ -156,6 +157,9 @@ impl Pass {
             return Ok(false);
         }
         self.line_no += 1;
+        if self.line_no == 1 {
+            super::strip_bom(&mut self.line);
+        }
         Ok(true)
     }
 
@@ -251,6 +255,9 @@ fn detect_layout(path: &Path) -> Result<Layout> {
             return Err(Error::input(path, "contains no points"));
         }
         line_no += 1;
+        if line_no == 1 {
+            super::strip_bom(&mut line);
+        }
         let (commented, body) = strip_comment(&line);
         if body.trim().is_empty() {
             continue;

@@ -175,6 +175,7 @@ pub fn compare(opts: &CompareOptions) -> Result<Summary> {
     }
     // Validate the user's values before measuring anything.
     Params::resolve(&user, 1.0)?;
+    user.check_lengths_within(&[before.bounds, after.bounds])?;
     let t0 = Instant::now();
     let spacing = sampling::measure(&opts.before)?;
     let params = Params::resolve(&user, spacing.effective_spacing)?;
