@@ -560,7 +560,11 @@ fn gain_and_loss_1_m_apart_are_two_events() {
 fn a_deposit_near_the_cliff_foot_is_one_event() {
     let (_, found, matches) = run_scene("deposit", &[]);
     assert_eq!(matches, vec![Some(0)]);
-    assert_eq!(found.len(), 1, "no second event, on the face or anywhere: {found:?}");
+    assert_eq!(
+        found.len(),
+        1,
+        "no second event, on the face or anywhere: {found:?}"
+    );
 }
 
 /// Issue item 1: an event half inside a hole of the before epoch (no points over a rectangle
@@ -573,7 +577,9 @@ fn an_event_half_in_a_hole_is_measured_over_its_covered_half() {
     let res = dir.path().join("res");
     let found = compare(&data.join("before.laz"), &data.join("after.laz"), &res);
     let t = &truth.events[0];
-    let covered = t.covered_volume_m3.expect("the hole scene gives the covered part");
+    let covered = t
+        .covered_volume_m3
+        .expect("the hole scene gives the covered part");
     assert_eq!(found.len(), 1, "{found:?}");
     let e = &found[0];
     let rel = (e.volume - covered) / covered;
@@ -585,7 +591,10 @@ fn an_event_half_in_a_hole_is_measured_over_its_covered_half() {
     );
     assert!(rel.abs() <= 0.05, "{rel}");
     let gj: Value =
-        serde_json::from_str(&std::fs::read_to_string(res.join("events.geojson")).unwrap()).unwrap();
-    let coverage = gj["features"][0]["properties"]["coverage"].as_f64().unwrap();
+        serde_json::from_str(&std::fs::read_to_string(res.join("events.geojson")).unwrap())
+            .unwrap();
+    let coverage = gj["features"][0]["properties"]["coverage"]
+        .as_f64()
+        .unwrap();
     assert!(coverage < 0.95 && coverage > 0.5, "coverage {coverage}");
 }

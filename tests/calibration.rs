@@ -29,8 +29,13 @@ fn run(scene: &str, extra: &[&str], dir: &Path) -> (Truth, Value, Value) {
     let res = dir.join("res");
     let o = common::run_compare(&data.join("before.laz"), &data.join("after.laz"), &res, &[]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let truth: Truth = serde_json::from_str(&std::fs::read_to_string(data.join("truth.json")).unwrap()).unwrap();
-    (truth, read_json(&res.join("events.geojson")), read_json(&res.join("summary.json")))
+    let truth: Truth =
+        serde_json::from_str(&std::fs::read_to_string(data.join("truth.json")).unwrap()).unwrap();
+    (
+        truth,
+        read_json(&res.join("events.geojson")),
+        read_json(&res.join("summary.json")),
+    )
 }
 
 /// (V_true, V, U) of every planted event, matched to the found event of its kind nearest to its
@@ -52,7 +57,12 @@ fn matched(truth: &Truth, events: &Value, label: &str) -> Vec<(f64, f64, f64)> {
                 })
                 .filter(|(d, _)| *d <= t.radius_m.max(3.0))
                 .min_by(|a, b| a.0.total_cmp(&b.0))
-                .unwrap_or_else(|| panic!("{label}: planted {} ({:+.3} m³) not found", t.description, t.volume_m3));
+                .unwrap_or_else(|| {
+                    panic!(
+                        "{label}: planted {} ({:+.3} m³) not found",
+                        t.description, t.volume_m3
+                    )
+                });
             let p = &best.1["properties"];
             (
                 t.volume_m3,
@@ -111,7 +121,11 @@ fn judge(label: &str, rows: &[(f64, f64, f64)]) {
         }
     }
     assert!(rows.len() >= 90, "{label}: {} events", rows.len());
-    assert!(share >= 0.85, "{label}: truth inside for {:.1} %", 100.0 * share);
+    assert!(
+        share >= 0.85,
+        "{label}: truth inside for {:.1} %",
+        100.0 * share
+    );
     assert!(rms >= 0.3, "{label}: RMS z {rms} (intervals too wide)");
 }
 

@@ -51,8 +51,10 @@ fn tiled_runs_equal_the_whole_cloud_run() {
         serde_json::from_str(&std::fs::read_to_string(whole.join("summary.json")).unwrap())
             .unwrap();
     assert_eq!(summary["tiles"], 1, "the reference must be one tile");
-    // The scene's three planted events are found (else the comparison below proves little).
-    assert_eq!(s["events"], 3, "{s}");
+    // The scene's three planted events are found, as the significant ones (else the comparison
+    // below proves little); at this coarse core spacing the noise gives a few small ones more,
+    // which the tiled runs must reproduce as well.
+    assert_eq!(s["significant_events"], 3, "{s}");
     for (ts, threads) in [("4", "1"), ("4", "2"), ("10", "2"), ("13", "1")] {
         let tiled = tmp.path().join(format!("tiles{ts}-threads{threads}"));
         compare(

@@ -183,7 +183,7 @@ pub fn measure(samples: &[Sample], spacing: f64) -> Option<Stable> {
         let centre = median(&mut r);
         let mut dev: Vec<f64> = r.iter().map(|x| (x - centre).abs()).collect();
         sigma = 1.4826 * median(&mut dev);
-        if !(sigma > 0.0) {
+        if sigma.is_nan() || sigma <= 0.0 {
             sigma = dev.iter().cloned().fold(0.0, f64::max).max(1e-12);
         }
         let next: Vec<usize> = finite
@@ -298,7 +298,7 @@ fn fit_variogram(samples: &[Sample], keep: &[usize], t: &Point3, spacing: f64) -
         max_d = max_d.max(dist(rng.below(n), rng.below(n)));
     }
     let h0 = spacing.max(1e-9);
-    if !(max_d > 2.0 * h0) {
+    if max_d.is_nan() || max_d <= 2.0 * h0 {
         return Variogram {
             nugget: 0.0,
             sill: 0.0,

@@ -50,7 +50,7 @@ pub fn measure_stable(
     let mut merged = MergedResults::new(results)?;
     let mut n = 0u64;
     while let Some(k) = merged.next_result()? {
-        if n % step == 0 && k.r.distance.is_finite() {
+        if n.is_multiple_of(step) && k.r.distance.is_finite() {
             samples.push(events::stable::Sample {
                 xyz: k.xyz,
                 normal: k.r.normal,
@@ -404,17 +404,20 @@ fn candidate_boxes(e: &Event, cluster: &[Point3]) -> Vec<Obb> {
     boxes
 }
 
+/// A search box: its half extents in the box frame, its xy bounds, the box.
+type SearchBox = ([f64; 3], [f64; 4], Obb);
+
 /// Each event's points of both epochs inside any of its search boxes, from the tiles the boxes
 /// touch (owned points only: no duplicates from halos).
 #[allow(clippy::type_complexity)]
 fn gather(
-    boxes: &[Vec<([f64; 3], [f64; 4], Obb)>],
+    boxes: &[Vec<SearchBox>],
     layout: &Layout,
     tiled: &Tiled,
 ) -> Result<(Vec<Vec<Point3>>, Vec<Vec<Point3>>)> {
     let mut before: Vec<Vec<Point3>> = vec![Vec::new(); boxes.len()];
     let mut after: Vec<Vec<Point3>> = vec![Vec::new(); boxes.len()];
-    let flat: Vec<(usize, &([f64; 3], [f64; 4], Obb))> = boxes
+    let flat: Vec<(usize, &SearchBox)> = boxes
         .iter()
         .enumerate()
         .flat_map(|(e, b)| b.iter().map(move |x| (e, x)))
@@ -488,7 +491,7 @@ fn volumes(
             None => candidate_boxes(e, cluster(e)),
         })
         .collect();
-    let boxes: Vec<Vec<([f64; 3], [f64; 4], Obb)>> = candidates
+    let boxes: Vec<Vec<SearchBox>> = candidates
         .iter()
         .map(|c| {
             c.iter()
@@ -513,7 +516,7 @@ fn volumes(
         .zip(&boxes)
         .enumerate()
         .map(|(i, (mut e, cands))| {
-            let walls = |(h, _, o): &([f64; 3], [f64; 4], Obb)| {
+            let walls = |(h, _, o): &SearchBox| {
                 let frame = volume::Frame::of_obb(o);
                 let r = volume::Footprint::of_obb(o, margin);
                 volume::axis::wall_points(&frame, &r, h[2], &before[i], spacing)

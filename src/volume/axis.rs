@@ -44,7 +44,7 @@ pub fn wall_points(
 /// Per local point (u, v, w): does another point lie within one `spacing` in (u, v) with a w
 /// difference beyond [`WALL_SLOPE`] × their distance + `spacing`?
 pub fn wall_flags(local: &[[f64; 3]], spacing: f64) -> Vec<bool> {
-    if local.is_empty() || !(spacing > 0.0) {
+    if local.is_empty() || spacing.is_nan() || spacing <= 0.0 {
         return vec![false; local.len()];
     }
     let rho = spacing;
