@@ -56,14 +56,14 @@ pub fn demo(out: &Path, view: bool) -> Result<()> {
     let scene = out.join("scene");
     let result = out.join("result");
     let truth = crate::synth::synth(SceneKind::Cliff, &SynthOptions::default(), &scene)?;
-    let opts = crate::pipeline::CompareOptions {
+    let opts = crate::compare::CompareOptions {
         before: scene.join(&truth.epochs[0]),
         after: scene.join(&truth.epochs[1]),
         out: result.clone(),
         force: true,
         ..Default::default()
     };
-    let summary = crate::pipeline::compare(&opts)?;
+    let summary = crate::compare::compare(&opts)?;
     let text = std::fs::read_to_string(result.join("events.geojson"))
         .map_err(|e| Error::Internal(format!("events.geojson: {e}")))?;
     let fc: serde_json::Value =
@@ -133,5 +133,30 @@ pub fn demo(out: &Path, view: bool) -> Result<()> {
         return self::view(&result, crate::view::DEFAULT_BIND, 0);
     }
     println!("see them with: talus view {}", result.display());
+    Ok(())
+}
+
+/// `talus worker DIR`: execute units of the run in DIR until every unit is done (the process
+/// that holds DIR's lock publishes).
+pub fn worker(dir: &Path, slots: usize, threads: Option<usize>) -> Result<()> {
+    let store = crate::store::Store::open(dir, false)?;
+    let plan = crate::plan::Plan::load(&crate::compare::plan_path(&store))?;
+    let threads = match threads {
+        Some(0) => return Err(Error::Usage("--threads: must be at least 1".into())),
+        Some(t) => t.min(1024),
+        None => std::thread::available_parallelism().map_or(1, |n| n.get()),
+    };
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| Error::Internal(format!("thread pool: {e}")))?;
+    let label = format!("worker {}", std::process::id());
+    let report = pool.install(|| crate::exec::run(&store, &plan, slots.max(1), &label))?;
+    eprintln!(
+        "talus worker: {} unit(s) computed, {} found done, in {}",
+        report.computed,
+        report.reused,
+        dir.display()
+    );
     Ok(())
 }

@@ -1,21 +1,33 @@
-//! talus: change events and volumes between two terrain surveys.
+//! talus: change events and volumes between terrain surveys.
 //!
-//! The pipeline, one module per stage: [`io`] (read epochs) → tiles (the `talus-tiling` crate,
-//! driven by [`pipeline`]) → [`m3c2`] (normals and distances at core points) → [`events`]
-//! (filter, smoothing, signed DBSCAN, PCA box) → [`volume`] (clipped watertight solids) →
-//! outputs. [`synth`] writes synthetic pairs with exact ground truth; [`view`] serves the viewer.
+//! Three layers (ARCHITECTURE.md):
+//! - pure algorithms, functions of their inputs: [`m3c2`] (normals and distances at core points),
+//!   [`events`] (stable ground, filter, smoothing, signed DBSCAN, description), [`volume`]
+//!   (regions, clipped watertight solids, uncertainty), over [`spatial`] indexes and [`io`];
+//! - the [`store`] of immutable units in DIR/.talus, and the [`plan`] of a run's units with
+//!   their dependencies, whose work [`units`] does (one module per kind of unit);
+//! - drivers that execute a plan: [`exec`] (this process; `talus worker`), behind the commands
+//!   [`compare`].
+//!
+//! [`synth`] writes synthetic pairs with exact ground truth; [`view`] serves the viewer.
 
 pub mod commands;
+pub mod compare;
 pub mod error;
 pub mod events;
+pub mod exec;
 pub mod info;
+pub mod interrupt;
 pub mod io;
 pub mod m3c2;
 pub mod params;
-pub mod pipeline;
+pub mod plan;
+pub mod progress;
 pub mod sampling;
 pub mod spatial;
+pub mod store;
 pub mod synth;
+pub mod units;
 pub mod view;
 pub mod volume;
 

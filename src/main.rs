@@ -44,6 +44,18 @@ enum Command {
         #[arg(long, default_value = "127.0.0.1")]
         bind: std::net::IpAddr,
     },
+    /// Execute units of the run in DIR (started by `talus compare`) beside the process that
+    /// runs it: any number of workers, on this or other machines sharing DIR.
+    Worker {
+        /// The --out directory of a running comparison.
+        dir: PathBuf,
+        /// Units at a time.
+        #[arg(long, default_value_t = 1)]
+        slots: usize,
+        /// Threads inside a unit (default: available cores).
+        #[arg(long)]
+        threads: Option<usize>,
+    },
     /// Synthesize the cliff scene, compare it and print the events beside the truth.
     Demo {
         /// Where to write the scene and the result.
@@ -176,9 +188,10 @@ impl CompareArgs {
 }
 
 fn run(cli: Cli) -> talus::Result<()> {
+    talus::interrupt::install();
     match cli.command {
         Command::Compare(a) => {
-            let opts = talus::pipeline::CompareOptions {
+            let opts = talus::compare::CompareOptions {
                 user: a.user_params(),
                 before: a.before,
                 after: a.after,
@@ -192,7 +205,7 @@ fn run(cli: Cli) -> talus::Result<()> {
                 tile_size: a.tile_size,
                 m3c2_only: a.m3c2_only,
             };
-            let summary = talus::pipeline::compare(&opts)?;
+            let summary = talus::compare::compare(&opts)?;
             eprintln!("{}", summary.one_line());
             Ok(())
         }
@@ -201,6 +214,11 @@ fn run(cli: Cli) -> talus::Result<()> {
             &s.scene, &s.out, s.points, s.seed, s.noise, s.rotate, s.density2, s.shift, !s.las,
         ),
         Command::View { dir, port, bind } => talus::commands::view(&dir, bind, port),
+        Command::Worker {
+            dir,
+            slots,
+            threads,
+        } => talus::commands::worker(&dir, slots, threads),
         Command::Demo { out, view } => talus::commands::demo(&out, view),
     }
 }
@@ -209,6 +227,10 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
+        Err(talus::Error::Interrupted) => {
+            eprintln!("talus: interrupted; resume with --resume");
+            ExitCode::from(130)
+        }
         Err(e) => {
             eprintln!("talus: error: {e}");
             ExitCode::from(e.exit_code() as u8)

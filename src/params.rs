@@ -168,7 +168,7 @@ impl UserParams {
 }
 
 /// One resolved parameter and where it came from.
-#[derive(Debug, Clone, Serialize, PartialEq)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct Resolved<T> {
     pub value: T,
     /// "user" (flag or config file) or "derived: <rule>" or "default".
@@ -176,7 +176,7 @@ pub struct Resolved<T> {
 }
 
 /// Every parameter of a run, resolved.
-#[derive(Debug, Clone, Serialize, PartialEq)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct Params {
     /// The effective point spacing of C1 (1/√density) the rules start from.
     pub point_spacing: f64,

@@ -20,7 +20,7 @@ pub const WHOLE: u64 = 400_000;
 pub const WINDOW_TARGET: f64 = 40_000.0;
 
 /// The measured spacing and how it was measured.
-#[derive(Debug, Clone, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Spacing {
     /// Median nearest-neighbour distance.
     pub spacing: f64,

@@ -3,7 +3,7 @@
 //! DBSCAN and k-nearest smoothing written here from the definitions, and closed-form PCA
 //! boxes.
 
-use talus::events::dbscan::{core_flags, dbscan, merge, tile_links, TileLinks};
+use talus::events::dbscan::dbscan;
 use talus::events::{describe, filter, smooth::smooth, Event, Kind};
 use talus::volume::{
     check_watertight, event_volume, event_volume_from_surfaces, read_ply_mesh, write_ply,
@@ -829,56 +829,11 @@ fn clustered(rng: &mut Rng) -> Vec<[f64; 3]> {
     pts
 }
 
-/// Tiled DBSCAN over a k×k split of [0, 30]² with the given halo, through the two phases
-/// and the merge, global ids = indices; tiles merged in reverse order on purpose.
-fn tiled_dbscan(pts: &[[f64; 3]], k: usize, halo: f64, eps: f64, min_pts: usize) -> Vec<u32> {
-    let size = 30.0 / k as f64;
-    let tile_of = |x: f64| ((x / size).floor().max(0.0) as usize).min(k - 1);
-    let tiles: Vec<(usize, usize)> = (0..k).flat_map(|i| (0..k).map(move |j| (i, j))).collect();
-    let members = |(ti, tj): (usize, usize)| -> (Vec<usize>, Vec<bool>) {
-        let (x0, y0) = (ti as f64 * size, tj as f64 * size);
-        let mut idx = Vec::new();
-        let mut owned = Vec::new();
-        for (i, p) in pts.iter().enumerate() {
-            let own = tile_of(p[0]) == ti && tile_of(p[1]) == tj;
-            let near = p[0] >= x0 - halo
-                && p[0] <= x0 + size + halo
-                && p[1] >= y0 - halo
-                && p[1] <= y0 + size + halo;
-            if own || near {
-                idx.push(i);
-                owned.push(own);
-            }
-        }
-        (idx, owned)
-    };
-    // Phase 1.
-    let mut core = vec![false; pts.len()];
-    let mut n_owned = 0;
-    for &t in &tiles {
-        let (idx, owned) = members(t);
-        let sub: Vec<[f64; 3]> = idx.iter().map(|&i| pts[i]).collect();
-        let flags = core_flags(&sub, &owned, eps, min_pts).unwrap();
-        for (a, &i) in idx.iter().enumerate() {
-            if owned[a] {
-                core[i] = flags[a];
-                n_owned += 1;
-            }
-        }
-    }
-    assert_eq!(n_owned, pts.len(), "every point owned once");
-    // Phase 2.
-    let mut links: Vec<TileLinks> = Vec::new();
-    for &t in &tiles {
-        let (idx, owned) = members(t);
-        let sub: Vec<[f64; 3]> = idx.iter().map(|&i| pts[i]).collect();
-        let ids: Vec<u64> = idx.iter().map(|&i| i as u64).collect();
-        let c: Vec<bool> = idx.iter().map(|&i| core[i]).collect();
-        links.push(tile_links(&sub, &ids, &owned, &c, eps).unwrap());
-    }
-    links.reverse();
-    let labels = merge(links);
-    (0..pts.len() as u64).map(|i| labels.get(i)).collect()
+/// `events::tiled::cluster` over a k×k grid of [0, 30]², global ids = indices.
+fn tiled_dbscan(pts: &[[f64; 3]], k: usize, eps: f64, min_pts: usize) -> Vec<u32> {
+    let grid = talus_tiling::TileGrid::new([0.0, 0.0], 30.0 / k as f64, k as u32, k as u32).unwrap();
+    let keys: Vec<u64> = (0..pts.len() as u64).collect();
+    talus::events::tiled::cluster(pts, &keys, &grid, eps, min_pts).unwrap()
 }
 
 #[test]
@@ -901,9 +856,9 @@ fn tiled_dbscan_equals_whole_cloud() {
     let pts = clustered(&mut rng);
     let (eps, min_pts) = (1.0, 8);
     let whole = dbscan(&pts, eps, min_pts).unwrap();
-    for (k, halo) in [(2, 1.0), (3, 1.0), (3, 2.5)] {
-        let tiled = tiled_dbscan(&pts, k, halo, eps, min_pts);
-        assert_eq!(tiled, whole, "{k}x{k} tiles, halo {halo}");
+    for k in [2, 3, 5] {
+        let tiled = tiled_dbscan(&pts, k, eps, min_pts);
+        assert_eq!(tiled, whole, "{k}x{k} tiles");
     }
     // The corner blobs really straddle tiles: points of one cluster in several 3×3 tiles.
     let size = 10.0;

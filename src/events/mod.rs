@@ -12,6 +12,7 @@ pub mod describe;
 pub mod filter;
 pub mod smooth;
 pub mod stable;
+pub mod tiled;
 pub mod union_find;
 
 pub use describe::{describe, Event, Kind, Obb};

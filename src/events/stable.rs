@@ -52,7 +52,7 @@ pub struct Sample {
 }
 
 /// A spherical variogram γ(h) = nugget + sill · Sph(h / range).
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Variogram {
     pub nugget: f64,
     /// Partial sill: the variance of the spatially correlated part.
@@ -80,7 +80,7 @@ fn spherical(x: f64) -> f64 {
 }
 
 /// What the stable ground says about the pair.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Stable {
     /// The fitted translation t between the epochs (input units).
     pub translation: Point3,

@@ -7,6 +7,7 @@ pub mod cylinder;
 pub mod moments;
 pub mod normals;
 pub mod orientation;
+pub mod tile;
 
 use rayon::prelude::*;
 

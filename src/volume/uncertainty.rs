@@ -31,7 +31,7 @@ const LARGE: f64 = 50.0;
 
 /// The parts of an event's volume uncertainty (one standard deviation each, m³) and the 95 %
 /// half-width.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct VolumeUncertainty {
     pub random_m3: f64,
     pub correlated_m3: f64,

@@ -11,6 +11,7 @@ pub const COMPARED: &[&str] = &[
     "m3c2.laz",
     "events.geojson",
     "events.csv",
+    "event_regions.geojson",
     "view.json",
     "terrain.bin",
 ];
@@ -31,6 +32,27 @@ pub fn cliff(dir: &Path, points: u64) -> (PathBuf, PathBuf) {
         String::from_utf8_lossy(&out.stderr)
     );
     (dir.join("before.laz"), dir.join("after.laz"))
+}
+
+/// `talus synth cliff` as uncompressed LAS with `seed` (so that two seeds give files of one size).
+pub fn cliff_seeded(dir: &Path, points: u64, seed: u64) -> (PathBuf, PathBuf) {
+    let out = run(&[
+        "synth",
+        "cliff",
+        "--out",
+        dir.to_str().unwrap(),
+        "--points",
+        &points.to_string(),
+        "--seed",
+        &seed.to_string(),
+        "--las",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (dir.join("before.las"), dir.join("after.las"))
 }
 
 pub fn compare(before: &Path, after: &Path, out: &Path, extra: &[&str]) {
@@ -137,32 +159,32 @@ pub fn stage_line(stderr: &[u8], stage: &str) -> (u64, bool) {
     (count, line.ends_with(", reused"))
 }
 
-/// Modification times of every result chunk file (`.talus/m3c2/*.tile`) by name.
-pub fn chunk_mtimes(dir: &Path) -> std::collections::BTreeMap<String, std::time::SystemTime> {
+/// The finished units of `kind` in DIR's store, by name, with the time their record was
+/// written: a unit computed again gets a new record (its name holds its key).
+pub fn unit_times(dir: &Path, kind: &str) -> std::collections::BTreeMap<String, std::time::SystemTime> {
     let mut m = std::collections::BTreeMap::new();
-    let Ok(rd) = std::fs::read_dir(dir.join(".talus/m3c2")) else {
+    let Ok(rd) = std::fs::read_dir(dir.join(".talus/units").join(kind)) else {
         return m;
     };
     for e in rd {
         let e = e.unwrap();
-        let name = e.file_name().to_string_lossy().into_owned();
-        if name.ends_with(".tile") {
-            m.insert(name, e.metadata().unwrap().modified().unwrap());
+        if let Ok(meta) = std::fs::metadata(e.path().join("record.json")) {
+            m.insert(
+                e.file_name().to_string_lossy().into_owned(),
+                meta.modified().unwrap(),
+            );
         }
     }
     m
 }
 
-/// The tiles whose M3C2 unit the manifest of `dir` records as done.
-pub fn done_m3c2_tiles(dir: &Path) -> Vec<String> {
-    let Ok(text) = std::fs::read_to_string(dir.join(".talus/manifest.json")) else {
-        return Vec::new();
-    };
-    let v: serde_json::Value = serde_json::from_str(&text).expect("the manifest is valid JSON");
-    v["units"]
-        .as_object()
-        .unwrap()
-        .keys()
-        .filter_map(|k| k.strip_prefix("m3c2:").map(str::to_string))
-        .collect()
+/// The directory of the finished unit of `kind` whose name starts with `prefix` (e.g.
+/// "after-" for the after survey's tiling, "pair-t_0001_0002-" for a tile's M3C2).
+pub fn unit_dir(dir: &Path, kind: &str, prefix: &str) -> PathBuf {
+    let names: Vec<String> = unit_times(dir, kind)
+        .into_keys()
+        .filter(|n| n.starts_with(prefix))
+        .collect();
+    assert_eq!(names.len(), 1, "one {kind} unit {prefix}*: {names:?}");
+    dir.join(".talus/units").join(kind).join(&names[0])
 }

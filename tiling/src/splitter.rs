@@ -18,7 +18,7 @@
 
 use crate::error::{Error, Result};
 use crate::grid::{TileGrid, TileId};
-use crate::tile_file::{self, Column, ColumnData, TileColumns, WriteOptions};
+use crate::tile_file::{self, Column, ColumnData, FileDigest, TileColumns, WriteOptions};
 use std::fs::{self, OpenOptions};
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
@@ -212,7 +212,16 @@ impl TileSplitter {
     /// Write every non-empty tile file (segments first, then the buffer, i.e. input order), one
     /// tile at a time, delete the segments, and return the tiles written with their point counts
     /// (halo points included), in tile order.
-    pub fn finish(mut self) -> Result<Vec<(TileId, u64)>> {
+    pub fn finish(self) -> Result<Vec<(TileId, u64)>> {
+        Ok(self
+            .finish_with_digests()?
+            .into_iter()
+            .map(|(id, n, _)| (id, n))
+            .collect())
+    }
+
+    /// [`TileSplitter::finish`], with each tile file's digest.
+    pub fn finish_with_digests(mut self) -> Result<Vec<(TileId, u64, FileDigest)>> {
         let mut written = Vec::new();
         for i in 0..self.buffers.len() {
             let id = self.id_of(i);
@@ -234,8 +243,8 @@ impl TileSplitter {
             }
             append(&mut cols, into_columns(buffer));
             let path = tile_path(&self.dir, id);
-            tile_file::write_tile_with(&path, &cols, &self.opts)?;
-            written.push((id, cols.len() as u64));
+            let digest = tile_file::write_tile_with(&path, &cols, &self.opts)?;
+            written.push((id, cols.len() as u64, digest));
             if self.flushed[i] > 0 {
                 let seg = self.segment_path(i);
                 fs::remove_file(&seg).map_err(|e| Error::io(&seg, e))?;

@@ -201,15 +201,34 @@ pub struct TileHeader {
     pub columns: Vec<String>,
 }
 
+/// What a writer knows of the file it wrote: its size and the CRC-32 (IEEE) of all its bytes,
+/// computed from the bytes in memory (so a record of the file needs no read back).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FileDigest {
+    pub size: u64,
+    pub crc32: u32,
+}
+
+impl FileDigest {
+    /// The digest of `bytes`.
+    pub fn of(bytes: &[u8]) -> Self {
+        FileDigest {
+            size: bytes.len() as u64,
+            crc32: crc32fast::hash(bytes),
+        }
+    }
+}
+
 /// Write `cols` to `path` atomically with the default [`WriteOptions`].
-pub fn write_tile(path: &Path, cols: &TileColumns) -> Result<()> {
+pub fn write_tile(path: &Path, cols: &TileColumns) -> Result<FileDigest> {
     write_tile_with(path, cols, &WriteOptions::default())
 }
 
-/// Write `cols` to `path` atomically.
-pub fn write_tile_with(path: &Path, cols: &TileColumns, opts: &WriteOptions) -> Result<()> {
+/// Write `cols` to `path` atomically; returns the written file's digest.
+pub fn write_tile_with(path: &Path, cols: &TileColumns, opts: &WriteOptions) -> Result<FileDigest> {
     let bytes = encode(cols, opts).map_err(|p| Error::invalid(path, p))?;
-    atomic_write(path, &bytes)
+    atomic_write(path, &bytes)?;
+    Ok(FileDigest::of(&bytes))
 }
 
 /// Read and verify a tile file.

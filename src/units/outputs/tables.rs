@@ -1,15 +1,12 @@
-//! events.geojson, events.csv and meshes/ (SPEC.md §2), each written under a temporary name and
-//! renamed.
+//! events.geojson, event_regions.geojson and events.csv (SPEC.md §2).
 
 use serde_json::{json, Value};
 
+use super::EventRecord;
 use crate::error::{Error, Result};
 use crate::io::Crs;
-use crate::pipeline::events_pass::EventRecord;
-use crate::pipeline::outputs::write_atomic;
-use crate::pipeline::view_export::EventMeshes;
-use crate::pipeline::workdir::WorkDir;
-use crate::volume;
+use crate::store::UnitWriter;
+use crate::units::write_bytes;
 
 fn opt(v: Option<f64>) -> Value {
     match v {
@@ -52,7 +49,7 @@ fn properties(r: &EventRecord) -> Value {
 }
 
 /// Is `name` a mesh file talus writes (`event_NNNN_before.ply` / `event_NNNN_after.ply`)?
-fn is_event_mesh(name: &str) -> bool {
+pub fn is_event_mesh(name: &str) -> bool {
     let Some(rest) = name.strip_prefix("event_") else {
         return false;
     };
@@ -62,42 +59,10 @@ fn is_event_mesh(name: &str) -> bool {
         && (tail == "_before.ply" || tail == "_after.ply")
 }
 
-/// Write meshes/event_NNNN_{before,after}.ply for every event with solids; returns their names.
-/// Event meshes of an earlier run that this run does not write are removed (only talus's own
-/// names: anything else in meshes/ is the user's).
-pub fn write_meshes(wd: &WorkDir, events: &[EventRecord]) -> Result<Vec<(u32, EventMeshes)>> {
-    let dir = wd.out.join("meshes");
-    std::fs::create_dir_all(&dir).map_err(|e| Error::output(&dir, e))?;
-    let keep: std::collections::HashSet<String> = events
-        .iter()
-        .filter(|r| r.solids.is_some())
-        .flat_map(|r| ["before", "after"].map(|w| format!("event_{:04}_{w}.ply", r.event.id)))
-        .collect();
-    for entry in std::fs::read_dir(&dir).map_err(|e| Error::output(&dir, e))? {
-        let entry = entry.map_err(|e| Error::output(&dir, e))?;
-        let name = entry.file_name().to_string_lossy().into_owned();
-        if is_event_mesh(&name) && !keep.contains(&name) {
-            std::fs::remove_file(entry.path()).map_err(|e| Error::output(entry.path(), e))?;
-        }
-    }
-    let mut out = Vec::new();
-    for r in events {
-        let Some((b, a)) = &r.solids else { continue };
-        let names = EventMeshes {
-            before: format!("meshes/event_{:04}_before.ply", r.event.id),
-            after: format!("meshes/event_{:04}_after.ply", r.event.id),
-        };
-        volume::write_ply(&wd.out.join(&names.before), b)?;
-        volume::write_ply(&wd.out.join(&names.after), a)?;
-        out.push((r.event.id, names));
-    }
-    Ok(out)
-}
-
 /// Write event_regions.geojson: per event the outline of the region its volume was integrated
 /// over (Polygon or MultiPolygon, 3-D coordinates in the footprint plane; null geometry for an
 /// event without a volume).
-pub fn write_regions(wd: &WorkDir, events: &[EventRecord], crs: &Crs) -> Result<()> {
+pub fn write_regions(out: &mut UnitWriter, events: &[EventRecord], crs: &Crs) -> Result<()> {
     let features: Vec<Value> = events
         .iter()
         .map(|r| {
@@ -125,11 +90,11 @@ pub fn write_regions(wd: &WorkDir, events: &[EventRecord], crs: &Crs) -> Result<
         "features": features,
     });
     let text = serde_json::to_string(&fc).map_err(|e| Error::Internal(e.to_string()))?;
-    write_atomic(&wd.out.join("event_regions.geojson"), text.as_bytes())
+    write_bytes(out, "event_regions.geojson", text.as_bytes())
 }
 
 /// Write events.geojson and events.csv.
-pub fn write_tables(wd: &WorkDir, events: &[EventRecord], crs: &Crs) -> Result<()> {
+pub fn write_tables(out: &mut UnitWriter, events: &[EventRecord], crs: &Crs) -> Result<()> {
     let features: Vec<Value> = events
         .iter()
         .map(|r| {
@@ -146,7 +111,7 @@ pub fn write_tables(wd: &WorkDir, events: &[EventRecord], crs: &Crs) -> Result<(
         "features": features,
     });
     let text = serde_json::to_string_pretty(&fc).map_err(|e| Error::Internal(e.to_string()))?;
-    write_atomic(&wd.out.join("events.geojson"), text.as_bytes())?;
+    write_bytes(out, "events.geojson", text.as_bytes())?;
 
     let mut csv = String::from(
         "id,kind,x,y,z,volume_m3,volume_uncertainty_m3,significant,gain_m3,loss_m3,n_points,area_m2,\
@@ -185,5 +150,5 @@ pub fn write_tables(wd: &WorkDir, events: &[EventRecord], crs: &Crs) -> Result<(
         csv.push_str(&row.join(","));
         csv.push('\n');
     }
-    write_atomic(&wd.out.join("events.csv"), csv.as_bytes())
+    write_bytes(out, "events.csv", csv.as_bytes())
 }

@@ -6,9 +6,9 @@ use serde::Serialize;
 
 use crate::error::{Error, Result};
 use crate::io::{Crs, Point3};
-use crate::pipeline::m3c2_pass::KeyedResult;
-use crate::pipeline::outputs::write_atomic;
-use crate::pipeline::workdir::WorkDir;
+use crate::m3c2::tile::KeyedResult;
+use crate::store::UnitWriter;
+use crate::units::write_bytes;
 
 /// Upper bound on the terrain points the viewer gets.
 pub const MAX_TERRAIN_POINTS: u64 = 2_000_000;
@@ -65,8 +65,8 @@ impl TerrainSample {
         self.seen += 1;
     }
 
-    /// Write DIR/terrain.bin and DIR/view.json.
-    pub fn write(self, wd: &WorkDir, crs: &Crs, meshes: &[(u32, EventMeshes)]) -> Result<()> {
+    /// Write terrain.bin and view.json.
+    pub fn write(self, out: &mut UnitWriter, crs: &Crs, meshes: &[(u32, EventMeshes)]) -> Result<()> {
         let TerrainSample {
             origin, pos, dist, ..
         } = self;
@@ -82,7 +82,7 @@ impl TerrainSample {
         for v in pos.iter().chain(dist.iter()) {
             bytes.extend_from_slice(&v.to_le_bytes());
         }
-        write_atomic(&wd.out.join("terrain.bin"), &bytes)?;
+        write_bytes(out, "terrain.bin", &bytes)?;
         let view = ViewJson {
             version: 1,
             crs: crs.describe(),
@@ -98,6 +98,6 @@ impl TerrainSample {
         };
         let text =
             serde_json::to_string_pretty(&view).map_err(|e| Error::Internal(e.to_string()))?;
-        write_atomic(&wd.out.join("view.json"), text.as_bytes())
+        write_bytes(out, "view.json", text.as_bytes())
     }
 }

@@ -1,0 +1,257 @@
+//! Drivers: executing a plan's units (SPEC.md §3, §6).
+//!
+//! [`run`] executes, in this process, every unit of a plan that is not done: a few slot threads
+//! each take the first unit (in plan order) whose dependencies are done, claim it in the store (so
+//! that other processes working on the same DIR — `talus worker DIR`, Slurm array tasks — do not
+//! compute it too), run it and commit its files. Units use the rayon pool inside (M3C2 over core
+//! points, volumes over events); two slots let one unit's reading overlap another's computing, as
+//! a bounded read-ahead would, within the two tiles in flight the layout's memory plan allows for.
+//! A unit another process holds is waited for (its record appears) or, when that process died,
+//! taken over (its claim is stale). A unit that finds a dependency's file damaged has that
+//! dependency thrown away and both redone, once.
+//!
+//! The executor never publishes: the process holding DIR's lock does, once every unit is done.
+
+pub mod progress;
+
+use std::collections::HashMap;
+use std::sync::{Condvar, Mutex};
+use std::time::{Duration, Instant};
+
+use crate::error::{Error, Result};
+use crate::plan::Plan;
+use crate::store::{Claim, Store};
+use crate::units::{self, unit_ref, Ctx};
+use progress::Stages;
+
+/// How long a slot waits before looking again at units other processes hold.
+const POLL: Duration = Duration::from_millis(250);
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum State {
+    /// Not done, not running here.
+    Todo,
+    /// Running in this process.
+    Running,
+    Done,
+}
+
+struct Shared {
+    state: Vec<State>,
+    /// Redos after damage, per unit.
+    redone: Vec<u8>,
+    error: Option<Error>,
+    /// Units found claimed by another live process at the last look.
+    elsewhere: Vec<bool>,
+}
+
+/// What a run of the executor did.
+#[derive(Debug, Default)]
+pub struct Report {
+    /// Units this process computed.
+    pub computed: usize,
+    /// Units found done.
+    pub reused: usize,
+}
+
+/// Execute every unit of `plan` not yet done in `store`, with `slots` units at a time, as a
+/// process of run `plan.run` labelled `label` (for claims).
+pub fn run(store: &Store, plan: &Plan, slots: usize, label: &str) -> Result<Report> {
+    let n = plan.units.len();
+    let done: Vec<bool> = (0..n)
+        .map(|i| store.done(&unit_ref(plan, i)).is_some())
+        .collect();
+    let reused = done.iter().filter(|&&d| d).count();
+    let shared = Mutex::new(Shared {
+        state: done
+            .iter()
+            .map(|&d| if d { State::Done } else { State::Todo })
+            .collect(),
+        redone: vec![0; n],
+        error: None,
+        elsewhere: vec![false; n],
+    });
+    let wake = Condvar::new();
+    let stages = Stages::new(plan, &done);
+    let computed = std::sync::atomic::AtomicUsize::new(0);
+    std::thread::scope(|s| {
+        for _ in 0..slots.max(1) {
+            s.spawn(|| slot(store, plan, label, &shared, &wake, &stages, &computed));
+        }
+    });
+    stages.finish_all();
+    let shared = shared.into_inner().unwrap_or_else(|e| e.into_inner());
+    if let Some(e) = shared.error {
+        return Err(e);
+    }
+    Ok(Report {
+        computed: computed.into_inner(),
+        reused,
+    })
+}
+
+/// One slot: take ready units until every unit is done or the run failed.
+fn slot(
+    store: &Store,
+    plan: &Plan,
+    label: &str,
+    shared: &Mutex<Shared>,
+    wake: &Condvar,
+    stages: &Stages,
+    computed: &std::sync::atomic::AtomicUsize,
+) {
+    let lock = || shared.lock().unwrap_or_else(|e| e.into_inner());
+    loop {
+        // Pick the first ready unit nobody else holds.
+        let picked = {
+            let mut sh = lock();
+            loop {
+                if sh.error.is_some() || crate::interrupt::requested() {
+                    if sh.error.is_none() {
+                        sh.error = Some(Error::Interrupted);
+                    }
+                    wake.notify_all();
+                    return;
+                }
+                if sh.state.iter().all(|&s| s == State::Done) {
+                    wake.notify_all();
+                    return;
+                }
+                let ready = (0..plan.units.len()).find(|&i| {
+                    sh.state[i] == State::Todo
+                        && plan.units[i].deps.iter().all(|&d| sh.state[d] == State::Done)
+                        && !sh.elsewhere[i]
+                });
+                if let Some(i) = ready {
+                    sh.state[i] = State::Running;
+                    break i;
+                }
+                // Nothing ready here: wait for a unit of this process to finish, or look again
+                // at what other processes hold.
+                let others = sh.elsewhere.iter().any(|&e| e);
+                let (guard, _) = wake
+                    .wait_timeout(sh, POLL)
+                    .unwrap_or_else(|e| e.into_inner());
+                sh = guard;
+                if others {
+                    refresh_elsewhere(store, plan, &mut sh);
+                }
+            }
+        };
+        let outcome = claim_and_run(store, plan, picked, label, stages);
+        let mut sh = lock();
+        match outcome {
+            Ok(Ran::Done) => {
+                computed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                sh.state[picked] = State::Done;
+                stages.unit_done(plan, picked, &sh.state.iter().map(|&s| s == State::Done).collect::<Vec<_>>());
+            }
+            Ok(Ran::Elsewhere) => {
+                sh.state[picked] = State::Todo;
+                sh.elsewhere[picked] = true;
+            }
+            Err(Error::Damaged { path, problem }) if sh.redone[picked] == 0 => {
+                // Throw away the dependency that holds the damaged file, redo both.
+                let dep = plan.units[picked].deps.iter().copied().find(|&d| {
+                    store
+                        .unit_dir(&unit_ref(plan, d))
+                        .is_ok_and(|dir| path.starts_with(dir))
+                });
+                match dep {
+                    Some(d) => {
+                        eprintln!(
+                            "talus: {}: {problem}; computing unit {} again",
+                            path.display(),
+                            plan.units[d].name
+                        );
+                        sh.redone[picked] += 1;
+                        if let Err(e) = store.invalidate(&unit_ref(plan, d)) {
+                            sh.error.get_or_insert(e);
+                        }
+                        sh.state[d] = State::Todo;
+                        sh.state[picked] = State::Todo;
+                        stages.reopen(plan, d);
+                    }
+                    None => {
+                        sh.error.get_or_insert(Error::Damaged { path, problem });
+                    }
+                }
+            }
+            Err(e) => {
+                sh.state[picked] = State::Todo;
+                sh.error.get_or_insert(e);
+            }
+        }
+        wake.notify_all();
+    }
+}
+
+/// Units another process held at the last look: done now, or claimable again.
+fn refresh_elsewhere(store: &Store, plan: &Plan, sh: &mut Shared) {
+    for i in 0..plan.units.len() {
+        if sh.elsewhere[i] {
+            sh.elsewhere[i] = false;
+            if store.done(&unit_ref(plan, i)).is_some() {
+                sh.state[i] = State::Done;
+            }
+        }
+    }
+}
+
+enum Ran {
+    Done,
+    /// Another live process holds the unit.
+    Elsewhere,
+}
+
+/// Claim unit `i`, run it, commit it (or find another process did).
+fn claim_and_run(
+    store: &Store,
+    plan: &Plan,
+    i: usize,
+    label: &str,
+    stages: &Stages,
+) -> Result<Ran> {
+    let unit = unit_ref(plan, i);
+    let claim: Option<Claim> = store.claim(&plan.run, &unit, label)?;
+    let Some(claim) = claim else {
+        return Ok(Ran::Elsewhere);
+    };
+    // Another process may have finished it between our look and our claim.
+    if store.done(&unit).is_some() {
+        drop(claim);
+        return Ok(Ran::Done);
+    }
+    let started = Instant::now();
+    stages.unit_started(plan, i);
+    let progress = |n: u64| stages.add(plan, i, n);
+    let ctx = Ctx {
+        plan,
+        store,
+        progress: &progress,
+    };
+    let mut out = store.begin(&unit)?;
+    let mut meta = units::run(&ctx, i, &mut out)?;
+    if let Some(m) = meta.as_object_mut() {
+        m.insert(
+            "seconds".into(),
+            serde_json::json!(started.elapsed().as_secs_f64()),
+        );
+    }
+    out.commit(meta)?;
+    drop(claim);
+    Ok(Ran::Done)
+}
+
+/// The units of `plan` not done in `store`, by kind (for `talus status`).
+pub fn pending(store: &Store, plan: &Plan) -> HashMap<&'static str, (usize, usize)> {
+    let mut m: HashMap<&'static str, (usize, usize)> = HashMap::new();
+    for i in 0..plan.units.len() {
+        let e = m.entry(plan.units[i].kind()).or_default();
+        e.0 += 1;
+        if store.done(&unit_ref(plan, i)).is_some() {
+            e.1 += 1;
+        }
+    }
+    m
+}

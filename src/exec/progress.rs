@@ -1,0 +1,153 @@
+//! The executor's progress: one [`Stage`] (a bar on a terminal, a line at the end) per stage of
+//! the pipeline, opened when this process starts the stage's first unit and closed when every unit
+//! of the stage is done. A stage whose units were all done before the run says so: `..., reused`.
+
+use std::sync::Mutex;
+
+use crate::plan::Plan;
+use crate::progress::Stage;
+use crate::units::outputs::stage_name;
+
+/// The stages in pipeline order, with the unit their counts are in.
+const STAGES: [(&str, &str); 6] = [
+    ("pass 1: tiling", "points"),
+    ("pass 2: normals and M3C2", "points"),
+    ("stable ground", "core points sampled"),
+    ("events", "events"),
+    ("volumes", "events"),
+    ("outputs", "core points"),
+];
+
+struct Open {
+    /// Units of the stage not done yet.
+    remaining: usize,
+    /// Units of the stage in the plan.
+    units: usize,
+    stage: Option<Stage>,
+    /// The line was printed (stage finished, or reused).
+    closed: bool,
+}
+
+pub struct Stages {
+    open: Mutex<Vec<Open>>,
+}
+
+fn index(kind: &str) -> usize {
+    let name = stage_name(kind);
+    STAGES.iter().position(|s| s.0 == name).unwrap_or(STAGES.len() - 1)
+}
+
+impl Stages {
+    /// The stages of `plan`, `done[i]` telling which units were done before the run.
+    pub fn new(plan: &Plan, done: &[bool]) -> Stages {
+        let mut open: Vec<Open> = STAGES
+            .iter()
+            .map(|_| Open {
+                remaining: 0,
+                units: 0,
+                stage: None,
+                closed: false,
+            })
+            .collect();
+        for (i, u) in plan.units.iter().enumerate() {
+            let s = &mut open[index(u.kind())];
+            s.units += 1;
+            if !done[i] {
+                s.remaining += 1;
+            }
+        }
+        Stages {
+            open: Mutex::new(open),
+        }
+    }
+
+    fn with<T>(&self, f: impl FnOnce(&mut Vec<Open>) -> T) -> T {
+        let mut g = self.open.lock().unwrap_or_else(|e| e.into_inner());
+        f(&mut g)
+    }
+
+    /// Print the lines of the stages before `upto` whose units were all done already.
+    fn close_reused(open: &mut [Open], upto: usize) {
+        for (k, s) in open.iter_mut().enumerate().take(upto) {
+            if !s.closed && s.remaining == 0 && s.stage.is_none() && s.units > 0 {
+                Stage::log_only(STAGES[k].0, STAGES[k].1).finish("reused");
+                s.closed = true;
+            }
+        }
+    }
+
+    /// Unit `i` starts in this process.
+    pub fn unit_started(&self, plan: &Plan, i: usize) {
+        let k = index(plan.units[i].kind());
+        self.with(|open| {
+            Self::close_reused(open, k);
+            let s = &mut open[k];
+            if s.stage.is_none() && !s.closed {
+                let total = match k {
+                    0 => Some(plan.surveys.iter().map(|s| s.points).sum()),
+                    1 => Some(
+                        plan.pairs
+                            .iter()
+                            .map(|p| plan.surveys[p.before].points + plan.surveys[p.after].points)
+                            .sum(),
+                    ),
+                    _ => None,
+                };
+                s.stage = Some(Stage::start(STAGES[k].0, total, STAGES[k].1));
+            }
+        });
+    }
+
+    /// Unit `i` handled `n` more items.
+    pub fn add(&self, plan: &Plan, i: usize, n: u64) {
+        let k = index(plan.units[i].kind());
+        self.with(|open| {
+            if let Some(s) = &open[k].stage {
+                s.inc(n);
+            }
+        });
+    }
+
+    /// Unit `i` was committed; `done` says which units are done now.
+    pub fn unit_done(&self, plan: &Plan, i: usize, done: &[bool]) {
+        let k = index(plan.units[i].kind());
+        let remaining = plan
+            .units
+            .iter()
+            .enumerate()
+            .filter(|(j, u)| index(u.kind()) == k && !done[*j])
+            .count();
+        self.with(|open| {
+            let s = &mut open[k];
+            s.remaining = remaining;
+            if remaining == 0 {
+                if let Some(stage) = s.stage.take() {
+                    stage.finish("");
+                }
+                s.closed = true;
+            }
+        });
+    }
+
+    /// Unit `i` must be done again (its files were damaged).
+    pub fn reopen(&self, plan: &Plan, i: usize) {
+        let k = index(plan.units[i].kind());
+        self.with(|open| {
+            open[k].remaining += 1;
+            open[k].closed = false;
+        });
+    }
+
+    /// The run ended: close what is still open.
+    pub fn finish_all(&self) {
+        self.with(|open| {
+            let n = open.len();
+            Self::close_reused(open, n);
+            for s in open.iter_mut() {
+                if let Some(stage) = s.stage.take() {
+                    stage.finish("");
+                }
+            }
+        });
+    }
+}

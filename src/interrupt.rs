@@ -1,0 +1,42 @@
+//! SIGINT and SIGTERM: stop at the next safe point, keep every finished unit, and exit 130 with
+//! "interrupted; resume with --resume" (SPEC.md §2). The handler only sets a flag (the one thing
+//! a signal handler may safely do); units and the executor look at it between chunks of work, so
+//! nothing is left half-written under a final name. A second signal ends the process at once.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use crate::error::{Error, Result};
+
+static REQUESTED: AtomicBool = AtomicBool::new(false);
+
+extern "C" fn on_signal(sig: libc::c_int) {
+    if REQUESTED.swap(true, Ordering::SeqCst) {
+        // Second signal: the default action, now.
+        unsafe {
+            libc::signal(sig, libc::SIG_DFL);
+            libc::raise(sig);
+        }
+    }
+}
+
+/// Install the handler for SIGINT and SIGTERM (once, at the start of a command that runs units).
+pub fn install() {
+    unsafe {
+        libc::signal(libc::SIGINT, on_signal as *const () as libc::sighandler_t);
+        libc::signal(libc::SIGTERM, on_signal as *const () as libc::sighandler_t);
+    }
+}
+
+/// Has an interruption been asked for?
+pub fn requested() -> bool {
+    REQUESTED.load(Ordering::Relaxed)
+}
+
+/// `Err(Error::Interrupted)` once an interruption has been asked for.
+pub fn check() -> Result<()> {
+    if requested() {
+        Err(Error::Interrupted)
+    } else {
+        Ok(())
+    }
+}

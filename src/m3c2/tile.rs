@@ -1,0 +1,77 @@
+//! M3C2 for the core points one tile owns, from the points of both epochs the tile holds (its
+//! square and halo): index both, thin C1 to the tile's core points (or take the user's), normals,
+//! distances. A pure function of its inputs.
+//!
+//! Every tile uses the same local frame (the core-point anchor), not one of its own: the local
+//! coordinates, and so every rounding in the sums and the top-surface cells of `auto`
+//! orientation, are then the same whatever the tiling, and a tiled run gives the bytes of a
+//! whole-cloud run.
+
+use super::{core_points, CoreResult, M3c2Params};
+use crate::io::Point3;
+use crate::spatial::Columns;
+
+/// One epoch's points in a tile, with whether the tile owns each.
+pub struct EpochPoints<'a> {
+    pub point: &'a (dyn Fn(usize) -> Point3 + Sync),
+    pub owned: &'a [bool],
+}
+
+impl EpochPoints<'_> {
+    pub fn len(&self) -> usize {
+        self.owned.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.owned.is_empty()
+    }
+}
+
+/// One core point's result with its global sort key.
+#[derive(Debug, Clone, Copy)]
+pub struct KeyedResult {
+    pub key: u64,
+    pub xyz: Point3,
+    pub r: CoreResult,
+}
+
+/// Normals and M3C2 at the core points the tile owns — C1 thinned on the grid anchored at
+/// `anchor` with cells of `core_spacing` (keyed by cell), or the user's `cores` (keyed by input
+/// order) — sorted by key.
+pub fn compute(
+    before: &EpochPoints,
+    after: &EpochPoints,
+    anchor: Point3,
+    core_spacing: f64,
+    cores: Option<&[(u64, Point3)]>,
+    params: &M3c2Params,
+) -> Vec<KeyedResult> {
+    let cell = super::column_width(params);
+    let index = |t: &EpochPoints| Columns::from_fn(t.len(), t.point, anchor, cell);
+    let (b, a) = rayon::join(|| index(before), || index(after));
+    let keyed: Vec<(u64, Point3)> = match cores {
+        Some(c) => c.to_vec(),
+        None => core_points::thin(
+            before.len(),
+            before.point,
+            &anchor,
+            core_spacing,
+            |i| before.owned[i],
+        )
+        .into_iter()
+        .map(|(k, i)| (k, (before.point)(i)))
+        .collect(),
+    };
+    if keyed.is_empty() {
+        return Vec::new();
+    }
+    let local: Vec<Point3> = keyed.iter().map(|(_, p)| b.to_local(p)).collect();
+    let normals = super::normals(&b, &local, params);
+    let results = super::distances(&b, &a, &local, &normals, params);
+    let mut out: Vec<KeyedResult> = keyed
+        .iter()
+        .zip(results)
+        .map(|(&(key, xyz), r)| KeyedResult { key, xyz, r })
+        .collect();
+    out.sort_by_key(|k| k.key);
+    out
+}

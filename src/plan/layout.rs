@@ -1,0 +1,136 @@
+//! The tile layout of a run: one grid of square tiles with halos for every survey of the run
+//! (SPEC.md §3), anchored on the core-point grid.
+//!
+//! The grid's origin and side are whole multiples of `core_spacing`, so a core-point cell never
+//! straddles two tiles and a tiled run thins C1 to exactly the core points of a whole-cloud run.
+//! Its side follows from the memory budget and the densest survey ([`TileGrid::plan`]); its halo
+//! holds every neighbourhood a tile's core points need ([`tile_halo`]).
+
+use serde::{Deserialize, Serialize};
+use talus_tiling::{BoundsXY, TileGrid};
+
+use crate::error::{Error, Result};
+use crate::io::{Bounds, Point3};
+use crate::params::Params;
+
+/// Resident bytes per input point while its tile is processed: coordinates (24), the column
+/// index's copy (24), the owned flag and slack for the per-core-point results and the tile being
+/// read meanwhile.
+pub const BYTES_PER_POINT: u64 = 72;
+
+/// Map an error of the tiling crate onto talus's.
+pub fn tiling_error(e: talus_tiling::Error) -> Error {
+    match e {
+        talus_tiling::Error::Io { path, source } => Error::output(path, source),
+        other => Error::Internal(other.to_string()),
+    }
+}
+
+/// The grid, halo and core-point anchor of a run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Layout {
+    /// Grid origin (min corner), tile side, columns, rows.
+    pub origin: [f64; 2],
+    pub tile_size: f64,
+    pub cols: u32,
+    pub rows: u32,
+    pub halo: f64,
+    /// Origin of the core-point grid (global).
+    pub anchor: Point3,
+    pub core_spacing: f64,
+    /// The bounds of every input (the surveys and the core-point file).
+    pub extent: Bounds,
+}
+
+impl Layout {
+    /// Plan the tiles from the inputs' bounds and point counts, the halo and the memory budget;
+    /// `tile_size` forces the side (tests of tiling invariance).
+    pub fn plan(
+        bounds: &[Bounds],
+        points: u64,
+        params: &Params,
+        tile_size: Option<f64>,
+    ) -> Result<Layout> {
+        let mut b = Bounds::empty();
+        for x in bounds {
+            b.grow(&x.min);
+            b.grow(&x.max);
+        }
+        let c = params.core_spacing.value;
+        let anchor = [
+            (b.min[0] / c).floor() * c,
+            (b.min[1] / c).floor() * c,
+            (b.min[2] / c).floor() * c,
+        ];
+        let halo = tile_halo(params);
+        let w = (b.max[0] - anchor[0]).max(c);
+        let h = (b.max[1] - anchor[1]).max(c);
+        let density = points as f64 / (w * h);
+        let side = match tile_size {
+            Some(s) if s > 0.0 => s,
+            Some(s) => return Err(Error::Usage(format!("tile size must be positive, got {s}"))),
+            None => TileGrid::plan(
+                BoundsXY::new([anchor[0], anchor[1]], [anchor[0] + w, anchor[1] + h]),
+                density,
+                halo,
+                params.memory_bytes.value,
+                BYTES_PER_POINT,
+            )
+            .map_err(tiling_error)?
+            .tile_size(),
+        };
+        // Whole core cells per tile; at least one.
+        let side = ((side / c).ceil().max(1.0)) * c;
+        let cols = ((w / side).ceil().max(1.0)) as u32;
+        let rows = ((h / side).ceil().max(1.0)) as u32;
+        let layout = Layout {
+            origin: [anchor[0], anchor[1]],
+            tile_size: side,
+            cols,
+            rows,
+            halo,
+            anchor,
+            core_spacing: c,
+            extent: b,
+        };
+        layout.grid()?;
+        Ok(layout)
+    }
+
+    /// The tile grid.
+    pub fn grid(&self) -> Result<TileGrid> {
+        TileGrid::new(self.origin, self.tile_size, self.cols, self.rows).map_err(tiling_error)
+    }
+
+    /// A stable description for unit keys: everything a tile's content depends on.
+    pub fn key(&self) -> String {
+        format!(
+            "{:?}|{}|{}|{}|{}|{:?}",
+            self.origin, self.tile_size, self.cols, self.rows, self.halo, self.anchor
+        )
+    }
+
+    /// Number of tiles.
+    pub fn len(&self) -> usize {
+        self.cols as usize * self.rows as usize
+    }
+
+    /// True when the grid has no tile (never: a layout has at least one).
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// The halo of the tile files: how far beyond its square a tile must hold points so that every
+/// neighbourhood a tile's M3C2 unit computes for the core points it owns is the one a whole-cloud
+/// run sees (SPEC.md §3): the normal sphere, the M3C2 cylinder (inside its circumscribed sphere),
+/// and, for `auto` orientation, the top-surface cells 1..4 × normal_radius away (cells of
+/// normal_radius / 2, so a cell reaches another half diagonal, < 0.71 × normal_radius, further).
+/// The DBSCAN `eps` is not in it: the events unit clusters the kept core points with its own
+/// halo, so a changed `eps` must not cut the surveys again.
+pub fn tile_halo(params: &Params) -> f64 {
+    let nr = params.normal_radius.value;
+    let cyl = (params.cyl_radius.value.powi(2) + params.cyl_halflen.value.powi(2)).sqrt();
+    let orient = 4.0 * nr + 0.5 * nr * std::f64::consts::SQRT_2;
+    nr.max(cyl).max(orient) + 2.0 * params.core_spacing.value
+}

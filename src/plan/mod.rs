@@ -1,0 +1,331 @@
+//! The plan of a run: its units and their dependencies (SPEC.md §3 "Units").
+//!
+//! A unit is one piece of work with immutable results: a survey's tiling, a tile's normals and
+//! M3C2 for a pair, a pair's stable ground, a pair's events, a tile's event volumes, a pair's
+//! outputs. Each has a **key**, a hash of what its result depends on — its inputs' content (the
+//! files' content keys, `store::Store::content_key`), the parameters it uses, and the keys of the
+//! units it reads (a Merkle chain: a change anywhere upstream changes every key below it, and
+//! nothing else). A unit's name holds its key, so a finished unit with that name is exactly the
+//! result wanted, whichever process or run made it, and `--resume` needs no other bookkeeping.
+//!
+//! The plan is written to `DIR/.talus/plan.json`, so that any process (`talus worker DIR`, a
+//! Slurm array task) can run any unit whose dependencies are done. A `compare` is a one-pair
+//! plan; a campaign is a bigger one with the same kinds of units.
+
+pub mod layout;
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use talus_tiling::{Fnv64, TileId};
+
+use crate::error::{Error, Result};
+use crate::io::Bounds;
+use crate::params::Params;
+use crate::sampling::Spacing;
+pub use layout::Layout;
+
+/// The version of plan.json's layout (a plan of another version is planned again).
+pub const PLAN_VERSION: u32 = 1;
+
+/// An input file and its content key.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct InputFile {
+    pub path: PathBuf,
+    pub key: String,
+}
+
+/// One survey (epoch) of the run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Survey {
+    /// A short name for unit names and outputs (`before`, `after`, a date, a label).
+    pub label: String,
+    pub file: InputFile,
+    pub points: u64,
+    pub bounds: Bounds,
+    /// e.g. `LAZ 1.4 point format 6`.
+    pub format: String,
+    /// e.g. `EPSG:32755`.
+    pub crs: String,
+    /// The LAS scale factors (coordinate quanta), None for text and PLY.
+    pub scale: Option<[f64; 3]>,
+}
+
+/// Two surveys compared.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Pair {
+    pub label: String,
+    pub before: usize,
+    pub after: usize,
+}
+
+/// What a unit does.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Spec {
+    /// Cut a survey into the layout's tiles.
+    Tiling { survey: usize },
+    /// Cut the user's core-point file into the layout's tiles.
+    Cores,
+    /// Normals and M3C2 for the core points one tile owns.
+    M3c2 { pair: usize, tile: [u32; 2] },
+    /// Noise and registration error on the pair's stable ground.
+    Stable { pair: usize },
+    /// The pair's events: filter, smoothing, signed clustering, description.
+    Events { pair: usize },
+    /// The volumes of the pair's events whose centroid a tile owns.
+    Volumes { pair: usize, tile: [u32; 2] },
+    /// The pair's outputs, ready to publish.
+    Outputs { pair: usize },
+}
+
+impl Spec {
+    /// The kind, as in unit names and store directories.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Spec::Tiling { .. } => "tiling",
+            Spec::Cores => "cores",
+            Spec::M3c2 { .. } => "m3c2",
+            Spec::Stable { .. } => "stable",
+            Spec::Events { .. } => "events",
+            Spec::Volumes { .. } => "volumes",
+            Spec::Outputs { .. } => "outputs",
+        }
+    }
+}
+
+/// A tile id from the plan's [col, row].
+pub fn tile_id(t: [u32; 2]) -> TileId {
+    TileId {
+        col: t[0],
+        row: t[1],
+    }
+}
+
+/// One unit of the plan.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Unit {
+    /// Store directory: `units/<kind>/<name>`; the name ends in the key.
+    pub name: String,
+    pub key: String,
+    /// Indices (into `Plan::units`) of the units whose results this one reads.
+    pub deps: Vec<usize>,
+    pub spec: Spec,
+}
+
+impl Unit {
+    pub fn kind(&self) -> &'static str {
+        self.spec.kind()
+    }
+}
+
+/// Everything a run needs, for any process that executes its units.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Plan {
+    pub version: u32,
+    /// The run's id: the key of its final units (so the same work is the same run).
+    pub run: String,
+    pub surveys: Vec<Survey>,
+    pub pairs: Vec<Pair>,
+    /// Parameters as resolved before M3C2 (the stable-ground unit measures the rest).
+    pub params: Params,
+    pub spacing: Spacing,
+    pub layout: Layout,
+    pub core_points: Option<InputFile>,
+    /// The user's surfaces (before, after) instead of the local reconstruction.
+    pub meshes: Option<[InputFile; 2]>,
+    /// Stop after M3C2: no events, volumes or meshes.
+    pub m3c2_only: bool,
+    pub units: Vec<Unit>,
+}
+
+/// A unit key: FNV-1a 64 over the parts, each length-prefixed (so ("ab","c") ≠ ("a","bc")).
+pub fn key_of(parts: &[&str]) -> String {
+    let mut h = Fnv64::new();
+    for p in parts {
+        h.write_str(p);
+    }
+    h.hex()
+}
+
+/// A name safe in file names: ASCII letters, digits, '-', '_', '.', the rest '_'.
+pub fn slug(s: &str) -> String {
+    s.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' || c == '.' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+impl Plan {
+    /// Add a unit; returns its index.
+    fn push(&mut self, spec: Spec, label: &str, key_parts: &[&str], deps: Vec<usize>) -> usize {
+        let dep_keys: Vec<&str> = deps.iter().map(|&d| self.units[d].key.as_str()).collect();
+        let mut parts = vec![spec.kind()];
+        parts.extend_from_slice(key_parts);
+        parts.extend(dep_keys);
+        let key = key_of(&parts);
+        self.units.push(Unit {
+            name: format!("{}-{key}", slug(label)),
+            key,
+            deps,
+            spec,
+        });
+        self.units.len() - 1
+    }
+
+    /// The units of a one-pair comparison (before = survey 0, after = survey 1), appended to an
+    /// empty plan: two tilings, an M3C2 unit per tile, the stable ground, the events, a volumes
+    /// unit per tile and the outputs (no events, volumes with `m3c2_only`).
+    pub fn add_pair_units(&mut self, pair: usize) -> Result<()> {
+        let grid = self.layout.grid()?;
+        let layout_key = self.layout.key();
+        let (b, a) = (self.pairs[pair].before, self.pairs[pair].after);
+        let label = self.pairs[pair].label.clone();
+        let tiling = |plan: &mut Plan, s: usize| -> usize {
+            // A survey tiled once serves every pair it is in.
+            if let Some(i) = plan.units.iter().position(
+                |u| matches!(u.spec, Spec::Tiling { survey } if survey == s),
+            ) {
+                return i;
+            }
+            let (file_key, lbl) = (plan.surveys[s].file.key.clone(), plan.surveys[s].label.clone());
+            plan.push(Spec::Tiling { survey: s }, &lbl, &[&file_key, &layout_key], Vec::new())
+        };
+        let (tb, ta) = (tiling(self, b), tiling(self, a));
+        let m3c2 = format!("{:?}|{}", self.params.m3c2(), self.params.core_spacing.value);
+        let cores = self
+            .core_points
+            .as_ref()
+            .map_or("thinned C1".to_string(), |c| c.key.clone());
+        let core_unit = match self.core_points.clone() {
+            Some(c) => Some(match self.find(&Spec::Cores) {
+                Some(i) => i,
+                None => self.push(Spec::Cores, "cores", &[&c.key, &layout_key], Vec::new()),
+            }),
+            None => None,
+        };
+        let tiles: Vec<TileId> = grid.tiles().collect();
+        let m3c2_units: Vec<usize> = tiles
+            .iter()
+            .map(|t| {
+                self.push(
+                    Spec::M3c2 {
+                        pair,
+                        tile: [t.col, t.row],
+                    },
+                    &format!("{label}-{}", t.name()),
+                    &[&m3c2, &cores],
+                    [tb, ta].into_iter().chain(core_unit).collect(),
+                )
+            })
+            .collect();
+        let samples = crate::units::stable::SAMPLES.to_string();
+        let stable = self.push(
+            Spec::Stable { pair },
+            &label,
+            &[&samples],
+            m3c2_units.clone(),
+        );
+        let mut final_deps = vec![stable];
+        final_deps.extend(&m3c2_units);
+        if !self.m3c2_only {
+            let p = &self.params;
+            let user = |r: &crate::params::Resolved<f64>| {
+                if r.source == "user" {
+                    r.value.to_string()
+                } else {
+                    "measured".into()
+                }
+            };
+            let events_params = format!(
+                "{}|{}|{}|{}|{}|{}",
+                user(&p.reg_error),
+                user(&p.threshold),
+                p.smooth_k.value,
+                p.smooth_sigma.value,
+                p.eps.value,
+                p.cluster_min_points.value
+            );
+            let mut deps = vec![stable];
+            deps.extend(&m3c2_units);
+            let events = self.push(Spec::Events { pair }, &label, &[&events_params], deps);
+            let meshes = self
+                .meshes
+                .as_ref()
+                .map_or("points".to_string(), |[m1, m2]| format!("{}|{}", m1.key, m2.key));
+            let volume_params = format!(
+                "{}|{}|{}",
+                self.params.cyl_radius.value, self.params.cyl_halflen.value, self.params.point_spacing
+            );
+            let volumes: Vec<usize> = tiles
+                .iter()
+                .map(|t| {
+                    self.push(
+                        Spec::Volumes {
+                            pair,
+                            tile: [t.col, t.row],
+                        },
+                        &format!("{label}-{}", t.name()),
+                        &[&volume_params, &meshes],
+                        vec![events, stable, tb, ta],
+                    )
+                })
+                .collect();
+            final_deps.push(events);
+            final_deps.extend(volumes);
+        }
+        let inputs: Vec<String> = [b, a]
+            .iter()
+            .map(|&s| serde_json::to_string(&self.surveys[s]).unwrap_or_default())
+            .collect();
+        let version = format!("{}|{}", env!("CARGO_PKG_VERSION"), self.m3c2_only);
+        let out = self.push(
+            Spec::Outputs { pair },
+            &label,
+            &[&version, &inputs[0], &inputs[1], &cores],
+            final_deps,
+        );
+        self.run = self.units[out].key.clone();
+        Ok(())
+    }
+
+    /// The index of the unit of `spec`.
+    pub fn find(&self, spec: &Spec) -> Option<usize> {
+        self.units.iter().position(|u| &u.spec == spec)
+    }
+
+    /// The units of `kind` for `pair` (every pair for kinds without one), in plan order.
+    pub fn of_kind<'a>(&'a self, kind: &'a str) -> impl Iterator<Item = usize> + 'a {
+        (0..self.units.len()).filter(move |&i| self.units[i].kind() == kind)
+    }
+
+    /// Write the plan to `path` atomically.
+    pub fn save(&self, path: &Path) -> Result<()> {
+        let text = serde_json::to_vec_pretty(self)
+            .map_err(|e| Error::Internal(format!("plan: {e}")))?;
+        talus_tiling::atomic_write(path, &text).map_err(layout::tiling_error)
+    }
+
+    /// Read the plan at `path`.
+    pub fn load(path: &Path) -> Result<Plan> {
+        let text = std::fs::read(path)
+            .map_err(|e| Error::input(path, format!("cannot read the run's plan: {e}")))?;
+        let plan: Plan = serde_json::from_slice(&text)
+            .map_err(|e| Error::input(path, format!("not a talus plan: {e}")))?;
+        if plan.version != PLAN_VERSION {
+            return Err(Error::input(
+                path,
+                format!(
+                    "a plan of version {} (this talus writes {PLAN_VERSION}): run the command again",
+                    plan.version
+                ),
+            ));
+        }
+        Ok(plan)
+    }
+}

@@ -1,0 +1,215 @@
+//! An events unit: a pair's significance filter → smoothing → signed DBSCAN merged across tiles →
+//! description (SPEC.md §1), over the pair's M3C2 results in key order, with the parameters its
+//! stable-ground unit resolved.
+//!
+//! The kept core points (significant and |d| ≥ τ) are few next to the epochs, so they are held.
+//! Writes `events.json` (each event described, with the boxes its volume may be extruded along)
+//! and `kept.tile` (every kept core point: key, smoothed distance, event id or 0, normal and
+//! per-epoch spread, for m3c2.laz and for the volumes' claims and uncertainty).
+
+use std::collections::HashMap;
+
+use serde::{Deserialize, Serialize};
+use talus_tiling::{Column, ColumnData, TileColumns};
+
+use super::m3c2::Merged;
+use super::Ctx;
+use crate::error::{Error, Result};
+use crate::events::{self, Event, Kind, Obb};
+use crate::io::Point3;
+use crate::m3c2::orientation::STEEP_NZ;
+use crate::store::UnitWriter;
+
+pub const EVENTS: &str = "events.json";
+pub const KEPT: &str = "kept.tile";
+
+/// An event as the events unit leaves it: described, with its candidate boxes.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Draft {
+    pub event: Event,
+    /// The boxes the volume may be extruded along: the mean normal's, and straight up's where the
+    /// normal is not steep (see `volume::axis`).
+    pub candidates: Vec<Obb>,
+}
+
+/// A kept core point.
+#[derive(Debug, Clone, Copy)]
+pub struct Kept {
+    pub key: u64,
+    pub xyz: Point3,
+    pub d: f64,
+    pub lod: f64,
+    pub normal: Point3,
+    pub std_dev: [f64; 2],
+    pub smoothed: f64,
+    /// 0 = in no event.
+    pub event: u32,
+}
+
+/// The candidate boxes of an event with core points `cluster` (see [`Draft::candidates`]).
+pub fn candidate_boxes(e: &Event, cluster: &[Point3]) -> Vec<Obb> {
+    let mut boxes = vec![e.obb];
+    let n = e.mean_normal;
+    if n[2] >= STEEP_NZ && n[2] < 1.0 - 1e-9 {
+        boxes.extend(events::describe::box_along(cluster, [0.0, 0.0, 1.0]));
+    }
+    boxes
+}
+
+/// Run pair `pair`'s events into `out`.
+pub fn run(ctx: &Ctx, _unit: usize, pair: usize, out: &mut UnitWriter) -> Result<serde_json::Value> {
+    let params = super::stable::read(ctx, pair)?.params;
+    let (tau, reg) = (params.threshold.value, params.reg_error.value);
+    let mut kept = Vec::new();
+    let mut merged = Merged::new(ctx, pair)?;
+    while let Some(k) = merged.next_result()? {
+        let r = k.r.with_registration(reg);
+        if events::filter::is_kept(r.distance, r.uncertainty, tau) {
+            kept.push(Kept {
+                key: k.key,
+                xyz: k.xyz,
+                d: r.distance,
+                lod: r.uncertainty,
+                normal: r.normal,
+                std_dev: [r.std_dev1, r.std_dev2],
+                smoothed: f64::NAN,
+                event: 0,
+            });
+        }
+    }
+    let pts: Vec<Point3> = kept.iter().map(|k| k.xyz).collect();
+    let d: Vec<f64> = kept.iter().map(|k| k.d).collect();
+    let smoothed = events::smooth::smooth(
+        &pts,
+        &d,
+        params.smooth_k.value as usize,
+        params.smooth_sigma.value,
+    )?;
+    for (k, s) in kept.iter_mut().zip(&smoothed) {
+        k.smoothed = *s;
+    }
+    // Signed clusters, each sign on its own, tile by tile over the run's grid.
+    let grid = ctx.plan.layout.grid()?;
+    let mut clusters: Vec<(u64, Kind, Vec<usize>)> = Vec::new();
+    for kind in [Kind::Gain, Kind::Loss] {
+        let idx: Vec<usize> = (0..kept.len())
+            .filter(|&i| kind.matches(smoothed[i]))
+            .collect();
+        let p: Vec<Point3> = idx.iter().map(|&i| pts[i]).collect();
+        let keys: Vec<u64> = idx.iter().map(|&i| kept[i].key).collect();
+        let labels = events::tiled::cluster(
+            &p,
+            &keys,
+            &grid,
+            params.eps.value,
+            params.cluster_min_points.value as usize,
+        )?;
+        let mut by_label: HashMap<u32, Vec<usize>> = HashMap::new();
+        for (j, &l) in labels.iter().enumerate() {
+            if l > 0 {
+                by_label.entry(l).or_default().push(idx[j]);
+            }
+        }
+        for (_, members) in by_label {
+            let min_key = members.iter().map(|&i| kept[i].key).min().unwrap_or(0);
+            clusters.push((min_key, kind, members));
+        }
+    }
+    // Event ids in a canonical order: by the smallest key of each cluster.
+    clusters.sort_by_key(|c| c.0);
+    let mut drafts = Vec::new();
+    for (n, (_, kind, members)) in clusters.iter().enumerate() {
+        let id = n as u32 + 1;
+        let get = |f: &dyn Fn(&Kept) -> Point3| -> Vec<Point3> {
+            members.iter().map(|&i| f(&kept[i])).collect()
+        };
+        let (p, normals) = (get(&|k| k.xyz), get(&|k| k.normal));
+        let dist: Vec<f64> = members.iter().map(|&i| kept[i].d).collect();
+        let lod: Vec<f64> = members.iter().map(|&i| kept[i].lod).collect();
+        for &i in members {
+            kept[i].event = id;
+        }
+        if let Some(e) = events::describe(
+            id,
+            *kind,
+            &p,
+            &dist,
+            &lod,
+            &normals,
+            params.core_spacing.value,
+        ) {
+            let candidates = candidate_boxes(&e, &p);
+            drafts.push(Draft { event: e, candidates });
+        }
+    }
+    (ctx.progress)(drafts.len() as u64);
+    super::write_json(out, EVENTS, &drafts)?;
+    super::write_columns(out, KEPT, &to_columns(&kept))?;
+    Ok(serde_json::json!({ "events": drafts.len(), "kept": kept.len() }))
+}
+
+fn to_columns(kept: &[Kept]) -> TileColumns {
+    let f = |name: &str, g: &dyn Fn(&Kept) -> f64| Column {
+        name: name.into(),
+        data: ColumnData::F64(kept.iter().map(g).collect()),
+    };
+    let u = |name: &str, g: &dyn Fn(&Kept) -> u32| Column {
+        name: name.into(),
+        data: ColumnData::U32(kept.iter().map(g).collect()),
+    };
+    TileColumns {
+        x: kept.iter().map(|k| k.xyz[0]).collect(),
+        y: kept.iter().map(|k| k.xyz[1]).collect(),
+        z: kept.iter().map(|k| k.xyz[2]).collect(),
+        extra: vec![
+            u("key_hi", &|k| (k.key >> 32) as u32),
+            u("key_lo", &|k| k.key as u32),
+            f("distance", &|k| k.d),
+            f("lod", &|k| k.lod),
+            f("normal_x", &|k| k.normal[0]),
+            f("normal_y", &|k| k.normal[1]),
+            f("normal_z", &|k| k.normal[2]),
+            f("std_dev1", &|k| k.std_dev[0]),
+            f("std_dev2", &|k| k.std_dev[1]),
+            f("smoothed", &|k| k.smoothed),
+            u("event", &|k| k.event),
+        ],
+    }
+}
+
+/// The events and kept core points of pair `pair` (its events unit must be done).
+pub fn read(ctx: &Ctx, pair: usize) -> Result<(Vec<Draft>, Vec<Kept>)> {
+    let u = ctx.unit(&crate::plan::Spec::Events { pair })?;
+    let drafts: Vec<Draft> = super::read_json(ctx, u, EVENTS)?;
+    let c = super::read_columns(ctx, u, KEPT)?;
+    let kept_path = ctx.input(u, KEPT)?;
+    let bad = |name: &str| Error::Damaged {
+        path: kept_path.clone(),
+        problem: format!("no column {name}"),
+    };
+    let f = |name: &str| match c.column(name) {
+        Some(ColumnData::F64(v)) => Ok(v),
+        _ => Err(bad(name)),
+    };
+    let g = |name: &str| match c.column(name) {
+        Some(ColumnData::U32(v)) => Ok(v),
+        _ => Err(bad(name)),
+    };
+    let (hi, lo, ev) = (g("key_hi")?, g("key_lo")?, g("event")?);
+    let (d, lod, sm) = (f("distance")?, f("lod")?, f("smoothed")?);
+    let (nx, ny, nz) = (f("normal_x")?, f("normal_y")?, f("normal_z")?);
+    let (s1, s2) = (f("std_dev1")?, f("std_dev2")?);
+    let kept = (0..c.len())
+        .map(|i| Kept {
+            key: (hi[i] as u64) << 32 | lo[i] as u64,
+            xyz: [c.x[i], c.y[i], c.z[i]],
+            d: d[i],
+            lod: lod[i],
+            normal: [nx[i], ny[i], nz[i]],
+            std_dev: [s1[i], s2[i]],
+            smoothed: sm[i],
+            event: ev[i],
+        })
+        .collect();
+    Ok((drafts, kept))
+}

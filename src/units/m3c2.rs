@@ -1,0 +1,316 @@
+//! An M3C2 unit: normals and M3C2 for the core points one tile owns, for one pair (pass 2 of
+//! SPEC.md §3), from the pair's two tilings (and the user's core points, [`cores`]). Results are
+//! written as chunk files sorted by core-point key; [`Merged`] streams a pair's results in global
+//! key order (a k-way merge over the tiles), so everything downstream is the same whatever the
+//! tiling.
+
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+use std::path::PathBuf;
+
+use talus_tiling::{Column, ColumnData, TileColumns, TileId};
+
+use super::{meta_u64, read_tile, Ctx, TilePoints};
+use crate::error::{Error, Result};
+use crate::io::Point3;
+use crate::m3c2::tile::{compute, EpochPoints, KeyedResult};
+use crate::m3c2::CoreResult;
+use crate::plan::Spec;
+use crate::store::UnitWriter;
+
+/// Rows per result chunk file: a merge holds one chunk per tile.
+pub const CHUNK_ROWS: usize = 8192;
+
+/// The file of chunk `k`.
+pub fn chunk_file(k: usize) -> String {
+    format!("r_{k:05}.tile")
+}
+
+/// Compute tile `tile` of pair `pair` into `out`.
+pub fn run(
+    ctx: &Ctx,
+    unit: usize,
+    pair: usize,
+    tile: TileId,
+    out: &mut UnitWriter,
+) -> Result<serde_json::Value> {
+    let plan = ctx.plan;
+    let deps = &plan.units[unit].deps;
+    let (before, after) = std::thread::scope(|s| {
+        // Both epochs at once: decompressing a tile is one thread's work.
+        let a = s.spawn(|| read_tile(ctx, deps[1], tile));
+        let b = read_tile(ctx, deps[0], tile);
+        let a = a
+            .join()
+            .unwrap_or_else(|_| Err(Error::Internal("a tile reader panicked".into())));
+        (b, a)
+    });
+    let (before, after) = (before?, after?);
+    let user_cores = match deps.get(2) {
+        Some(&c) => Some(cores::read(ctx, c, tile)?),
+        None => None,
+    };
+    let (fb, fa) = (|i: usize| before.point(i), |i: usize| after.point(i));
+    let results = compute(
+        &EpochPoints {
+            point: &fb,
+            owned: &before.owned,
+        },
+        &EpochPoints {
+            point: &fa,
+            owned: &after.owned,
+        },
+        plan.layout.anchor,
+        plan.layout.core_spacing,
+        user_cores.as_deref(),
+        &plan.params.m3c2(),
+    );
+    let mut chunks = 0;
+    for (k, part) in results.chunks(CHUNK_ROWS).enumerate() {
+        super::write_columns(out, &chunk_file(k), &to_columns(part))?;
+        chunks = k + 1;
+    }
+    let owned = |t: &TilePoints| t.owned.iter().filter(|&&o| o).count() as u64;
+    let points = owned(&before) + owned(&after);
+    (ctx.progress)(points);
+    let _ = pair;
+    Ok(serde_json::json!({
+        "chunks": chunks,
+        "core_points": results.len(),
+        "points": points,
+    }))
+}
+
+fn f64col(name: &str, v: Vec<f64>) -> Column {
+    Column {
+        name: name.into(),
+        data: ColumnData::F64(v),
+    }
+}
+
+fn u32col(name: &str, v: Vec<u32>) -> Column {
+    Column {
+        name: name.into(),
+        data: ColumnData::U32(v),
+    }
+}
+
+fn to_columns(rs: &[KeyedResult]) -> TileColumns {
+    let col = |f: &dyn Fn(&KeyedResult) -> f64| rs.iter().map(f).collect::<Vec<f64>>();
+    TileColumns {
+        x: col(&|r| r.xyz[0]),
+        y: col(&|r| r.xyz[1]),
+        z: col(&|r| r.xyz[2]),
+        extra: vec![
+            u32col("key_hi", rs.iter().map(|r| (r.key >> 32) as u32).collect()),
+            u32col("key_lo", rs.iter().map(|r| r.key as u32).collect()),
+            f64col("distance", col(&|r| r.r.distance)),
+            f64col("uncertainty", col(&|r| r.r.uncertainty)),
+            Column {
+                name: "significant".into(),
+                data: ColumnData::U8(rs.iter().map(|r| r.r.significant as u8).collect()),
+            },
+            f64col("std_dev1", col(&|r| r.r.std_dev1)),
+            f64col("std_dev2", col(&|r| r.r.std_dev2)),
+            u32col("count1", rs.iter().map(|r| r.r.count1).collect()),
+            u32col("count2", rs.iter().map(|r| r.r.count2).collect()),
+            f64col("normal_x", col(&|r| r.r.normal[0])),
+            f64col("normal_y", col(&|r| r.r.normal[1])),
+            f64col("normal_z", col(&|r| r.r.normal[2])),
+        ],
+    }
+}
+
+/// Read one result chunk back.
+pub fn read_chunk(path: &std::path::Path) -> Result<Vec<KeyedResult>> {
+    let c = talus_tiling::read_tile(path).map_err(|e| super::damaged(path, e))?;
+    let missing = |name: &str| Error::Damaged {
+        path: path.to_path_buf(),
+        problem: format!("no column {name}"),
+    };
+    let f = |name: &str| -> Result<&Vec<f64>> {
+        match c.column(name) {
+            Some(ColumnData::F64(v)) => Ok(v),
+            _ => Err(missing(name)),
+        }
+    };
+    let u = |name: &str| -> Result<&Vec<u32>> {
+        match c.column(name) {
+            Some(ColumnData::U32(v)) => Ok(v),
+            _ => Err(missing(name)),
+        }
+    };
+    let sig = match c.column("significant") {
+        Some(ColumnData::U8(v)) => v,
+        _ => return Err(missing("significant")),
+    };
+    let (hi, lo) = (u("key_hi")?, u("key_lo")?);
+    let (d, unc, s1, s2) = (
+        f("distance")?,
+        f("uncertainty")?,
+        f("std_dev1")?,
+        f("std_dev2")?,
+    );
+    let (n1, n2) = (u("count1")?, u("count2")?);
+    let (nx, ny, nz) = (f("normal_x")?, f("normal_y")?, f("normal_z")?);
+    Ok((0..c.len())
+        .map(|i| KeyedResult {
+            key: (hi[i] as u64) << 32 | lo[i] as u64,
+            xyz: [c.x[i], c.y[i], c.z[i]],
+            r: CoreResult {
+                distance: d[i],
+                uncertainty: unc[i],
+                significant: sig[i] == 1,
+                std_dev1: s1[i],
+                std_dev2: s2[i],
+                count1: n1[i],
+                count2: n2[i],
+                normal: [nx[i], ny[i], nz[i]],
+            },
+        })
+        .collect())
+}
+
+/// The chunk files of a pair's M3C2 units, per tile in grid order.
+pub fn pair_chunks(ctx: &Ctx, pair: usize) -> Result<Vec<Vec<PathBuf>>> {
+    let grid = ctx.plan.layout.grid()?;
+    grid.tiles()
+        .map(|t| {
+            let u = ctx.unit(&Spec::M3c2 {
+                pair,
+                tile: [t.col, t.row],
+            })?;
+            let n = meta_u64(&ctx.meta(u)?, "chunks")? as usize;
+            (0..n).map(|k| ctx.input(u, &chunk_file(k))).collect()
+        })
+        .collect()
+}
+
+/// How many core points a pair's M3C2 units hold, from their records.
+pub fn pair_count(ctx: &Ctx, pair: usize) -> Result<u64> {
+    let grid = ctx.plan.layout.grid()?;
+    let mut n = 0;
+    for t in grid.tiles() {
+        let u = ctx.unit(&Spec::M3c2 {
+            pair,
+            tile: [t.col, t.row],
+        })?;
+        n += meta_u64(&ctx.meta(u)?, "core_points")?;
+    }
+    Ok(n)
+}
+
+/// A pair's M3C2 results in global key order: a k-way merge holding one chunk per tile.
+pub struct Merged {
+    tiles: Vec<Vec<PathBuf>>,
+    /// Per tile: the loaded chunk, position in it, next chunk number.
+    cursors: Vec<(Vec<KeyedResult>, usize, usize)>,
+    heap: BinaryHeap<Reverse<(u64, usize)>>,
+}
+
+impl Merged {
+    pub fn new(ctx: &Ctx, pair: usize) -> Result<Self> {
+        let tiles = pair_chunks(ctx, pair)?;
+        let mut m = Merged {
+            cursors: vec![(Vec::new(), 0, 0); tiles.len()],
+            tiles,
+            heap: BinaryHeap::new(),
+        };
+        for t in 0..m.tiles.len() {
+            m.advance_chunk(t)?;
+        }
+        Ok(m)
+    }
+
+    fn advance_chunk(&mut self, t: usize) -> Result<()> {
+        let c = &mut self.cursors[t];
+        while c.1 >= c.0.len() && c.2 < self.tiles[t].len() {
+            c.0 = read_chunk(&self.tiles[t][c.2])?;
+            c.1 = 0;
+            c.2 += 1;
+        }
+        if c.1 < c.0.len() {
+            self.heap.push(Reverse((c.0[c.1].key, t)));
+        }
+        Ok(())
+    }
+
+    /// The next result in key order.
+    pub fn next_result(&mut self) -> Result<Option<KeyedResult>> {
+        let Some(Reverse((_, t))) = self.heap.pop() else {
+            return Ok(None);
+        };
+        let c = &mut self.cursors[t];
+        let r = c.0[c.1];
+        c.1 += 1;
+        if c.1 < c.0.len() {
+            self.heap.push(Reverse((c.0[c.1].key, t)));
+        } else {
+            self.advance_chunk(t)?;
+        }
+        Ok(Some(r))
+    }
+}
+
+/// The user's core points (`--core-points`), cut into the layout's tiles once for every M3C2
+/// unit: each tile's file holds the points it owns, keyed by their order in the input (so
+/// m3c2.laz gives them back in that order).
+pub mod cores {
+    use super::*;
+
+    /// The file of tile `id`'s core points.
+    pub fn file(id: TileId) -> String {
+        format!("c_{}.tile", id.name())
+    }
+
+    /// Cut the plan's core-point file into `out`.
+    pub fn run(ctx: &Ctx, out: &mut UnitWriter) -> Result<serde_json::Value> {
+        let plan = ctx.plan;
+        let grid = plan.layout.grid()?;
+        let input = plan
+            .core_points
+            .as_ref()
+            .ok_or_else(|| Error::Internal("a core-point unit without core points".into()))?;
+        let mut by_tile: Vec<Vec<(u64, Point3)>> = vec![Vec::new(); grid.len()];
+        let mut reader = crate::io::open(&input.path)?;
+        let mut buf = Vec::new();
+        let mut n = 0u64;
+        while reader.fill(&mut buf, 1 << 16)? > 0 {
+            for p in &buf {
+                by_tile[grid.index(grid.owner(p[0], p[1]))].push((n, *p));
+                n += 1;
+            }
+        }
+        for id in grid.tiles() {
+            let pts = &by_tile[grid.index(id)];
+            let col = |k: usize| pts.iter().map(|(_, p)| p[k]).collect::<Vec<f64>>();
+            let cols = TileColumns {
+                x: col(0),
+                y: col(1),
+                z: col(2),
+                extra: vec![
+                    u32col("key_hi", pts.iter().map(|(k, _)| (k >> 32) as u32).collect()),
+                    u32col("key_lo", pts.iter().map(|(k, _)| *k as u32).collect()),
+                ],
+            };
+            super::super::write_columns(out, &file(id), &cols)?;
+        }
+        Ok(serde_json::json!({ "points": n }))
+    }
+
+    /// Tile `id`'s core points from the core-point unit `unit`.
+    pub fn read(ctx: &Ctx, unit: usize, id: TileId) -> Result<Vec<(u64, Point3)>> {
+        let c = super::super::read_columns(ctx, unit, &file(id))?;
+        let (Some(ColumnData::U32(hi)), Some(ColumnData::U32(lo))) =
+            (c.column("key_hi"), c.column("key_lo"))
+        else {
+            return Err(Error::Damaged {
+                path: ctx.input(unit, &file(id))?,
+                problem: "no key columns".into(),
+            });
+        };
+        Ok((0..c.len())
+            .map(|i| ((hi[i] as u64) << 32 | lo[i] as u64, [c.x[i], c.y[i], c.z[i]]))
+            .collect())
+    }
+}

@@ -1,0 +1,196 @@
+//! What each kind of unit does (SPEC.md §3 "Units"), one module per kind, in pipeline order:
+//! [`tiling`] (a survey → tile files) → [`m3c2`] (a tile's normals and distances for a pair) →
+//! [`stable`] (a pair's noise and registration error) → [`events`] (a pair's filter, smoothing,
+//! clustering, description) → [`volumes`] (a tile's events' volumes) → [`outputs`] (a pair's
+//! files, ready to publish).
+//!
+//! The unit contract: a unit reads only the plan and the files of the units it depends on, and
+//! writes only into its own [`UnitWriter`]; it returns a small JSON `meta` kept in its record
+//! (counts, seconds). It is a pure function of those inputs — whichever process, machine or run
+//! executes it, and in whatever order the units run, its files are the same bytes. A stage is
+//! added by writing one more such module and the units of its kind in [`crate::plan`].
+
+pub mod events;
+pub mod m3c2;
+pub mod outputs;
+pub mod stable;
+pub mod tiling;
+pub mod volumes;
+
+use std::path::{Path, PathBuf};
+
+use talus_tiling::TileId;
+
+use crate::error::{Error, Result};
+use crate::io::Point3;
+use crate::plan::{Plan, Spec};
+use crate::store::{Store, UnitRef, UnitWriter};
+
+/// What a unit sees while it runs.
+pub struct Ctx<'a> {
+    pub plan: &'a Plan,
+    pub store: &'a Store,
+    /// Counts the unit's work (points, core points, events) for its stage's progress line.
+    pub progress: &'a (dyn Fn(u64) + Sync),
+}
+
+impl Ctx<'_> {
+    /// The store's name of unit `i`.
+    pub fn unit_ref(&self, i: usize) -> UnitRef {
+        unit_ref(self.plan, i)
+    }
+
+    /// The path of `file` in finished unit `i` (a dependency).
+    pub fn input(&self, i: usize, file: &str) -> Result<PathBuf> {
+        Ok(self.store.unit_dir(&self.unit_ref(i))?.join(file))
+    }
+
+    /// The record's meta of finished unit `i`.
+    pub fn meta(&self, i: usize) -> Result<serde_json::Value> {
+        self.store
+            .done(&self.unit_ref(i))
+            .map(|r| r.meta)
+            .ok_or_else(|| Error::Internal(format!("unit {} is not done", self.plan.units[i].name)))
+    }
+
+    /// The index of the unit of `spec` (it must be in the plan).
+    pub fn unit(&self, spec: &Spec) -> Result<usize> {
+        self.plan
+            .find(spec)
+            .ok_or_else(|| Error::Internal(format!("no unit {spec:?} in the plan")))
+    }
+}
+
+/// The store's name of the plan's unit `i`.
+pub fn unit_ref(plan: &Plan, i: usize) -> UnitRef {
+    let u = &plan.units[i];
+    UnitRef {
+        kind: u.kind().to_string(),
+        name: u.name.clone(),
+    }
+}
+
+/// Run unit `i` of the plan, writing its files into `out`; returns the meta for its record.
+pub fn run(ctx: &Ctx, i: usize, out: &mut UnitWriter) -> Result<serde_json::Value> {
+    match ctx.plan.units[i].spec {
+        Spec::Tiling { survey } => tiling::run(ctx, survey, out),
+        Spec::Cores => m3c2::cores::run(ctx, out),
+        Spec::M3c2 { pair, tile } => m3c2::run(ctx, i, pair, crate::plan::tile_id(tile), out),
+        Spec::Stable { pair } => stable::run(ctx, i, pair, out),
+        Spec::Events { pair } => events::run(ctx, i, pair, out),
+        Spec::Volumes { pair, tile } => {
+            volumes::run(ctx, i, pair, crate::plan::tile_id(tile), out)
+        }
+        Spec::Outputs { pair } => outputs::run(ctx, i, pair, out),
+    }
+}
+
+/// A damaged file of a finished unit: the executor throws that unit away and redoes it (a tile
+/// file's checksums do not match, it is truncated, ...).
+pub fn damaged(path: &Path, e: talus_tiling::Error) -> Error {
+    if e.is_corrupt() {
+        Error::Damaged {
+            path: path.to_path_buf(),
+            problem: e.to_string(),
+        }
+    } else {
+        crate::plan::layout::tiling_error(e)
+    }
+}
+
+/// The points of one tile: global coordinates, as the columns the tile file holds (no copy into
+/// another layout), and whether the tile owns each one.
+pub struct TilePoints {
+    pub x: Vec<f64>,
+    pub y: Vec<f64>,
+    pub z: Vec<f64>,
+    pub owned: Vec<bool>,
+}
+
+impl TilePoints {
+    /// Number of points.
+    pub fn len(&self) -> usize {
+        self.x.len()
+    }
+
+    /// True when the tile holds no point.
+    pub fn is_empty(&self) -> bool {
+        self.x.is_empty()
+    }
+
+    /// Point `i`.
+    #[inline]
+    pub fn point(&self, i: usize) -> Point3 {
+        [self.x[i], self.y[i], self.z[i]]
+    }
+}
+
+/// Read tile `id` of the tiling unit `tiling`.
+pub fn read_tile(ctx: &Ctx, tiling: usize, id: TileId) -> Result<TilePoints> {
+    let path = ctx.input(tiling, &tiling::tile_file(id))?;
+    let cols = talus_tiling::read_tile(&path).map_err(|e| damaged(&path, e))?;
+    let owned = match cols.column(talus_tiling::OWNED_COLUMN) {
+        Some(talus_tiling::ColumnData::U8(v)) => v.iter().map(|&o| o == 1).collect(),
+        _ => vec![true; cols.len()],
+    };
+    Ok(TilePoints {
+        x: cols.x,
+        y: cols.y,
+        z: cols.z,
+        owned,
+    })
+}
+
+/// A number of the record's meta.
+pub fn meta_u64(meta: &serde_json::Value, key: &str) -> Result<u64> {
+    meta[key]
+        .as_u64()
+        .ok_or_else(|| Error::Internal(format!("unit record without {key}: {meta}")))
+}
+
+/// Serialize `value` as JSON into `file` of `out`, recorded with its digest.
+pub fn write_json(out: &mut UnitWriter, file: &str, value: &impl serde::Serialize) -> Result<()> {
+    let bytes =
+        serde_json::to_vec(value).map_err(|e| Error::Internal(format!("{file}: {e}")))?;
+    write_bytes(out, file, &bytes)
+}
+
+/// Write `bytes` into `file` of `out`, recorded with its digest.
+pub fn write_bytes(out: &mut UnitWriter, file: &str, bytes: &[u8]) -> Result<()> {
+    let path = out.path(file)?;
+    std::fs::write(&path, bytes).map_err(|e| Error::output(&path, e))?;
+    let d = talus_tiling::FileDigest::of(bytes);
+    out.add(file, d.crc32, d.size);
+    Ok(())
+}
+
+/// Read `file` of finished unit `i` as JSON.
+pub fn read_json<T: serde::de::DeserializeOwned>(ctx: &Ctx, i: usize, file: &str) -> Result<T> {
+    let path = ctx.input(i, file)?;
+    let bytes = std::fs::read(&path).map_err(|e| Error::Damaged {
+        path: path.clone(),
+        problem: e.to_string(),
+    })?;
+    serde_json::from_slice(&bytes).map_err(|e| Error::Damaged {
+        path,
+        problem: e.to_string(),
+    })
+}
+
+/// Write tile-file columns into `file` of `out`, recorded with their digest.
+pub fn write_columns(
+    out: &mut UnitWriter,
+    file: &str,
+    cols: &talus_tiling::TileColumns,
+) -> Result<()> {
+    let path = out.path(file)?;
+    let d = talus_tiling::write_tile(&path, cols).map_err(crate::plan::layout::tiling_error)?;
+    out.add(file, d.crc32, d.size);
+    Ok(())
+}
+
+/// Read tile-file columns `file` of finished unit `i`.
+pub fn read_columns(ctx: &Ctx, i: usize, file: &str) -> Result<talus_tiling::TileColumns> {
+    let path = ctx.input(i, file)?;
+    talus_tiling::read_tile(&path).map_err(|e| damaged(&path, e))
+}

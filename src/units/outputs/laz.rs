@@ -1,0 +1,130 @@
+//! m3c2.laz: the core points with PDAL-named extra bytes, in canonical key order whatever the
+//! tiling.
+
+use crate::error::Result;
+use crate::io::las_out::{CoordinateGrid, ExtraDim, ExtraType, ResultWriter};
+use crate::io::Crs;
+use crate::m3c2::tile::KeyedResult;
+use crate::store::UnitWriter;
+use crate::units::m3c2::Merged;
+
+/// The extra dimensions of m3c2.laz, in record order (SPEC.md §2).
+pub const M3C2_DIMS: &[ExtraDim] = &[
+    ExtraDim {
+        name: "m3c2_distance",
+        ty: ExtraType::F64,
+        description: "M3C2 distance t2 - t1",
+    },
+    ExtraDim {
+        name: "m3c2_uncertainty",
+        ty: ExtraType::F64,
+        description: "LoD95",
+    },
+    ExtraDim {
+        name: "m3c2_significant",
+        ty: ExtraType::U8,
+        description: "1 when |distance| > LoD95",
+    },
+    ExtraDim {
+        name: "m3c2_std_dev1",
+        ty: ExtraType::F64,
+        description: "std dev along normal, epoch 1",
+    },
+    ExtraDim {
+        name: "m3c2_std_dev2",
+        ty: ExtraType::F64,
+        description: "std dev along normal, epoch 2",
+    },
+    ExtraDim {
+        name: "m3c2_count1",
+        ty: ExtraType::U32,
+        description: "points in cylinder, epoch 1",
+    },
+    ExtraDim {
+        name: "m3c2_count2",
+        ty: ExtraType::U32,
+        description: "points in cylinder, epoch 2",
+    },
+    ExtraDim {
+        name: "normal_x",
+        ty: ExtraType::F32,
+        description: "oriented normal, x",
+    },
+    ExtraDim {
+        name: "normal_y",
+        ty: ExtraType::F32,
+        description: "oriented normal, y",
+    },
+    ExtraDim {
+        name: "normal_z",
+        ty: ExtraType::F32,
+        description: "oriented normal, z",
+    },
+    ExtraDim {
+        name: "m3c2_smoothed",
+        ty: ExtraType::F64,
+        description: "smoothed distance (kept points)",
+    },
+    ExtraDim {
+        name: "event_id",
+        ty: ExtraType::U32,
+        description: "change event, 0 = none",
+    },
+];
+
+/// Counts of what m3c2.laz holds.
+pub struct Written {
+    pub core_points: u64,
+    pub computed: u64,
+    pub significant: u64,
+}
+
+/// Write m3c2.laz into `out` from the pair's results in key order (`results`), with the
+/// registration error `reg_error` in LoD95 and significance. `event_of(key)` gives the smoothed
+/// distance and event id of a core point (NaN, 0 when it is in no event); `each` sees every
+/// result in the same order (the viewer's terrain sample rides on this pass instead of merging
+/// the results again).
+pub fn write_m3c2_laz(
+    out: &mut UnitWriter,
+    results: &mut Merged,
+    reg_error: f64,
+    crs: &Crs,
+    grid: CoordinateGrid,
+    event_of: &dyn Fn(u64) -> (f64, u32),
+    each: &mut dyn FnMut(&KeyedResult),
+) -> Result<Written> {
+    let path = out.path("m3c2.laz")?;
+    let mut w = ResultWriter::create_on_grid(&path, crs, M3C2_DIMS, grid)?;
+    let mut written = Written {
+        core_points: 0,
+        computed: 0,
+        significant: 0,
+    };
+    while let Some(mut k) = results.next_result()? {
+        k.r = k.r.with_registration(reg_error);
+        each(&k);
+        let r = &k.r;
+        let (smoothed, event) = event_of(k.key);
+        let extra = [
+            r.distance,
+            r.uncertainty,
+            r.significant as u8 as f64,
+            r.std_dev1,
+            r.std_dev2,
+            r.count1 as f64,
+            r.count2 as f64,
+            r.normal[0],
+            r.normal[1],
+            r.normal[2],
+            smoothed,
+            event as f64,
+        ];
+        w.write(k.xyz, &extra)?;
+        written.core_points += 1;
+        written.computed += r.distance.is_finite() as u64;
+        written.significant += r.significant as u64;
+    }
+    w.finish()?;
+    out.add_file("m3c2.laz")?;
+    Ok(written)
+}

@@ -1,0 +1,389 @@
+//! An outputs unit: a pair's result files (SPEC.md §2), written into the unit like any other and
+//! published into DIR as one set by the executor (`store::Store::publish`): m3c2.laz,
+//! events.geojson, event_regions.geojson, events.csv, view.json, terrain.bin and summary.json
+//! here; the meshes stay in the volumes units that wrote them and are published from there (the
+//! record's `publish` list says which file goes where).
+
+pub mod laz;
+pub mod tables;
+pub mod view;
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+
+use serde::{Deserialize, Serialize};
+
+use super::volumes::{mesh_files, Measured};
+use super::Ctx;
+use crate::error::{Error, Result};
+use crate::events::stable::Stable;
+use crate::events::{Event, Kind};
+use crate::io::las_out::CoordinateGrid;
+use crate::io::{self, Bounds};
+use crate::params::Params;
+use crate::plan::Spec;
+use crate::sampling::Spacing;
+use crate::store::UnitWriter;
+use crate::volume::uncertainty::VolumeUncertainty;
+
+/// The file that completes a published set (written last, removed first).
+pub const MARKER: &str = "summary.json";
+
+/// The names of DIR entries talus writes (so that publishing may replace them; anything else in
+/// DIR is the user's).
+pub fn is_output(name: &str) -> bool {
+    matches!(
+        name,
+        "m3c2.laz"
+            | "events.geojson"
+            | "events.csv"
+            | "event_regions.geojson"
+            | "summary.json"
+            | "view.json"
+            | "terrain.bin"
+    ) || name
+        .strip_prefix("meshes/")
+        .is_some_and(tables::is_event_mesh)
+}
+
+/// One event with its volume, as the outputs report it.
+#[derive(Debug, Clone)]
+pub struct EventRecord {
+    pub event: Event,
+    pub volume_m3: Option<f64>,
+    pub volume_uncertainty_m3: Option<f64>,
+    pub uncertainty: Option<VolumeUncertainty>,
+    /// |V| exceeds its 95 % half-width.
+    pub significant: bool,
+    pub gain_m3: Option<f64>,
+    pub loss_m3: Option<f64>,
+    pub footprint_area_m2: Option<f64>,
+    pub region_area_m2: Option<f64>,
+    pub coverage: Option<f64>,
+    pub volume_note: Option<String>,
+    pub region: Vec<Vec<Vec<crate::io::Point3>>>,
+    pub meshes: bool,
+}
+
+impl EventRecord {
+    fn new(mut event: Event, m: Measured) -> EventRecord {
+        event.obb = m.obb;
+        let u = m.uncertainty.map(|u| u.half_width_95_m3);
+        EventRecord {
+            significant: matches!((m.volume_m3, u), (Some(v), Some(u)) if v.abs() > u),
+            event,
+            volume_m3: m.volume_m3,
+            volume_uncertainty_m3: u,
+            uncertainty: m.uncertainty,
+            gain_m3: m.gain_m3,
+            loss_m3: m.loss_m3,
+            footprint_area_m2: m.footprint_area_m2,
+            region_area_m2: m.region_area_m2,
+            coverage: m.coverage,
+            volume_note: m.note,
+            region: m.region,
+            meshes: m.meshes,
+        }
+    }
+}
+
+/// One input as summary.json reports it.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct InputSummary {
+    pub path: PathBuf,
+    pub format: String,
+    pub points: u64,
+    pub bounds: Bounds,
+    pub crs: String,
+}
+
+/// The work of one stage: its units and the seconds they took (summed over the units, in
+/// whichever processes ran them).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct StageTime {
+    pub stage: String,
+    pub units: usize,
+    pub seconds: f64,
+}
+
+/// What summary.json holds.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Summary {
+    pub tool: String,
+    pub version: String,
+    pub inputs: Vec<InputSummary>,
+    pub core_points_file: Option<PathBuf>,
+    pub spacing: Spacing,
+    pub parameters: Params,
+    /// Noise and registration error measured on the stable ground (None: too little of it).
+    pub stable: Option<Stable>,
+    pub tiles: usize,
+    pub tile_size: f64,
+    pub core_points: u64,
+    pub computed_points: u64,
+    pub significant_points: u64,
+    /// Core points kept by the significance filter (|d| ≥ τ and significant).
+    pub kept_points: u64,
+    pub events: usize,
+    pub gain_events: usize,
+    pub loss_events: usize,
+    /// Events whose |volume| exceeds its 95 % uncertainty (the others stay out of the totals).
+    pub significant_events: usize,
+    /// Sum of the positive volumes of the significant events, m³.
+    pub total_gain_m3: f64,
+    /// Sum of the negative volumes of the significant events, m³ (≤ 0).
+    pub total_loss_m3: f64,
+    pub stages: Vec<StageTime>,
+}
+
+impl Summary {
+    /// One line for the terminal.
+    pub fn one_line(&self) -> String {
+        format!(
+            "talus: {} core points ({} with a distance, {} significant), {} event(s), {} significant: {} gain {:+.3} m³, {} loss {:+.3} m³; {} tile(s)",
+            self.core_points,
+            self.computed_points,
+            self.significant_points,
+            self.events,
+            self.significant_events,
+            self.gain_events,
+            self.total_gain_m3,
+            self.loss_events,
+            self.total_loss_m3,
+            self.tiles,
+        )
+    }
+}
+
+/// The stage a unit kind belongs to, as the progress lines and summary.json name it.
+pub fn stage_name(kind: &str) -> &'static str {
+    match kind {
+        "tiling" | "cores" => "pass 1: tiling",
+        "m3c2" => "pass 2: normals and M3C2",
+        "stable" => "stable ground",
+        "events" => "events",
+        "volumes" => "volumes",
+        _ => "outputs",
+    }
+}
+
+/// A file the executor publishes: from unit `unit` (its name and kind), `file`, as `name` in DIR.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Publish {
+    pub kind: String,
+    pub unit: String,
+    pub file: String,
+    pub name: String,
+}
+
+/// Write pair `pair`'s outputs into `out`.
+pub fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<serde_json::Value> {
+    let plan = ctx.plan;
+    let p = &plan.pairs[pair];
+    let bs = &plan.surveys[p.before];
+    let ground = super::stable::read(ctx, pair)?;
+    let params = ground.params.clone();
+    let grid = plan.layout.grid()?;
+    // Events with their volumes, in id order.
+    let (records, kept, mesh_sources) = if plan.m3c2_only {
+        (Vec::new(), Vec::new(), Vec::new())
+    } else {
+        let (drafts, kept) = super::events::read(ctx, pair)?;
+        let mut measured: HashMap<u32, (Measured, usize)> = HashMap::new();
+        for t in grid.tiles() {
+            let v = ctx.unit(&Spec::Volumes {
+                pair,
+                tile: [t.col, t.row],
+            })?;
+            let list: Vec<Measured> = super::read_json(ctx, v, super::volumes::FILE)?;
+            for m in list {
+                measured.insert(m.id, (m, v));
+            }
+        }
+        let mut records = Vec::new();
+        let mut sources = Vec::new();
+        for d in drafts {
+            let (m, v) = measured.remove(&d.event.id).ok_or_else(|| {
+                Error::Internal(format!("event {} has no volume record", d.event.id))
+            })?;
+            sources.push((d.event.id, v, m.meshes));
+            records.push(EventRecord::new(d.event, m));
+        }
+        (records, kept, sources)
+    };
+    let per_point: HashMap<u64, (f64, u32)> =
+        kept.iter().map(|k| (k.key, (k.smoothed, k.event))).collect();
+    // m3c2.laz and the viewer's terrain, in one pass over the results.
+    let total = super::m3c2::pair_count(ctx, pair)?;
+    let mut terrain = view::TerrainSample::new(total, plan.layout.anchor);
+    // Core points are C1 points or the user's: the finest coordinate quantum of the file they
+    // come from keeps them exact.
+    let scales: Vec<[f64; 3]> = [bs.scale, plan.core_points.as_ref().and_then(|_| core_scale(ctx))]
+        .into_iter()
+        .flatten()
+        .collect();
+    let crs = io::open(&bs.file.path)?.info().crs.clone();
+    let extent = &plan.layout.extent;
+    let mut merged = super::m3c2::Merged::new(ctx, pair)?;
+    let written = laz::write_m3c2_laz(
+        out,
+        &mut merged,
+        params.reg_error.value,
+        &crs,
+        CoordinateGrid::for_extent(extent.min, extent.max, &scales),
+        &|k| per_point.get(&k).copied().unwrap_or((f64::NAN, 0)),
+        &mut |k| terrain.push(k),
+    )?;
+    (ctx.progress)(written.core_points);
+    let mut publish = Vec::new();
+    let mut meshes = Vec::new();
+    for &(id, v, has) in &mesh_sources {
+        if !has {
+            continue;
+        }
+        let names = mesh_files(id);
+        for n in &names {
+            publish.push(Publish {
+                kind: "volumes".into(),
+                unit: plan.units[v].name.clone(),
+                file: n.clone(),
+                name: format!("meshes/{n}"),
+            });
+        }
+        meshes.push((
+            id,
+            view::EventMeshes {
+                before: format!("meshes/{}", names[0]),
+                after: format!("meshes/{}", names[1]),
+            },
+        ));
+    }
+    if !plan.m3c2_only {
+        tables::write_tables(out, &records, &crs)?;
+        tables::write_regions(out, &records, &crs)?;
+    }
+    terrain.write(out, &crs, &meshes)?;
+    let summary = summarize(ctx, unit, pair, params, ground.stable, &records, &written, kept.len());
+    let text = serde_json::to_string_pretty(&summary)
+        .map_err(|e| Error::Internal(format!("summary: {e}")))?;
+    super::write_bytes(out, MARKER, text.as_bytes())?;
+    let mut files = vec!["m3c2.laz", "view.json", "terrain.bin", MARKER];
+    if !plan.m3c2_only {
+        files.extend(["events.geojson", "events.csv", "event_regions.geojson"]);
+    }
+    for f in files {
+        publish.push(Publish {
+            kind: "outputs".into(),
+            unit: plan.units[unit].name.clone(),
+            file: f.into(),
+            name: f.into(),
+        });
+    }
+    Ok(serde_json::json!({ "publish": publish, "core_points": written.core_points }))
+}
+
+/// The LAS scale of the user's core-point file, if it has one.
+fn core_scale(ctx: &Ctx) -> Option<[f64; 3]> {
+    let c = ctx.plan.core_points.as_ref()?;
+    io::open(&c.path).ok()?.info().scale
+}
+
+#[allow(clippy::too_many_arguments)]
+fn summarize(
+    ctx: &Ctx,
+    unit: usize,
+    pair: usize,
+    params: Params,
+    stable: Option<Stable>,
+    records: &[EventRecord],
+    written: &laz::Written,
+    kept: usize,
+) -> Summary {
+    let plan = ctx.plan;
+    let p = &plan.pairs[pair];
+    let input = |s: &crate::plan::Survey| InputSummary {
+        path: s.file.path.clone(),
+        format: s.format.clone(),
+        points: s.points,
+        bounds: s.bounds,
+        crs: s.crs.clone(),
+    };
+    let mut inputs = vec![input(&plan.surveys[p.before]), input(&plan.surveys[p.after])];
+    if let Some(c) = &plan.core_points {
+        if let Ok(r) = io::open(&c.path) {
+            let i = r.info();
+            inputs.push(InputSummary {
+                path: i.path.clone(),
+                format: i.format_detail.clone(),
+                points: i.point_count,
+                bounds: i.bounds,
+                crs: i.crs.describe(),
+            });
+        }
+    }
+    // Stage work from the records of the units this one depends on (transitively: its direct
+    // dependencies are every unit of the pair but the tilings, whose records the M3C2 units'
+    // dependencies name).
+    let mut order: Vec<&'static str> = Vec::new();
+    let mut stages: HashMap<&'static str, (usize, f64)> = HashMap::new();
+    let mut seen = std::collections::HashSet::new();
+    let mut stack = plan.units[unit].deps.clone();
+    while let Some(u) = stack.pop() {
+        if !seen.insert(u) {
+            continue;
+        }
+        stack.extend(&plan.units[u].deps);
+        let name = stage_name(plan.units[u].kind());
+        let secs = ctx
+            .meta(u)
+            .ok()
+            .and_then(|m| m["seconds"].as_f64())
+            .unwrap_or(0.0);
+        let e = stages.entry(name).or_insert_with(|| {
+            order.push(name);
+            (0, 0.0)
+        });
+        e.0 += 1;
+        e.1 += secs;
+    }
+    let pipeline = ["pass 1: tiling", "pass 2: normals and M3C2", "stable ground", "events", "volumes"];
+    let stages = pipeline
+        .iter()
+        .filter_map(|&s| {
+            stages.get(s).map(|&(units, seconds)| StageTime {
+                stage: s.to_string(),
+                units,
+                seconds,
+            })
+        })
+        .collect();
+    let significant = || records.iter().filter(|e| e.significant);
+    Summary {
+        tool: "talus".into(),
+        version: env!("CARGO_PKG_VERSION").into(),
+        inputs,
+        core_points_file: plan.core_points.as_ref().map(|c| c.path.clone()),
+        spacing: plan.spacing.clone(),
+        parameters: params,
+        stable,
+        tiles: plan.layout.len(),
+        tile_size: plan.layout.tile_size,
+        core_points: written.core_points,
+        computed_points: written.computed,
+        significant_points: written.significant,
+        kept_points: kept as u64,
+        events: records.len(),
+        gain_events: records.iter().filter(|e| e.event.kind == Kind::Gain).count(),
+        loss_events: records.iter().filter(|e| e.event.kind == Kind::Loss).count(),
+        significant_events: significant().count(),
+        total_gain_m3: significant()
+            .filter_map(|e| e.volume_m3)
+            .filter(|v| *v > 0.0)
+            .sum(),
+        total_loss_m3: significant()
+            .filter_map(|e| e.volume_m3)
+            .filter(|v| *v < 0.0)
+            .sum(),
+        stages,
+    }
+}

@@ -1,0 +1,59 @@
+//! A tiling unit: one survey streamed into the layout's tiles (pass 1 of SPEC.md §3). The survey
+//! is read in chunks and never whole; every tile of the grid gets a file (an empty one where no
+//! point falls in its halo box), so a missing file always means damage. A survey tiled once
+//! serves every pair it belongs to.
+
+use talus_tiling::{TileId, TileSplitter};
+
+use super::Ctx;
+use crate::error::Result;
+use crate::io;
+use crate::plan::layout::tiling_error;
+use crate::store::UnitWriter;
+
+/// The file of tile `id` in a tiling unit.
+pub fn tile_file(id: TileId) -> String {
+    format!("{}.tile", id.name())
+}
+
+/// Share of the memory budget the splitter's buffers may take. Two tilings may run at once (one
+/// per survey of a pair: decoding is one thread's work, so on two cores that halves pass 1).
+pub const SPLIT_BUDGET_SHARE: u64 = 8;
+
+/// Cut survey `survey` into `out`.
+pub fn run(ctx: &Ctx, survey: usize, out: &mut UnitWriter) -> Result<serde_json::Value> {
+    let plan = ctx.plan;
+    let layout = &plan.layout;
+    let grid = layout.grid()?;
+    let src = &plan.surveys[survey].file.path;
+    let budget = (plan.params.memory_bytes.value / SPLIT_BUDGET_SHARE).max(8 << 20);
+    // The unit's own directory: where the splitter writes its tile files.
+    let dir = out
+        .path("tile")?
+        .parent()
+        .map(|d| d.to_path_buf())
+        .ok_or_else(|| crate::error::Error::Internal("a unit without a directory".into()))?;
+    let mut splitter = TileSplitter::new(&dir, grid, layout.halo, budget).map_err(tiling_error)?;
+    let mut reader = io::open(src)?;
+    let mut buf = Vec::new();
+    let mut points = 0u64;
+    while reader.fill(&mut buf, 1 << 16)? > 0 {
+        splitter.push(&buf).map_err(tiling_error)?;
+        points += buf.len() as u64;
+        (ctx.progress)(buf.len() as u64);
+    }
+    let mut has_file = vec![false; grid.len()];
+    for (id, _, digest) in splitter.finish_with_digests().map_err(tiling_error)? {
+        has_file[grid.index(id)] = true;
+        out.add(&tile_file(id), digest.crc32, digest.size);
+    }
+    for id in grid.tiles() {
+        if !has_file[grid.index(id)] {
+            let name = tile_file(id);
+            let digest = talus_tiling::write_tile(&out.path(&name)?, &talus_tiling::empty_columns())
+                .map_err(tiling_error)?;
+            out.add(&name, digest.crc32, digest.size);
+        }
+    }
+    Ok(serde_json::json!({ "points": points }))
+}

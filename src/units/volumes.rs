@@ -1,0 +1,356 @@
+//! A volumes unit: the volume, region, uncertainty and solids of the pair's events whose centroid
+//! one tile owns (SPEC.md §1 "Volume", "Volume accounting"), reading only the points inside each
+//! event's search boxes, from the tiles those boxes touch.
+//!
+//! Every event's claim comes from the events unit, so each volumes unit decides ownership the
+//! same way without waiting for the others: an event claims all its candidate boxes (along the
+//! mean normal and, on gentle ground, straight up), a location in several claims belongs to the
+//! event with the nearest clustered core point (`volume::ownership`). Writes `volumes.json` and
+//! each event's two solids as PLY.
+
+use std::collections::HashMap;
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use talus_tiling::TileId;
+
+use super::events::{Draft, Kept};
+use super::{read_tile, Ctx};
+use crate::error::Result;
+use crate::events::stable::Stable;
+use crate::events::{Event, Obb};
+use crate::io::Point3;
+use crate::params::Params;
+use crate::spatial::BoxIndex;
+use crate::store::UnitWriter;
+use crate::volume::{self, uncertainty, EventVolume};
+
+pub const FILE: &str = "volumes.json";
+
+/// The mesh files of event `id`: (before, after).
+pub fn mesh_files(id: u32) -> [String; 2] {
+    ["before", "after"].map(|w| format!("event_{id:04}_{w}.ply"))
+}
+
+/// One event's volume as a volumes unit records it.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Measured {
+    pub id: u32,
+    /// The box of the axis the volume was extruded along.
+    pub obb: Obb,
+    pub volume_m3: Option<f64>,
+    pub uncertainty: Option<uncertainty::VolumeUncertainty>,
+    pub gain_m3: Option<f64>,
+    pub loss_m3: Option<f64>,
+    pub footprint_area_m2: Option<f64>,
+    pub region_area_m2: Option<f64>,
+    pub coverage: Option<f64>,
+    /// The region's outline: polygons of rings of global points (see `EventVolume::outline`).
+    pub region: Vec<Vec<Vec<Point3>>>,
+    /// Whether the two solids were written.
+    pub meshes: bool,
+    /// Why there is no volume, when there is none.
+    pub note: Option<String>,
+}
+
+/// Volume margin of SPEC.md §1: cyl_radius + 2 × point spacing.
+pub fn margin(params: &Params) -> f64 {
+    params.cyl_radius.value + 2.0 * params.point_spacing
+}
+
+/// The box (in the event's frame) whose points the volume needs, and its XY bounds.
+pub fn search_box(obb: &Obb, params: &Params) -> ([f64; 3], [f64; 4]) {
+    let s = params.point_spacing;
+    let m = margin(params);
+    let h = [
+        obb.half_extents[0] + m + 3.0 * s,
+        obb.half_extents[1] + m + 3.0 * s,
+        obb.half_extents[2] + params.cyl_halflen.value,
+    ];
+    let mut xy = [
+        f64::INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::NEG_INFINITY,
+    ];
+    for c in 0..8 {
+        let l = [
+            if c & 1 == 0 { -h[0] } else { h[0] },
+            if c & 2 == 0 { -h[1] } else { h[1] },
+            if c & 4 == 0 { -h[2] } else { h[2] },
+        ];
+        let g = obb.to_global(&l);
+        xy = [xy[0].min(g[0]), xy[1].min(g[1]), xy[2].max(g[0]), xy[3].max(g[1])];
+    }
+    (h, xy)
+}
+
+/// The claims of every event (one per candidate box) over their clustered core points.
+pub fn ownership(drafts: &[Draft], members: &HashMap<u32, Vec<&Kept>>, params: &Params) -> volume::Ownership {
+    let claims = drafts
+        .iter()
+        .flat_map(|d| {
+            let cores: Vec<Point3> = members
+                .get(&d.event.id)
+                .map(|m| m.iter().map(|k| k.xyz).collect())
+                .unwrap_or_default();
+            d.candidates
+                .iter()
+                .map(|o| {
+                    let (h, _) = search_box(o, params);
+                    volume::Claim::new(
+                        d.event.id,
+                        volume::Frame::of_obb(o),
+                        volume::Footprint::of_obb(o, margin(params)),
+                        h[2],
+                        &cores,
+                    )
+                })
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    volume::Ownership::new(claims)
+}
+
+/// The error model of one event's volume (see `volume::uncertainty`): per epoch the area a point
+/// carries in the region and the mean per-point variance, the cluster's own over its core points'
+/// share of the region and the stable ground's over the rest; the stable ground's variogram; and
+/// the registration error along the event's core normals (the user's value if given).
+fn error_model(
+    v: &EventVolume,
+    members: &[&Kept],
+    params: &Params,
+    stable: Option<&Stable>,
+) -> uncertainty::ErrorModel {
+    let area = v.region_area_m2;
+    let core_area = params.core_spacing.value.powi(2);
+    let cluster_area = (members.len() as f64 * core_area).min(area);
+    let point_area = std::array::from_fn(|k| match v.region_points[k] {
+        0 => params.point_spacing * params.point_spacing,
+        n => area / n as f64,
+    });
+    let variance = std::array::from_fn(|k| {
+        let own: Vec<f64> = members
+            .iter()
+            .map(|m| m.std_dev[k].powi(2))
+            .filter(|x| x.is_finite())
+            .collect();
+        let own = own.iter().sum::<f64>() / own.len().max(1) as f64;
+        let rest = stable.map_or(own, |s| s.point_variance[k]);
+        (cluster_area * own + (area - cluster_area) * rest) / area.max(f64::MIN_POSITIVE)
+    });
+    let systematic = match stable {
+        Some(s) if params.reg_error.source != "user" => (members
+            .iter()
+            .map(|m| s.along(&m.normal).powi(2))
+            .sum::<f64>()
+            / members.len().max(1) as f64)
+            .sqrt(),
+        _ => params.reg_error.value,
+    };
+    uncertainty::ErrorModel {
+        point_area,
+        variance,
+        variogram: stable.map(|s| s.variogram),
+        systematic,
+    }
+}
+
+/// A search box: its half extents in the box frame, its xy bounds, the box.
+type SearchBox = ([f64; 3], [f64; 4], Obb);
+
+/// Each event's points of both epochs inside any of its search boxes, from the tiles the boxes
+/// touch (owned points only: no duplicates from halos).
+fn gather(
+    ctx: &Ctx,
+    tilings: [usize; 2],
+    boxes: &[Vec<SearchBox>],
+) -> Result<[Vec<Vec<Point3>>; 2]> {
+    let mut out = [vec![Vec::new(); boxes.len()], vec![Vec::new(); boxes.len()]];
+    let flat: Vec<(usize, &SearchBox)> = boxes
+        .iter()
+        .enumerate()
+        .flat_map(|(e, b)| b.iter().map(move |x| (e, x)))
+        .collect();
+    if flat.is_empty() {
+        return Ok(out);
+    }
+    let index = BoxIndex::new(&flat.iter().map(|(_, b)| b.1).collect::<Vec<_>>());
+    let grid = ctx.plan.layout.grid()?;
+    for id in grid.tiles() {
+        let sq = grid.square(id);
+        if !index.any_overlaps(&[sq.min[0], sq.min[1], sq.max[0], sq.max[1]]) {
+            continue;
+        }
+        for (epoch, &tiling) in tilings.iter().enumerate() {
+            let t = read_tile(ctx, tiling, id)?;
+            for (i, &own) in t.owned.iter().enumerate() {
+                if !own {
+                    continue;
+                }
+                let p = t.point(i);
+                let mut last = usize::MAX;
+                for k in index.containing(p[0], p[1]) {
+                    let (e, (h, _, obb)) = flat[k];
+                    if e == last {
+                        continue;
+                    }
+                    let l = obb.to_local(&p);
+                    if l[0].abs() <= h[0] && l[1].abs() <= h[1] && l[2].abs() <= h[2] {
+                        out[epoch][e].push(p);
+                        last = e;
+                    }
+                }
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Measure the events of pair `pair` whose centroid tile `tile` owns, into `out`.
+pub fn run(
+    ctx: &Ctx,
+    unit: usize,
+    pair: usize,
+    tile: TileId,
+    out: &mut UnitWriter,
+) -> Result<serde_json::Value> {
+    let plan = ctx.plan;
+    let deps = &plan.units[unit].deps;
+    let ground = super::stable::read(ctx, pair)?;
+    let params = &ground.params;
+    let stable = ground.stable.as_ref();
+    let (drafts, kept) = super::events::read(ctx, pair)?;
+    let grid = plan.layout.grid()?;
+    let mine: Vec<&Draft> = drafts
+        .iter()
+        .filter(|d| grid.owner(d.event.centroid[0], d.event.centroid[1]) == tile)
+        .collect();
+    let mut measured: Vec<Measured> = Vec::new();
+    if !mine.is_empty() {
+        let mut members: HashMap<u32, Vec<&Kept>> = HashMap::new();
+        for k in kept.iter().filter(|k| k.event > 0) {
+            members.entry(k.event).or_default().push(k);
+        }
+        let ownership = ownership(&drafts, &members, params);
+        let user = match &plan.meshes {
+            Some([b, a]) => Some((
+                volume::read_ply_mesh(&b.path)?,
+                volume::read_ply_mesh(&a.path)?,
+            )),
+            None => None,
+        };
+        let margin = margin(params);
+        let spacing = params.point_spacing;
+        let boxes: Vec<Vec<SearchBox>> = mine
+            .iter()
+            .map(|d| {
+                let c: &[Obb] = if user.is_some() {
+                    &d.candidates[..1]
+                } else {
+                    &d.candidates
+                };
+                c.iter()
+                    .map(|o| {
+                        let (h, xy) = search_box(o, params);
+                        (h, xy, *o)
+                    })
+                    .collect()
+            })
+            .collect();
+        let [before, after] = match user {
+            Some(_) => [vec![Vec::new(); mine.len()], vec![Vec::new(); mine.len()]],
+            None => gather(ctx, [deps[2], deps[3]], &boxes)?,
+        };
+        // Gathered tile by tile, the points come in an order that depends on the tiling;
+        // `volume::epoch_tin` sorts what it triangulates, so the volumes do not.
+        let results: Vec<(Measured, Option<EventVolume>)> = mine
+            .par_iter()
+            .enumerate()
+            .map(|(i, d)| {
+                let mut e: Event = d.event.clone();
+                // The extrusion axis: the candidate in which both epochs have the fewest points
+                // on walls or fold-overs (volume::axis); the mean normal on a tie.
+                if boxes[i].len() > 1 {
+                    let walls = |(h, _, o): &SearchBox| {
+                        let frame = volume::Frame::of_obb(o);
+                        let r = volume::Footprint::of_obb(o, margin);
+                        volume::axis::wall_points(&frame, &r, h[2], &before[i], spacing)
+                            + volume::axis::wall_points(&frame, &r, h[2], &after[i], spacing)
+                    };
+                    let counts: Vec<usize> = boxes[i].iter().map(walls).collect();
+                    let best = (0..boxes[i].len())
+                        .min_by_key(|&k| (counts[k], k))
+                        .unwrap_or(0);
+                    e.obb = boxes[i][best].2;
+                }
+                let id = e.id;
+                let owned = |x: &Point3| ownership.owner(x) == Some(id);
+                let v = match &user {
+                    Some((mb, ma)) => {
+                        let frame = volume::Frame::of_obb(&e.obb);
+                        let r = volume::Footprint::of_obb(&e.obb, margin);
+                        let sb = volume::UserMesh::new(mb, &frame, &r);
+                        let sa = volume::UserMesh::new(ma, &frame, &r);
+                        volume::event_volume_from_surfaces(&e.obb, margin, &sb, &sa, spacing, &owned)
+                    }
+                    None => volume::event_volume(&e.obb, margin, &before[i], &after[i], spacing, &owned),
+                };
+                let m = members.get(&id).map(|v| v.as_slice()).unwrap_or(&[]);
+                match v {
+                    Ok(v) => {
+                        let u = uncertainty::propagate(&v.region, &error_model(&v, m, params, stable));
+                        (
+                            Measured {
+                                id,
+                                obb: e.obb,
+                                volume_m3: Some(v.volume_m3),
+                                uncertainty: Some(u),
+                                gain_m3: Some(v.gain_m3),
+                                loss_m3: Some(v.loss_m3),
+                                footprint_area_m2: Some(v.footprint_area_m2),
+                                region_area_m2: Some(v.region_area_m2),
+                                coverage: Some(v.coverage),
+                                region: v.outline(),
+                                meshes: true,
+                                note: None,
+                            },
+                            Some(v),
+                        )
+                    }
+                    Err(err) => (
+                        Measured {
+                            id,
+                            obb: e.obb,
+                            volume_m3: None,
+                            uncertainty: None,
+                            gain_m3: None,
+                            loss_m3: None,
+                            footprint_area_m2: None,
+                            region_area_m2: None,
+                            coverage: None,
+                            region: Vec::new(),
+                            meshes: false,
+                            note: Some(err.to_string()),
+                        },
+                        None,
+                    ),
+                }
+            })
+            .collect();
+        for (m, v) in results {
+            if let Some(v) = v {
+                let names = mesh_files(m.id);
+                for (name, solid) in names.iter().zip([&v.before_solid, &v.after_solid]) {
+                    let path = out.path(name)?;
+                    volume::write_ply(&path, solid)?;
+                    out.add_file(name)?;
+                }
+            }
+            measured.push(m);
+        }
+    }
+    (ctx.progress)(measured.len() as u64);
+    super::write_json(out, FILE, &measured)?;
+    Ok(serde_json::json!({ "events": measured.len() }))
+}
