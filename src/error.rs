@@ -32,6 +32,10 @@ pub enum Error {
         source: std::io::Error,
     },
 
+    /// DIR's lock is held by another live run (see `store::Store::lock`).
+    #[error("{}: in use by another talus run ({holder}); wait for it to finish, or remove {}/.talus/lock if you are sure it is gone", dir.display(), dir.display())]
+    Busy { dir: PathBuf, holder: String },
+
     /// The run was interrupted (SIGINT); finished units are kept for `--resume`.
     #[error("interrupted")]
     Interrupted,
@@ -65,6 +69,8 @@ impl Error {
             Error::Input { .. } | Error::Usage(_) | Error::Epochs(_) => 2,
             // An unwritable output directory is the user's to fix as well.
             Error::Output { .. } => 2,
+            // Another run holds DIR: the user waits or clears a lock they know is stale.
+            Error::Busy { .. } => 2,
             Error::Interrupted => 130,
             Error::Internal(_) => 1,
         }

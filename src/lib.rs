@@ -15,6 +15,7 @@ pub mod params;
 pub mod pipeline;
 pub mod sampling;
 pub mod spatial;
+pub mod store;
 pub mod synth;
 pub mod view;
 pub mod volume;
