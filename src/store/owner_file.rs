@@ -37,7 +37,7 @@ pub struct Owner {
     pub host: String,
     /// Unix seconds when the owner took the file.
     pub started: u64,
-    /// The pid's start time in clock ticks since boot (see [`process::pid_start`]), so a reused
+    /// The pid's start time in clock ticks since boot (`/proc/<pid>/stat` field 22), so a reused
     /// pid does not count as the owner.
     #[serde(default)]
     pub pid_start: Option<u64>,
@@ -74,7 +74,7 @@ impl Owner {
     }
 
     /// Whether owner-file content `bytes` is stale (see [`Owner::gone`]); unparseable content is
-    /// stale only once the file has stood for [`UNPARSEABLE_GRACE`].
+    /// stale only once the file has stood for a minute.
     pub fn stale(bytes: &[u8], mtime: Option<SystemTime>, lease: Option<Duration>) -> bool {
         match serde_json::from_slice::<Owner>(bytes) {
             Ok(owner) => owner.gone(lease),
