@@ -41,6 +41,8 @@ mod lock_tests;
 #[cfg(test)]
 mod publish_tests;
 #[cfg(test)]
+mod timing_tests;
+#[cfg(test)]
 mod unit_tests;
 
 use std::path::{Path, PathBuf};
