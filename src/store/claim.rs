@@ -1,0 +1,125 @@
+//! Claims: `claims/<run>/<kind>/<name>` says which process computes a unit right now, so that
+//! the threads of a run, `talus worker` processes and Slurm tasks on other hosts do not all
+//! compute the same unit.
+//!
+//! A claim only saves work; correctness never depends on it: units are deterministic and a
+//! second commit of the same unit keeps the first (see [`UnitWriter::commit`]). That is why a
+//! claim from another host, whose pid cannot be checked, may be taken over after a lease.
+//!
+//! [`UnitWriter::commit`]: super::UnitWriter::commit
+
+use std::path::PathBuf;
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+
+use super::fsops::out_err;
+use super::owner_file::{self, Acquired, Owner};
+use super::process;
+use super::unit_ref::{check_component, UnitRef};
+use super::Store;
+
+/// The content of a claim file.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ClaimInfo {
+    #[serde(flatten)]
+    pub owner: Owner,
+    /// Who claims, in the caller's words ("thread 3", "slurm 1234_7").
+    pub label: String,
+}
+
+/// A held claim; dropping it (or [`Claim::release`]) removes the claim file.
+#[derive(Debug)]
+pub struct Claim {
+    path: PathBuf,
+    tmp: PathBuf,
+    info: ClaimInfo,
+    released: bool,
+}
+
+impl Store {
+    /// Claim `unit` for this process in run `run` (see the module doc). `None` when a live claim
+    /// of another process — or of another thread of this one — holds it. A claim whose owner on
+    /// this host is dead, or from another host older than the lease, is taken over.
+    pub fn claim(&self, run: &str, unit: &UnitRef, label: &str) -> Result<Option<Claim>> {
+        check_component("run id", run)?;
+        unit.check()?;
+        let dir = self.work.join("claims").join(run).join(&unit.kind);
+        std::fs::create_dir_all(&dir).map_err(out_err(&dir))?;
+        let path = dir.join(&unit.name);
+        let info = ClaimInfo {
+            owner: Owner::me(),
+            label: label.to_string(),
+        };
+        let bytes = claim_bytes(&info)?;
+        let lease = self.lease;
+        match owner_file::acquire(&path, &self.tmp(), &bytes, |b, mtime| {
+            Owner::stale(b, mtime, Some(lease))
+        })? {
+            Acquired::Ours => Ok(Some(Claim {
+                path,
+                tmp: self.tmp(),
+                info,
+                released: false,
+            })),
+            Acquired::Held(_) => Ok(None),
+        }
+    }
+
+    /// The current claim on `unit` in run `run`, if any (live or not: for `talus status`).
+    pub fn claim_holder(&self, run: &str, unit: &UnitRef) -> Option<ClaimInfo> {
+        check_component("run id", run).ok()?;
+        unit.check().ok()?;
+        let path = self
+            .work
+            .join("claims")
+            .join(run)
+            .join(&unit.kind)
+            .join(&unit.name);
+        serde_json::from_slice(&std::fs::read(path).ok()?).ok()
+    }
+}
+
+fn claim_bytes(info: &ClaimInfo) -> Result<Vec<u8>> {
+    serde_json::to_vec_pretty(info).map_err(|e| Error::Internal(format!("claim: {e}")))
+}
+
+impl Claim {
+    /// The claim file.
+    pub fn path(&self) -> &std::path::Path {
+        &self.path
+    }
+
+    /// Renew the lease (for a unit that runs longer than the store's lease): hosts that cannot
+    /// check our pid measure the claim's age from this moment.
+    pub fn renew(&self) -> Result<()> {
+        let mut info = self.info.clone();
+        info.owner.renewed = Some(process::now_secs());
+        owner_file::rewrite(
+            &self.path,
+            &self.tmp,
+            &info.owner.token,
+            &claim_bytes(&info)?,
+        )
+    }
+
+    /// What the claim file says about us (as taken; renewals aside).
+    pub fn info(&self) -> &ClaimInfo {
+        &self.info
+    }
+
+    /// Remove the claim file now (if it is still ours), reporting a failure.
+    pub fn release(mut self) -> Result<()> {
+        self.released = true;
+        owner_file::release(&self.path, &self.info.owner.token).map(|_| ())
+    }
+}
+
+impl Drop for Claim {
+    fn drop(&mut self) {
+        if !self.released {
+            let _ = owner_file::release(&self.path, &self.info.owner.token);
+        }
+    }
+}

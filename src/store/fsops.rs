@@ -1,0 +1,165 @@
+//! File-system steps the store is built from, each durable and each naming its path on error.
+//!
+//! The store's promises (a unit is complete exactly when its directory exists under `units/`; a
+//! replaced file is either the old or the new one) rest on two POSIX facts: `rename` within one
+//! file system is atomic, and a rename or creation survives a power loss only once its directory
+//! is fsynced. Temporary files always get a [`unique`](super::process::unique) name in the
+//! store's `tmp/`, never a fixed one: several processes on several hosts write the same targets.
+
+use std::fs::{self, File};
+use std::io::{self, Write};
+use std::path::{Path, PathBuf};
+use std::time::SystemTime;
+
+use crate::error::{Error, Result};
+
+use super::process::unique;
+
+/// An I/O failure on `path` in the store or the output directory.
+pub fn out_err(path: &Path) -> impl FnOnce(io::Error) -> Error + '_ {
+    move |e| Error::output(path, e)
+}
+
+/// fsync the directory `dir`, making the creations, renames and removals in it durable.
+pub fn sync_dir(dir: &Path) -> Result<()> {
+    File::open(dir)
+        .and_then(|d| d.sync_all())
+        .map_err(out_err(dir))
+}
+
+/// fsync the file `path` (opened read-only: fsync flushes the file, whoever wrote it).
+pub fn sync_file(path: &Path) -> Result<()> {
+    File::open(path)
+        .and_then(|f| f.sync_all())
+        .map_err(out_err(path))
+}
+
+/// A fresh temporary path in `tmp` whose name starts with `what` (for a reader of the directory)
+/// and ends with a unique owner suffix (for [`gc`](super::Store::gc)).
+pub fn tmp_name(tmp: &Path, what: &str) -> PathBuf {
+    // Keep the whole name well inside NAME_MAX (255) whatever the caller's unit name.
+    let what: String = what.chars().take(96).collect();
+    tmp.join(format!("{what}~{}", unique()))
+}
+
+/// Write `bytes` to a unique temporary file in `tmp`, fsynced, and return its path.
+pub fn write_tmp(tmp: &Path, what: &str, bytes: &[u8]) -> Result<PathBuf> {
+    let path = tmp_name(tmp, what);
+    let written = (|| {
+        let mut f = File::create_new(&path)?;
+        f.write_all(bytes)?;
+        f.sync_all()
+    })();
+    if let Err(e) = written {
+        let _ = fs::remove_file(&path);
+        return Err(Error::output(&path, e));
+    }
+    Ok(path)
+}
+
+/// Replace `path` with `bytes` atomically: a unique temporary in `tmp` (same file system),
+/// renamed over `path`, the directory fsynced. Two processes doing this at once leave one
+/// complete version (the last rename), never a mix.
+pub fn replace_file(tmp: &Path, path: &Path, bytes: &[u8]) -> Result<()> {
+    let what = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let t = write_tmp(tmp, &what, bytes)?;
+    if let Err(e) = fs::rename(&t, path) {
+        let _ = fs::remove_file(&t);
+        return Err(Error::output(path, e));
+    }
+    sync_dir(parent(path))
+}
+
+/// The directory holding `path`.
+pub fn parent(path: &Path) -> &Path {
+    match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    }
+}
+
+/// Remove a file or a whole directory tree; a path that is already gone is fine (another process
+/// or an earlier attempt removed it).
+pub fn remove_any(path: &Path) -> Result<()> {
+    let meta = match fs::symlink_metadata(path) {
+        Ok(m) => m,
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(()),
+        Err(e) => return Err(Error::output(path, e)),
+    };
+    let r = if meta.is_dir() {
+        fs::remove_dir_all(path)
+    } else {
+        fs::remove_file(path)
+    };
+    match r {
+        Err(e) if e.kind() != io::ErrorKind::NotFound => Err(Error::output(path, e)),
+        _ => Ok(()),
+    }
+}
+
+/// Remove a directory tree by first renaming it into `tmp` (atomic: readers see the whole tree
+/// or nothing), then deleting it there. If the deletion is cut short, what is left is a trash
+/// directory in `tmp` that gc clears. Returns false when `path` did not exist.
+pub fn trash(tmp: &Path, path: &Path) -> Result<bool> {
+    let dest = tmp_name(tmp, "trash");
+    match fs::rename(path, &dest) {
+        Ok(()) => {}
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(false),
+        Err(e) => return Err(Error::output(path, e)),
+    }
+    sync_dir(parent(path))?;
+    remove_any(&dest)?;
+    Ok(true)
+}
+
+/// The latest modification time of `path` or anything below it (a sign of life of a writer).
+pub fn newest_mtime(path: &Path) -> Option<SystemTime> {
+    let meta = fs::symlink_metadata(path).ok()?;
+    let mut newest = meta.modified().ok()?;
+    if meta.is_dir() {
+        for entry in fs::read_dir(path).ok()?.flatten() {
+            if let Some(t) = newest_mtime(&entry.path()) {
+                newest = newest.max(t);
+            }
+        }
+    }
+    Some(newest)
+}
+
+/// The names in directory `dir`, sorted (so every walk of the store is deterministic); an absent
+/// directory has none.
+pub fn sorted_names(dir: &Path) -> Result<Vec<String>> {
+    let entries = match fs::read_dir(dir) {
+        Ok(e) => e,
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(e) => return Err(Error::output(dir, e)),
+    };
+    let mut names = Vec::new();
+    for entry in entries {
+        let entry = entry.map_err(out_err(dir))?;
+        names.push(entry.file_name().to_string_lossy().into_owned());
+    }
+    names.sort();
+    Ok(names)
+}
+
+/// The CRC-32 and size of a file, read once in 1 MiB blocks.
+pub fn crc_and_size(path: &Path) -> io::Result<(u32, u64)> {
+    use std::io::Read;
+    let mut f = File::open(path)?;
+    let mut h = crc32fast::Hasher::new();
+    let mut buf = vec![0u8; 1 << 20];
+    let mut size = 0u64;
+    loop {
+        let n = f.read(&mut buf)?;
+        if n == 0 {
+            break;
+        }
+        h.update(&buf[..n]);
+        size += n as u64;
+    }
+    Ok((h.finalize(), size))
+}

@@ -1,0 +1,142 @@
+//! The work area of a DIR as a store of immutable units, filled concurrently by many processes
+//! (threads of a run, `talus worker DIR` processes, Slurm array tasks on hosts sharing DIR over
+//! NFS) — in the spirit of tantivy's segments: every unit is written aside and published by one
+//! atomic rename, nothing shared is ever rewritten in place by several writers.
+//!
+//! ```text
+//! DIR/.talus/
+//!   lock                          one run per DIR                      (lock.rs)
+//!   units/<kind>/<name>/          one finished unit: files + record.json (writer.rs, units.rs)
+//!   tmp/                          units being written, trash, temporaries (fsops.rs, gc.rs)
+//!   claims/<run>/<kind>/<name>    who computes a unit now              (claim.rs)
+//!   cache/inputs.json             content keys of inputs by identity    (content_key.rs)
+//!   publishing                    journal of a publish into DIR         (publish.rs, recover.rs)
+//! ```
+//!
+//! A unit's name carries its content key, so a unit never changes: it exists complete or not at
+//! all, and two processes computing it produce the same bytes (the first commit is kept).
+//! Claims only avoid duplicate work; the lock keeps two runs from publishing into one DIR.
+//! Everything outside `.talus` is the user's, except the outputs [`Store::publish`] places.
+
+mod claim;
+mod content_key;
+mod fsops;
+mod gc;
+mod lock;
+mod owner_file;
+mod process;
+mod publish;
+mod record;
+mod recover;
+mod unit_ref;
+mod units;
+mod writer;
+
+#[cfg(test)]
+mod claim_tests;
+#[cfg(test)]
+mod content_key_tests;
+#[cfg(test)]
+mod lock_tests;
+#[cfg(test)]
+mod publish_tests;
+#[cfg(test)]
+mod timing_tests;
+#[cfg(test)]
+mod unit_tests;
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+pub use claim::{Claim, ClaimInfo};
+pub use gc::GcReport;
+pub use lock::{Lock, LockInfo};
+pub use owner_file::Owner;
+pub use record::{Record, RecordFile, RECORD_FILE};
+pub use recover::Recovery;
+pub use unit_ref::{check_component, UnitRef};
+pub use writer::UnitWriter;
+
+use crate::error::{Error, Result};
+use fsops::out_err;
+
+/// How long a claim from another host (whose pid cannot be checked) holds without renewal.
+pub const DEFAULT_LEASE: Duration = Duration::from_secs(6 * 3600);
+
+/// The store of one DIR.
+#[derive(Clone, Debug)]
+pub struct Store {
+    dir: PathBuf,
+    work: PathBuf,
+    lease: Duration,
+    /// See [`content_key::RACY`]; tests shorten it.
+    racy: Duration,
+}
+
+impl Store {
+    /// Open the store of `dir`, creating `dir` and `.talus/{units,tmp,claims,cache}` when
+    /// `create`. Writability is probed now (a file in `tmp/`), before any work is spent: a file
+    /// where DIR should be, a missing store without `create`, or an unwritable DIR is
+    /// `Error::Output` naming the path.
+    pub fn open(dir: &Path, create: bool) -> Result<Store> {
+        match std::fs::metadata(dir) {
+            Ok(m) if !m.is_dir() => {
+                return Err(Error::output(
+                    dir,
+                    std::io::Error::new(
+                        std::io::ErrorKind::NotADirectory,
+                        "exists and is not a directory",
+                    ),
+                ))
+            }
+            Ok(_) => {}
+            Err(e) if !create => return Err(Error::output(dir, e)),
+            Err(_) => std::fs::create_dir_all(dir).map_err(out_err(dir))?,
+        }
+        let work = dir.join(".talus");
+        let store = Store {
+            dir: dir.to_path_buf(),
+            work,
+            lease: DEFAULT_LEASE,
+            racy: content_key::RACY,
+        };
+        for sub in ["units", "tmp", "claims", "cache"] {
+            let p = store.work.join(sub);
+            if create {
+                std::fs::create_dir_all(&p).map_err(out_err(&p))?;
+            } else if !p.is_dir() {
+                return Err(Error::output(
+                    &p,
+                    std::io::Error::new(std::io::ErrorKind::NotFound, "no talus store here"),
+                ));
+            }
+        }
+        let probe = fsops::write_tmp(&store.tmp(), "probe", b"ok")?;
+        std::fs::remove_file(&probe).map_err(out_err(&probe))?;
+        Ok(store)
+    }
+
+    /// The same store with another lease for claims from other hosts (default 6 h).
+    pub fn with_lease(mut self, lease: Duration) -> Store {
+        self.lease = lease;
+        self
+    }
+
+    /// DIR, the user's output directory.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// DIR/.talus.
+    pub fn work(&self) -> &Path {
+        &self.work
+    }
+
+    fn units(&self) -> PathBuf {
+        self.work.join("units")
+    }
+
+    fn tmp(&self) -> PathBuf {
+        self.work.join("tmp")
+    }
+}

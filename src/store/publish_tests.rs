@@ -1,0 +1,222 @@
+//! Tests of publishing outputs into DIR and of recovering an interrupted publish.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use super::publish::fault::{self, Fault};
+use super::unit_tests::{store, unit};
+use super::*;
+
+/// Talus's outputs by name (the caller's `ours`).
+fn ours(name: &str) -> bool {
+    matches!(
+        name,
+        "summary.json" | "m3c2.laz" | "events.csv" | "events.geojson" | "meshes"
+    ) || (name.starts_with("meshes/event_") && name.ends_with(".ply"))
+}
+
+/// Every file below DIR but `.talus`, with its content.
+fn listing(dir: &Path) -> BTreeMap<String, String> {
+    fn walk(dir: &Path, rel: &str, out: &mut BTreeMap<String, String>) {
+        for e in std::fs::read_dir(dir).unwrap().flatten() {
+            let name = e.file_name().to_string_lossy().into_owned();
+            let name = if rel.is_empty() {
+                name
+            } else {
+                format!("{rel}/{name}")
+            };
+            if name == ".talus" {
+                continue;
+            }
+            if e.file_type().unwrap().is_dir() {
+                walk(&e.path(), &name, out);
+            } else {
+                out.insert(name, std::fs::read_to_string(e.path()).unwrap());
+            }
+        }
+    }
+    let mut out = BTreeMap::new();
+    walk(dir, "", &mut out);
+    out
+}
+
+fn put(dir: &Path, name: &str, text: &str) {
+    let p = dir.join(name);
+    std::fs::create_dir_all(p.parent().unwrap()).unwrap();
+    std::fs::write(p, text).unwrap();
+}
+
+const OLD: &[&str] = &[
+    "summary.json",
+    "m3c2.laz",
+    "events.csv",
+    "meshes/event_0001_before.ply",
+];
+const USER: &[&str] = &["notes.txt", "meshes/mine.ply"];
+const NEW: &[&str] = &[
+    "m3c2.laz",
+    "meshes/event_0002_after.ply",
+    "meshes/event_0002_before.ply",
+    "summary.json",
+];
+
+/// A DIR holding an old output set and the user's files, and a committed unit holding the new
+/// set; returns the files to publish (the marker in the middle: publish puts it last).
+fn setup() -> (tempfile::TempDir, Store, Vec<(PathBuf, String)>) {
+    let (t, s) = store();
+    for name in OLD {
+        put(s.dir(), name, &format!("old {name}"));
+    }
+    for name in USER {
+        put(s.dir(), name, &format!("user's {name}"));
+    }
+    let u = unit("outputs", "pair0-abc");
+    let mut w = s.begin(&u).unwrap();
+    for name in NEW {
+        std::fs::write(w.path(name).unwrap(), format!("new {name}")).unwrap();
+        w.add_file(name).unwrap();
+    }
+    w.commit(serde_json::Value::Null).unwrap();
+    let dir = s.unit_dir(&u).unwrap();
+    let files = NEW.iter().map(|n| (dir.join(n), n.to_string())).collect();
+    (t, s, files)
+}
+
+fn expected(new: &[&str]) -> BTreeMap<String, String> {
+    let mut m: BTreeMap<String, String> = new
+        .iter()
+        .map(|n| (n.to_string(), format!("new {n}")))
+        .collect();
+    for n in USER {
+        m.insert(n.to_string(), format!("user's {n}"));
+    }
+    m
+}
+
+#[test]
+fn publish_replaces_the_old_set_and_keeps_the_users_files() {
+    let (_t, s, files) = setup();
+    s.publish(&files, "summary.json", &ours).unwrap();
+    assert_eq!(listing(s.dir()), expected(NEW));
+    assert!(!s.work().join("publishing").exists());
+    // Hard links to the unit's files: no copy of 100M-point outputs.
+    use std::os::unix::fs::MetadataExt;
+    let a = std::fs::metadata(s.dir().join("m3c2.laz")).unwrap().ino();
+    assert_eq!(std::fs::metadata(&files[0].0).unwrap().ino(), a);
+    assert!(super::unit_tests::tmp_entries(&s).is_empty());
+    assert_eq!(s.recover().unwrap(), Recovery::Nothing);
+
+    // A set without meshes: meshes/ stays for the user's file; without it, it goes.
+    let few: Vec<_> = files
+        .iter()
+        .filter(|(_, n)| !n.starts_with("meshes/"))
+        .cloned()
+        .collect();
+    s.publish(&few, "summary.json", &ours).unwrap();
+    assert_eq!(listing(s.dir()), expected(&["m3c2.laz", "summary.json"]));
+    std::fs::remove_file(s.dir().join("meshes/mine.ply")).unwrap();
+    s.publish(&files, "summary.json", &ours).unwrap();
+    s.publish(&few, "summary.json", &ours).unwrap();
+    assert!(!s.dir().join("meshes").exists());
+}
+
+#[test]
+fn publish_refuses_before_touching_anything() {
+    let (_t, s, files) = setup();
+    let before = listing(s.dir());
+    let mut missing = files.clone();
+    missing.insert(
+        1,
+        (
+            s.dir().join("nowhere.ply"),
+            "meshes/event_0003_before.ply".into(),
+        ),
+    );
+    assert!(matches!(
+        s.publish(&missing, "summary.json", &ours),
+        Err(Error::Output { .. })
+    ));
+    assert!(matches!(
+        s.publish(&files, "view.json", &ours),
+        Err(Error::Internal(_))
+    ));
+    // A new name held by a user file (not ours) is never replaced.
+    let mut clash = files.clone();
+    clash.push((files[0].0.clone(), "notes.txt".into()));
+    let e = s.publish(&clash, "summary.json", &ours).unwrap_err();
+    assert!(e.to_string().contains("notes.txt"), "{e}");
+    assert_eq!(listing(s.dir()), before);
+    assert!(!s.work().join("publishing").exists());
+}
+
+#[test]
+fn a_failing_publish_leaves_no_outputs() {
+    let (_t, s, files) = setup();
+    fault::arm(2, Fault::Fail);
+    assert!(s.publish(&files, "summary.json", &ours).is_err());
+    assert_eq!(listing(s.dir()), expected(&[]));
+    assert!(!s.work().join("publishing").exists());
+    assert_eq!(s.recover().unwrap(), Recovery::Nothing);
+}
+
+#[test]
+fn a_crash_at_any_step_never_mixes_sets_and_recover_finishes_it() {
+    for at in 0..NEW.len() {
+        let (_t, s, files) = setup();
+        fault::arm(at, Fault::Crash);
+        assert!(s.publish(&files, "summary.json", &ours).is_err());
+        // No old output left, no marker, only new files (the first `at` of them).
+        let now = listing(s.dir());
+        assert!(!now.contains_key("summary.json"), "crash at {at}: {now:?}");
+        let talus: Vec<&String> = now.keys().filter(|n| ours(n)).collect();
+        assert_eq!(talus.len(), at, "crash at {at}: {now:?}");
+        for n in talus {
+            assert!(now[n].starts_with("new "), "crash at {at}: {now:?}");
+        }
+        assert!(s.work().join("publishing").exists());
+        assert_eq!(s.recover().unwrap(), Recovery::RolledForward);
+        assert_eq!(listing(s.dir()), expected(NEW), "crash at {at}");
+        assert_eq!(s.recover().unwrap(), Recovery::Nothing);
+    }
+}
+
+#[test]
+fn recover_undoes_a_publish_whose_sources_are_gone() {
+    let (_t, s, files) = setup();
+    fault::arm(1, Fault::Crash);
+    assert!(s.publish(&files, "summary.json", &ours).is_err());
+    s.invalidate(&unit("outputs", "pair0-abc")).unwrap();
+    assert_eq!(s.recover().unwrap(), Recovery::RolledBack);
+    assert_eq!(listing(s.dir()), expected(&[]));
+    assert!(!s.dir().join("meshes/event_0002_after.ply").exists());
+    assert!(!s.work().join("publishing").exists());
+}
+
+#[test]
+fn recover_finishes_a_journal_left_after_the_old_marker_went() {
+    let (_t, s, files) = setup();
+    // As a crash in step 2 leaves it: the old marker removed, the rest of the old set not yet.
+    std::fs::remove_file(s.dir().join("summary.json")).unwrap();
+    let mut ordered: Vec<(PathBuf, String)> = files
+        .iter()
+        .filter(|(_, n)| n != "summary.json")
+        .cloned()
+        .collect();
+    ordered.extend(files.iter().filter(|(_, n)| n == "summary.json").cloned());
+    let journal = serde_json::json!({
+        "files": ordered,
+        "marker": "summary.json",
+        "remove": ["summary.json", "events.csv", "m3c2.laz", "meshes/event_0001_before.ply"],
+        "dirs": ["meshes"],
+    });
+    std::fs::write(
+        s.work().join("publishing"),
+        serde_json::to_vec(&journal).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(s.recover().unwrap(), Recovery::RolledForward);
+    assert_eq!(listing(s.dir()), expected(NEW));
+
+    std::fs::write(s.work().join("publishing"), b"{damaged").unwrap();
+    assert!(matches!(s.recover(), Err(Error::Output { .. })));
+}

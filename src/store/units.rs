@@ -1,0 +1,56 @@
+//! Reading finished units: whether one is done (cheap), whether its bytes are intact
+//! (expensive), and throwing one away.
+
+use std::fs;
+use std::io;
+use std::path::PathBuf;
+
+use crate::error::{Error, Result};
+
+use super::fsops::{crc_and_size, trash};
+use super::record::Record;
+use super::unit_ref::UnitRef;
+use super::Store;
+
+impl Store {
+    /// The directory of finished `unit` (whether or not it exists).
+    pub fn unit_dir(&self, unit: &UnitRef) -> Result<PathBuf> {
+        unit.check()?;
+        Ok(self.units().join(&unit.kind).join(&unit.name))
+    }
+
+    /// The record of finished `unit`: its directory exists, its `record.json` parses and names
+    /// this unit, and every listed file exists with the recorded size. Nothing is read but the
+    /// record and the files' metadata: a flipped byte is found only by [`Store::verify`].
+    pub fn done(&self, unit: &UnitRef) -> Option<Record> {
+        let dir = self.unit_dir(unit).ok()?;
+        let record = Record::read(&dir, unit)?;
+        let sizes_ok = record.files.iter().all(|f| {
+            fs::metadata(dir.join(&f.name)).is_ok_and(|m| m.is_file() && m.len() == f.size)
+        });
+        sizes_ok.then_some(record)
+    }
+
+    /// Re-read every file of finished `unit` and compare size and CRC-32 with `record`. A
+    /// missing file is `false`; a file that exists but cannot be read is an error naming it.
+    pub fn verify(&self, unit: &UnitRef, record: &Record) -> Result<bool> {
+        let dir = self.unit_dir(unit)?;
+        for f in &record.files {
+            let path = dir.join(&f.name);
+            match crc_and_size(&path) {
+                Ok((crc, size)) if crc == f.crc32 && size == f.size => {}
+                Ok(_) => return Ok(false),
+                Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(false),
+                Err(e) => return Err(Error::output(&path, e)),
+            }
+        }
+        Ok(true)
+    }
+
+    /// Throw finished `unit` away: rename its directory into `tmp/` (readers then see it gone
+    /// at once, never half-deleted) and delete it there. A unit that does not exist is fine.
+    pub fn invalidate(&self, unit: &UnitRef) -> Result<()> {
+        let dir = self.unit_dir(unit)?;
+        trash(&self.tmp(), &dir).map(|_| ())
+    }
+}
