@@ -10,7 +10,6 @@
 //! 5. publish the outputs unit's files into DIR as one set, drop units no longer in the plan.
 
 use std::path::PathBuf;
-use std::time::Instant;
 
 use crate::error::{Error, Result};
 use crate::io::{self, CloudInfo};
@@ -188,7 +187,6 @@ pub fn compare(opts: &CompareOptions) -> Result<Summary> {
     };
     let user = opts.user.clone().over(config);
     let inputs = check_inputs(opts, &user)?;
-    let t0 = Instant::now();
     let (store, created) = open_store(opts)?;
     let result = (|| {
         let command = std::env::args().collect::<Vec<_>>().join(" ");
@@ -202,14 +200,6 @@ pub fn compare(opts: &CompareOptions) -> Result<Summary> {
                 store.invalidate(&unit_ref(&plan, i))?;
             }
         }
-        eprintln!(
-            "talus: inputs and parameters: {} + {} points, {} tile(s), {} units in {:.2} s",
-            inputs.before.point_count,
-            inputs.after.point_count,
-            plan.layout.len(),
-            plan.units.len(),
-            t0.elapsed().as_secs_f64()
-        );
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(plan.params.threads.value)
             .build()

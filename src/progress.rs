@@ -88,6 +88,13 @@ impl Stage {
     }
 
     /// End the stage: clear its bar and print its line, with `note` (e.g. "reused") appended.
+    /// Clear the bar without printing the stage's line (the run failed).
+    pub fn abandon(self) {
+        if let Some(b) = &self.bar {
+            b.finish_and_clear();
+        }
+    }
+
     pub fn finish(self, note: &str) -> f64 {
         let secs = self.seconds();
         if let Some(b) = &self.bar {

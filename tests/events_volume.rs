@@ -831,7 +831,8 @@ fn clustered(rng: &mut Rng) -> Vec<[f64; 3]> {
 
 /// `events::tiled::cluster` over a k×k grid of [0, 30]², global ids = indices.
 fn tiled_dbscan(pts: &[[f64; 3]], k: usize, eps: f64, min_pts: usize) -> Vec<u32> {
-    let grid = talus_tiling::TileGrid::new([0.0, 0.0], 30.0 / k as f64, k as u32, k as u32).unwrap();
+    let grid =
+        talus_tiling::TileGrid::new([0.0, 0.0], 30.0 / k as f64, k as u32, k as u32).unwrap();
     let keys: Vec<u64> = (0..pts.len() as u64).collect();
     talus::events::tiled::cluster(pts, &keys, &grid, eps, min_pts).unwrap()
 }

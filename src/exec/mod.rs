@@ -79,11 +79,13 @@ pub fn run(store: &Store, plan: &Plan, slots: usize, label: &str) -> Result<Repo
             s.spawn(|| slot(store, plan, label, &shared, &wake, &stages, &computed));
         }
     });
-    stages.finish_all();
     let shared = shared.into_inner().unwrap_or_else(|e| e.into_inner());
     if let Some(e) = shared.error {
+        // A failed run prints its error, not the lines of stages it did not finish.
+        stages.abandon();
         return Err(e);
     }
+    stages.finish_all();
     Ok(Report {
         computed: computed.into_inner(),
         reused,
@@ -119,7 +121,10 @@ fn slot(
                 }
                 let ready = (0..plan.units.len()).find(|&i| {
                     sh.state[i] == State::Todo
-                        && plan.units[i].deps.iter().all(|&d| sh.state[d] == State::Done)
+                        && plan.units[i]
+                            .deps
+                            .iter()
+                            .all(|&d| sh.state[d] == State::Done)
                         && !sh.elsewhere[i]
                 });
                 if let Some(i) = ready {
@@ -144,7 +149,14 @@ fn slot(
             Ok(Ran::Done) => {
                 computed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                 sh.state[picked] = State::Done;
-                stages.unit_done(plan, picked, &sh.state.iter().map(|&s| s == State::Done).collect::<Vec<_>>());
+                stages.unit_done(
+                    plan,
+                    picked,
+                    &sh.state
+                        .iter()
+                        .map(|&s| s == State::Done)
+                        .collect::<Vec<_>>(),
+                );
             }
             Ok(Ran::Elsewhere) => {
                 sh.state[picked] = State::Todo;
@@ -160,7 +172,7 @@ fn slot(
                 match dep {
                     Some(d) => {
                         eprintln!(
-                            "talus: {}: {problem}; computing unit {} again",
+                            "talus: {}: damaged ({problem}); computing unit {} again",
                             path.display(),
                             plan.units[d].name
                         );

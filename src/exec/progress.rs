@@ -34,7 +34,10 @@ pub struct Stages {
 
 fn index(kind: &str) -> usize {
     let name = stage_name(kind);
-    STAGES.iter().position(|s| s.0 == name).unwrap_or(STAGES.len() - 1)
+    STAGES
+        .iter()
+        .position(|s| s.0 == name)
+        .unwrap_or(STAGES.len() - 1)
 }
 
 impl Stages {
@@ -135,6 +138,17 @@ impl Stages {
         self.with(|open| {
             open[k].remaining += 1;
             open[k].closed = false;
+        });
+    }
+
+    /// The run failed: clear the bars of unfinished stages without their lines.
+    pub fn abandon(&self) {
+        self.with(|open| {
+            for s in open.iter_mut() {
+                if let Some(stage) = s.stage.take() {
+                    stage.abandon();
+                }
+            }
         });
     }
 

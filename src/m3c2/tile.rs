@@ -50,13 +50,9 @@ pub fn compute(
     let (b, a) = rayon::join(|| index(before), || index(after));
     let keyed: Vec<(u64, Point3)> = match cores {
         Some(c) => c.to_vec(),
-        None => core_points::thin(
-            before.len(),
-            before.point,
-            &anchor,
-            core_spacing,
-            |i| before.owned[i],
-        )
+        None => core_points::thin(before.len(), before.point, &anchor, core_spacing, |i| {
+            before.owned[i]
+        })
         .into_iter()
         .map(|(k, i)| (k, (before.point)(i)))
         .collect(),

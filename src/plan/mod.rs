@@ -165,7 +165,9 @@ impl Plan {
     /// Add a unit; returns its index.
     fn push(&mut self, spec: Spec, label: &str, key_parts: &[&str], deps: Vec<usize>) -> usize {
         let dep_keys: Vec<&str> = deps.iter().map(|&d| self.units[d].key.as_str()).collect();
-        let mut parts = vec![spec.kind()];
+        // The spec itself (which survey, pair, tile) is part of what the unit computes.
+        let what = serde_json::to_string(&spec).unwrap_or_default();
+        let mut parts = vec![what.as_str()];
         parts.extend_from_slice(key_parts);
         parts.extend(dep_keys);
         let key = key_of(&parts);
@@ -188,16 +190,30 @@ impl Plan {
         let label = self.pairs[pair].label.clone();
         let tiling = |plan: &mut Plan, s: usize| -> usize {
             // A survey tiled once serves every pair it is in.
-            if let Some(i) = plan.units.iter().position(
-                |u| matches!(u.spec, Spec::Tiling { survey } if survey == s),
-            ) {
+            if let Some(i) = plan
+                .units
+                .iter()
+                .position(|u| matches!(u.spec, Spec::Tiling { survey } if survey == s))
+            {
                 return i;
             }
-            let (file_key, lbl) = (plan.surveys[s].file.key.clone(), plan.surveys[s].label.clone());
-            plan.push(Spec::Tiling { survey: s }, &lbl, &[&file_key, &layout_key], Vec::new())
+            let (file_key, lbl) = (
+                plan.surveys[s].file.key.clone(),
+                plan.surveys[s].label.clone(),
+            );
+            plan.push(
+                Spec::Tiling { survey: s },
+                &lbl,
+                &[&file_key, &layout_key],
+                Vec::new(),
+            )
         };
         let (tb, ta) = (tiling(self, b), tiling(self, a));
-        let m3c2 = format!("{:?}|{}", self.params.m3c2(), self.params.core_spacing.value);
+        let m3c2 = format!(
+            "{:?}|{}",
+            self.params.m3c2(),
+            self.params.core_spacing.value
+        );
         let cores = self
             .core_points
             .as_ref()
@@ -257,10 +273,14 @@ impl Plan {
             let meshes = self
                 .meshes
                 .as_ref()
-                .map_or("points".to_string(), |[m1, m2]| format!("{}|{}", m1.key, m2.key));
+                .map_or("points".to_string(), |[m1, m2]| {
+                    format!("{}|{}", m1.key, m2.key)
+                });
             let volume_params = format!(
                 "{}|{}|{}",
-                self.params.cyl_radius.value, self.params.cyl_halflen.value, self.params.point_spacing
+                self.params.cyl_radius.value,
+                self.params.cyl_halflen.value,
+                self.params.point_spacing
             );
             let volumes: Vec<usize> = tiles
                 .iter()
@@ -306,8 +326,8 @@ impl Plan {
 
     /// Write the plan to `path` atomically.
     pub fn save(&self, path: &Path) -> Result<()> {
-        let text = serde_json::to_vec_pretty(self)
-            .map_err(|e| Error::Internal(format!("plan: {e}")))?;
+        let text =
+            serde_json::to_vec_pretty(self).map_err(|e| Error::Internal(format!("plan: {e}")))?;
         talus_tiling::atomic_write(path, &text).map_err(layout::tiling_error)
     }
 

@@ -57,8 +57,13 @@ pub fn candidate_boxes(e: &Event, cluster: &[Point3]) -> Vec<Obb> {
 }
 
 /// Run pair `pair`'s events into `out`.
-pub fn run(ctx: &Ctx, _unit: usize, pair: usize, out: &mut UnitWriter) -> Result<serde_json::Value> {
-    let params = super::stable::read(ctx, pair)?.params;
+pub fn run(
+    ctx: &Ctx,
+    _unit: usize,
+    pair: usize,
+    out: &mut UnitWriter,
+) -> Result<serde_json::Value> {
+    let params = super::stable::read(ctx, pair)?.params(ctx.plan);
     let (tau, reg) = (params.threshold.value, params.reg_error.value);
     let mut kept = Vec::new();
     let mut merged = Merged::new(ctx, pair)?;
@@ -139,7 +144,10 @@ pub fn run(ctx: &Ctx, _unit: usize, pair: usize, out: &mut UnitWriter) -> Result
             params.core_spacing.value,
         ) {
             let candidates = candidate_boxes(&e, &p);
-            drafts.push(Draft { event: e, candidates });
+            drafts.push(Draft {
+                event: e,
+                candidates,
+            });
         }
     }
     (ctx.progress)(drafts.len() as u64);

@@ -289,7 +289,10 @@ pub mod cores {
                 y: col(1),
                 z: col(2),
                 extra: vec![
-                    u32col("key_hi", pts.iter().map(|(k, _)| (k >> 32) as u32).collect()),
+                    u32col(
+                        "key_hi",
+                        pts.iter().map(|(k, _)| (k >> 32) as u32).collect(),
+                    ),
                     u32col("key_lo", pts.iter().map(|(k, _)| *k as u32).collect()),
                 ],
             };
@@ -310,7 +313,12 @@ pub mod cores {
             });
         };
         Ok((0..c.len())
-            .map(|i| ((hi[i] as u64) << 32 | lo[i] as u64, [c.x[i], c.y[i], c.z[i]]))
+            .map(|i| {
+                (
+                    (hi[i] as u64) << 32 | lo[i] as u64,
+                    [c.x[i], c.y[i], c.z[i]],
+                )
+            })
             .collect())
     }
 }

@@ -78,9 +78,7 @@ pub fn run(ctx: &Ctx, i: usize, out: &mut UnitWriter) -> Result<serde_json::Valu
         Spec::M3c2 { pair, tile } => m3c2::run(ctx, i, pair, crate::plan::tile_id(tile), out),
         Spec::Stable { pair } => stable::run(ctx, i, pair, out),
         Spec::Events { pair } => events::run(ctx, i, pair, out),
-        Spec::Volumes { pair, tile } => {
-            volumes::run(ctx, i, pair, crate::plan::tile_id(tile), out)
-        }
+        Spec::Volumes { pair, tile } => volumes::run(ctx, i, pair, crate::plan::tile_id(tile), out),
         Spec::Outputs { pair } => outputs::run(ctx, i, pair, out),
     }
 }
@@ -88,13 +86,12 @@ pub fn run(ctx: &Ctx, i: usize, out: &mut UnitWriter) -> Result<serde_json::Valu
 /// A damaged file of a finished unit: the executor throws that unit away and redoes it (a tile
 /// file's checksums do not match, it is truncated, ...).
 pub fn damaged(path: &Path, e: talus_tiling::Error) -> Error {
-    if e.is_corrupt() {
-        Error::Damaged {
+    match e {
+        talus_tiling::Error::Corrupt { reason, .. } => Error::Damaged {
             path: path.to_path_buf(),
-            problem: e.to_string(),
-        }
-    } else {
-        crate::plan::layout::tiling_error(e)
+            problem: reason,
+        },
+        other => crate::plan::layout::tiling_error(other),
     }
 }
 
@@ -150,8 +147,7 @@ pub fn meta_u64(meta: &serde_json::Value, key: &str) -> Result<u64> {
 
 /// Serialize `value` as JSON into `file` of `out`, recorded with its digest.
 pub fn write_json(out: &mut UnitWriter, file: &str, value: &impl serde::Serialize) -> Result<()> {
-    let bytes =
-        serde_json::to_vec(value).map_err(|e| Error::Internal(format!("{file}: {e}")))?;
+    let bytes = serde_json::to_vec(value).map_err(|e| Error::Internal(format!("{file}: {e}")))?;
     write_bytes(out, file, &bytes)
 }
 

@@ -19,17 +19,29 @@ pub const SAMPLES: u64 = 1_000_000;
 /// The file of a stable unit.
 pub const FILE: &str = "stable.json";
 
-/// What a stable unit writes.
+/// What a stable unit writes: the measurement only. The parameters that follow from it are the
+/// current plan's with it (`params`): a unit reused from a run with other parameters (its key
+/// does not depend on the threshold, say) must not bring that run's values along.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct StableGround {
     /// None: too few stable core points to measure.
     pub stable: Option<Stable>,
-    /// The plan's parameters with reg_error and threshold resolved.
-    pub params: Params,
+}
+
+impl StableGround {
+    /// The plan's parameters with reg_error and threshold resolved from the measurement.
+    pub fn params(&self, plan: &crate::plan::Plan) -> Params {
+        plan.params.clone().with_stable(self.stable.as_ref())
+    }
 }
 
 /// Measure pair `pair`'s stable ground into `out`.
-pub fn run(ctx: &Ctx, _unit: usize, pair: usize, out: &mut UnitWriter) -> Result<serde_json::Value> {
+pub fn run(
+    ctx: &Ctx,
+    _unit: usize,
+    pair: usize,
+    out: &mut UnitWriter,
+) -> Result<serde_json::Value> {
     let total = pair_count(ctx, pair)?;
     let step = total.div_ceil(SAMPLES).max(1);
     let mut samples = Vec::with_capacity(total.min(SAMPLES) as usize);
@@ -49,8 +61,7 @@ pub fn run(ctx: &Ctx, _unit: usize, pair: usize, out: &mut UnitWriter) -> Result
     }
     (ctx.progress)(samples.len() as u64);
     let stable = measure(&samples, ctx.plan.params.core_spacing.value);
-    let params = ctx.plan.params.clone().with_stable(stable.as_ref());
-    let ground = StableGround { stable, params };
+    let ground = StableGround { stable };
     super::write_json(out, FILE, &ground)?;
     Ok(serde_json::json!({ "sampled": samples.len() }))
 }

@@ -50,8 +50,9 @@ pub fn run(ctx: &Ctx, survey: usize, out: &mut UnitWriter) -> Result<serde_json:
     for id in grid.tiles() {
         if !has_file[grid.index(id)] {
             let name = tile_file(id);
-            let digest = talus_tiling::write_tile(&out.path(&name)?, &talus_tiling::empty_columns())
-                .map_err(tiling_error)?;
+            let digest =
+                talus_tiling::write_tile(&out.path(&name)?, &talus_tiling::empty_columns())
+                    .map_err(tiling_error)?;
             out.add(&name, digest.crc32, digest.size);
         }
     }

@@ -80,13 +80,22 @@ pub fn search_box(obb: &Obb, params: &Params) -> ([f64; 3], [f64; 4]) {
             if c & 4 == 0 { -h[2] } else { h[2] },
         ];
         let g = obb.to_global(&l);
-        xy = [xy[0].min(g[0]), xy[1].min(g[1]), xy[2].max(g[0]), xy[3].max(g[1])];
+        xy = [
+            xy[0].min(g[0]),
+            xy[1].min(g[1]),
+            xy[2].max(g[0]),
+            xy[3].max(g[1]),
+        ];
     }
     (h, xy)
 }
 
 /// The claims of every event (one per candidate box) over their clustered core points.
-pub fn ownership(drafts: &[Draft], members: &HashMap<u32, Vec<&Kept>>, params: &Params) -> volume::Ownership {
+pub fn ownership(
+    drafts: &[Draft],
+    members: &HashMap<u32, Vec<&Kept>>,
+    params: &Params,
+) -> volume::Ownership {
     let claims = drafts
         .iter()
         .flat_map(|d| {
@@ -218,7 +227,7 @@ pub fn run(
     let plan = ctx.plan;
     let deps = &plan.units[unit].deps;
     let ground = super::stable::read(ctx, pair)?;
-    let params = &ground.params;
+    let params = &ground.params(plan);
     let stable = ground.stable.as_ref();
     let (drafts, kept) = super::events::read(ctx, pair)?;
     let grid = plan.layout.grid()?;
@@ -292,14 +301,19 @@ pub fn run(
                         let r = volume::Footprint::of_obb(&e.obb, margin);
                         let sb = volume::UserMesh::new(mb, &frame, &r);
                         let sa = volume::UserMesh::new(ma, &frame, &r);
-                        volume::event_volume_from_surfaces(&e.obb, margin, &sb, &sa, spacing, &owned)
+                        volume::event_volume_from_surfaces(
+                            &e.obb, margin, &sb, &sa, spacing, &owned,
+                        )
                     }
-                    None => volume::event_volume(&e.obb, margin, &before[i], &after[i], spacing, &owned),
+                    None => {
+                        volume::event_volume(&e.obb, margin, &before[i], &after[i], spacing, &owned)
+                    }
                 };
                 let m = members.get(&id).map(|v| v.as_slice()).unwrap_or(&[]);
                 match v {
                     Ok(v) => {
-                        let u = uncertainty::propagate(&v.region, &error_model(&v, m, params, stable));
+                        let u =
+                            uncertainty::propagate(&v.region, &error_model(&v, m, params, stable));
                         (
                             Measured {
                                 id,

@@ -147,9 +147,10 @@ pub fn compare_passes(before: &Path, after: &Path, out: &Path, extra: &[&str]) -
 pub fn stage_line(stderr: &[u8], stage: &str) -> (u64, bool) {
     let text = String::from_utf8_lossy(stderr);
     let prefix = format!("talus: {stage}: ");
+    // The last line of the stage: a stage redone after damage prints a line again.
     let line = text
         .lines()
-        .find(|l| l.starts_with(&prefix))
+        .rfind(|l| l.starts_with(&prefix))
         .unwrap_or_else(|| panic!("no line for stage '{stage}' in:\n{text}"));
     let count = line[prefix.len()..]
         .split(' ')
@@ -161,7 +162,10 @@ pub fn stage_line(stderr: &[u8], stage: &str) -> (u64, bool) {
 
 /// The finished units of `kind` in DIR's store, by name, with the time their record was
 /// written: a unit computed again gets a new record (its name holds its key).
-pub fn unit_times(dir: &Path, kind: &str) -> std::collections::BTreeMap<String, std::time::SystemTime> {
+pub fn unit_times(
+    dir: &Path,
+    kind: &str,
+) -> std::collections::BTreeMap<String, std::time::SystemTime> {
     let mut m = std::collections::BTreeMap::new();
     let Ok(rd) = std::fs::read_dir(dir.join(".talus/units").join(kind)) else {
         return m;

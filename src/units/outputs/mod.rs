@@ -182,7 +182,7 @@ pub fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<
     let p = &plan.pairs[pair];
     let bs = &plan.surveys[p.before];
     let ground = super::stable::read(ctx, pair)?;
-    let params = ground.params.clone();
+    let params = ground.params(plan);
     let grid = plan.layout.grid()?;
     // Events with their volumes, in id order.
     let (records, kept, mesh_sources) = if plan.m3c2_only {
@@ -211,17 +211,22 @@ pub fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<
         }
         (records, kept, sources)
     };
-    let per_point: HashMap<u64, (f64, u32)> =
-        kept.iter().map(|k| (k.key, (k.smoothed, k.event))).collect();
+    let per_point: HashMap<u64, (f64, u32)> = kept
+        .iter()
+        .map(|k| (k.key, (k.smoothed, k.event)))
+        .collect();
     // m3c2.laz and the viewer's terrain, in one pass over the results.
     let total = super::m3c2::pair_count(ctx, pair)?;
     let mut terrain = view::TerrainSample::new(total, plan.layout.anchor);
     // Core points are C1 points or the user's: the finest coordinate quantum of the file they
     // come from keeps them exact.
-    let scales: Vec<[f64; 3]> = [bs.scale, plan.core_points.as_ref().and_then(|_| core_scale(ctx))]
-        .into_iter()
-        .flatten()
-        .collect();
+    let scales: Vec<[f64; 3]> = [
+        bs.scale,
+        plan.core_points.as_ref().and_then(|_| core_scale(ctx)),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
     let crs = io::open(&bs.file.path)?.info().crs.clone();
     let extent = &plan.layout.extent;
     let mut merged = super::m3c2::Merged::new(ctx, pair)?;
@@ -263,7 +268,16 @@ pub fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<
         tables::write_regions(out, &records, &crs)?;
     }
     terrain.write(out, &crs, &meshes)?;
-    let summary = summarize(ctx, unit, pair, params, ground.stable, &records, &written, kept.len());
+    let summary = summarize(
+        ctx,
+        unit,
+        pair,
+        params,
+        ground.stable,
+        &records,
+        &written,
+        kept.len(),
+    );
     let text = serde_json::to_string_pretty(&summary)
         .map_err(|e| Error::Internal(format!("summary: {e}")))?;
     super::write_bytes(out, MARKER, text.as_bytes())?;
@@ -308,7 +322,10 @@ fn summarize(
         bounds: s.bounds,
         crs: s.crs.clone(),
     };
-    let mut inputs = vec![input(&plan.surveys[p.before]), input(&plan.surveys[p.after])];
+    let mut inputs = vec![
+        input(&plan.surveys[p.before]),
+        input(&plan.surveys[p.after]),
+    ];
     if let Some(c) = &plan.core_points {
         if let Ok(r) = io::open(&c.path) {
             let i = r.info();
@@ -346,7 +363,13 @@ fn summarize(
         e.0 += 1;
         e.1 += secs;
     }
-    let pipeline = ["pass 1: tiling", "pass 2: normals and M3C2", "stable ground", "events", "volumes"];
+    let pipeline = [
+        "pass 1: tiling",
+        "pass 2: normals and M3C2",
+        "stable ground",
+        "events",
+        "volumes",
+    ];
     let stages = pipeline
         .iter()
         .filter_map(|&s| {
@@ -373,8 +396,14 @@ fn summarize(
         significant_points: written.significant,
         kept_points: kept as u64,
         events: records.len(),
-        gain_events: records.iter().filter(|e| e.event.kind == Kind::Gain).count(),
-        loss_events: records.iter().filter(|e| e.event.kind == Kind::Loss).count(),
+        gain_events: records
+            .iter()
+            .filter(|e| e.event.kind == Kind::Gain)
+            .count(),
+        loss_events: records
+            .iter()
+            .filter(|e| e.event.kind == Kind::Loss)
+            .count(),
         significant_events: significant().count(),
         total_gain_m3: significant()
             .filter_map(|e| e.volume_m3)

@@ -66,7 +66,12 @@ impl TerrainSample {
     }
 
     /// Write terrain.bin and view.json.
-    pub fn write(self, out: &mut UnitWriter, crs: &Crs, meshes: &[(u32, EventMeshes)]) -> Result<()> {
+    pub fn write(
+        self,
+        out: &mut UnitWriter,
+        crs: &Crs,
+        meshes: &[(u32, EventMeshes)],
+    ) -> Result<()> {
         let TerrainSample {
             origin, pos, dist, ..
         } = self;
