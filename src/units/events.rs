@@ -57,12 +57,7 @@ pub fn candidate_boxes(e: &Event, cluster: &[Point3]) -> Vec<Obb> {
 }
 
 /// Run pair `pair`'s events into `out`.
-pub fn run(
-    ctx: &Ctx,
-    _unit: usize,
-    pair: usize,
-    out: &mut UnitWriter,
-) -> Result<serde_json::Value> {
+pub fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<serde_json::Value> {
     let params = super::stable::read(ctx, pair)?.params(ctx.plan);
     let (tau, reg) = (params.threshold.value, params.reg_error.value);
     let mut kept = Vec::new();

@@ -26,11 +26,10 @@ pub fn chunk_file(k: usize) -> String {
     format!("r_{k:05}.tile")
 }
 
-/// Compute tile `tile` of pair `pair` into `out`.
+/// Compute tile `tile` of unit `unit`'s pair into `out`.
 pub fn run(
     ctx: &Ctx,
     unit: usize,
-    pair: usize,
     tile: TileId,
     out: &mut UnitWriter,
 ) -> Result<serde_json::Value> {
@@ -73,7 +72,6 @@ pub fn run(
     let owned = |t: &TilePoints| t.owned.iter().filter(|&&o| o).count() as u64;
     let points = owned(&before) + owned(&after);
     (ctx.progress)(points);
-    let _ = pair;
     Ok(serde_json::json!({
         "chunks": chunks,
         "core_points": results.len(),

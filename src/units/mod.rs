@@ -75,9 +75,9 @@ pub fn run(ctx: &Ctx, i: usize, out: &mut UnitWriter) -> Result<serde_json::Valu
     match ctx.plan.units[i].spec {
         Spec::Tiling { survey } => tiling::run(ctx, survey, out),
         Spec::Cores => m3c2::cores::run(ctx, out),
-        Spec::M3c2 { pair, tile } => m3c2::run(ctx, i, pair, crate::plan::tile_id(tile), out),
-        Spec::Stable { pair } => stable::run(ctx, i, pair, out),
-        Spec::Events { pair } => events::run(ctx, i, pair, out),
+        Spec::M3c2 { tile, .. } => m3c2::run(ctx, i, crate::plan::tile_id(tile), out),
+        Spec::Stable { pair } => stable::run(ctx, pair, out),
+        Spec::Events { pair } => events::run(ctx, pair, out),
         Spec::Volumes { pair, tile } => volumes::run(ctx, i, pair, crate::plan::tile_id(tile), out),
         Spec::Outputs { pair } => outputs::run(ctx, i, pair, out),
     }

@@ -36,12 +36,7 @@ impl StableGround {
 }
 
 /// Measure pair `pair`'s stable ground into `out`.
-pub fn run(
-    ctx: &Ctx,
-    _unit: usize,
-    pair: usize,
-    out: &mut UnitWriter,
-) -> Result<serde_json::Value> {
+pub fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<serde_json::Value> {
     let total = pair_count(ctx, pair)?;
     let step = total.div_ceil(SAMPLES).max(1);
     let mut samples = Vec::with_capacity(total.min(SAMPLES) as usize);

@@ -67,26 +67,7 @@ pub fn search_box(obb: &Obb, params: &Params) -> ([f64; 3], [f64; 4]) {
         obb.half_extents[1] + m + 3.0 * s,
         obb.half_extents[2] + params.cyl_halflen.value,
     ];
-    let mut xy = [
-        f64::INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::NEG_INFINITY,
-    ];
-    for c in 0..8 {
-        let l = [
-            if c & 1 == 0 { -h[0] } else { h[0] },
-            if c & 2 == 0 { -h[1] } else { h[1] },
-            if c & 4 == 0 { -h[2] } else { h[2] },
-        ];
-        let g = obb.to_global(&l);
-        xy = [
-            xy[0].min(g[0]),
-            xy[1].min(g[1]),
-            xy[2].max(g[0]),
-            xy[3].max(g[1]),
-        ];
-    }
+    let xy = volume::Frame::of_obb(obb).bounds_xy(h.map(|x| -x), h);
     (h, xy)
 }
 

@@ -30,6 +30,27 @@ impl Frame {
         ];
         self.axes.map(|a| a[0] * d[0] + a[1] * d[1] + a[2] * d[2])
     }
+    /// The xy bounds [x0, y0, x1, y1] of the box [lo, hi] given in this frame (its 8 corners).
+    pub fn bounds_xy(&self, lo: [f64; 3], hi: [f64; 3]) -> [f64; 4] {
+        let mut b = [
+            f64::INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NEG_INFINITY,
+        ];
+        for c in 0..8 {
+            let l: [f64; 3] = std::array::from_fn(|k| if c >> k & 1 == 0 { lo[k] } else { hi[k] });
+            let g = self.to_global(&l);
+            b = [
+                b[0].min(g[0]),
+                b[1].min(g[1]),
+                b[2].max(g[0]),
+                b[3].max(g[1]),
+            ];
+        }
+        b
+    }
+
     /// Local → global.
     pub fn to_global(&self, l: &[f64; 3]) -> [f64; 3] {
         let a = &self.axes;

@@ -53,27 +53,7 @@ impl Claim {
     /// The box's bounds in x and y: [x0, y0, x1, y1].
     pub fn bounds_xy(&self) -> [f64; 4] {
         let (r, h) = (&self.footprint, self.depth);
-        let mut b = [
-            f64::INFINITY,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::NEG_INFINITY,
-        ];
-        for c in 0..8 {
-            let l = [
-                if c & 1 == 0 { r.u0 } else { r.u1 },
-                if c & 2 == 0 { r.v0 } else { r.v1 },
-                if c & 4 == 0 { -h } else { h },
-            ];
-            let g = self.frame.to_global(&l);
-            b = [
-                b[0].min(g[0]),
-                b[1].min(g[1]),
-                b[2].max(g[0]),
-                b[3].max(g[1]),
-            ];
-        }
-        b
+        self.frame.bounds_xy([r.u0, r.v0, -h], [r.u1, r.v1, h])
     }
 }
 

@@ -16,43 +16,44 @@ pub const COMPARED: &[&str] = &[
     "terrain.bin",
 ];
 
-/// Write the cliff scene (3 planted events) with `points` per epoch into `dir`.
-pub fn cliff(dir: &Path, points: u64) -> (PathBuf, PathBuf) {
-    let out = run(&[
+/// `talus synth cliff` (3 planted events) with `points` per epoch into `dir`, with `extra`
+/// options; the epochs' paths.
+fn synth_cliff(dir: &Path, points: u64, extra: &[&str]) -> (PathBuf, PathBuf) {
+    let n = points.to_string();
+    let mut args = vec![
         "synth",
         "cliff",
         "--out",
         dir.to_str().unwrap(),
         "--points",
-        &points.to_string(),
-    ]);
+        &n,
+    ];
+    args.extend_from_slice(extra);
+    let out = run(&args);
     assert!(
         out.status.success(),
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    (dir.join("before.laz"), dir.join("after.laz"))
+    let ext = if extra.contains(&"--las") {
+        "las"
+    } else {
+        "laz"
+    };
+    (
+        dir.join(format!("before.{ext}")),
+        dir.join(format!("after.{ext}")),
+    )
+}
+
+/// Write the cliff scene (3 planted events) with `points` per epoch into `dir`.
+pub fn cliff(dir: &Path, points: u64) -> (PathBuf, PathBuf) {
+    synth_cliff(dir, points, &[])
 }
 
 /// `talus synth cliff` as uncompressed LAS with `seed` (so that two seeds give files of one size).
 pub fn cliff_seeded(dir: &Path, points: u64, seed: u64) -> (PathBuf, PathBuf) {
-    let out = run(&[
-        "synth",
-        "cliff",
-        "--out",
-        dir.to_str().unwrap(),
-        "--points",
-        &points.to_string(),
-        "--seed",
-        &seed.to_string(),
-        "--las",
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    (dir.join("before.las"), dir.join("after.las"))
+    synth_cliff(dir, points, &["--seed", &seed.to_string(), "--las"])
 }
 
 pub fn compare(before: &Path, after: &Path, out: &Path, extra: &[&str]) {
