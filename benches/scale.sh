@@ -71,7 +71,13 @@ for n in sizes:
             v = found[best]["properties"]["volume_m3"]
             errs.append(100 * abs(v - t["volume_m3"]) / abs(t["volume_m3"]) if v is not None else float("inf"))
     extra = [f["properties"]["volume_m3"] for i, f in enumerate(found) if i not in used]
-    stages = {x["stage"]: x["seconds"] for x in s["stages"]}
+    # Wall time per stage from the run's stage lines ("talus: <stage>: <n> <unit> in <s> s"),
+    # which the time -v file holds with the rest of stderr.
+    stages = {}
+    for line in open(f"{d}.compare.time"):
+        m = re.match(r"talus: (.+?): \d+ .+? in ([\d.]+) s", line)
+        if m:
+            stages[m.group(1)] = stages.get(m.group(1), 0.0) + float(m.group(2))
     rows.append((n, wall, rss, stages, s["tiles"], s["core_points"], len(truth), matched, errs, extra, swall, srss))
 
 print()
