@@ -9,12 +9,13 @@
 //!    names hold their keys; `--force` recomputes them);
 //! 5. publish the outputs unit's files into DIR as one set, drop units no longer in the plan.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
 use crate::io::{self, CloudInfo};
 use crate::params::{Params, UserParams};
-use crate::plan::{InputFile, Layout, Pair, Plan, Spec, Survey, PLAN_VERSION};
+use crate::plan::inputs::SurveyFiles;
+use crate::plan::{InputFile, Layout, Pair, Plan, Survey, PLAN_VERSION};
 use crate::sampling;
 use crate::store::Store;
 use crate::units::outputs::{is_output, Publish, Summary, MARKER};
@@ -42,16 +43,16 @@ pub struct CompareOptions {
 
 /// The headers of the inputs, checked (before anything is written).
 struct Inputs {
-    before: CloudInfo,
-    after: CloudInfo,
+    before: SurveyFiles,
+    after: SurveyFiles,
     cores: Option<CloudInfo>,
 }
 
 fn check_inputs(opts: &CompareOptions, user: &UserParams) -> Result<Inputs> {
-    let before = io::open(&opts.before)?.info().clone();
-    let after = io::open(&opts.after)?.info().clone();
-    if !before.bounds.overlaps_xy(&after.bounds) {
-        let (b, a) = (before.bounds, after.bounds);
+    let before = SurveyFiles::open(&opts.before)?;
+    let after = SurveyFiles::open(&opts.after)?;
+    if !before.bounds().overlaps_xy(&after.bounds()) {
+        let (b, a) = (before.bounds(), after.bounds());
         return Err(Error::Epochs(format!(
             "{} and {}: the epochs do not overlap (x {:.3}..{:.3}, y {:.3}..{:.3} vs x {:.3}..{:.3}, y {:.3}..{:.3})",
             opts.before.display(),
@@ -80,7 +81,7 @@ fn check_inputs(opts: &CompareOptions, user: &UserParams) -> Result<Inputs> {
     }
     // Validate the user's values before measuring anything.
     Params::resolve(user, 1.0)?;
-    user.check_lengths_within(&[before.bounds, after.bounds])?;
+    user.check_lengths_within(&[before.bounds(), after.bounds()])?;
     Ok(Inputs {
         before,
         after,
@@ -88,24 +89,36 @@ fn check_inputs(opts: &CompareOptions, user: &UserParams) -> Result<Inputs> {
     })
 }
 
-fn survey(store: &Store, label: &str, info: &CloudInfo) -> Result<Survey> {
+/// A survey of the plan: its files keyed by content.
+pub fn survey(store: &Store, label: &str, files: &SurveyFiles) -> Result<Survey> {
+    let inputs: Vec<InputFile> = files
+        .infos
+        .iter()
+        .map(|i| {
+            Ok(InputFile {
+                path: std::fs::canonicalize(&i.path).unwrap_or_else(|_| i.path.clone()),
+                key: store.content_key(&i.path)?,
+            })
+        })
+        .collect::<Result<_>>()?;
+    let keys: Vec<&str> = inputs.iter().map(|f| f.key.as_str()).collect();
     Ok(Survey {
         label: label.into(),
-        file: InputFile {
-            path: std::fs::canonicalize(&info.path).unwrap_or_else(|_| info.path.clone()),
-            key: store.content_key(&info.path)?,
-        },
-        points: info.point_count,
-        bounds: info.bounds,
-        format: info.format_detail.clone(),
-        crs: info.crs.describe(),
-        scale: info.scale,
+        arg: files.arg.clone(),
+        key: crate::plan::key_of(&keys),
+        date: None,
+        files: inputs,
+        points: files.points(),
+        bounds: files.bounds(),
+        format: files.format(),
+        crs: files.first().crs.describe(),
+        scale: files.scale(),
     })
 }
 
 /// Plan the comparison of `opts` in `store`.
 fn plan(store: &Store, opts: &CompareOptions, user: &UserParams, inputs: &Inputs) -> Result<Plan> {
-    let spacing = sampling::measure(&opts.before)?;
+    let spacing = sampling::measure(&inputs.before.first().path)?;
     let params = Params::resolve(user, spacing.effective_spacing)?;
     let surveys = vec![
         survey(store, "before", &inputs.before)?,
@@ -122,11 +135,14 @@ fn plan(store: &Store, opts: &CompareOptions, user: &UserParams, inputs: &Inputs
         (Some(b), Some(a)) => Some([input(b)?, input(a)?]),
         _ => None,
     };
-    let mut bounds = vec![inputs.before.bounds, inputs.after.bounds];
+    let mut bounds = vec![inputs.before.bounds(), inputs.after.bounds()];
     bounds.extend(inputs.cores.as_ref().map(|c| c.bounds));
+    let all = union(&bounds);
+    let area = ((all.max[0] - all.min[0]) * (all.max[1] - all.min[1])).max(f64::MIN_POSITIVE);
     let layout = Layout::plan(
         &bounds,
-        inputs.before.point_count + inputs.after.point_count,
+        &all,
+        (inputs.before.points() + inputs.after.points()) as f64 / area,
         &params,
         opts.tile_size,
     )?;
@@ -147,13 +163,23 @@ fn plan(store: &Store, opts: &CompareOptions, user: &UserParams, inputs: &Inputs
         m3c2_only: opts.m3c2_only,
         units: Vec::new(),
     };
-    plan.add_pair_units(0)?;
+    plan.add_pair_units(0, None)?;
     Ok(plan)
 }
 
-/// Prepare DIR: refuse one that holds something else unless --resume or --force.
-fn open_store(opts: &CompareOptions) -> Result<(Store, bool)> {
-    let out = &opts.out;
+/// The bounds of all of `bounds`.
+pub fn union(bounds: &[crate::io::Bounds]) -> crate::io::Bounds {
+    let mut u = crate::io::Bounds::empty();
+    for b in bounds {
+        u.grow(&b.min);
+        u.grow(&b.max);
+    }
+    u
+}
+
+/// Prepare DIR: refuse one that holds something else unless `resume` or `force`; whether this
+/// run created DIR.
+pub fn open_store(out: &Path, resume: bool, force: bool) -> Result<(Store, bool)> {
     let existed = out.exists();
     if existed && !out.is_dir() {
         return Err(Error::Usage(format!(
@@ -161,7 +187,7 @@ fn open_store(opts: &CompareOptions) -> Result<(Store, bool)> {
             out.display()
         )));
     }
-    if existed && !opts.resume && !opts.force {
+    if existed && !resume && !force {
         let mut entries = std::fs::read_dir(out).map_err(|e| Error::output(out, e))?;
         if entries.next().is_some() {
             return Err(Error::Usage(format!(
@@ -187,54 +213,77 @@ pub fn compare(opts: &CompareOptions) -> Result<Summary> {
     };
     let user = opts.user.clone().over(config);
     let inputs = check_inputs(opts, &user)?;
-    let (store, created) = open_store(opts)?;
-    let result = (|| {
-        let command = std::env::args().collect::<Vec<_>>().join(" ");
-        // The lock's run id is only for the lock file; the plan's run follows.
-        let lock = store.lock("compare", &command)?;
-        store.recover()?;
-        let plan = plan(&store, opts, &user, &inputs)?;
-        plan.save(&plan_path(&store))?;
-        if opts.force {
-            for i in 0..plan.units.len() {
-                store.invalidate(&unit_ref(&plan, i))?;
-            }
-        }
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(plan.params.threads.value)
-            .build()
-            .map_err(|e| Error::Internal(format!("thread pool: {e}")))?;
-        let slots = plan.params.threads.value.min(2);
-        pool.install(|| crate::exec::run(&store, &plan, slots, "compare"))?;
-        let summary = publish(&store, &plan)?;
-        let keep = (0..plan.units.len()).map(|i| unit_ref(&plan, i)).collect();
-        store.gc(&keep)?;
-        drop(lock);
-        Ok(summary)
-    })();
+    let (store, created) = open_store(&opts.out, opts.resume, opts.force)?;
+    let result = run_planned(&store, opts.force, &is_output, |store| {
+        plan(store, opts, &user, &inputs)
+    });
+    let marker = forget_if_input_error(result, created, &opts.out)?;
+    let text = std::fs::read(&marker).map_err(|e| Error::output(&marker, e))?;
+    serde_json::from_slice(&text).map_err(|e| Error::Internal(format!("summary.json: {e}")))
+}
+
+/// After a failed run in a DIR it created: remove DIR again when the failure is the input's
+/// (nothing worth resuming).
+pub fn forget_if_input_error<T>(result: Result<T>, created: bool, out: &Path) -> Result<T> {
     match result {
-        Ok(s) => Ok(s),
+        Ok(v) => Ok(v),
         Err(e) => {
-            // Bad input found while streaming: nothing worth keeping.
             if created && matches!(e, Error::Input { .. } | Error::Usage(_) | Error::Epochs(_)) {
-                let _ = std::fs::remove_dir_all(&opts.out);
+                let _ = std::fs::remove_dir_all(out);
             }
             Err(e)
         }
     }
 }
 
-/// Publish the plan's outputs unit into DIR as one set; returns its summary.
-pub fn publish(store: &Store, plan: &Plan) -> Result<Summary> {
-    let out = plan
-        .find(&Spec::Outputs { pair: 0 })
-        .ok_or_else(|| Error::Internal("a plan without outputs".into()))?;
-    let unit = unit_ref(plan, out);
+/// The run of a planned command in `store`: take DIR's lock (one run per DIR), finish a publish
+/// a crash interrupted, plan (`plan`), write the plan, with `force` throw its units away,
+/// execute every unit not done, publish the last unit's `publish` list as one set (`ours` tells
+/// talus's outputs from the user's files), drop units no longer in the plan. Returns the path of
+/// the published marker in its unit.
+pub fn run_planned(
+    store: &Store,
+    force: bool,
+    ours: &dyn Fn(&str) -> bool,
+    plan: impl FnOnce(&Store) -> Result<Plan>,
+) -> Result<PathBuf> {
+    let command = std::env::args().collect::<Vec<_>>().join(" ");
+    let lock = store.lock("run", &command)?;
+    store.recover()?;
+    let plan = plan(store)?;
+    plan.save(&plan_path(store))?;
+    if force {
+        for i in 0..plan.units.len() {
+            store.invalidate(&unit_ref(&plan, i))?;
+        }
+    }
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(plan.params.threads.value)
+        .build()
+        .map_err(|e| Error::Internal(format!("thread pool: {e}")))?;
+    let slots = plan.params.threads.value.min(2);
+    pool.install(|| crate::exec::run(store, &plan, slots, "run"))?;
+    let marker = publish(store, &plan, ours)?;
+    let keep = (0..plan.units.len()).map(|i| unit_ref(&plan, i)).collect();
+    store.gc(&keep)?;
+    drop(lock);
+    Ok(marker)
+}
+
+/// Publish the plan's last unit's `publish` list into DIR as one set; returns the path of the
+/// marker (the file published last) in its unit.
+pub fn publish(store: &Store, plan: &Plan, ours: &dyn Fn(&str) -> bool) -> Result<PathBuf> {
+    let last = plan
+        .units
+        .len()
+        .checked_sub(1)
+        .ok_or_else(|| Error::Internal("an empty plan".into()))?;
+    let unit = unit_ref(plan, last);
     let record = store
         .done(&unit)
-        .ok_or_else(|| Error::Internal(format!("outputs unit {} not done", unit.name)))?;
+        .ok_or_else(|| Error::Internal(format!("unit {} not done", unit.name)))?;
     let list: Vec<Publish> = serde_json::from_value(record.meta["publish"].clone())
-        .map_err(|e| Error::Internal(format!("outputs unit record: {e}")))?;
+        .map_err(|e| Error::Internal(format!("unit {} record: {e}", unit.name)))?;
     let files: Vec<(PathBuf, String)> = list
         .iter()
         .map(|p| {
@@ -245,8 +294,6 @@ pub fn publish(store: &Store, plan: &Plan) -> Result<Summary> {
             Ok((store.unit_dir(&u)?.join(&p.file), p.name.clone()))
         })
         .collect::<Result<_>>()?;
-    store.publish(&files, MARKER, &is_output)?;
-    let path = store.unit_dir(&unit)?.join(MARKER);
-    let text = std::fs::read(&path).map_err(|e| Error::output(&path, e))?;
-    serde_json::from_slice(&text).map_err(|e| Error::Internal(format!("summary.json: {e}")))
+    store.publish(&files, MARKER, ours)?;
+    Ok(store.unit_dir(&unit)?.join(MARKER))
 }

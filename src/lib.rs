@@ -11,6 +11,7 @@
 //!
 //! [`synth`] writes synthetic pairs with exact ground truth; [`view`] serves the viewer.
 
+pub mod campaign;
 pub mod commands;
 pub mod compare;
 pub mod error;

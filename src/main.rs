@@ -22,6 +22,8 @@ struct Cli {
 enum Command {
     /// Compare two epochs: M3C2 distances, change events and their volumes.
     Compare(Box<CompareArgs>),
+    /// Compare the surveys of a campaign pair by pair: tables, tracks, time series, report.
+    Campaign(Box<CampaignArgs>),
     /// Point count, bounds, format, CRS, point spacing and derived parameters of point clouds.
     Info {
         /// Point clouds (LAS/LAZ, text, PLY).
@@ -67,21 +69,12 @@ enum Command {
     },
 }
 
+/// The method's parameters (every one left out is derived from the data).
 #[derive(Args)]
-struct CompareArgs {
-    /// The earlier epoch (C1).
-    before: PathBuf,
-    /// The later epoch (C2).
-    after: PathBuf,
-    /// Output directory.
+struct ParamArgs {
+    /// Effective point spacing the other parameters derive from (default: measured on C1).
     #[arg(long)]
-    out: PathBuf,
-    /// TOML file with parameters (flags override it).
-    #[arg(long)]
-    config: Option<PathBuf>,
-    /// Core points file (any supported cloud format); default: C1 thinned by --core-spacing.
-    #[arg(long, conflicts_with = "core_spacing")]
-    core_points: Option<PathBuf>,
+    point_spacing: Option<f64>,
     #[arg(long)]
     core_spacing: Option<f64>,
     #[arg(long)]
@@ -90,6 +83,7 @@ struct CompareArgs {
     cyl_radius: Option<f64>,
     #[arg(long)]
     cyl_halflen: Option<f64>,
+    /// Registration error between the epochs (default: measured on the stable ground).
     #[arg(long)]
     reg_error: Option<f64>,
     /// Fewer points than this in either cylinder → no distance.
@@ -98,7 +92,7 @@ struct CompareArgs {
     /// auto | up | X,Y,Z | toward:X,Y,Z
     #[arg(long)]
     orientation: Option<String>,
-    /// Significance threshold τ on |distance|.
+    /// Significance threshold τ on |distance| (default: from the measured noise).
     #[arg(long)]
     threshold: Option<f64>,
     #[arg(long)]
@@ -116,6 +110,26 @@ struct CompareArgs {
     memory: Option<String>,
     #[arg(long)]
     threads: Option<usize>,
+}
+
+#[derive(Args)]
+struct CompareArgs {
+    /// The earlier epoch (C1): a point cloud, or a folder or pattern of its tiles.
+    before: PathBuf,
+    /// The later epoch (C2), likewise.
+    after: PathBuf,
+    /// Output directory.
+    #[arg(long)]
+    out: PathBuf,
+    /// TOML file with parameters (flags override it).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Core points file (any supported cloud format); default: C1 thinned by --core-spacing
+    /// (with a file, --core-spacing is the spacing of its points: event areas, derived eps).
+    #[arg(long)]
+    core_points: Option<PathBuf>,
+    #[command(flatten)]
+    params: ParamArgs,
     /// Continue an interrupted run in DIR.
     #[arg(long, conflicts_with = "force")]
     resume: bool,
@@ -132,6 +146,34 @@ struct CompareArgs {
     #[arg(long)]
     m3c2_only: bool,
     /// Tile side (for testing tiling invariance; default: planned from --memory).
+    #[arg(long, hide = true)]
+    tile_size: Option<f64>,
+}
+
+#[derive(Args)]
+struct CampaignArgs {
+    /// The surveys: point clouds, or folders or patterns of tiles, dated by YYYYMMDD or
+    /// YYYY-MM-DD in their names or by [[epoch]] entries of --config.
+    #[arg(required = true, num_args = 2..)]
+    epochs: Vec<PathBuf>,
+    /// Output directory.
+    #[arg(long)]
+    out: PathBuf,
+    /// TOML file with parameters and [[epoch]] entries (path, date, label).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    #[command(flatten)]
+    params: ParamArgs,
+    /// Compare each later survey with the first as well.
+    #[arg(long)]
+    baseline: bool,
+    /// Continue an interrupted campaign, or one with surveys added, in DIR.
+    #[arg(long, conflicts_with = "force")]
+    resume: bool,
+    /// Start over, replacing what DIR holds.
+    #[arg(long)]
+    force: bool,
+    /// Tile side (tests; default: planned from --memory).
     #[arg(long, hide = true)]
     tile_size: Option<f64>,
 }
@@ -165,9 +207,10 @@ struct SynthArgs {
     las: bool,
 }
 
-impl CompareArgs {
+impl ParamArgs {
     fn user_params(&self) -> UserParams {
         UserParams {
+            point_spacing: self.point_spacing,
             core_spacing: self.core_spacing,
             normal_radius: self.normal_radius,
             cyl_radius: self.cyl_radius,
@@ -192,7 +235,7 @@ fn run(cli: Cli) -> talus::Result<()> {
     match cli.command {
         Command::Compare(a) => {
             let opts = talus::compare::CompareOptions {
-                user: a.user_params(),
+                user: a.params.user_params(),
                 before: a.before,
                 after: a.after,
                 out: a.out,
@@ -207,6 +250,27 @@ fn run(cli: Cli) -> talus::Result<()> {
             };
             let summary = talus::compare::compare(&opts)?;
             eprintln!("{}", summary.one_line());
+            Ok(())
+        }
+        Command::Campaign(a) => {
+            let opts = talus::campaign::command::CampaignOptions {
+                user: a.params.user_params(),
+                epochs: a.epochs,
+                out: a.out,
+                config: a.config,
+                baseline: a.baseline,
+                resume: a.resume,
+                force: a.force,
+                tile_size: a.tile_size,
+            };
+            let done = talus::campaign::command::campaign(&opts)?;
+            eprintln!(
+                "talus: campaign of {} surveys, {} pairs, {} tracks; outputs in {}",
+                done.surveys,
+                done.pairs,
+                done.summary["tracks"],
+                opts.out.display()
+            );
             Ok(())
         }
         Command::Info { files, json } => talus::info::print(&files, json),

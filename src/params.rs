@@ -31,6 +31,8 @@ use crate::m3c2::{M3c2Params, Orientation};
 #[derive(Debug, Clone, Default, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct UserParams {
+    /// The effective point spacing the derivation rules start from (default: measured on C1).
+    pub point_spacing: Option<f64>,
     pub core_spacing: Option<f64>,
     pub normal_radius: Option<f64>,
     pub cyl_radius: Option<f64>,
@@ -60,19 +62,33 @@ pub struct ConfigSource {
 impl UserParams {
     /// Read a TOML config file (same names as the flags, with underscores).
     pub fn from_toml_file(path: &Path) -> Result<Self> {
+        Self::from_toml_file_with(path, &[]).map(|(u, _)| u)
+    }
+
+    /// Read a TOML config file whose top-level tables or arrays named in `sections` are not
+    /// parameters (a campaign's `[[epoch]]` entries): they are returned apart, unparsed.
+    pub fn from_toml_file_with(path: &Path, sections: &[&str]) -> Result<(Self, toml::Table)> {
         let text = std::fs::read_to_string(path)
             .map_err(|e| Error::input(path, format!("cannot read config: {e}")))?;
-        let mut user: UserParams = toml::from_str(&text).map_err(|e| {
+        let bad = |e: toml::de::Error| {
             let line = e.span().map_or(String::new(), |s| {
                 format!("line {}: ", text[..s.start].matches('\n').count() + 1)
             });
             Error::input(path, format!("bad config: {line}{}", e.message()))
-        })?;
+        };
+        let mut table: toml::Table = toml::from_str(&text).map_err(bad)?;
+        let mut apart = toml::Table::new();
+        for name in sections {
+            if let Some(v) = table.remove(*name) {
+                apart.insert(name.to_string(), v);
+            }
+        }
+        let mut user: UserParams = toml::Value::Table(table).try_into().map_err(bad)?;
         user.config = Some(ConfigSource {
             path: path.to_path_buf(),
             keys: user.keys_set(),
         });
-        Ok(user)
+        Ok((user, apart))
     }
 
     /// The names of the values that are set.
@@ -129,8 +145,9 @@ impl UserParams {
     }
 
     /// The lengths that size neighbourhoods, with their keys.
-    fn lengths(&self) -> [(&'static str, Option<f64>); 6] {
+    fn lengths(&self) -> [(&'static str, Option<f64>); 7] {
         [
+            ("point_spacing", self.point_spacing),
             ("core_spacing", self.core_spacing),
             ("normal_radius", self.normal_radius),
             ("cyl_radius", self.cyl_radius),
@@ -148,6 +165,7 @@ impl UserParams {
             c
         });
         UserParams {
+            point_spacing: self.point_spacing.or(base.point_spacing),
             core_spacing: self.core_spacing.or(base.core_spacing),
             normal_radius: self.normal_radius.or(base.normal_radius),
             cyl_radius: self.cyl_radius.or(base.cyl_radius),
@@ -178,8 +196,8 @@ pub struct Resolved<T> {
 /// Every parameter of a run, resolved.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct Params {
-    /// The effective point spacing of C1 (1/√density) the rules start from.
-    pub point_spacing: f64,
+    /// The effective point spacing (1/√density of C1, measured) the rules start from.
+    pub point_spacing: Resolved<f64>,
     pub core_spacing: Resolved<f64>,
     pub normal_radius: Resolved<f64>,
     pub cyl_radius: Resolved<f64>,
@@ -299,8 +317,9 @@ fn parse_size_problem(s: &str) -> std::result::Result<u64, String> {
 }
 
 impl Params {
-    /// Resolve every parameter from the user's values and the measured spacing `s`.
-    pub fn resolve(user: &UserParams, s: f64) -> Result<Params> {
+    /// Resolve every parameter from the user's values and the measured spacing (used unless
+    /// the user gave `point_spacing`).
+    pub fn resolve(user: &UserParams, measured_spacing: f64) -> Result<Params> {
         for (name, v) in user.lengths() {
             check_length(user, name, v, false)?;
         }
@@ -329,6 +348,12 @@ impl Params {
             let problem = m.strip_prefix("--orientation: ").unwrap_or(&m);
             user.bad_value("orientation", problem)
         })?;
+        let point_spacing = pick(
+            user.point_spacing,
+            measured_spacing,
+            "measured: 1/√density of the before survey",
+        );
+        let s = point_spacing.value;
         if !(s > 0.0 && s.is_finite()) {
             return Err(Error::Internal(format!(
                 "point spacing {s} is not positive"
@@ -351,7 +376,7 @@ impl Params {
             .map(|n| n.get())
             .unwrap_or(1);
         Ok(Params {
-            point_spacing: s,
+            point_spacing,
             normal_radius: pick(
                 user.normal_radius,
                 4.0 * s,
@@ -418,7 +443,7 @@ impl Params {
                     ),
                 },
                 None => Resolved {
-                    value: 0.5 * self.point_spacing,
+                    value: 0.5 * self.point_spacing.value,
                     source: "derived: effective spacing / 2 (no stable ground to measure noise on)"
                         .into(),
                 },

@@ -2,6 +2,7 @@
 //! did not write: las-rs (header, CRS records, raw records and extra bytes) and laspy, which
 //! decodes the extra dimensions from our Extra Bytes VLR on its own (names, types, values).
 
+use std::borrow::Cow;
 use std::path::Path;
 
 use talus::io::las_out::{ExtraDim, ExtraType, ResultWriter};
@@ -13,27 +14,27 @@ use common::laspy::{laspy_python, laspy_read, num};
 
 const DIMS: [ExtraDim; 5] = [
     ExtraDim {
-        name: "m3c2_significant",
+        name: Cow::Borrowed("m3c2_significant"),
         ty: ExtraType::U8,
         description: "|d| > LoD95",
     },
     ExtraDim {
-        name: "m3c2_count1",
+        name: Cow::Borrowed("m3c2_count1"),
         ty: ExtraType::U32,
         description: "points in cylinder, epoch 1",
     },
     ExtraDim {
-        name: "event_id",
+        name: Cow::Borrowed("event_id"),
         ty: ExtraType::I32,
         description: "signed event id",
     },
     ExtraDim {
-        name: "m3c2_distance",
+        name: Cow::Borrowed("m3c2_distance"),
         ty: ExtraType::F32,
         description: "M3C2 distance",
     },
     ExtraDim {
-        name: "m3c2_uncertainty_with_a_long_nam",
+        name: Cow::Borrowed("m3c2_uncertainty_with_a_long_nam"),
         ty: ExtraType::F64,
         description: "",
     },
@@ -211,7 +212,7 @@ fn check_with_laspy(py: &Path, path: &Path, point_format: u8, wkt: bool) {
         .collect();
     assert_eq!(descriptions, DIMS.map(|d| d.description));
     for (k, d) in DIMS.iter().enumerate() {
-        let values = j["extra"][d.name].as_array().expect("values");
+        let values = j["extra"][d.name.as_ref()].as_array().expect("values");
         assert_eq!(values.len(), N);
         for (i, v) in values.iter().enumerate() {
             let want = point(i).1[k];

@@ -38,7 +38,9 @@ fn pair(before: &Path, after: &Path, out: &Path) -> PairResult {
     let o = common::run_compare(before, after, out, &[]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let summary = read_json(&out.join("summary.json"));
-    let spacing = summary["parameters"]["point_spacing"].as_f64().unwrap();
+    let spacing = summary["parameters"]["point_spacing"]["value"]
+        .as_f64()
+        .unwrap();
     let (_, p1) = talus::io::read_all(before).unwrap();
     let (_, p2) = talus::io::read_all(after).unwrap();
     let origin = [p1[0][0], p1[0][1]];

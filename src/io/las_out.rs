@@ -61,10 +61,11 @@ impl ExtraType {
 }
 
 /// One extra dimension appended to every point record.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub struct ExtraDim {
-    /// At most 32 bytes (LAS descriptor field), unique within a file.
-    pub name: &'static str,
+    /// At most 32 bytes (LAS descriptor field), unique within a file. Borrowed for the fixed
+    /// dimensions of m3c2.laz, owned for the per-pair ones of a campaign's time series.
+    pub name: std::borrow::Cow<'static, str>,
     pub ty: ExtraType,
     /// At most 32 bytes.
     pub description: &'static str,
@@ -188,7 +189,7 @@ impl ResultWriter {
                     d.name
                 )));
             }
-            if !seen.insert(d.name) {
+            if !seen.insert(d.name.as_ref()) {
                 return Err(Error::Internal(format!(
                     "extra dimension '{}' given twice",
                     d.name

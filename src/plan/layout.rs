@@ -13,6 +13,11 @@ use crate::error::{Error, Result};
 use crate::io::{Bounds, Point3};
 use crate::params::Params;
 
+/// The size (input units) of the blocks the core-point lattice is anchored on: large next to a
+/// site, so that two runs over it share the anchor, small enough that local coordinates keep
+/// their precision (a picometre at 10 km) and Morton keys their 21 bits per axis.
+pub const ANCHOR_BLOCK: f64 = 10_000.0;
+
 /// Resident bytes per input point while its tile is processed: coordinates (24), the column
 /// index's copy (24), the owned flag and slack for the per-core-point results and the tile being
 /// read meanwhile.
@@ -43,11 +48,20 @@ pub struct Layout {
 }
 
 impl Layout {
-    /// Plan the tiles from the inputs' bounds and point counts, the halo and the memory budget;
-    /// `tile_size` forces the side (tests of tiling invariance).
+    /// Plan the tiles over the inputs' `bounds`, with `density` points per unit² to hold at once
+    /// (both epochs of a pair), the halo and the memory budget; `tile_size` forces the side
+    /// (tests of tiling invariance).
+    ///
+    /// The core-point lattice is anchored at the corner of the [`ANCHOR_BLOCK`]-sized block
+    /// (a power of two of core spacings) holding the minimum of `core` (a campaign's first
+    /// survey; a pair's inputs): a corner that depends on the site, not on the files' exact
+    /// extents, so a campaign's pairs and a `compare` of the same surveys share one local frame,
+    /// one core-point grid and one key order, and their results are the same bits. The grid's
+    /// origin is the lattice point just below the inputs.
     pub fn plan(
         bounds: &[Bounds],
-        points: u64,
+        core: &Bounds,
+        density: f64,
         params: &Params,
         tile_size: Option<f64>,
     ) -> Result<Layout> {
@@ -57,20 +71,23 @@ impl Layout {
             b.grow(&x.max);
         }
         let c = params.core_spacing.value;
+        let block = c * (ANCHOR_BLOCK / c).log2().ceil().exp2();
         let anchor = [
-            (b.min[0] / c).floor() * c,
-            (b.min[1] / c).floor() * c,
-            (b.min[2] / c).floor() * c,
+            (core.min[0] / block).floor() * block,
+            (core.min[1] / block).floor() * block,
+            (core.min[2] / block).floor() * block,
         ];
+        // The lattice point at or just below the inputs' minimum.
+        let lattice = |k: usize| anchor[k] + ((b.min[k] - anchor[k]) / c).floor() * c;
+        let origin = [lattice(0), lattice(1)];
         let halo = tile_halo(params);
-        let w = (b.max[0] - anchor[0]).max(c);
-        let h = (b.max[1] - anchor[1]).max(c);
-        let density = points as f64 / (w * h);
+        let w = (b.max[0] - origin[0]).max(c);
+        let h = (b.max[1] - origin[1]).max(c);
         let side = match tile_size {
             Some(s) if s > 0.0 => s,
             Some(s) => return Err(Error::Usage(format!("tile size must be positive, got {s}"))),
             None => TileGrid::plan(
-                BoundsXY::new([anchor[0], anchor[1]], [anchor[0] + w, anchor[1] + h]),
+                BoundsXY::new(origin, [origin[0] + w, origin[1] + h]),
                 density,
                 halo,
                 params.memory_bytes.value,
@@ -84,7 +101,7 @@ impl Layout {
         let cols = ((w / side).ceil().max(1.0)) as u32;
         let rows = ((h / side).ceil().max(1.0)) as u32;
         let layout = Layout {
-            origin: [anchor[0], anchor[1]],
+            origin,
             tile_size: side,
             cols,
             rows,

@@ -12,6 +12,7 @@
 //! Slurm array task) can run any unit whose dependencies are done. A `compare` is a one-pair
 //! plan; a campaign is a bigger one with the same kinds of units.
 
+pub mod inputs;
 pub mod layout;
 
 use std::path::{Path, PathBuf};
@@ -40,7 +41,14 @@ pub struct InputFile {
 pub struct Survey {
     /// A short name for unit names and outputs (`before`, `after`, a date, a label).
     pub label: String,
-    pub file: InputFile,
+    /// The argument as given: a file, a folder or a pattern of tiles.
+    pub arg: PathBuf,
+    /// Its files, in name order, with their content keys.
+    pub files: Vec<InputFile>,
+    /// The survey's content key: over its files' keys.
+    pub key: String,
+    /// When it was surveyed (`YYYY-MM-DD`; campaigns).
+    pub date: Option<String>,
     pub points: u64,
     pub bounds: Bounds,
     /// e.g. `LAZ 1.4 point format 6`.
@@ -67,6 +75,8 @@ pub enum Spec {
     Tiling { survey: usize },
     /// Cut the user's core-point file into the layout's tiles.
     Cores,
+    /// The core points of every pair of a campaign: a survey thinned on the core-point grid.
+    Thinned { survey: usize },
     /// Normals and M3C2 for the core points one tile owns.
     M3c2 { pair: usize, tile: [u32; 2] },
     /// Noise and registration error on the pair's stable ground.
@@ -77,6 +87,8 @@ pub enum Spec {
     Volumes { pair: usize, tile: [u32; 2] },
     /// The pair's outputs, ready to publish.
     Outputs { pair: usize },
+    /// The campaign's outputs: table, tracks, time series, magnitude–frequency, report.
+    Campaign,
 }
 
 impl Spec {
@@ -85,11 +97,13 @@ impl Spec {
         match self {
             Spec::Tiling { .. } => "tiling",
             Spec::Cores => "cores",
+            Spec::Thinned { .. } => "cores",
             Spec::M3c2 { .. } => "m3c2",
             Spec::Stable { .. } => "stable",
             Spec::Events { .. } => "events",
             Spec::Volumes { .. } => "volumes",
             Spec::Outputs { .. } => "outputs",
+            Spec::Campaign => "campaign",
         }
     }
 }
@@ -180,50 +194,61 @@ impl Plan {
         self.units.len() - 1
     }
 
-    /// The units of a one-pair comparison (before = survey 0, after = survey 1), appended to an
-    /// empty plan: two tilings, an M3C2 unit per tile, the stable ground, the events, a volumes
-    /// unit per tile and the outputs (no events, volumes with `m3c2_only`).
-    pub fn add_pair_units(&mut self, pair: usize) -> Result<()> {
+    /// The unit of the campaign's core points: survey `survey` thinned on the core-point grid.
+    pub fn add_thinned_cores(&mut self, survey: usize) -> usize {
+        let t = self.tiling_unit(survey);
+        let c = self.params.core_spacing.value.to_string();
+        let label = format!("thinned-{}", self.surveys[survey].label);
+        self.push(Spec::Thinned { survey }, &label, &[&c], vec![t])
+    }
+
+    /// The tiling unit of survey `s` (added when missing): a survey tiled once serves every pair
+    /// it is in.
+    fn tiling_unit(&mut self, s: usize) -> usize {
+        if let Some(i) = self.find(&Spec::Tiling { survey: s }) {
+            return i;
+        }
+        let (key, label, layout) = (
+            self.surveys[s].key.clone(),
+            self.surveys[s].label.clone(),
+            self.layout.key(),
+        );
+        self.push(
+            Spec::Tiling { survey: s },
+            &label,
+            &[&key, &layout],
+            Vec::new(),
+        )
+    }
+
+    /// The units of pair `pair`, appended: its surveys' tilings (when not there yet), an M3C2
+    /// unit per tile, the stable ground, the events, a volumes unit per tile and the outputs (no
+    /// events, volumes with `m3c2_only`); the pair's outputs unit becomes the run's id. The core
+    /// points are `cores` (a core-point unit), the user's file when the plan has one, else the
+    /// pair's before survey thinned tile by tile inside the M3C2 units.
+    pub fn add_pair_units(&mut self, pair: usize, cores: Option<usize>) -> Result<usize> {
         let grid = self.layout.grid()?;
         let layout_key = self.layout.key();
         let (b, a) = (self.pairs[pair].before, self.pairs[pair].after);
         let label = self.pairs[pair].label.clone();
-        let tiling = |plan: &mut Plan, s: usize| -> usize {
-            // A survey tiled once serves every pair it is in.
-            if let Some(i) = plan
-                .units
-                .iter()
-                .position(|u| matches!(u.spec, Spec::Tiling { survey } if survey == s))
-            {
-                return i;
-            }
-            let (file_key, lbl) = (
-                plan.surveys[s].file.key.clone(),
-                plan.surveys[s].label.clone(),
-            );
-            plan.push(
-                Spec::Tiling { survey: s },
-                &lbl,
-                &[&file_key, &layout_key],
-                Vec::new(),
-            )
-        };
-        let (tb, ta) = (tiling(self, b), tiling(self, a));
+        let (tb, ta) = (self.tiling_unit(b), self.tiling_unit(a));
         let m3c2 = format!(
             "{:?}|{}",
             self.params.m3c2(),
             self.params.core_spacing.value
         );
-        let cores = self
-            .core_points
-            .as_ref()
-            .map_or("thinned C1".to_string(), |c| c.key.clone());
-        let core_unit = match self.core_points.clone() {
-            Some(c) => Some(match self.find(&Spec::Cores) {
+        let core_unit = match (cores, self.core_points.clone()) {
+            (Some(c), _) => Some(c),
+            (None, Some(c)) => Some(match self.find(&Spec::Cores) {
                 Some(i) => i,
                 None => self.push(Spec::Cores, "cores", &[&c.key, &layout_key], Vec::new()),
             }),
-            None => None,
+            (None, None) => None,
+        };
+        // The core points are a core-point unit's (its key is a dependency's), or the thinning's.
+        let cores = match core_unit {
+            Some(_) => "core-point unit".to_string(),
+            None => "thinned C1".to_string(),
         };
         let tiles: Vec<TileId> = grid.tiles().collect();
         let m3c2_units: Vec<usize> = tiles
@@ -280,7 +305,7 @@ impl Plan {
                 "{}|{}|{}",
                 self.params.cyl_radius.value,
                 self.params.cyl_halflen.value,
-                self.params.point_spacing
+                self.params.point_spacing.value
             );
             let volumes: Vec<usize> = tiles
                 .iter()
@@ -311,7 +336,20 @@ impl Plan {
             final_deps,
         );
         self.run = self.units[out].key.clone();
-        Ok(())
+        Ok(out)
+    }
+
+    /// The campaign unit over every pair's outputs (and M3C2 units, for the time series); it
+    /// becomes the run's id.
+    pub fn add_campaign_unit(&mut self, cores: usize, title: &str) -> usize {
+        let mut deps = vec![cores];
+        deps.extend(self.of_kind("outputs").collect::<Vec<_>>());
+        deps.extend(self.of_kind("m3c2").collect::<Vec<_>>());
+        let pairs = serde_json::to_string(&self.pairs).unwrap_or_default();
+        let version = env!("CARGO_PKG_VERSION");
+        let c = self.push(Spec::Campaign, "campaign", &[version, &pairs, title], deps);
+        self.run = self.units[c].key.clone();
+        c
     }
 
     /// The index of the unit of `spec`.

@@ -280,23 +280,54 @@ pub mod cores {
             }
         }
         for id in grid.tiles() {
-            let pts = &by_tile[grid.index(id)];
-            let col = |k: usize| pts.iter().map(|(_, p)| p[k]).collect::<Vec<f64>>();
-            let cols = TileColumns {
-                x: col(0),
-                y: col(1),
-                z: col(2),
-                extra: vec![
-                    u32col(
-                        "key_hi",
-                        pts.iter().map(|(k, _)| (k >> 32) as u32).collect(),
-                    ),
-                    u32col("key_lo", pts.iter().map(|(k, _)| *k as u32).collect()),
-                ],
-            };
-            super::super::write_columns(out, &file(id), &cols)?;
+            write(out, id, &by_tile[grid.index(id)])?;
         }
         Ok(serde_json::json!({ "points": n }))
+    }
+
+    /// The core points of a campaign: the tiling `deps[0]` of unit `unit` thinned on the
+    /// core-point grid, tile by tile, keyed by their cells (the keys a pair's M3C2 unit gives
+    /// its own thinning: pair 0 of a campaign is a `compare` of its two surveys).
+    pub fn thinned(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<serde_json::Value> {
+        let plan = ctx.plan;
+        let tiling = plan.units[unit].deps[0];
+        let grid = plan.layout.grid()?;
+        let mut n = 0u64;
+        for id in grid.tiles() {
+            let t = read_tile(ctx, tiling, id)?;
+            let pts: Vec<(u64, Point3)> = crate::m3c2::core_points::thin(
+                t.len(),
+                |i| t.point(i),
+                &plan.layout.anchor,
+                plan.layout.core_spacing,
+                |i| t.owned[i],
+            )
+            .into_iter()
+            .map(|(k, i)| (k, t.point(i)))
+            .collect();
+            n += pts.len() as u64;
+            write(out, id, &pts)?;
+            (ctx.progress)(t.owned.iter().filter(|&&o| o).count() as u64);
+        }
+        Ok(serde_json::json!({ "points": n }))
+    }
+
+    /// Write tile `id`'s core points.
+    fn write(out: &mut UnitWriter, id: TileId, pts: &[(u64, Point3)]) -> Result<()> {
+        let col = |k: usize| pts.iter().map(|(_, p)| p[k]).collect::<Vec<f64>>();
+        let cols = TileColumns {
+            x: col(0),
+            y: col(1),
+            z: col(2),
+            extra: vec![
+                u32col(
+                    "key_hi",
+                    pts.iter().map(|(k, _)| (k >> 32) as u32).collect(),
+                ),
+                u32col("key_lo", pts.iter().map(|(k, _)| *k as u32).collect()),
+            ],
+        };
+        super::super::write_columns(out, &file(id), &cols)
     }
 
     /// Tile `id`'s core points from the core-point unit `unit`.

@@ -10,6 +10,7 @@
 //! executes it, and in whatever order the units run, its files are the same bytes. A stage is
 //! added by writing one more such module and the units of its kind in [`crate::plan`].
 
+pub mod campaign;
 pub mod events;
 pub mod m3c2;
 pub mod outputs;
@@ -75,6 +76,8 @@ pub fn run(ctx: &Ctx, i: usize, out: &mut UnitWriter) -> Result<serde_json::Valu
     match ctx.plan.units[i].spec {
         Spec::Tiling { survey } => tiling::run(ctx, survey, out),
         Spec::Cores => m3c2::cores::run(ctx, out),
+        Spec::Thinned { .. } => m3c2::cores::thinned(ctx, i, out),
+        Spec::Campaign => campaign::run(ctx, i, out),
         Spec::M3c2 { tile, .. } => m3c2::run(ctx, i, crate::plan::tile_id(tile), out),
         Spec::Stable { pair } => stable::run(ctx, pair, out),
         Spec::Events { pair } => events::run(ctx, pair, out),

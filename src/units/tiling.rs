@@ -25,7 +25,7 @@ pub fn run(ctx: &Ctx, survey: usize, out: &mut UnitWriter) -> Result<serde_json:
     let plan = ctx.plan;
     let layout = &plan.layout;
     let grid = layout.grid()?;
-    let src = &plan.surveys[survey].file.path;
+    let files = &plan.surveys[survey].files;
     let budget = (plan.params.memory_bytes.value / SPLIT_BUDGET_SHARE).max(8 << 20);
     // The unit's own directory: where the splitter writes its tile files.
     let dir = out
@@ -34,13 +34,17 @@ pub fn run(ctx: &Ctx, survey: usize, out: &mut UnitWriter) -> Result<serde_json:
         .map(|d| d.to_path_buf())
         .ok_or_else(|| crate::error::Error::Internal("a unit without a directory".into()))?;
     let mut splitter = TileSplitter::new(&dir, grid, layout.halo, budget).map_err(tiling_error)?;
-    let mut reader = io::open(src)?;
     let mut buf = Vec::new();
     let mut points = 0u64;
-    while reader.fill(&mut buf, 1 << 16)? > 0 {
-        splitter.push(&buf).map_err(tiling_error)?;
-        points += buf.len() as u64;
-        (ctx.progress)(buf.len() as u64);
+    // A survey delivered as tiles: its files one after the other, in name order.
+    for f in files {
+        let mut reader = io::open(&f.path)?;
+        while reader.fill(&mut buf, 1 << 16)? > 0 {
+            splitter.push(&buf).map_err(tiling_error)?;
+            points += buf.len() as u64;
+            (ctx.progress)(buf.len() as u64);
+            crate::interrupt::check()?;
+        }
     }
     let mut has_file = vec![false; grid.len()];
     for (id, _, digest) in splitter.finish_with_digests().map_err(tiling_error)? {

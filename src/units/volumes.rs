@@ -55,12 +55,12 @@ pub struct Measured {
 
 /// Volume margin of SPEC.md §1: cyl_radius + 2 × point spacing.
 pub fn margin(params: &Params) -> f64 {
-    params.cyl_radius.value + 2.0 * params.point_spacing
+    params.cyl_radius.value + 2.0 * params.point_spacing.value
 }
 
 /// The box (in the event's frame) whose points the volume needs, and its XY bounds.
 pub fn search_box(obb: &Obb, params: &Params) -> ([f64; 3], [f64; 4]) {
-    let s = params.point_spacing;
+    let s = params.point_spacing.value;
     let m = margin(params);
     let h = [
         obb.half_extents[0] + m + 3.0 * s,
@@ -116,7 +116,7 @@ fn error_model(
     let core_area = params.core_spacing.value.powi(2);
     let cluster_area = (members.len() as f64 * core_area).min(area);
     let point_area = std::array::from_fn(|k| match v.region_points[k] {
-        0 => params.point_spacing * params.point_spacing,
+        0 => params.point_spacing.value * params.point_spacing.value,
         n => area / n as f64,
     });
     let variance = std::array::from_fn(|k| {
@@ -231,7 +231,7 @@ pub fn run(
             None => None,
         };
         let margin = margin(params);
-        let spacing = params.point_spacing;
+        let spacing = params.point_spacing.value;
         let boxes: Vec<Vec<SearchBox>> = mine
             .iter()
             .map(|d| {

@@ -1,6 +1,8 @@
 //! m3c2.laz: the core points with PDAL-named extra bytes, in canonical key order whatever the
 //! tiling.
 
+use std::borrow::Cow;
+
 use crate::error::Result;
 use crate::io::las_out::{CoordinateGrid, ExtraDim, ExtraType, ResultWriter};
 use crate::io::Crs;
@@ -11,62 +13,62 @@ use crate::units::m3c2::Merged;
 /// The extra dimensions of m3c2.laz, in record order (SPEC.md §2).
 pub const M3C2_DIMS: &[ExtraDim] = &[
     ExtraDim {
-        name: "m3c2_distance",
+        name: Cow::Borrowed("m3c2_distance"),
         ty: ExtraType::F64,
         description: "M3C2 distance t2 - t1",
     },
     ExtraDim {
-        name: "m3c2_uncertainty",
+        name: Cow::Borrowed("m3c2_uncertainty"),
         ty: ExtraType::F64,
         description: "LoD95",
     },
     ExtraDim {
-        name: "m3c2_significant",
+        name: Cow::Borrowed("m3c2_significant"),
         ty: ExtraType::U8,
         description: "1 when |distance| > LoD95",
     },
     ExtraDim {
-        name: "m3c2_std_dev1",
+        name: Cow::Borrowed("m3c2_std_dev1"),
         ty: ExtraType::F64,
         description: "std dev along normal, epoch 1",
     },
     ExtraDim {
-        name: "m3c2_std_dev2",
+        name: Cow::Borrowed("m3c2_std_dev2"),
         ty: ExtraType::F64,
         description: "std dev along normal, epoch 2",
     },
     ExtraDim {
-        name: "m3c2_count1",
+        name: Cow::Borrowed("m3c2_count1"),
         ty: ExtraType::U32,
         description: "points in cylinder, epoch 1",
     },
     ExtraDim {
-        name: "m3c2_count2",
+        name: Cow::Borrowed("m3c2_count2"),
         ty: ExtraType::U32,
         description: "points in cylinder, epoch 2",
     },
     ExtraDim {
-        name: "normal_x",
+        name: Cow::Borrowed("normal_x"),
         ty: ExtraType::F32,
         description: "oriented normal, x",
     },
     ExtraDim {
-        name: "normal_y",
+        name: Cow::Borrowed("normal_y"),
         ty: ExtraType::F32,
         description: "oriented normal, y",
     },
     ExtraDim {
-        name: "normal_z",
+        name: Cow::Borrowed("normal_z"),
         ty: ExtraType::F32,
         description: "oriented normal, z",
     },
     ExtraDim {
-        name: "m3c2_smoothed",
+        name: Cow::Borrowed("m3c2_smoothed"),
         ty: ExtraType::F64,
         description: "smoothed distance (kept points)",
     },
     ExtraDim {
-        name: "event_id",
+        name: Cow::Borrowed("event_id"),
         ty: ExtraType::U32,
         description: "change event, 0 = none",
     },

@@ -227,8 +227,23 @@ pub fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<
     .into_iter()
     .flatten()
     .collect();
-    let crs = io::open(&bs.file.path)?.info().crs.clone();
-    let extent = &plan.layout.extent;
+    let crs = io::open(&bs.files[0].path)?.info().crs.clone();
+    // The pair's own inputs (not the campaign's union: a survey added later must not change a
+    // finished pair's file).
+    let mut extent = crate::compare::union(&[bs.bounds, plan.surveys[p.after].bounds]);
+    if let Some(c) = &plan.core_points {
+        if let Ok(r) = io::open(&c.path) {
+            extent.grow(&r.info().bounds.min);
+            extent.grow(&r.info().bounds.max);
+        }
+    }
+    // A campaign's core points come from its first survey.
+    for u in &plan.units {
+        if let Spec::Thinned { survey } = u.spec {
+            extent.grow(&plan.surveys[survey].bounds.min);
+            extent.grow(&plan.surveys[survey].bounds.max);
+        }
+    }
     let mut merged = super::m3c2::Merged::new(ctx, pair)?;
     let written = laz::write_m3c2_laz(
         out,
@@ -316,7 +331,7 @@ fn summarize(
     let plan = ctx.plan;
     let p = &plan.pairs[pair];
     let input = |s: &crate::plan::Survey| InputSummary {
-        path: s.file.path.clone(),
+        path: s.arg.clone(),
         format: s.format.clone(),
         points: s.points,
         bounds: s.bounds,

@@ -1,0 +1,168 @@
+//! `talus campaign EPOCH... --out DIR` (SPEC.md §5): one plan for the whole campaign — each
+//! survey tiled once on one tile grid, one parameter set derived from the first survey, one set of
+//! core points (the first survey thinned) so that every core point has a time series, a `compare`
+//! unit chain per pair, and the campaign unit over them — executed and published like `compare`.
+//! Appending a survey and running again with `--resume` computes only what the new survey adds:
+//! the grid, the parameters and the core points come from what does not change (the surveys'
+//! union, the first survey), and every other unit's key is what it was.
+
+use std::path::{Path, PathBuf};
+
+use super::epochs::{self, EpochEntry};
+use crate::compare::{forget_if_input_error, open_store, run_planned, survey};
+use crate::error::{Error, Result};
+use crate::params::{Params, UserParams};
+use crate::plan::inputs::SurveyFiles;
+use crate::plan::{Layout, Pair, Plan, PLAN_VERSION};
+use crate::sampling;
+use crate::store::Store;
+
+/// Everything `campaign` needs.
+#[derive(Debug, Clone, Default)]
+pub struct CampaignOptions {
+    pub epochs: Vec<PathBuf>,
+    pub out: PathBuf,
+    pub config: Option<PathBuf>,
+    pub user: UserParams,
+    /// Each later epoch against the first too.
+    pub baseline: bool,
+    pub resume: bool,
+    pub force: bool,
+    /// Force the tile side (tests); None = plan from the memory budget.
+    pub tile_size: Option<f64>,
+}
+
+/// What a finished campaign reports on the terminal.
+pub struct Done {
+    pub surveys: usize,
+    pub pairs: usize,
+    pub summary: serde_json::Value,
+}
+
+/// The epochs of the config file's `[[epoch]]` entries (paths relative to the config's folder).
+fn entries(path: &Path, table: &toml::Table) -> Result<Vec<EpochEntry>> {
+    let Some(v) = table.get("epoch") else {
+        return Ok(Vec::new());
+    };
+    let list: Vec<EpochEntry> = v.clone().try_into().map_err(|e: toml::de::Error| {
+        Error::input(path, format!("bad [[epoch]]: {}", e.message()))
+    })?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    Ok(list
+        .into_iter()
+        .map(|mut e| {
+            if e.path.is_relative() && !e.path.exists() {
+                e.path = base.join(&e.path);
+            }
+            e
+        })
+        .collect())
+}
+
+/// Run a campaign.
+pub fn campaign(opts: &CampaignOptions) -> Result<Done> {
+    let (config, entries) = match &opts.config {
+        Some(p) => {
+            let (u, rest) = UserParams::from_toml_file_with(p, &["epoch"])?;
+            (u, entries(p, &rest)?)
+        }
+        None => (UserParams::default(), Vec::new()),
+    };
+    let user = opts.user.clone().over(config);
+    let epochs = epochs::epochs(&opts.epochs, &entries, opts.config.as_deref())?;
+    // Every survey's headers, checked before anything is written.
+    let files: Vec<SurveyFiles> = epochs
+        .iter()
+        .map(|e| SurveyFiles::open(&e.arg))
+        .collect::<Result<_>>()?;
+    let first = files[0].bounds();
+    for (e, f) in epochs.iter().zip(&files).skip(1) {
+        if !first.overlaps_xy(&f.bounds()) {
+            return Err(Error::input(
+                &e.arg,
+                format!(
+                    "does not overlap the first survey ({}): a campaign compares surveys of one site",
+                    epochs[0].arg.display()
+                ),
+            ));
+        }
+    }
+    Params::resolve(&user, 1.0)?;
+    let bounds: Vec<_> = files.iter().map(|f| f.bounds()).collect();
+    user.check_lengths_within(&bounds)?;
+    let (store, created) = open_store(&opts.out, opts.resume, opts.force)?;
+    let result = run_planned(
+        &store,
+        opts.force,
+        &crate::units::campaign::is_output,
+        |store| plan(store, opts, &user, &epochs, &files),
+    );
+    let marker = forget_if_input_error(result, created, &opts.out)?;
+    let text = std::fs::read(&marker).map_err(|e| Error::output(&marker, e))?;
+    let summary: serde_json::Value =
+        serde_json::from_slice(&text).map_err(|e| Error::Internal(format!("summary.json: {e}")))?;
+    Ok(Done {
+        surveys: epochs.len(),
+        pairs: summary["pairs"].as_array().map_or(0, |p| p.len()),
+        summary,
+    })
+}
+
+fn plan(
+    store: &Store,
+    opts: &CampaignOptions,
+    user: &UserParams,
+    epochs: &[epochs::Epoch],
+    files: &[SurveyFiles],
+) -> Result<Plan> {
+    // One parameter set: from the first survey, which an appended survey does not change.
+    let spacing = sampling::measure(&files[0].first().path)?;
+    let params = Params::resolve(user, spacing.effective_spacing)?;
+    let surveys = epochs
+        .iter()
+        .zip(files)
+        .map(|(e, f)| {
+            let mut s = survey(store, &e.label, f)?;
+            s.date = Some(e.date.iso());
+            Ok(s)
+        })
+        .collect::<Result<Vec<_>>>()?;
+    // One tile grid over every survey, for two of the densest surveys at once, and one
+    // core-point lattice from the first survey (its core points are every pair's).
+    let bounds: Vec<_> = files.iter().map(|f| f.bounds()).collect();
+    let densest = files
+        .iter()
+        .map(|f| {
+            let b = f.bounds();
+            f.points() as f64 / ((b.max[0] - b.min[0]) * (b.max[1] - b.min[1])).max(1e-9)
+        })
+        .fold(0.0, f64::max);
+    let layout = Layout::plan(&bounds, &bounds[0], 2.0 * densest, &params, opts.tile_size)?;
+    let pairs = epochs::pairs(epochs.len(), opts.baseline)
+        .into_iter()
+        .map(|(b, a)| Pair {
+            label: format!("{}_{}", epochs[b].label, epochs[a].label),
+            before: b,
+            after: a,
+        })
+        .collect();
+    let mut plan = Plan {
+        version: PLAN_VERSION,
+        run: String::new(),
+        surveys,
+        pairs,
+        params,
+        spacing,
+        layout,
+        core_points: None,
+        meshes: None,
+        m3c2_only: false,
+        units: Vec::new(),
+    };
+    let cores = plan.add_thinned_cores(0);
+    for k in 0..plan.pairs.len() {
+        plan.add_pair_units(k, Some(cores))?;
+    }
+    plan.add_campaign_unit(cores, "campaign");
+    Ok(plan)
+}

@@ -1,0 +1,9 @@
+//! Campaigns: many surveys of one site (SPEC.md §5). [`epochs`] dates and orders the surveys and
+//! makes the pairs; [`tracks`] follows events from pair to pair.
+
+pub mod command;
+pub mod epochs;
+pub mod tracks;
+
+pub mod powerlaw;
+pub mod report;

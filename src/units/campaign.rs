@@ -1,0 +1,497 @@
+//! The campaign unit (SPEC.md §5): from every pair's outputs unit, the campaign's own files —
+//! `campaign.csv` and `campaign.json` (the paper's Table 1, completed), `events.geojson` and
+//! `events.csv` (every pair's events with their pair, dates and track), `timeseries.laz` (each
+//! core point's distance in every pair), `magnitude_frequency.csv` with a power-law fit per gain
+//! and loss (in campaign.json), `report.html`, and `summary.json`; and the list of files to
+//! publish: each pair's outputs under `pairs/<before>_<after>/` and the campaign's own.
+
+use std::collections::HashMap;
+
+use serde::Serialize;
+use serde_json::{json, Value};
+
+use super::outputs::{Publish, Summary};
+use super::{read_json, Ctx};
+use crate::campaign::powerlaw::{self, PowerLawFit};
+use crate::campaign::report::{self, EventRow, PairRow, Report};
+use crate::campaign::tracks::{self, Placed};
+use crate::error::{Error, Result};
+use crate::events::Obb;
+use crate::io::las_out::{CoordinateGrid, ExtraDim, ExtraType, ResultWriter};
+use crate::io::{self, Point3};
+use crate::plan::Spec;
+use crate::store::UnitWriter;
+
+/// The campaign's marker (written last, removed first when published).
+pub const MARKER: &str = "summary.json";
+
+/// The names of the campaign files in DIR.
+pub const FILES: &[&str] = &[
+    "campaign.csv",
+    "campaign.json",
+    "events.geojson",
+    "events.csv",
+    "timeseries.laz",
+    "magnitude_frequency.csv",
+    "report.html",
+    MARKER,
+];
+
+/// Is `name` (in a campaign's DIR) a talus output? The campaign files, and a pair's outputs
+/// under `pairs/<label>/`.
+pub fn is_output(name: &str) -> bool {
+    if FILES.contains(&name) || name == "pairs" {
+        return true;
+    }
+    match name.strip_prefix("pairs/") {
+        Some(rest) => match rest.split_once('/') {
+            None => true,
+            Some((_, inner)) => super::outputs::is_output(inner) || inner == "meshes",
+        },
+        None => false,
+    }
+}
+
+/// An event as the campaign reads it back from its pair's files.
+struct PairEvent {
+    pair: usize,
+    properties: serde_json::Map<String, Value>,
+    centroid: Point3,
+    region: Vec<Vec<Vec<Point3>>>,
+}
+
+fn point(v: &Value) -> Option<Point3> {
+    Some([v[0].as_f64()?, v[1].as_f64()?, v[2].as_f64()?])
+}
+
+fn polygons(g: &Value) -> Vec<Vec<Vec<Point3>>> {
+    let ring = |r: &Value| -> Vec<Point3> {
+        r.as_array()
+            .map(|a| a.iter().filter_map(point).collect())
+            .unwrap_or_default()
+    };
+    let poly = |p: &Value| -> Vec<Vec<Point3>> {
+        p.as_array()
+            .map(|a| a.iter().map(ring).collect())
+            .unwrap_or_default()
+    };
+    match g["type"].as_str() {
+        Some("Polygon") => vec![poly(&g["coordinates"])],
+        Some("MultiPolygon") => g["coordinates"]
+            .as_array()
+            .map(|a| a.iter().map(poly).collect())
+            .unwrap_or_default(),
+        _ => Vec::new(),
+    }
+}
+
+/// The events of pair `pair` from its outputs unit `unit`.
+fn pair_events(ctx: &Ctx, pair: usize, unit: usize) -> Result<Vec<PairEvent>> {
+    let events: Value = read_json(ctx, unit, "events.geojson")?;
+    let regions: Value = read_json(ctx, unit, "event_regions.geojson")?;
+    let mut by_id: HashMap<u64, Vec<Vec<Vec<Point3>>>> = HashMap::new();
+    for f in regions["features"].as_array().into_iter().flatten() {
+        if let Some(id) = f["properties"]["id"].as_u64() {
+            by_id.insert(id, polygons(&f["geometry"]));
+        }
+    }
+    Ok(events["features"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(|f| {
+            let properties = f["properties"].as_object()?.clone();
+            let id = properties.get("id")?.as_u64()?;
+            Some(PairEvent {
+                pair,
+                centroid: point(&f["geometry"]["coordinates"])?,
+                region: by_id.remove(&id).unwrap_or_default(),
+                properties,
+            })
+        })
+        .collect())
+}
+
+/// One row of campaign.csv / campaign.json.
+#[derive(Debug, Clone, Serialize)]
+struct Row {
+    #[serde(flatten)]
+    row: PairRow,
+    reg_error_m: f64,
+    threshold_m: f64,
+}
+
+/// Write the campaign's files into `out`.
+pub fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<Value> {
+    let plan = ctx.plan;
+    let cores = plan.units[unit].deps[0];
+    let date = |s: usize| plan.surveys[s].date.clone().unwrap_or_default();
+    let days = |s: usize| crate::campaign::epochs::Date::parse(&date(s)).map_or(0, |d| d.days());
+    // Per pair: its summary and its events.
+    let mut rows = Vec::new();
+    let mut events: Vec<PairEvent> = Vec::new();
+    let mut publish: Vec<Publish> = Vec::new();
+    for (k, p) in plan.pairs.iter().enumerate() {
+        let o = ctx.unit(&Spec::Outputs { pair: k })?;
+        let summary: Summary = read_json(ctx, o, super::outputs::MARKER)?;
+        let mine = pair_events(ctx, k, o)?;
+        let volumes: Vec<f64> = mine
+            .iter()
+            .filter_map(|e| e.properties.get("volume_uncertainty_m3")?.as_f64())
+            .collect();
+        rows.push(Row {
+            row: PairRow {
+                label: p.label.clone(),
+                before: plan.surveys[p.before].label.clone(),
+                after: plan.surveys[p.after].label.clone(),
+                before_date: date(p.before),
+                after_date: date(p.after),
+                days: days(p.after) - days(p.before),
+                core_points: summary.core_points,
+                significant_points: summary.significant_points,
+                events: summary.events,
+                gain_events: summary.gain_events,
+                loss_events: summary.loss_events,
+                gain_m3: summary.total_gain_m3,
+                loss_m3: summary.total_loss_m3,
+                net_m3: summary.total_gain_m3 + summary.total_loss_m3,
+                mean_volume_uncertainty_m3: if volumes.is_empty() {
+                    0.0
+                } else {
+                    volumes.iter().sum::<f64>() / volumes.len() as f64
+                },
+                seconds: summary.stages.iter().map(|s| s.seconds).sum(),
+            },
+            reg_error_m: summary.parameters.reg_error.value,
+            threshold_m: summary.parameters.threshold.value,
+        });
+        events.extend(mine);
+        // The pair's outputs go under pairs/<label>/.
+        let rec = ctx
+            .store
+            .done(&ctx.unit_ref(o))
+            .ok_or_else(|| Error::Internal(format!("outputs of {} not done", p.label)))?;
+        let list: Vec<Publish> = serde_json::from_value(rec.meta["publish"].clone())
+            .map_err(|e| Error::Internal(format!("outputs record: {e}")))?;
+        publish.extend(list.into_iter().map(|x| Publish {
+            name: format!("pairs/{}/{}", p.label, x.name),
+            ..x
+        }));
+    }
+    // Tracks over every pair's events.
+    let depth = plan.params.cyl_halflen.value;
+    let placed: Vec<Placed> = events
+        .iter()
+        .map(|e| {
+            let obb: Obb = e
+                .properties
+                .get("obb")
+                .and_then(|o| serde_json::from_value(o.clone()).ok())
+                .unwrap_or(Obb {
+                    center: e.centroid,
+                    axes: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+                    half_extents: [0.0; 3],
+                });
+            Placed {
+                pair: e.pair,
+                id: e.properties.get("id").and_then(Value::as_u64).unwrap_or(0) as u32,
+                gain: e.properties.get("kind").and_then(Value::as_str) == Some("gain"),
+                centroid: e.centroid,
+                depth: obb.half_extents[2] + depth,
+                obb,
+                region: e.region.clone(),
+            }
+        })
+        .collect();
+    let track = tracks::tracks(&placed);
+    // Magnitude–frequency over the consecutive pairs' significant events (a baseline pair
+    // repeats them).
+    let consecutive = |pair: usize| plan.pairs[pair].after == plan.pairs[pair].before + 1;
+    let magnitudes = |gain: bool| -> Vec<f64> {
+        events
+            .iter()
+            .zip(&placed)
+            .filter(|(e, p)| {
+                p.gain == gain
+                    && consecutive(e.pair)
+                    && e.properties.get("significant").and_then(Value::as_bool) == Some(true)
+            })
+            .filter_map(|(e, _)| e.properties.get("volume_m3")?.as_f64())
+            .map(f64::abs)
+            .collect()
+    };
+    let (gains, losses) = (magnitudes(true), magnitudes(false));
+    let (gain_fit, loss_fit) = (powerlaw::fit(&gains), powerlaw::fit(&losses));
+    let crs_info = io::open(&plan.surveys[0].files[0].path)?.info().clone();
+    // events.geojson / events.csv.
+    write_events(out, &events, &track, plan, &date, &crs_info.crs.describe())?;
+    // campaign.csv / campaign.json.
+    write_table(out, &rows, gain_fit.as_ref(), loss_fit.as_ref(), plan)?;
+    // magnitude_frequency.csv.
+    let mut mf = String::from("kind,volume_m3,events_at_least,exceedance\n");
+    for (kind, values) in [("gain", &gains), ("loss", &losses)] {
+        for (v, n, p) in powerlaw::exceedance(values) {
+            mf.push_str(&format!("{kind},{v:.6},{n},{p:.6}\n"));
+        }
+    }
+    super::write_bytes(out, "magnitude_frequency.csv", mf.as_bytes())?;
+    // timeseries.laz.
+    let points = write_timeseries(ctx, out, cores, &crs_info)?;
+    (ctx.progress)(points);
+    // report.html.
+    let report = Report {
+        title: format!(
+            "talus campaign: {} surveys, {} to {}",
+            plan.surveys.len(),
+            date(0),
+            date(plan.surveys.len() - 1)
+        ),
+        crs: crs_info.crs.describe(),
+        pairs: rows.iter().map(|r| r.row.clone()).collect(),
+        events: events
+            .iter()
+            .zip(&placed)
+            .zip(&track)
+            .map(|((e, p), &t)| EventRow {
+                pair: e.pair,
+                id: p.id,
+                kind: if p.gain { "gain" } else { "loss" }.into(),
+                volume_m3: e.properties.get("volume_m3").and_then(Value::as_f64),
+                uncertainty_m3: e
+                    .properties
+                    .get("volume_uncertainty_m3")
+                    .and_then(Value::as_f64),
+                significant: e.properties.get("significant").and_then(Value::as_bool) == Some(true),
+                track_id: t,
+                centroid: e.centroid,
+                region: e.region.clone(),
+            })
+            .collect(),
+        gain_fit: gain_fit.clone(),
+        loss_fit: loss_fit.clone(),
+        generated_by: format!("talus {}", env!("CARGO_PKG_VERSION")),
+    };
+    super::write_bytes(out, "report.html", report::html(&report).as_bytes())?;
+    // summary.json.
+    let summary = json!({
+        "tool": "talus",
+        "version": env!("CARGO_PKG_VERSION"),
+        "epochs": plan.surveys.iter().map(|s| json!({
+            "label": s.label,
+            "date": s.date,
+            "survey": s.arg,
+            "files": s.files.iter().map(|f| &f.path).collect::<Vec<_>>(),
+            "points": s.points,
+            "bounds": s.bounds,
+            "crs": s.crs,
+        })).collect::<Vec<_>>(),
+        "parameters": plan.params,
+        "spacing": plan.spacing,
+        "pairs": rows.iter().map(|r| json!({
+            "label": r.row.label,
+            "reg_error_m": r.reg_error_m,
+            "threshold_m": r.threshold_m,
+            "events": r.row.events,
+        })).collect::<Vec<_>>(),
+        "tracks": track.iter().copied().max().unwrap_or(0),
+        "tiles": plan.layout.len(),
+        "core_points": points,
+        "seconds": rows.iter().map(|r| r.row.seconds).sum::<f64>(),
+    });
+    let text = serde_json::to_vec_pretty(&summary).map_err(|e| Error::Internal(e.to_string()))?;
+    super::write_bytes(out, MARKER, &text)?;
+    for f in FILES {
+        publish.push(Publish {
+            kind: "campaign".into(),
+            unit: plan.units[unit].name.clone(),
+            file: f.to_string(),
+            name: f.to_string(),
+        });
+    }
+    Ok(json!({ "publish": publish, "events": events.len() }))
+}
+
+fn write_events(
+    out: &mut UnitWriter,
+    events: &[PairEvent],
+    track: &[u32],
+    plan: &crate::plan::Plan,
+    date: &dyn Fn(usize) -> String,
+    crs: &str,
+) -> Result<()> {
+    let mut features = Vec::with_capacity(events.len());
+    let mut csv = String::from("pair,before_date,after_date,track_id");
+    let columns = [
+        "id",
+        "kind",
+        "volume_m3",
+        "volume_uncertainty_m3",
+        "significant",
+        "gain_m3",
+        "loss_m3",
+        "coverage",
+        "region_area_m2",
+        "n_points",
+        "area_m2",
+        "mean_distance_m",
+        "max_abs_distance_m",
+        "mean_lod95_m",
+    ];
+    for c in &columns {
+        csv.push(',');
+        csv.push_str(c);
+    }
+    csv.push_str(",x,y,z\n");
+    for (e, &t) in events.iter().zip(track) {
+        let p = &plan.pairs[e.pair];
+        let mut props = e.properties.clone();
+        props.insert("pair".into(), json!(p.label));
+        props.insert("before_date".into(), json!(date(p.before)));
+        props.insert("after_date".into(), json!(date(p.after)));
+        props.insert("track_id".into(), json!(t));
+        features.push(json!({
+            "type": "Feature",
+            "geometry": { "type": "Point", "coordinates": e.centroid },
+            "properties": props,
+        }));
+        let mut row = vec![
+            p.label.clone(),
+            date(p.before),
+            date(p.after),
+            t.to_string(),
+        ];
+        for c in &columns {
+            row.push(match e.properties.get(*c) {
+                Some(Value::Null) | None => String::new(),
+                Some(Value::String(s)) => s.clone(),
+                Some(v) => v.to_string(),
+            });
+        }
+        row.extend(e.centroid.iter().map(|v| format!("{v:.4}")));
+        csv.push_str(&row.join(","));
+        csv.push('\n');
+    }
+    let fc = json!({ "type": "FeatureCollection", "crs_name": crs, "features": features });
+    let text = serde_json::to_vec_pretty(&fc).map_err(|e| Error::Internal(e.to_string()))?;
+    super::write_bytes(out, "events.geojson", &text)?;
+    super::write_bytes(out, "events.csv", csv.as_bytes())
+}
+
+fn write_table(
+    out: &mut UnitWriter,
+    rows: &[Row],
+    gain: Option<&PowerLawFit>,
+    loss: Option<&PowerLawFit>,
+    plan: &crate::plan::Plan,
+) -> Result<()> {
+    let mut sorted: Vec<&Row> = rows.iter().collect();
+    sorted.sort_by(|a, b| {
+        (&a.row.after_date, &a.row.before_date).cmp(&(&b.row.after_date, &b.row.before_date))
+    });
+    let mut csv = String::from(
+        "before,after,before_date,after_date,days,core_points,significant_points,events,\
+         gain_events,loss_events,gain_m3,loss_m3,net_m3,mean_volume_uncertainty_m3,seconds,\
+         reg_error_m,threshold_m\n",
+    );
+    for r in &sorted {
+        let x = &r.row;
+        csv.push_str(&format!(
+            "{},{},{},{},{},{},{},{},{},{},{:.3},{:.3},{:.3},{:.3},{:.2},{:.4},{:.4}\n",
+            x.before,
+            x.after,
+            x.before_date,
+            x.after_date,
+            x.days,
+            x.core_points,
+            x.significant_points,
+            x.events,
+            x.gain_events,
+            x.loss_events,
+            x.gain_m3,
+            x.loss_m3,
+            x.net_m3,
+            x.mean_volume_uncertainty_m3,
+            x.seconds,
+            r.reg_error_m,
+            r.threshold_m,
+        ));
+    }
+    super::write_bytes(out, "campaign.csv", csv.as_bytes())?;
+    let table = json!({
+        "pairs": sorted,
+        "power_law": {
+            "method": "maximum likelihood, x_min by the Kolmogorov–Smirnov distance (Clauset, Shalizi & Newman 2009), over the significant events of consecutive pairs",
+            "gain": gain,
+            "loss": loss,
+        },
+        "epochs": plan.surveys.iter().map(|s| json!({ "label": s.label, "date": s.date })).collect::<Vec<_>>(),
+    });
+    let text = serde_json::to_vec_pretty(&table).map_err(|e| Error::Internal(e.to_string()))?;
+    super::write_bytes(out, "campaign.json", &text)
+}
+
+/// timeseries.laz: the campaign's core points (every pair has the same, in the same key order)
+/// with one dimension per pair, `d_<before>_<after>`, the M3C2 distance (NaN where not
+/// computed). Returns the number of core points.
+fn write_timeseries(
+    ctx: &Ctx,
+    out: &mut UnitWriter,
+    _cores: usize,
+    crs: &io::CloudInfo,
+) -> Result<u64> {
+    let plan = ctx.plan;
+    let names: Vec<String> = plan
+        .pairs
+        .iter()
+        .map(|p| {
+            format!(
+                "d_{}_{}",
+                plan.surveys[p.before].label, plan.surveys[p.after].label
+            )
+        })
+        .collect();
+    let dims: Vec<ExtraDim> = names
+        .iter()
+        .map(|n| ExtraDim {
+            name: n.clone().into(),
+            ty: ExtraType::F64,
+            description: "M3C2 distance of the pair",
+        })
+        .collect();
+    let extent = &plan.layout.extent;
+    let scales: Vec<[f64; 3]> = plan.surveys[0].scale.into_iter().collect();
+    let path = out.path("timeseries.laz")?;
+    let mut w = ResultWriter::create_on_grid(
+        &path,
+        &crs.crs,
+        &dims,
+        CoordinateGrid::for_extent(extent.min, extent.max, &scales),
+    )?;
+    let mut streams: Vec<super::m3c2::Merged> = (0..plan.pairs.len())
+        .map(|k| super::m3c2::Merged::new(ctx, k))
+        .collect::<Result<_>>()?;
+    let mut n = 0u64;
+    let mut values = vec![f64::NAN; streams.len()];
+    loop {
+        let first = streams[0].next_result()?;
+        let Some(first) = first else { break };
+        values[0] = first.r.distance;
+        for (k, s) in streams.iter_mut().enumerate().skip(1) {
+            let r = s.next_result()?.ok_or_else(|| {
+                Error::Internal(format!("pair {k} has fewer core points than pair 0"))
+            })?;
+            if r.key != first.key {
+                return Err(Error::Internal(format!(
+                    "pair {k}'s core points differ from pair 0's (key {} vs {})",
+                    r.key, first.key
+                )));
+            }
+            values[k] = r.r.distance;
+        }
+        w.write(first.xyz, &values)?;
+        n += 1;
+    }
+    w.finish()?;
+    out.add_file("timeseries.laz")?;
+    Ok(n)
+}
