@@ -83,7 +83,32 @@ impl UserParams {
                 apart.insert(name.to_string(), v);
             }
         }
-        let mut user: UserParams = toml::Value::Table(table).try_into().map_err(bad)?;
+        let user: std::result::Result<UserParams, _> = toml::Value::Table(table.clone()).try_into();
+        let mut user = match user {
+            Ok(u) => u,
+            // Errors from a value carry no position: find the key that fails alone and name its line.
+            Err(e) => {
+                let key = table.iter().find_map(|(k, v)| {
+                    let one = toml::Table::from_iter([(k.clone(), v.clone())]);
+                    toml::Value::Table(one)
+                        .try_into::<UserParams>()
+                        .err()
+                        .map(|_| k)
+                });
+                let line = key.and_then(|k| {
+                    text.lines().position(|l| {
+                        l.trim_start()
+                            .strip_prefix(k.as_str())
+                            .is_some_and(|r| r.trim_start().starts_with('='))
+                    })
+                });
+                let at = line.map_or(String::new(), |n| format!("line {}: ", n + 1));
+                return Err(Error::input(
+                    path,
+                    format!("bad config: {at}{}", e.message()),
+                ));
+            }
+        };
         user.config = Some(ConfigSource {
             path: path.to_path_buf(),
             keys: user.keys_set(),

@@ -13,6 +13,7 @@
 //! The executor never publishes: the process holding DIR's lock does, once every unit is done.
 
 pub mod progress;
+pub mod resident;
 
 use std::collections::HashMap;
 use std::sync::{Condvar, Mutex};
@@ -73,10 +74,22 @@ pub fn run(store: &Store, plan: &Plan, slots: usize, label: &str) -> Result<Repo
     });
     let wake = Condvar::new();
     let stages = Stages::new(plan, &done);
+    let watch = resident::Watch::start();
     let computed = std::sync::atomic::AtomicUsize::new(0);
     std::thread::scope(|s| {
         for _ in 0..slots.max(1) {
-            s.spawn(|| slot(store, plan, label, &shared, &wake, &stages, &computed));
+            s.spawn(|| {
+                slot(&RunCtx {
+                    store,
+                    plan,
+                    label,
+                    shared: &shared,
+                    wake: &wake,
+                    stages: &stages,
+                    watch: &watch,
+                    computed: &computed,
+                })
+            });
         }
     });
     let shared = shared.into_inner().unwrap_or_else(|e| e.into_inner());
@@ -92,16 +105,30 @@ pub fn run(store: &Store, plan: &Plan, slots: usize, label: &str) -> Result<Repo
     })
 }
 
+/// What every slot of one run shares.
+struct RunCtx<'a> {
+    store: &'a Store,
+    plan: &'a Plan,
+    label: &'a str,
+    shared: &'a Mutex<Shared>,
+    wake: &'a Condvar,
+    stages: &'a Stages,
+    watch: &'a resident::Watch,
+    computed: &'a std::sync::atomic::AtomicUsize,
+}
+
 /// One slot: take ready units until every unit is done or the run failed.
-fn slot(
-    store: &Store,
-    plan: &Plan,
-    label: &str,
-    shared: &Mutex<Shared>,
-    wake: &Condvar,
-    stages: &Stages,
-    computed: &std::sync::atomic::AtomicUsize,
-) {
+fn slot(cx: &RunCtx) {
+    let RunCtx {
+        store,
+        plan,
+        label,
+        shared,
+        wake,
+        stages,
+        watch,
+        computed,
+    } = *cx;
     let lock = || shared.lock().unwrap_or_else(|e| e.into_inner());
     loop {
         // Pick the first ready unit nobody else holds.
@@ -143,7 +170,7 @@ fn slot(
                 }
             }
         };
-        let outcome = claim_and_run(store, plan, picked, label, stages);
+        let outcome = claim_and_run(store, plan, picked, label, stages, watch);
         let mut sh = lock();
         match outcome {
             Ok(Ran::Done) => {
@@ -223,6 +250,7 @@ fn claim_and_run(
     i: usize,
     label: &str,
     stages: &Stages,
+    watch: &resident::Watch,
 ) -> Result<Ran> {
     let unit = unit_ref(plan, i);
     let claim: Option<Claim> = store.claim(&plan.run, &unit, label)?;
@@ -243,12 +271,19 @@ fn claim_and_run(
         progress: &progress,
     };
     let mut out = store.begin(&unit)?;
-    let mut meta = units::run(&ctx, i, &mut out)?;
+    watch.begin(i);
+    let ran = units::run(&ctx, i, &mut out);
+    let peak = watch.end(i);
+    let mut meta = ran?;
     if let Some(m) = meta.as_object_mut() {
         m.insert(
             "seconds".into(),
             serde_json::json!(started.elapsed().as_secs_f64()),
         );
+        if let Some(p) = peak {
+            m.insert("peak_rss_bytes".into(), serde_json::json!(p));
+            stages.peak(plan, i, p);
+        }
     }
     out.commit(meta)?;
     drop(claim);

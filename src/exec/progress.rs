@@ -26,6 +26,8 @@ struct Open {
     stage: Option<Stage>,
     /// The line was printed (stage finished, or reused).
     closed: bool,
+    /// The highest resident memory seen while one of the stage's units ran here.
+    peak: u64,
 }
 
 pub struct Stages {
@@ -50,6 +52,7 @@ impl Stages {
                 units: 0,
                 stage: None,
                 closed: false,
+                peak: 0,
             })
             .collect();
         for (i, u) in plan.units.iter().enumerate() {
@@ -111,6 +114,12 @@ impl Stages {
         });
     }
 
+    /// Unit `i` ran with at most `bytes` resident.
+    pub fn peak(&self, plan: &Plan, i: usize, bytes: u64) {
+        let k = index(plan.units[i].kind());
+        self.with(|open| open[k].peak = open[k].peak.max(bytes));
+    }
+
     /// Unit `i` was committed; `done` says which units are done now.
     pub fn unit_done(&self, plan: &Plan, i: usize, done: &[bool]) {
         let k = index(plan.units[i].kind());
@@ -125,7 +134,7 @@ impl Stages {
             s.remaining = remaining;
             if remaining == 0 {
                 if let Some(stage) = s.stage.take() {
-                    stage.finish("");
+                    stage.finish(&peak_note(s.peak));
                 }
                 s.closed = true;
             }
@@ -159,9 +168,18 @@ impl Stages {
             Self::close_reused(open, n);
             for s in open.iter_mut() {
                 if let Some(stage) = s.stage.take() {
-                    stage.finish("");
+                    stage.finish(&peak_note(s.peak));
                 }
             }
         });
+    }
+}
+
+/// "peak 412 MiB" for a stage's line (nothing when unknown).
+fn peak_note(bytes: u64) -> String {
+    if bytes == 0 {
+        String::new()
+    } else {
+        format!("peak {} MiB", bytes >> 20)
     }
 }
