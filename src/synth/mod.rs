@@ -20,7 +20,11 @@
 //! dozen small events laid out by the seed for calibration statistics (`events`), a stable pair
 //! (false-positive check) and a large pair for the out-of-core path. `--shift` moves every epoch-2
 //! point rigidly (a registration error the comparison must absorb; the truth is unchanged).
+//!
+//! [`campaign`] (`talus synth campaign`) writes N surveys of one site instead of a pair, with the
+//! truth of every consecutive pair and of every survey against the first.
 
+pub mod campaign;
 mod output;
 pub(crate) mod rng;
 mod sampling;
@@ -119,7 +123,7 @@ impl FromStr for SceneKind {
             .ok_or_else(|| {
                 let names: Vec<&str> = SceneKind::ALL.iter().map(|k| k.name()).collect();
                 Error::Usage(format!(
-                    "unknown scene '{s}': expected one of {}",
+                    "unknown scene '{s}': expected one of {} (or campaign: many surveys)",
                     names.join(", ")
                 ))
             })
