@@ -33,7 +33,8 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
-    /// Write a synthetic pair of epochs with exact ground truth (truth.json).
+    /// Write a synthetic pair of epochs (or a campaign of surveys) with exact ground truth
+    /// (truth.json).
     Synth(SynthArgs),
     /// Serve the web viewer for a comparison result on 127.0.0.1.
     View {
@@ -180,13 +181,17 @@ struct CampaignArgs {
 
 #[derive(Args)]
 struct SynthArgs {
-    /// hill | cube | spheres | cubes | cliff | deposit | hole | events | stable | large
+    /// hill | cube | spheres | cubes | cliff | deposit | hole | events | stable | large |
+    /// campaign
     scene: String,
     #[arg(long)]
     out: PathBuf,
     /// Points per epoch (default: per scene).
     #[arg(long)]
     points: Option<u64>,
+    /// Surveys of `synth campaign` (3 to 41; default 5).
+    #[arg(long)]
+    epochs: Option<usize>,
     #[arg(long, default_value_t = 1)]
     seed: u64,
     /// Noise standard deviation.
@@ -275,7 +280,8 @@ fn run(cli: Cli) -> talus::Result<()> {
         }
         Command::Info { files, json } => talus::info::print(&files, json),
         Command::Synth(s) => talus::commands::synth(
-            &s.scene, &s.out, s.points, s.seed, s.noise, s.rotate, s.density2, s.shift, !s.las,
+            &s.scene, &s.out, s.points, s.epochs, s.seed, s.noise, s.rotate, s.density2, s.shift,
+            !s.las,
         ),
         Command::View { dir, port, bind } => talus::commands::view(&dir, bind, port),
         Command::Worker {

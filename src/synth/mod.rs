@@ -20,7 +20,11 @@
 //! dozen small events laid out by the seed for calibration statistics (`events`), a stable pair
 //! (false-positive check) and a large pair for the out-of-core path. `--shift` moves every epoch-2
 //! point rigidly (a registration error the comparison must absorb; the truth is unchanged).
+//!
+//! [`campaign`] (`talus synth campaign`) writes N surveys of one site instead of a pair, with the
+//! truth of every consecutive pair and of every survey against the first.
 
+pub mod campaign;
 mod output;
 pub(crate) mod rng;
 mod sampling;
@@ -119,7 +123,7 @@ impl FromStr for SceneKind {
             .ok_or_else(|| {
                 let names: Vec<&str> = SceneKind::ALL.iter().map(|k| k.name()).collect();
                 Error::Usage(format!(
-                    "unknown scene '{s}': expected one of {}",
+                    "unknown scene '{s}': expected one of {} (or campaign: many surveys)",
                     names.join(", ")
                 ))
             })
@@ -184,6 +188,25 @@ struct Resolved {
     noise: f64,
 }
 
+/// `--points` of command `what` (e.g. "synth hill") must lie in [min, MAX_POINTS].
+fn check_points(what: &str, n: u64, min: u64) -> Result<()> {
+    if !(min..=MAX_POINTS).contains(&n) {
+        return Err(Error::Usage(format!(
+            "{what}: --points must be between {min} and {MAX_POINTS}, got {n}"
+        )));
+    }
+    Ok(())
+}
+
+fn check_noise(noise: f64) -> Result<()> {
+    if !(noise.is_finite() && (0.0..=1.0).contains(&noise)) {
+        return Err(Error::Usage(format!(
+            "synth: --noise must be between 0 and 1 m, got {noise}"
+        )));
+    }
+    Ok(())
+}
+
 fn resolve(kind: SceneKind, opts: &SynthOptions) -> Result<Resolved> {
     let n1 = opts.points.unwrap_or_else(|| kind.default_points());
     let min = if kind == SceneKind::Large {
@@ -191,17 +214,9 @@ fn resolve(kind: SceneKind, opts: &SynthOptions) -> Result<Resolved> {
     } else {
         MIN_POINTS
     };
-    if !(min..=MAX_POINTS).contains(&n1) {
-        return Err(Error::Usage(format!(
-            "synth {kind}: --points must be between {min} and {MAX_POINTS}, got {n1}"
-        )));
-    }
+    check_points(&format!("synth {kind}"), n1, min)?;
     let noise = opts.noise.unwrap_or_else(|| kind.default_noise());
-    if !(noise.is_finite() && (0.0..=1.0).contains(&noise)) {
-        return Err(Error::Usage(format!(
-            "synth: --noise must be between 0 and 1 m, got {noise}"
-        )));
-    }
+    check_noise(noise)?;
     if !opts
         .shift_m
         .iter()
@@ -308,21 +323,7 @@ pub fn synth(kind: SceneKind, opts: &SynthOptions, out_dir: &Path) -> Result<Tru
             )));
         }
     }
-    let place = placement(&model, opts, 0);
-    let events: Vec<TruthEvent> = model
-        .events
-        .iter()
-        .enumerate()
-        .map(|(i, e)| TruthEvent {
-            id: i as u32 + 1,
-            kind: if e.volume_m3 >= 0.0 { "gain" } else { "loss" }.into(),
-            volume_m3: e.volume_m3,
-            covered_volume_m3: e.covered_volume_m3,
-            centre: place.apply(e.centre),
-            radius_m: e.radius_m,
-            description: e.description.clone(),
-        })
-        .collect();
+    let events = truth_events(&model.events, &placement(&model, opts, 0));
     let truth = Truth {
         scene: kind.name().into(),
         summary: model.summary.clone(),
@@ -345,7 +346,25 @@ pub fn synth(kind: SceneKind, opts: &SynthOptions, out_dir: &Path) -> Result<Tru
     Ok(truth)
 }
 
-fn write_json(path: &Path, truth: &Truth) -> Result<()> {
+/// The truth of a model's events, ids from 1, centres placed in global coordinates.
+fn truth_events(events: &[ModelEvent], place: &Placement) -> Vec<TruthEvent> {
+    events
+        .iter()
+        .enumerate()
+        .map(|(i, e)| TruthEvent {
+            id: i as u32 + 1,
+            kind: if e.volume_m3 >= 0.0 { "gain" } else { "loss" }.into(),
+            volume_m3: e.volume_m3,
+            covered_volume_m3: e.covered_volume_m3,
+            centre: place.apply(e.centre),
+            radius_m: e.radius_m,
+            description: e.description.clone(),
+        })
+        .collect()
+}
+
+/// Write `truth` as pretty JSON to `path`, through `path`.json.tmp renamed at the end.
+fn write_json(path: &Path, truth: &impl serde::Serialize) -> Result<()> {
     let json = serde_json::to_vec_pretty(truth)
         .map_err(|e| Error::Internal(format!("truth.json: {e}")))?;
     let tmp = path.with_extension("json.tmp");

@@ -44,7 +44,7 @@ pub struct ModelEvent {
 
 /// A rockfall scar hollowed into the cliff face (plane y = 0, rock at y > 0); (x, z) coordinates.
 #[derive(Debug, Clone, Copy)]
-enum Scar {
+pub(crate) enum Scar {
     Box {
         min: [f64; 2],
         max: [f64; 2],
@@ -60,6 +60,67 @@ enum Scar {
 }
 
 impl Scar {
+    /// Volume of rock removed (m³, positive): w·h·d for a box, (2/3)πabc for a half-ellipsoid.
+    pub(crate) fn volume(&self) -> f64 {
+        match *self {
+            Scar::Box { min, max, depth } => (max[0] - min[0]) * (max[1] - min[1]) * depth,
+            Scar::HalfEllipsoid { a, b, cz, .. } => 2.0 / 3.0 * PI * a * b * cz,
+        }
+    }
+
+    /// The rectangle of the face (x, z) the scar opens: (min, max).
+    pub(crate) fn bounds(&self) -> ([f64; 2], [f64; 2]) {
+        match *self {
+            Scar::Box { min, max, .. } => (min, max),
+            Scar::HalfEllipsoid { c, a, cz, .. } => ([c[0] - a, c[1] - cz], [c[0] + a, c[1] + cz]),
+        }
+    }
+
+    /// The hole the scar cuts out of the face plane of a cliff whose foot is at `z0`, in the
+    /// face's (u = x, v = z − z0) coordinates.
+    pub(crate) fn hole(&self, z0: f64) -> Hole {
+        match *self {
+            Scar::Box { min, max, .. } => Hole::Rect {
+                min: [min[0], min[1] - z0],
+                max: [max[0], max[1] - z0],
+            },
+            Scar::HalfEllipsoid { c, a, cz, .. } => Hole::Ellipse {
+                c: [c[0], c[1] - z0],
+                a,
+                b: cz,
+            },
+        }
+    }
+
+    /// The scar's own surface: a box's back wall, floor, ceiling and two side walls, or the
+    /// half-ellipsoid.
+    pub(crate) fn patches(&self) -> Vec<Patch> {
+        match *self {
+            Scar::Box { min, max, depth: d } => {
+                let ([x0, z0], [x1, z1]) = (min, max);
+                let plane = |origin, eu, ev, len| Patch::Plane {
+                    origin,
+                    eu,
+                    ev,
+                    len,
+                    holes: Vec::new(),
+                };
+                let (ex, ey, ez) = ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]);
+                vec![
+                    plane([x0, d, z0], ex, ez, [x1 - x0, z1 - z0]),
+                    plane([x0, 0.0, z0], ex, ey, [x1 - x0, d]),
+                    plane([x0, 0.0, z1], ex, ey, [x1 - x0, d]),
+                    plane([x0, 0.0, z0], ey, ez, [d, z1 - z0]),
+                    plane([x1, 0.0, z0], ey, ez, [d, z1 - z0]),
+                ]
+            }
+            Scar::HalfEllipsoid { c, a, b, cz } => vec![Patch::HalfEllipsoid {
+                centre: [c[0], 0.0, c[1]],
+                radii: [a, b, cz],
+            }],
+        }
+    }
+
     fn depth(&self, x: f64, z: f64) -> f64 {
         match *self {
             Scar::Box { min, max, depth } => {
@@ -128,7 +189,7 @@ const LARGE_MARGIN: f64 = 25.0;
 /// Smallest large scene that still holds a feature: 2 × margin + pitch on a side.
 pub(crate) const LARGE_MIN_POINTS: u64 = 1_000_000;
 
-fn ground(min: [f64; 2], max: [f64; 2]) -> Footprint {
+pub(crate) fn ground(min: [f64; 2], max: [f64; 2]) -> Footprint {
     Footprint::Ground { min, max }
 }
 
@@ -447,12 +508,13 @@ fn cubes() -> SceneModel {
 /// The frame of the cliff scenes: a beach (x ∈ [0, width], y ∈ [−beach, 0], sloping 2 % seaward
 /// to −y) at the foot of a vertical face of `height` in the plane y = 0 (rock at y > 0, face normal
 /// −y) rising from z0, with a plateau `plateau` deep on top.
-struct CliffFrame {
-    width: f64,
-    height: f64,
-    beach: f64,
-    plateau: f64,
-    z0: f64,
+#[derive(Debug, Clone)]
+pub(crate) struct CliffFrame {
+    pub width: f64,
+    pub height: f64,
+    pub beach: f64,
+    pub plateau: f64,
+    pub z0: f64,
 }
 
 const CLIFF: CliffFrame = CliffFrame {
@@ -464,7 +526,7 @@ const CLIFF: CliffFrame = CliffFrame {
 };
 
 impl CliffFrame {
-    fn beach_base(&self) -> Base {
+    pub(crate) fn beach_base(&self) -> Base {
         Base {
             z0: self.z0,
             gx: 0.0,
@@ -474,7 +536,7 @@ impl CliffFrame {
     }
 
     /// Beach (with `features`), plateau and face (minus `holes`), in that order.
-    fn patches(&self, features: Vec<Feature>, holes: Vec<Hole>) -> Vec<Patch> {
+    pub(crate) fn patches(&self, features: Vec<Feature>, holes: Vec<Hole>) -> Vec<Patch> {
         let top = Heightfield::new(Base::plane(self.z0 + self.height), Vec::new());
         vec![
             height_patch(
@@ -493,7 +555,7 @@ impl CliffFrame {
         ]
     }
 
-    fn model(
+    pub(crate) fn model(
         &self,
         patches: [Vec<Patch>; 2],
         scars: [Vec<Scar>; 2],
@@ -534,73 +596,33 @@ fn cliff() -> SceneModel {
         b: ell_b,
         cz: ell_cz,
     };
+    let scars = vec![box_scar, ell_scar];
     let p1 = CLIFF.patches(Vec::new(), Vec::new());
+    let mut holes: Vec<Hole> = scars.iter().map(|s| s.hole(z0)).collect();
+    holes.push(Hole::BelowTent {
+        cu: fan_c[0],
+        peak: fan_h,
+        slope: fan_h / fan_r,
+    });
     let mut p2 = CLIFF.patches(
         vec![Feature::Cone {
             c: fan_c,
             radius: fan_r,
             height: fan_h,
         }],
-        vec![
-            Hole::Rect {
-                min: [10.0, 15.0],
-                max: [14.0, 18.0],
-            },
-            Hole::Ellipse {
-                c: [ell_c[0], ell_c[1] - z0],
-                a: ell_a,
-                b: ell_cz,
-            },
-            Hole::BelowTent {
-                cu: fan_c[0],
-                peak: fan_h,
-                slope: fan_h / fan_r,
-            },
-        ],
+        holes,
     );
-    // The box scar's back wall, floor, ceiling and two side walls.
-    let (bx0, bx1, bz0, bz1, d) = (10.0, 14.0, z0 + 15.0, z0 + 18.0, 1.0);
-    let plane = |origin, eu, ev, len| Patch::Plane {
-        origin,
-        eu,
-        ev,
-        len,
-        holes: Vec::new(),
-    };
-    let (ex, ey, ez) = ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]);
-    p2.push(plane([bx0, d, bz0], ex, ez, [bx1 - bx0, bz1 - bz0]));
-    p2.push(plane([bx0, 0.0, bz0], ex, ey, [bx1 - bx0, d]));
-    p2.push(plane([bx0, 0.0, bz1], ex, ey, [bx1 - bx0, d]));
-    p2.push(plane([bx0, 0.0, bz0], ey, ez, [d, bz1 - bz0]));
-    p2.push(plane([bx1, 0.0, bz0], ey, ez, [d, bz1 - bz0]));
-    p2.push(Patch::HalfEllipsoid {
-        centre: [ell_c[0], 0.0, ell_c[1]],
-        radii: [ell_a, ell_b, ell_cz],
-    });
+    p2.extend(scars.iter().flat_map(Scar::patches));
     let fan_centroid_y = -4.0 * fan_r / (3.0 * PI);
     let events = vec![
-        ModelEvent {
-            volume_m3: -(bx1 - bx0) * (bz1 - bz0) * d,
-            centre: [(bx0 + bx1) / 2.0, 0.0, (bz0 + bz1) / 2.0],
-            radius_m: (bx1 - bx0).hypot(bz1 - bz0) / 2.0,
-            footprint: Footprint::Face {
-                min: [bx0, bz0],
-                max: [bx1, bz1],
-            },
-            covered_volume_m3: None,
-            description: "rockfall scar: box 4 m wide, 3 m high, 1 m deep into the face".into(),
-        },
-        ModelEvent {
-            volume_m3: -2.0 / 3.0 * PI * ell_a * ell_b * ell_cz,
-            centre: [ell_c[0], 0.0, ell_c[1]],
-            radius_m: ell_a.max(ell_cz),
-            footprint: Footprint::Face {
-                min: [ell_c[0] - ell_a, ell_c[1] - ell_cz],
-                max: [ell_c[0] + ell_a, ell_c[1] + ell_cz],
-            },
-            covered_volume_m3: None,
-            description: "rockfall scar: half-ellipsoid 3 m × 2.5 m semi-axes, 1.5 m deep".into(),
-        },
+        scar_event(
+            &box_scar,
+            "rockfall scar: box 4 m wide, 3 m high, 1 m deep into the face".into(),
+        ),
+        scar_event(
+            &ell_scar,
+            "rockfall scar: half-ellipsoid 3 m × 2.5 m semi-axes, 1.5 m deep".into(),
+        ),
         ModelEvent {
             volume_m3: PI * fan_r * fan_r * fan_h / 6.0,
             centre: [
@@ -616,10 +638,29 @@ fn cliff() -> SceneModel {
     ];
     CLIFF.model(
         [p1, p2],
-        [Vec::new(), vec![box_scar, ell_scar]],
+        [Vec::new(), scars],
         events,
         "vertical cliff face with beach and plateau; rockfall scars and a debris fan",
     )
+}
+
+/// The event of a scar opened in an intact face: its volume lost, centred on the face plane,
+/// within the circle about the centre through the corners of its rectangle (a box) or of radius
+/// its larger semi-axis (a half-ellipsoid).
+pub(crate) fn scar_event(scar: &Scar, description: String) -> ModelEvent {
+    let (min, max) = scar.bounds();
+    let radius_m = match *scar {
+        Scar::Box { .. } => (max[0] - min[0]).hypot(max[1] - min[1]) / 2.0,
+        Scar::HalfEllipsoid { a, cz, .. } => a.max(cz),
+    };
+    ModelEvent {
+        volume_m3: -scar.volume(),
+        centre: [(min[0] + max[0]) / 2.0, 0.0, (min[1] + max[1]) / 2.0],
+        radius_m,
+        footprint: Footprint::Face { min, max },
+        covered_volume_m3: None,
+        description,
+    }
 }
 
 /// deposit: the cliff scene's frame without scars; epoch 2 has one debris deposit on the beach, a
