@@ -21,6 +21,7 @@ pub mod info;
 pub mod interrupt;
 pub mod io;
 pub mod m3c2;
+pub mod memory;
 pub mod params;
 pub mod plan;
 pub mod progress;

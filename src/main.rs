@@ -294,6 +294,7 @@ fn run(cli: Cli) -> talus::Result<()> {
 }
 
 fn main() -> ExitCode {
+    talus::memory::limit_arenas();
     let cli = Cli::parse();
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,

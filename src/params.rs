@@ -335,8 +335,11 @@ fn parse_size_problem(s: &str) -> std::result::Result<u64, String> {
         _ => return Err(bad()),
     };
     let bytes = n * mul;
-    if bytes.is_nan() || bytes < 64.0 * 1024.0 * 1024.0 {
-        return Err(format!("{s} is too small; talus needs at least 64MiB"));
+    if bytes.is_nan() || bytes < crate::memory::MIN_BUDGET as f64 {
+        return Err(format!(
+            "{s} is too small; talus needs at least {}MiB (the outputs' writers beside the process)",
+            crate::memory::mib(crate::memory::MIN_BUDGET)
+        ));
     }
     Ok(bytes as u64)
 }

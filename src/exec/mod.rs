@@ -75,6 +75,7 @@ pub fn run(store: &Store, plan: &Plan, slots: usize, label: &str) -> Result<Repo
     let wake = Condvar::new();
     let stages = Stages::new(plan, &done);
     let watch = resident::Watch::start();
+    let pool = crate::memory::pool_for(plan.params.memory_bytes.value);
     let computed = std::sync::atomic::AtomicUsize::new(0);
     std::thread::scope(|s| {
         for _ in 0..slots.max(1) {
@@ -87,6 +88,7 @@ pub fn run(store: &Store, plan: &Plan, slots: usize, label: &str) -> Result<Repo
                     wake: &wake,
                     stages: &stages,
                     watch: &watch,
+                    pool: &pool,
                     computed: &computed,
                 })
             });
@@ -114,6 +116,7 @@ struct RunCtx<'a> {
     wake: &'a Condvar,
     stages: &'a Stages,
     watch: &'a resident::Watch,
+    pool: &'a crate::memory::Pool,
     computed: &'a std::sync::atomic::AtomicUsize,
 }
 
@@ -127,6 +130,7 @@ fn slot(cx: &RunCtx) {
         wake,
         stages,
         watch,
+        pool,
         computed,
     } = *cx;
     let lock = || shared.lock().unwrap_or_else(|e| e.into_inner());
@@ -170,7 +174,7 @@ fn slot(cx: &RunCtx) {
                 }
             }
         };
-        let outcome = claim_and_run(store, plan, picked, label, stages, watch);
+        let outcome = claim_and_run(store, plan, picked, label, stages, watch, pool);
         let mut sh = lock();
         match outcome {
             Ok(Ran::Done) => {
@@ -251,6 +255,7 @@ fn claim_and_run(
     label: &str,
     stages: &Stages,
     watch: &resident::Watch,
+    pool: &crate::memory::Pool,
 ) -> Result<Ran> {
     let unit = unit_ref(plan, i);
     let claim: Option<Claim> = store.claim(&plan.run, &unit, label)?;
@@ -269,10 +274,12 @@ fn claim_and_run(
         plan,
         store,
         progress: &progress,
+        pool,
     };
     let mut out = store.begin(&unit)?;
     watch.begin(i);
     let ran = units::run(&ctx, i, &mut out);
+    crate::memory::trim();
     let peak = watch.end(i);
     let mut meta = ran?;
     if let Some(m) = meta.as_object_mut() {

@@ -18,10 +18,8 @@ use crate::params::Params;
 /// their precision (a picometre at 10 km) and Morton keys their 21 bits per axis.
 pub const ANCHOR_BLOCK: f64 = 10_000.0;
 
-/// Resident bytes per input point while its tile is processed: coordinates (24), the column
-/// index's copy (24), the owned flag and slack for the per-core-point results and the tile being
-/// read meanwhile.
-pub const BYTES_PER_POINT: u64 = 72;
+/// Resident bytes per input point while its tile is processed (the M3C2 unit's measured cost).
+pub const BYTES_PER_POINT: u64 = crate::units::m3c2::BYTES_PER_POINT;
 
 /// Map an error of the tiling crate onto talus's.
 pub fn tiling_error(e: talus_tiling::Error) -> Error {

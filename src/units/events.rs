@@ -57,6 +57,11 @@ pub fn candidate_boxes(e: &Event, cluster: &[Point3]) -> Vec<Obb> {
 }
 
 /// Run pair `pair`'s events into `out`.
+/// Resident bytes per kept core point in the events unit: the kept record (104), its copies for
+/// smoothing and clustering (40), the kd-tree and neighbour lists of smoothing (k = 10: ≈ 160),
+/// the clustering's labels and union-find (≈ 24), the columns written (≈ 70).
+pub const BYTES_PER_KEPT: u64 = 400;
+
 pub fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<serde_json::Value> {
     let params = super::stable::read(ctx, pair)?.params(ctx.plan);
     let (tau, reg) = (params.threshold.value, params.reg_error.value);
@@ -77,6 +82,12 @@ pub fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<serde_json::V
             });
         }
     }
+    // The kept points are known only once streamed (≈ 104 bytes each, held unreserved meanwhile:
+    // a small share of what smoothing and clustering then add).
+    let _held = ctx.reserve(
+        kept.len() as u64 * BYTES_PER_KEPT + (8 << 20),
+        &format!("the events of {} kept core points", kept.len()),
+    )?;
     let pts: Vec<Point3> = kept.iter().map(|k| k.xyz).collect();
     let d: Vec<f64> = kept.iter().map(|k| k.d).collect();
     let smoothed = events::smooth::smooth(

@@ -33,9 +33,17 @@ pub struct Ctx<'a> {
     pub store: &'a Store,
     /// Counts the unit's work (points, core points, events) for its stage's progress line.
     pub progress: &'a (dyn Fn(u64) + Sync),
+    /// The process's memory pool: reserve before holding anything large.
+    pub pool: &'a crate::memory::Pool,
 }
 
 impl Ctx<'_> {
+    /// Reserve `need` bytes for `what` from the pool (waiting for other units; exit 2 when the
+    /// budget could never hold it).
+    pub fn reserve(&self, need: u64, what: &str) -> Result<crate::memory::Reservation<'_>> {
+        crate::memory::reserve(self.pool, need, self.plan.params.memory_bytes.value, what)
+    }
+
     /// The store's name of unit `i`.
     pub fn unit_ref(&self, i: usize) -> UnitRef {
         unit_ref(self.plan, i)

@@ -308,15 +308,17 @@ fn finish(
     let r = region.cells.r;
     // One base plane below both surfaces, one spacing lower still so no wall is flat.
     let base = solid::min_height(&top1).min(solid::min_height(&top2)) - spacing;
-    let solid1 = solid::close(&top1, base, &r);
-    let solid2 = solid::close(&top2, base, &r);
+    let solid1 = solid::close(top1, base, &r);
+    let solid2 = solid::close(top2, base, &r);
     let (v1, v2) = (solid::signed_volume(&solid1), solid::signed_volume(&solid2));
     // Gross terms (reported, not part of V) by the midpoint rule on sub-cells of about
     // spacing/2 (a step is misplaced by at most half a sub-cell).
     let (gain, loss) = gross(s1, s2, &region, spacing / 2.0);
-    let to_global = |m: Mesh| Mesh {
-        vertices: m.vertices.iter().map(|l| frame.to_global(l)).collect(),
-        faces: m.faces,
+    let to_global = |mut m: Mesh| {
+        for v in &mut m.vertices {
+            *v = frame.to_global(v);
+        }
+        m
     };
     Ok(EventVolume {
         volume_m3: v2 - v1,

@@ -1,0 +1,138 @@
+//! Memory: the budget (`--memory`) and what the allocator keeps.
+//!
+//! `--memory` bounds the whole process's resident memory (what `/usr/bin/time -v` reports and a
+//! Slurm task is killed for). The budget is split as: the process's own base ([`BASE`]: code,
+//! thread stacks, the plan), the allocator's slack ([`SLACK`] of the budget), and the [`Pool`]
+//! the units reserve from before they hold anything large (each unit's need comes from its
+//! inputs' counts and a measured cost per item, see the `need` constants of each unit kind).
+//!
+//! glibc's malloc gives each thread that contends for the heap an arena of its own (up to 8 per
+//! core) and returns freed memory to the system only from the top of a heap: after a large unit,
+//! megabytes of free pages stay resident in arenas no thread uses any more, and the next unit's
+//! peak stacks on top of them. Two remedies, both measured on the 5.2M-point cliff
+//! (benches/memory.sh): at most [`ARENAS`] arenas, and every free page handed back
+//! (`malloc_trim`) after each unit.
+
+pub mod pool;
+
+pub use pool::{Pool, Reservation};
+
+use crate::error::{Error, Result};
+
+/// Resident bytes of the process whatever runs: the binary, thread stacks, the plan, the
+/// progress lines (measured: 10–12 MiB with no unit running; volumes units without events).
+pub const BASE: u64 = 16 << 20;
+
+/// Share of the budget left to the allocator's slack (freed memory not yet handed back, arena
+/// headers): measured peak minus the sum of reservations on the 5.2M-point cliff at 300 MiB.
+pub const SLACK: f64 = 0.05;
+
+/// The smallest budget: the one whose pool holds the outputs unit, the largest need that does not
+/// depend on the data (a tiling unit's need is a share of the budget; see `units::tiling::need`).
+pub const MIN_BUDGET: u64 = 160 << 20;
+
+/// The pool of a budget of `budget` bytes: what is left after [`BASE`] and [`SLACK`].
+pub fn pool_for(budget: u64) -> Pool {
+    Pool::new(pool_bytes(budget))
+}
+
+/// The pool's size for a budget.
+pub fn pool_bytes(budget: u64) -> u64 {
+    budget.saturating_sub(BASE + (SLACK * budget as f64) as u64)
+}
+
+/// The smallest budget whose pool holds `need` bytes.
+pub fn budget_for(need: u64) -> u64 {
+    ((need + BASE) as f64 / (1.0 - SLACK)).ceil() as u64
+}
+
+/// A budget in MiB, rounded up, for messages.
+pub fn mib(bytes: u64) -> u64 {
+    bytes.div_ceil(1 << 20)
+}
+
+/// Reserve `need` bytes for `what` from `pool`, waiting for others to give back theirs; refused
+/// (exit 2) when no budget left beside the base could hold it, with the smallest that would.
+pub fn reserve<'a>(pool: &'a Pool, need: u64, budget: u64, what: &str) -> Result<Reservation<'a>> {
+    if need > pool.limit() {
+        return Err(Error::Usage(format!(
+            "--memory {} MiB is too small: {what} needs {} MiB; the smallest budget that works is --memory {}MiB",
+            mib(budget),
+            mib(need),
+            mib(budget_for(need))
+        )));
+    }
+    pool.reserve(need, &crate::interrupt::requested)
+        .ok_or(Error::Interrupted)
+}
+
+/// Arenas allowed: one per core of these 2-core machines; more only fragments.
+pub const ARENAS: i32 = 2;
+
+/// Limit glibc's arenas (call once, before threads start).
+pub fn limit_arenas() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: mallopt only sets an allocator parameter; called before other threads exist.
+    unsafe {
+        libc::mallopt(libc::M_ARENA_MAX, ARENAS);
+    }
+}
+
+/// Hand every free page of every arena back to the system.
+pub fn trim() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: malloc_trim is thread-safe and only releases memory the allocator holds free.
+    unsafe {
+        libc::malloc_trim(0);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_smallest_budget_holds_the_fixed_needs() {
+        let pool = pool_bytes(MIN_BUDGET);
+        assert!(crate::units::outputs::NEED <= pool, "outputs do not fit");
+        let split = (MIN_BUDGET / crate::units::tiling::SPLIT_BUDGET_SHARE).max(8 << 20);
+        // Two tilings run at once (one per survey of a pair).
+        assert!(
+            2 * crate::units::tiling::need(split) <= pool,
+            "two tilings do not fit"
+        );
+    }
+
+    #[test]
+    fn budget_for_inverts_pool_bytes() {
+        for need in [1u64 << 20, 100 << 20, 3 << 30] {
+            let b = budget_for(need);
+            assert!(pool_bytes(b) >= need);
+            assert!(pool_bytes(b - (1 << 20)) < need + (1 << 20));
+        }
+    }
+
+    #[test]
+    fn a_need_beyond_the_pool_is_refused_with_the_budget_that_works() {
+        let budget = 300 << 20;
+        let pool = pool_for(budget);
+        let e = reserve(
+            &pool,
+            400 << 20,
+            budget,
+            "tile t_0001_0002 (4000000 points)",
+        )
+        .expect_err("refused");
+        let msg = e.to_string();
+        assert_eq!(e.exit_code(), 2);
+        assert!(
+            msg.contains("--memory 300 MiB is too small: tile t_0001_0002"),
+            "{msg}"
+        );
+        let want = format!("--memory {}MiB", mib(budget_for(400 << 20)));
+        assert!(msg.ends_with(&want), "{msg}");
+        // What fits is granted and given back.
+        drop(reserve(&pool, pool.limit(), budget, "all").expect("fits"));
+        assert_eq!(pool.used(), 0);
+    }
+}
