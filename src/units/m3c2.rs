@@ -285,6 +285,10 @@ pub mod cores {
         format!("c_{}.tile", id.name())
     }
 
+    /// Resident bytes per user core point while it is cut: the key and point (32), the columns
+    /// written (32).
+    pub const CORE_POINT_BYTES: u64 = 64;
+
     /// Cut the plan's core-point file into `out`.
     pub fn run(ctx: &Ctx, out: &mut UnitWriter) -> Result<serde_json::Value> {
         let plan = ctx.plan;
@@ -293,18 +297,55 @@ pub mod cores {
             .core_points
             .as_ref()
             .ok_or_else(|| Error::Internal("a core-point unit without core points".into()))?;
-        let mut by_tile: Vec<Vec<(u64, Point3)>> = vec![Vec::new(); grid.len()];
-        let mut reader = crate::io::open(&input.path)?;
-        let mut buf = Vec::new();
-        let mut n = 0u64;
-        while reader.fill(&mut buf, 1 << 16)? > 0 {
-            for p in &buf {
-                by_tile[grid.index(grid.owner(p[0], p[1]))].push((n, *p));
-                n += 1;
+        // A first pass counts each tile's points; then tiles are taken in batches whose points
+        // fit the unit's share of the pool, one pass over the file per batch: never the whole
+        // file at once (a core-point file can be as large as a survey).
+        let pass = |f: &mut dyn FnMut(u64, usize, Point3) -> Result<()>| -> Result<u64> {
+            let mut reader = crate::io::open(&input.path)?;
+            let mut buf = Vec::new();
+            let mut n = 0u64;
+            while reader.fill(&mut buf, 1 << 16)? > 0 {
+                for p in &buf {
+                    f(n, grid.index(grid.owner(p[0], p[1])), *p)?;
+                    n += 1;
+                }
+                crate::interrupt::check()?;
             }
-        }
-        for id in grid.tiles() {
-            write(out, id, &by_tile[grid.index(id)])?;
+            Ok(n)
+        };
+        let mut counts = vec![0u64; grid.len()];
+        let n = pass(&mut |_, t, _| {
+            counts[t] += 1;
+            Ok(())
+        })?;
+        let share = (ctx.pool.limit() / 4).max(CORE_POINT_BYTES);
+        let tiles: Vec<TileId> = grid.tiles().collect();
+        let mut start = 0;
+        while start < tiles.len() {
+            let mut end = start + 1;
+            let mut points = counts[grid.index(tiles[start])];
+            while end < tiles.len()
+                && (points + counts[grid.index(tiles[end])]) * CORE_POINT_BYTES <= share
+            {
+                points += counts[grid.index(tiles[end])];
+                end += 1;
+            }
+            let _held = ctx.reserve(
+                points * CORE_POINT_BYTES + (4 << 20),
+                &format!("{points} core points of {}", input.path.display()),
+            )?;
+            let mut by_tile: Vec<Vec<(u64, Point3)>> = vec![Vec::new(); end - start];
+            let batch: Vec<usize> = tiles[start..end].iter().map(|&t| grid.index(t)).collect();
+            pass(&mut |k, t, p| {
+                if let Some(b) = batch.iter().position(|&x| x == t) {
+                    by_tile[b].push((k, p));
+                }
+                Ok(())
+            })?;
+            for (b, &id) in tiles[start..end].iter().enumerate() {
+                write(out, id, &by_tile[b])?;
+            }
+            start = end;
         }
         Ok(serde_json::json!({ "points": n }))
     }
@@ -318,6 +359,15 @@ pub mod cores {
         let grid = plan.layout.grid()?;
         let mut n = 0u64;
         for id in grid.tiles() {
+            let path = ctx.input(tiling, &super::super::tiling::tile_file(id))?;
+            let count = talus_tiling::read_tile_header(&path)
+                .map_err(|e| super::super::damaged(&path, e))?
+                .point_count;
+            // The tile as read (25 bytes a point), its file's bytes, the thinning's cells.
+            let _held = ctx.reserve(
+                count * 64 + (4 << 20),
+                &format!("thinning tile {} ({count} points)", id.name()),
+            )?;
             let t = read_tile(ctx, tiling, id)?;
             let pts: Vec<(u64, Point3)> = crate::m3c2::core_points::thin(
                 t.len(),
