@@ -156,17 +156,10 @@ fn assert_same(a: &Path, b: &Path) {
     }
 }
 
-#[test]
-fn each_pair_is_a_compare_of_its_surveys_with_the_campaigns_parameters_and_core_points() {
-    let Some(s) = surveys() else { return };
-    let tmp = common::tempdir();
-    let dir = tmp.path().join("campaign");
-    ok(&campaign(&s[..4], &dir, &[]));
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
-    let p = &summary["parameters"];
-    let v = |k: &str| p[k]["value"].to_string();
-    let params: Vec<String> = [
+/// The flags that give `talus compare` the parameters of `p` (summary.json's "parameters"), but
+/// the registration error and the threshold: those compare measures on the pair's stable ground.
+fn parameter_flags(p: &Value) -> Vec<String> {
+    [
         "point_spacing",
         "core_spacing",
         "normal_radius",
@@ -179,12 +172,49 @@ fn each_pair_is_a_compare_of_its_surveys_with_the_campaigns_parameters_and_core_
         "cluster_min_points",
     ]
     .iter()
-    .flat_map(|k| [format!("--{}", k.replace('_', "-")), v(k)])
+    .flat_map(|k| {
+        [
+            format!("--{}", k.replace('_', "-")),
+            p[k]["value"].to_string(),
+        ]
+    })
     .chain([
         "--orientation".into(),
         p["orientation"]["value"].as_str().unwrap().into(),
     ])
-    .collect();
+    .collect()
+}
+
+/// The campaign's pair `label` (its outputs in `pair`) is compare's run in `out`: every output
+/// but summary.json byte for byte (m3c2.laz, events, regions, viewer files), every mesh.
+fn assert_pair_is_compare(label: &str, pair: &Path, out: &Path) {
+    let (mine, theirs) = (outputs(pair), outputs(out));
+    for name in pipeline_common::COMPARED {
+        assert!(
+            mine[*name] == theirs[*name],
+            "pair {label}: {name} differs from compare's"
+        );
+    }
+    let meshes = |m: &BTreeMap<String, Vec<u8>>| -> Vec<String> {
+        m.keys()
+            .filter(|n| n.starts_with("meshes/"))
+            .cloned()
+            .collect()
+    };
+    assert_eq!(meshes(&mine), meshes(&theirs), "pair {label}: other meshes");
+    for n in meshes(&mine) {
+        assert!(mine[&n] == theirs[&n], "pair {label}: {n} differs");
+    }
+}
+
+#[test]
+fn each_pair_is_a_compare_of_its_surveys_with_the_campaigns_parameters_and_core_points() {
+    let Some(s) = surveys() else { return };
+    let tmp = common::tempdir();
+    let dir = tmp.path().join("campaign");
+    ok(&campaign(&s[..4], &dir, &[]));
+    let summary = json(&dir.join("summary.json"));
+    let params = parameter_flags(&summary["parameters"]);
     for k in 0..3 {
         let label = format!(
             "{}_{}",
@@ -196,32 +226,8 @@ fn each_pair_is_a_compare_of_its_surveys_with_the_campaigns_parameters_and_core_
         let mut args: Vec<&str> = params.iter().map(String::as_str).collect();
         let cores = pair.join("m3c2.laz");
         args.extend(["--core-points", cores.to_str().unwrap()]);
-        let o = common::run_compare(&s[k], &s[k + 1], &out, &args);
-        ok(&o);
-        let (mine, theirs) = (outputs(&pair), outputs(&out));
-        for name in [
-            "m3c2.laz",
-            "events.geojson",
-            "events.csv",
-            "event_regions.geojson",
-            "view.json",
-            "terrain.bin",
-        ] {
-            assert!(
-                mine[name] == theirs[name],
-                "pair {label}: {name} differs from compare's"
-            );
-        }
-        let meshes = |m: &BTreeMap<String, Vec<u8>>| -> Vec<String> {
-            m.keys()
-                .filter(|n| n.starts_with("meshes/"))
-                .cloned()
-                .collect()
-        };
-        assert_eq!(meshes(&mine), meshes(&theirs));
-        for n in meshes(&mine) {
-            assert!(mine[&n] == theirs[&n], "pair {label}: {n} differs");
-        }
+        ok(&common::run_compare(&s[k], &s[k + 1], &out, &args));
+        assert_pair_is_compare(&label, &pair, &out);
     }
 }
 
@@ -328,13 +334,26 @@ fn synth_campaign(dir: &Path, epochs: usize, points: u64) -> CampaignTruth {
     serde_json::from_slice(&std::fs::read(dir.join("truth.json")).unwrap()).unwrap()
 }
 
-/// The surveys of `truth` (in `dir`) and their labels in the campaign (YYYYMMDD).
-fn synth_surveys(dir: &Path, truth: &CampaignTruth) -> (Vec<PathBuf>, Vec<String>) {
-    truth
+/// A synthetic campaign of 4 surveys of `points` points in `tmp`/data, then `talus campaign` of
+/// them with `--baseline` and `extra` into `tmp`/campaign: the truth, the surveys, their labels
+/// in the campaign (YYYYMMDD) and the campaign's DIR.
+fn synth_and_campaign(
+    tmp: &Path,
+    points: u64,
+    extra: &[&str],
+) -> (CampaignTruth, Vec<PathBuf>, Vec<String>, PathBuf) {
+    let data = tmp.join("data");
+    let truth = synth_campaign(&data, 4, points);
+    let (surveys, labels): (Vec<PathBuf>, Vec<String>) = truth
         .epochs
         .iter()
-        .map(|e| (dir.join(&e.file), e.date.replace('-', "")))
-        .unzip()
+        .map(|e| (data.join(&e.file), e.date.replace('-', "")))
+        .unzip();
+    let dir = tmp.join("campaign");
+    let mut args = vec!["--baseline"];
+    args.extend_from_slice(extra);
+    ok(&campaign(&surveys, &dir, &args));
+    (truth, surveys, labels, dir)
 }
 
 fn json(path: &Path) -> Value {
@@ -418,11 +437,7 @@ fn campaign_events(dir: &Path) -> Vec<Found> {
 #[test]
 fn synthetic_campaign_finds_every_planted_change_in_its_pair_and_tracks_the_recurring_scar() {
     let tmp = common::tempdir();
-    let data = tmp.path().join("data");
-    let truth = synth_campaign(&data, 4, 300_000);
-    let (surveys, labels) = synth_surveys(&data, &truth);
-    let dir = tmp.path().join("campaign");
-    ok(&campaign(&surveys, &dir, &["--baseline"]));
+    let (truth, _, labels, dir) = synth_and_campaign(tmp.path(), 300_000, &[]);
     let found = campaign_events(&dir);
     let mut fails = Vec::new();
     let mut table = String::new();
@@ -553,15 +568,8 @@ fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
 #[test]
 fn synthetic_campaign_pairs_are_compares_with_its_parameters_and_core_points() {
     let tmp = common::tempdir();
-    let data = tmp.path().join("data");
-    let truth = synth_campaign(&data, 4, 60_000);
-    let (surveys, labels) = synth_surveys(&data, &truth);
-    let dir = tmp.path().join("campaign");
-    ok(&campaign(
-        &surveys,
-        &dir,
-        &["--baseline", "--tile-size", "12"],
-    ));
+    let (truth, surveys, labels, dir) =
+        synth_and_campaign(tmp.path(), 60_000, &["--tile-size", "12"]);
     let summary = json(&dir.join("summary.json"));
     assert!(summary["tiles"].as_u64().unwrap() > 1, "one tile");
     let cores = dir.join("timeseries.laz");
@@ -576,61 +584,16 @@ fn synthetic_campaign_pairs_are_compares_with_its_parameters_and_core_points() {
         let label = format!("{}_{}", labels[b], labels[a]);
         let pair = dir.join("pairs").join(&label);
         let mine = json(&pair.join("summary.json"));
-        let p = &mine["parameters"];
-        let mut args: Vec<String> = [
-            "point_spacing",
-            "core_spacing",
-            "normal_radius",
-            "cyl_radius",
-            "cyl_halflen",
-            "min_points",
-            "smooth_k",
-            "smooth_sigma",
-            "eps",
-            "cluster_min_points",
-        ]
-        .iter()
-        .flat_map(|k| {
-            [
-                format!("--{}", k.replace('_', "-")),
-                p[k]["value"].to_string(),
-            ]
-        })
-        .collect();
-        args.extend([
-            "--orientation".into(),
-            p["orientation"]["value"].as_str().unwrap().into(),
-            "--core-points".into(),
-            cores.to_string_lossy().into_owned(),
-        ]);
+        let mut args = parameter_flags(&mine["parameters"]);
+        args.extend(["--core-points".into(), cores.to_string_lossy().into_owned()]);
         let out = tmp.path().join(format!("compare-{label}"));
         let refs: Vec<&str> = args.iter().map(String::as_str).collect();
         ok(&common::run_compare(&surveys[b], &surveys[a], &out, &refs));
-        let (x, y) = (outputs(&pair), outputs(&out));
-        for name in [
-            "m3c2.laz",
-            "events.geojson",
-            "events.csv",
-            "event_regions.geojson",
-            "view.json",
-            "terrain.bin",
-        ] {
-            assert!(
-                x[name] == y[name],
-                "pair {label}: {name} differs from compare's"
-            );
-        }
-        let meshes = |m: &BTreeMap<String, Vec<u8>>| -> Vec<String> {
-            m.keys()
-                .filter(|n| n.starts_with("meshes/"))
-                .cloned()
-                .collect()
-        };
-        assert_eq!(meshes(&x), meshes(&y), "pair {label}: other meshes");
-        assert!(!meshes(&x).is_empty(), "pair {label}: no mesh");
-        for n in meshes(&x) {
-            assert!(x[&n] == y[&n], "pair {label}: {n} differs from compare's");
-        }
+        assert_pair_is_compare(&label, &pair, &out);
+        assert!(
+            pair.join("meshes").read_dir().unwrap().next().is_some(),
+            "pair {label}: no mesh"
+        );
         let theirs = json(&out.join("summary.json"));
         let values = |s: &Value| -> BTreeMap<String, Value> {
             s["parameters"]

@@ -350,6 +350,24 @@ mod tests {
         assert!("0,0,0".parse::<Orientation>().is_err());
     }
 
+    /// C1 of the test cliff every 0.25 along x ∈ [0, 20): a plateau (z = 10, y < 0), a beach
+    /// (z = 0, y > 0) and the face between them (y = 0, z ∈ [0, 10)) where `face(z)`.
+    fn cliff_c1(face: impl Fn(f64) -> bool) -> Vec<Point3> {
+        let mut c1 = Vec::new();
+        for i in 0..80 {
+            let x = i as f64 * 0.25;
+            for k in 0..40 {
+                let t = k as f64 * 0.25;
+                c1.push([x, -t - 0.25, 10.0]);
+                c1.push([x, t + 0.25, 0.0]);
+                if face(t) {
+                    c1.push([x, 0.0, t]);
+                }
+            }
+        }
+        c1
+    }
+
     /// A plateau (z = 10, y < 0) above a vertical face (y = 0) above a beach (z = 0, y > 0):
     /// with `auto`, every face normal must point out of the rock (+y), whatever sign PCA gave.
     #[test]
@@ -371,17 +389,7 @@ mod tests {
             }
         }
         // The C1 points: the same three surfaces, densely.
-        let mut c1 = Vec::new();
-        for i in 0..80 {
-            let x = i as f64 * 0.25;
-            for k in 0..40 {
-                let t = k as f64 * 0.25;
-                c1.push([x, -t - 0.25, 10.0]);
-                c1.push([x, t + 0.25, 0.0]);
-                c1.push([x, 0.0, t]);
-            }
-        }
-        let before = Columns::new(&c1, [0.0; 3], 0.5);
+        let before = Columns::new(&cliff_c1(|_| true), [0.0; 3], 0.5);
         orient(&cores, &mut normals, &before, 1.0, Orientation::Auto);
         for (p, n) in cores.iter().zip(&normals) {
             if p[1] == 0.0 && p[2] > 0.0 && p[2] < 10.0 {
@@ -434,20 +442,11 @@ mod tests {
                 truth.push(None);
             }
         }
-        let mut c1 = Vec::new();
+        let mut c1 = cliff_c1(|z| (z - axis[1]).abs() >= radius);
         for i in 0..80 {
-            let x = i as f64 * 0.25;
-            for k in 0..40 {
-                let t = k as f64 * 0.25;
-                c1.push([x, -t - 0.25, 10.0]);
-                c1.push([x, t + 0.25, 0.0]);
-                if (t - axis[1]).abs() >= radius {
-                    c1.push([x, 0.0, t]);
-                }
-            }
             for k in 1..32 {
                 let [y, z] = cavity(k as f64 * std::f64::consts::PI / 32.0);
-                c1.push([x, y, z]);
+                c1.push([i as f64 * 0.25, y, z]);
             }
         }
         let before = Columns::new(&c1, [0.0; 3], 0.5);
