@@ -15,12 +15,7 @@ cd "$repo"
 SIZES="${SIZES:-10000000 40000000 120000000}"
 WORK="${SCALE_WORK:-$repo/bench-work/scale}"
 mkdir -p "$WORK"
-if [ ! -x /usr/bin/time ]; then
-  echo "scale.sh: installing GNU time" >&2
-  DEBIAN_FRONTEND=noninteractive apt-get install -y -q time >/dev/null
-fi
-cargo build --release --quiet
-talus="$repo/target/release/talus"
+. "$repo/benches/common.sh" scale.sh
 
 for n in $SIZES; do
   d="$WORK/large-$n"

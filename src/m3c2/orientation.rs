@@ -5,7 +5,10 @@
 //! noise flips signs point to point and smoothing then cancels a real rockfall).
 //!
 //! `auto` works in three steps:
-//! 1. non-steep normals point up;
+//! 1. non-steep normals point up, unless the core point lies under C1's top surface (the highest
+//!    point per cell, a small DSM) by more than two normal radii: there the surface may face down
+//!    (the ceiling of a cavity, an overhang: a scar in a cliff face that a later survey holds, seen
+//!    from the first survey's core points), so "up" is unreliable and the normal is left to step 3;
 //! 2. a steep normal points to the side where the terrain is lower: the top surface of C1 (the
 //!    highest point per cell, a small DSM) is looked up at horizontal offsets ±a along the
 //!    normal's horizontal part. In front of a cliff lies the beach, behind it the plateau or the
@@ -80,6 +83,10 @@ impl FromStr for Orientation {
 
 /// A normal is steep (its "up" sign unreliable) when |n·z| is below this: about 60° from vertical.
 pub const STEEP_NZ: f64 = 0.5;
+/// A non-steep normal is not simply turned up when C1's top surface lies more than this many
+/// normal radii above its core point (the top of a cell of half a normal radius on a slope just
+/// below 60° rises at most 1.23 radii above the cell's lowest point).
+const UNDER: f64 = 2.0;
 /// Neighbours per core point in the propagation graph.
 const GRAPH_K: usize = 8;
 
@@ -173,6 +180,11 @@ impl TopSurface {
         }
         TopSurface { cell, top }
     }
+    /// How far C1's top surface lies above `p` in `p`'s cell (0 when the cell has no point or
+    /// none above).
+    fn above(&self, p: &Point3) -> f64 {
+        self.at(p[0], p[1]).map_or(0.0, |z| (z - p[2]).max(0.0))
+    }
     fn at(&self, x: f64, y: f64) -> Option<f64> {
         let key = (
             (x / self.cell).floor() as i64,
@@ -199,27 +211,35 @@ impl TopSurface {
 
 fn orient_auto(cores: &[Point3], normals: &mut [Point3], before: &Columns, scale: f64) {
     let n = cores.len();
+    if n == 0 {
+        return;
+    }
     let mut done = vec![false; n];
+    let mut steep = vec![false; n];
     let valid = |nv: &Point3| nv[0].is_finite();
-    let mut any_steep = false;
+    let dsm = TopSurface::new(before.points(), scale / 2.0);
+    let mut undecided = false;
     for i in 0..n {
         if !valid(&normals[i]) {
             done[i] = true;
-        } else if normals[i][2].abs() >= STEEP_NZ {
+        } else if normals[i][2].abs() < STEEP_NZ {
+            steep[i] = true;
+            undecided = true;
+        } else if dsm.above(&cores[i]) > UNDER * scale {
+            // Under C1's top: maybe an overhang, whose normal points down (step 3 decides).
+            undecided = true;
+        } else {
             if normals[i][2] < 0.0 {
                 flip(&mut normals[i]);
             }
             done[i] = true;
-        } else {
-            any_steep = true;
         }
     }
-    if !any_steep {
+    if !undecided {
         return;
     }
-    let dsm = TopSurface::new(before.points(), scale / 2.0);
     for i in 0..n {
-        if done[i] {
+        if done[i] || !steep[i] {
             continue;
         }
         let nv = normals[i];
@@ -330,6 +350,24 @@ mod tests {
         assert!("0,0,0".parse::<Orientation>().is_err());
     }
 
+    /// C1 of the test cliff every 0.25 along x ∈ [0, 20): a plateau (z = 10, y < 0), a beach
+    /// (z = 0, y > 0) and the face between them (y = 0, z ∈ [0, 10)) where `face(z)`.
+    fn cliff_c1(face: impl Fn(f64) -> bool) -> Vec<Point3> {
+        let mut c1 = Vec::new();
+        for i in 0..80 {
+            let x = i as f64 * 0.25;
+            for k in 0..40 {
+                let t = k as f64 * 0.25;
+                c1.push([x, -t - 0.25, 10.0]);
+                c1.push([x, t + 0.25, 0.0]);
+                if face(t) {
+                    c1.push([x, 0.0, t]);
+                }
+            }
+        }
+        c1
+    }
+
     /// A plateau (z = 10, y < 0) above a vertical face (y = 0) above a beach (z = 0, y > 0):
     /// with `auto`, every face normal must point out of the rock (+y), whatever sign PCA gave.
     #[test]
@@ -351,17 +389,7 @@ mod tests {
             }
         }
         // The C1 points: the same three surfaces, densely.
-        let mut c1 = Vec::new();
-        for i in 0..80 {
-            let x = i as f64 * 0.25;
-            for k in 0..40 {
-                let t = k as f64 * 0.25;
-                c1.push([x, -t - 0.25, 10.0]);
-                c1.push([x, t + 0.25, 0.0]);
-                c1.push([x, 0.0, t]);
-            }
-        }
-        let before = Columns::new(&c1, [0.0; 3], 0.5);
+        let before = Columns::new(&cliff_c1(|_| true), [0.0; 3], 0.5);
         orient(&cores, &mut normals, &before, 1.0, Orientation::Auto);
         for (p, n) in cores.iter().zip(&normals) {
             if p[1] == 0.0 && p[2] > 0.0 && p[2] < 10.0 {
@@ -369,6 +397,66 @@ mod tests {
             } else if p[1] != 0.0 {
                 assert_eq!(n[2], 1.0, "flat normal at {p:?} not up");
             }
+        }
+    }
+
+    /// A face (y = 0, rock at y < 0, a plateau at z = 10 behind it, a beach at z = 0 in front)
+    /// with a cavity: a half-cylinder of radius 2 along x about (y, z) = (0, 5). Its ceiling faces
+    /// down, its back wall out (+y), its floor up; with `auto` every cavity normal must point out
+    /// of the rock, into the cavity, whatever sign PCA gave. ("Up" on the ceiling points into the
+    /// rock: the sign of every distance there would be wrong.)
+    #[test]
+    fn auto_points_a_cavity_ceiling_down() {
+        let (axis, radius) = ([0.0, 5.0], 2.0);
+        let cavity = |t: f64| [axis[0] - radius * t.sin(), axis[1] + radius * t.cos()];
+        let outward = |t: f64| [t.sin(), -t.cos()];
+        let mut cores = Vec::new();
+        let mut normals = Vec::new();
+        let mut truth = Vec::new();
+        for i in 0..40 {
+            let x = i as f64 * 0.5;
+            for k in 1..16 {
+                let t = k as f64 * std::f64::consts::PI / 16.0;
+                let [y, z] = cavity(t);
+                let [ny, nz] = outward(t);
+                let s = if (i + k) % 2 == 0 { 1.0 } else { -1.0 };
+                cores.push([x, y, z]);
+                normals.push([0.0, s * ny, s * nz]);
+                truth.push(Some([0.0, ny, nz]));
+            }
+            for k in 0..=20 {
+                let z = k as f64 * 0.5;
+                if (z - axis[1]).abs() < radius {
+                    continue;
+                }
+                cores.push([x, 0.0, z]);
+                normals.push([0.0, if (i + k) % 2 == 0 { 1.0 } else { -1.0 }, 0.0]);
+                truth.push(Some([0.0, 1.0, 0.0]));
+            }
+            for k in 1..10 {
+                cores.push([x, -(k as f64), 10.0]);
+                normals.push([0.0, 0.0, 1.0]);
+                truth.push(None);
+                cores.push([x, k as f64, 0.0]);
+                normals.push([0.0, 0.0, -1.0]);
+                truth.push(None);
+            }
+        }
+        let mut c1 = cliff_c1(|z| (z - axis[1]).abs() >= radius);
+        for i in 0..80 {
+            for k in 1..32 {
+                let [y, z] = cavity(k as f64 * std::f64::consts::PI / 32.0);
+                c1.push([i as f64 * 0.25, y, z]);
+            }
+        }
+        let before = Columns::new(&c1, [0.0; 3], 0.5);
+        orient(&cores, &mut normals, &before, 1.0, Orientation::Auto);
+        for ((p, n), t) in cores.iter().zip(&normals).zip(&truth) {
+            let want = t.unwrap_or([0.0, 0.0, 1.0]);
+            assert!(
+                dot(n, &want) > 0.99,
+                "normal {n:?} at {p:?} does not point out of the rock ({want:?})"
+            );
         }
     }
 }
