@@ -349,7 +349,9 @@ fn wait(store: &Store, sub: &record::Submission, ids: &[String]) -> Result<()> {
                 reported[k] = true;
                 let mut counts: Vec<(String, usize)> = Vec::new();
                 for s in &tasks {
-                    let name = s.map_or("UNKNOWN".to_string(), |s| s.state.to_string());
+                    let name = s.map_or("not listed (never ran)".to_string(), |s| {
+                        s.state.to_string()
+                    });
                     match counts.iter_mut().find(|(n, _)| *n == name) {
                         Some(c) => c.1 += 1,
                         None => counts.push((name, 1)),

@@ -68,7 +68,9 @@ pub struct Report {
     pub published: bool,
 }
 
-fn outcome(slurm: Option<&JobState>, report: Option<&TaskReport>) -> Outcome {
+/// A task's outcome from what Slurm says of it (`asked`: whether Slurm could be asked) and its
+/// own report.
+fn outcome(asked: bool, slurm: Option<&JobState>, report: Option<&TaskReport>) -> Outcome {
     if let Some(s) = slurm {
         if s.state.is_pending() {
             return Outcome::Queued(s.reason.clone());
@@ -92,6 +94,11 @@ fn outcome(slurm: Option<&JobState>, report: Option<&TaskReport>) -> Outcome {
         return Outcome::Failed(why);
     }
     match report {
+        // Slurm keeps no record of an array task cancelled while it was queued (squeue and
+        // scontrol: "not found", no job-completion line), nor of any job after MinJobAge.
+        None if asked => Outcome::Failed(
+            "never ran: cancelled while queued, or forgotten by Slurm (no record left)".into(),
+        ),
         None => Outcome::Unknown,
         Some(r) => match r.state.as_str() {
             "done" => Outcome::Done,
@@ -129,7 +136,9 @@ impl Report {
                     Some(j) => match cluster::states(&j.ids) {
                         Ok(s) => s,
                         Err(cluster::Unavailable(why)) => {
-                            slurm_unavailable = Some(why);
+                            // squeue's last line says it (the others: its retries).
+                            let last = why.lines().last().unwrap_or("").to_string();
+                            slurm_unavailable = Some(last);
                             HashMap::new()
                         }
                     },
@@ -147,7 +156,7 @@ impl Report {
                         let outcome = if jobs.is_none() {
                             Outcome::Unknown
                         } else {
-                            outcome(slurm.as_ref(), report.as_ref())
+                            outcome(slurm_unavailable.is_none(), slurm.as_ref(), report.as_ref())
                         };
                         tasks.push(Task {
                             stage: s.kind.clone(),
