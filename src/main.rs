@@ -79,6 +79,21 @@ enum Command {
         #[arg(long)]
         task: Option<usize>,
     },
+    /// Scaling on paper: a finished run's stages as job arrays (tasks, work, memory from the
+    /// units' records) and the wall time expected on some numbers of nodes.
+    #[command(hide = true)]
+    PlanStats {
+        dir: PathBuf,
+        /// Node counts, comma-separated.
+        #[arg(long, default_value = "1,4,16", value_delimiter = ',')]
+        nodes: Vec<usize>,
+        /// Cores per node (one-CPU tasks per node).
+        #[arg(long, default_value_t = 2)]
+        cores: usize,
+        /// Extrapolate to an input this many times bigger, linearly per tile.
+        #[arg(long, default_value_t = 1.0)]
+        scale: f64,
+    },
     /// Synthesize the cliff scene, compare it and print the events beside the truth.
     Demo {
         /// Where to write the scene and the result.
@@ -375,6 +390,18 @@ fn run(cli: Cli) -> talus::Result<()> {
             stage,
             task,
         } => talus::exec::slurm::task::run(&dir, submission, &stage, task),
+        Command::PlanStats {
+            dir,
+            nodes,
+            cores,
+            scale,
+        } => {
+            print!(
+                "{}",
+                talus::exec::slurm::scaling::report(&dir, &nodes, cores, scale)?
+            );
+            Ok(())
+        }
         Command::Demo { out, view } => talus::commands::demo(&out, view),
     }
 }

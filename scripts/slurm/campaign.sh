@@ -47,19 +47,8 @@ started_here=""
 if ! pid_alive slurmctld "$ctld_pid" || ! pid_alive slurmd "$slurmd_pid" || ! pid_alive munged "$munged_pid"; then
   started_here=1
 fi
-cleanup() {
-  local rc=$?
-  if [[ -n "$started_here" ]]; then
-    echo
-    echo "== stopping the daemons this test started (down.sh)"
-    bash "$here/down.sh" || rc=1
-  fi
-  if [[ $rc != 0 ]]; then
-    echo "******** slurm campaign test FAILED (exit $rc); daemon logs: $logdir; work: ${work:-} ********" >&2
-  fi
-  exit $rc
-}
-trap cleanup EXIT
+# Only a cluster this test started is stopped again (down.sh), on any exit.
+trap 'teardown_on_exit "slurm campaign test (work: ${work:-})" "$started_here"' EXIT
 section "cluster (up.sh)"
 eval "$(bash "$here/up.sh")" || fail "up.sh could not bring up Slurm"
 [[ -n "${SLURM_CONF:-}" ]] || fail "up.sh did not print SLURM_CONF"
@@ -70,6 +59,13 @@ rm -rf "$work"
 mkdir -p "$work"
 cd "$work"
 campaign() { "$talus" campaign "${surveys[@]}" "$@"; }
+# same_as_local NAME: $work/NAME holds the local run's outputs, byte for byte; its status.
+same_as_local() {
+  python3 "$here/same_outputs.py" "$work/local" "$work/$1" >"$work/same-$1.txt" \
+    || { cat "$work/same-$1.txt"; fail "the outputs of run '$1' differ from the local run's"; }
+  tail -n 1 "$work/same-$1.txt"
+  "$talus" status "$work/$1"
+}
 
 # ---------------------------------------------------------------- 1. local
 section "1. local run"
@@ -89,10 +85,7 @@ sed 's/^/  /' "$work/slurm.err"
 [[ $rc == 0 ]] || fail "the Slurm run exited $rc"
 [[ "$(wc -l <"$work/slurm.jobs")" == 9 ]] || fail "expected 9 arrays (8 stages and the publishing job)"
 echo "Slurm run: $((SECONDS - t0)) s"
-python3 "$here/same_outputs.py" "$work/local" "$work/slurm" >"$work/same1.txt" \
-  || { cat "$work/same1.txt"; fail "the Slurm run's outputs differ from the local run's"; }
-tail -n 1 "$work/same1.txt"
-"$talus" status "$work/slurm"
+same_as_local slurm
 
 # ---------------------------------------------------------------- 3. cancel, then --resume
 section "3. a second Slurm run; cancel M3C2 tasks mid-way; --resume"
@@ -151,10 +144,7 @@ sed 's/^/  /' "$work/resume.err"
 resumed_m3c2="$(awk '$1 == "m3c2" { print $3 }' "$work/resume.jobs")"
 [[ -n "$resumed_m3c2" && "$resumed_m3c2" -lt "$ntasks" ]] \
   || fail "--resume submitted ${resumed_m3c2:-no} M3C2 task(s) of $ntasks, expected only the missing ones"
-python3 "$here/same_outputs.py" "$work/local" "$work/cancel" >"$work/same2.txt" \
-  || { cat "$work/same2.txt"; fail "the resumed run's outputs differ from the local run's"; }
-tail -n 1 "$work/same2.txt"
-"$talus" status "$work/cancel"
+same_as_local cancel
 
 # ---------------------------------------------------------------- 4. --plan-only
 section "4. --plan-only"

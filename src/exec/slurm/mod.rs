@@ -25,6 +25,7 @@
 
 mod cluster;
 pub mod record;
+pub mod scaling;
 mod scripts;
 pub mod status;
 pub mod task;
@@ -386,4 +387,39 @@ fn wait(store: &Store, sub: &record::Submission, ids: &[String]) -> Result<()> {
 /// The absolute form of `dir` (scripts and tasks run elsewhere: no relative paths).
 pub fn absolute(dir: &Path) -> Result<PathBuf> {
     std::fs::canonicalize(dir).map_err(|e| Error::output(dir, e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::scripts::quote;
+    use super::split_args;
+
+    #[test]
+    fn slurm_args_split_like_a_shell() {
+        let v = split_args(r#"-p long  -A geo --time=1:00:00 --comment='a b' "--x=\"y\"" c\ d"#)
+            .unwrap();
+        assert_eq!(
+            v,
+            [
+                "-p",
+                "long",
+                "-A",
+                "geo",
+                "--time=1:00:00",
+                "--comment=a b",
+                "--x=\"y\"",
+                "c d"
+            ]
+        );
+        assert!(split_args("").unwrap().is_empty());
+        assert_eq!(split_args("''").unwrap(), [""]);
+        assert!(split_args("--comment='open").is_err());
+    }
+
+    #[test]
+    fn quoted_words_come_back_through_the_splitter() {
+        for w in ["plain", "a b", "it's", "", "--mem=2G", "$HOME", "x\"y"] {
+            assert_eq!(split_args(&quote(w)).unwrap(), [w]);
+        }
+    }
 }
