@@ -23,5 +23,9 @@ bash viewer/tests/run.sh
 
 # The Slurm executor against a real Slurm (installs and starts a one-node cluster, stops it
 # again; fails, never skips, when Slurm cannot be installed or started). About 1.5 min, with the
-# talus binary `cargo test` built.
-TALUS_BIN="$repo/target/debug/talus" bash scripts/slurm/campaign.sh
+# talus binary `cargo test` built (campaign.sh builds a release one when there is none).
+if [[ -x "$repo/target/debug/talus" ]]; then
+  TALUS_BIN="$repo/target/debug/talus" bash scripts/slurm/campaign.sh
+else
+  bash scripts/slurm/campaign.sh
+fi

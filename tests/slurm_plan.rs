@@ -69,23 +69,29 @@ fn plan_only_writes_the_scripts_and_submits_nothing() {
     assert!(sub.join("plan.json").is_file() && out.join(".talus/plan.json").is_file());
 
     // Two tiles per task in the tile stages.
-    let plan: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out.join(".talus/plan.json")).unwrap()).unwrap();
-    let tiles = plan["units"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|u| u["spec"]["kind"] == "m3c2")
-        .count();
+    let json = |p: &Path| -> serde_json::Value {
+        serde_json::from_slice(&std::fs::read(p).unwrap()).unwrap()
+    };
+    // The items of array `key` of `v` whose `field` is "m3c2".
+    let m3c2_of = |v: &serde_json::Value, key: &str, field: &dyn Fn(&serde_json::Value) -> bool| {
+        v[key]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|x| field(x))
+            .cloned()
+            .collect::<Vec<_>>()
+    };
+    let tiles = m3c2_of(&json(&out.join(".talus/plan.json")), "units", &|u| {
+        u["spec"]["kind"] == "m3c2"
+    })
+    .len();
     assert!(tiles >= 2, "the test wants several tiles, got {tiles}");
-    let record: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(sub.join("submission.json")).unwrap()).unwrap();
-    let m3c2 = record["stages"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|s| s["kind"] == "m3c2")
-        .unwrap();
+    let m3c2 = m3c2_of(&json(&sub.join("submission.json")), "stages", &|s| {
+        s["kind"] == "m3c2"
+    })
+    .pop()
+    .unwrap();
     assert_eq!(m3c2["tasks"].as_array().unwrap().len(), tiles.div_ceil(2));
 
     let script = std::fs::read_to_string(sub.join("02-m3c2.sh")).unwrap();
