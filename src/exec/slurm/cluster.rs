@@ -108,7 +108,9 @@ pub fn states(ids: &[String]) -> std::result::Result<HashMap<String, JobState>, 
         } else {
             let err = String::from_utf8_lossy(&o.stderr);
             if !err.contains("Invalid job id") {
-                return Err(Unavailable(err.trim().to_string()));
+                // Its last line says it (the others: its retries, DNS lookups).
+                let last = err.trim().lines().last().unwrap_or("").to_string();
+                return Err(Unavailable(last));
             }
         }
     }

@@ -220,26 +220,34 @@ pub fn check_idle(store: &Store) -> Result<()> {
             return Ok(());
         }
     };
-    let active: Vec<String> = states
-        .iter()
-        .filter(|(_, s)| s.state.is_active())
-        .map(|(id, s)| format!("{id} {}", s.state))
-        .collect();
+    // "518: 6 PENDING", one entry per array with tasks not ended.
+    let mut active: Vec<String> = Vec::new();
+    for id in &jobs.ids {
+        let mut counts: Vec<(String, usize)> = Vec::new();
+        for (task, s) in &states {
+            if s.state.is_active() && task.split('_').next() == Some(id.as_str()) {
+                match counts.iter_mut().find(|(n, _)| *n == s.state.0) {
+                    Some(c) => c.1 += 1,
+                    None => counts.push((s.state.0.clone(), 1)),
+                }
+            }
+        }
+        if !counts.is_empty() {
+            let c: Vec<String> = counts.iter().map(|(n, k)| format!("{k} {n}")).collect();
+            active.push(format!("{id}: {}", c.join(", ")));
+        }
+    }
     if active.is_empty() {
         return Ok(());
     }
-    let mut active = active;
-    active.sort();
-    Err(Error::Busy {
-        dir: store.dir().to_path_buf(),
-        holder: format!(
-            "Slurm jobs of its submission {n} are still queued or running: {}; wait for them \
-             (talus status {}) or cancel them (scancel {})",
-            active.join(", "),
-            store.dir().display(),
-            jobs.ids.join(" ")
-        ),
-    })
+    Err(Error::Usage(format!(
+        "{}: jobs of its Slurm submission {n} are still queued or running ({}); wait for them \
+         (talus status {}) or cancel them (scancel {}), then run the command again",
+        store.dir().display(),
+        active.join("; "),
+        store.dir().display(),
+        jobs.ids.join(" ")
+    )))
 }
 
 /// Execute `plan` on Slurm: submit the stages with units not done and the publishing job, print

@@ -136,9 +136,7 @@ impl Report {
                     Some(j) => match cluster::states(&j.ids) {
                         Ok(s) => s,
                         Err(cluster::Unavailable(why)) => {
-                            // squeue's last line says it (the others: its retries).
-                            let last = why.lines().last().unwrap_or("").to_string();
-                            slurm_unavailable = Some(last);
+                            slurm_unavailable = Some(why);
                             HashMap::new()
                         }
                     },
@@ -341,6 +339,7 @@ impl Report {
             let mut outcomes: Vec<(String, usize)> = Vec::new();
             for t in &tasks {
                 let name = match &t.outcome {
+                    Outcome::Queued(r) if r.is_empty() || r == "None" => "queued".into(),
                     Outcome::Queued(r) => format!("queued ({r})"),
                     Outcome::Running => "running".into(),
                     Outcome::Done => "done".into(),
