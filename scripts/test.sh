@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Every test of talus, on a fresh machine: installs what the tests need (a Python venv with laspy
 # for the independent-reader checks, Debian chromium and the viewer's npm packages for the
-# browser tests), then runs the Rust tests of the workspace and the viewer's browser tests.
+# browser tests, Debian's Slurm and munge for the cluster test), then runs the Rust tests of the
+# workspace, the viewer's browser tests and the Slurm executor against a real one-node Slurm.
 # This is the test command README.md gives; .ci/run calls it.
 set -euo pipefail
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -19,3 +20,12 @@ cargo test --workspace --no-fail-fast
 
 # Browser tests of the web viewer (installs chromium and npm packages when missing).
 bash viewer/tests/run.sh
+
+# The Slurm executor against a real Slurm (installs and starts a one-node cluster, stops it
+# again; fails, never skips, when Slurm cannot be installed or started). About 1.5 min, with the
+# talus binary `cargo test` built (campaign.sh builds a release one when there is none).
+if [[ -x "$repo/target/debug/talus" ]]; then
+  TALUS_BIN="$repo/target/debug/talus" bash scripts/slurm/campaign.sh
+else
+  bash scripts/slurm/campaign.sh
+fi

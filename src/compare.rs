@@ -18,7 +18,7 @@ use crate::plan::inputs::SurveyFiles;
 use crate::plan::{InputFile, Layout, Pair, Plan, Survey, PLAN_VERSION};
 use crate::sampling;
 use crate::store::Store;
-use crate::units::outputs::{is_output, Publish, Summary, MARKER};
+use crate::units::outputs::{is_output, Summary};
 use crate::units::unit_ref;
 
 /// Everything `compare` needs.
@@ -39,6 +39,8 @@ pub struct CompareOptions {
     /// Stop after M3C2: m3c2.laz (without smoothed values and event ids), summary.json and the
     /// viewer's terrain; no events, volumes or meshes.
     pub m3c2_only: bool,
+    /// Where the units run (SPEC.md §6).
+    pub executor: crate::exec::Executor,
 }
 
 /// The headers of the inputs, checked (before anything is written).
@@ -205,8 +207,9 @@ pub fn plan_path(store: &Store) -> PathBuf {
 }
 
 /// Run a comparison. On failure nothing is left under a final output name, and a DIR this run
-/// created is removed when the failure is the input's (nothing worth resuming).
-pub fn compare(opts: &CompareOptions) -> Result<Summary> {
+/// created is removed when the failure is the input's (nothing worth resuming). None when the
+/// run was submitted to Slurm and not waited for.
+pub fn compare(opts: &CompareOptions) -> Result<Option<Summary>> {
     let config = match &opts.config {
         Some(p) => UserParams::from_toml_file(p)?,
         None => UserParams::default(),
@@ -214,12 +217,16 @@ pub fn compare(opts: &CompareOptions) -> Result<Summary> {
     let user = opts.user.clone().over(config);
     let inputs = check_inputs(opts, &user)?;
     let (store, created) = open_store(&opts.out, opts.resume, opts.force)?;
-    let result = run_planned(&store, opts.force, &is_output, |store| {
+    let result = run_planned(&store, opts.force, &is_output, &opts.executor, |store| {
         plan(store, opts, &user, &inputs)
     });
-    let marker = forget_if_input_error(result, created, &opts.out)?;
+    let Some(marker) = forget_if_input_error(result, created, &opts.out)? else {
+        return Ok(None);
+    };
     let text = std::fs::read(&marker).map_err(|e| Error::output(&marker, e))?;
-    serde_json::from_slice(&text).map_err(|e| Error::Internal(format!("summary.json: {e}")))
+    serde_json::from_slice(&text)
+        .map(Some)
+        .map_err(|e| Error::Internal(format!("summary.json: {e}")))
 }
 
 /// After a failed run in a DIR it created: remove DIR again when the failure is the input's
@@ -237,19 +244,26 @@ pub fn forget_if_input_error<T>(result: Result<T>, created: bool, out: &Path) ->
 }
 
 /// The run of a planned command in `store`: take DIR's lock (one run per DIR), finish a publish
-/// a crash interrupted, plan (`plan`), write the plan, with `force` throw its units away,
-/// execute every unit not done, publish the last unit's `publish` list as one set (`ours` tells
-/// talus's outputs from the user's files), drop units no longer in the plan. Returns the path of
-/// the published marker in its unit.
+/// a crash interrupted, plan (`plan`), write the plan, with `force` throw its units away, then
+/// execute it with `executor`: locally, every unit not done, then publish the last unit's
+/// `publish` list as one set (`ours` tells talus's outputs from the user's files) and drop units
+/// no longer in the plan; on Slurm, submit the units not done (the final job publishes). Returns
+/// the path of the published marker in its unit, or None when the run was submitted to Slurm and
+/// not waited for (or only planned).
 pub fn run_planned(
     store: &Store,
     force: bool,
     ours: &dyn Fn(&str) -> bool,
+    executor: &crate::exec::Executor,
     plan: impl FnOnce(&Store) -> Result<Plan>,
-) -> Result<PathBuf> {
+) -> Result<Option<PathBuf>> {
     let command = std::env::args().collect::<Vec<_>>().join(" ");
     let lock = store.lock("run", &command)?;
     store.recover()?;
+    // Jobs of an earlier submission still queued or running would compute beside this run.
+    if !matches!(executor, crate::exec::Executor::Local) || force {
+        crate::exec::slurm::check_idle(store)?;
+    }
     let plan = plan(store)?;
     plan.save(&plan_path(store))?;
     if force {
@@ -257,43 +271,16 @@ pub fn run_planned(
             store.invalidate(&unit_ref(&plan, i))?;
         }
     }
+    if let crate::exec::Executor::Slurm(opts) = executor {
+        return crate::exec::slurm::run(store, &plan, opts, &command, lock, ours);
+    }
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(plan.params.threads.value)
         .build()
         .map_err(|e| Error::Internal(format!("thread pool: {e}")))?;
     let slots = plan.params.threads.value.min(2);
     pool.install(|| crate::exec::run(store, &plan, slots, "run"))?;
-    let marker = publish(store, &plan, ours)?;
-    let keep = (0..plan.units.len()).map(|i| unit_ref(&plan, i)).collect();
-    store.gc(&keep)?;
+    let marker = crate::exec::publish::publish_and_gc(store, &plan, ours)?;
     drop(lock);
-    Ok(marker)
-}
-
-/// Publish the plan's last unit's `publish` list into DIR as one set; returns the path of the
-/// marker (the file published last) in its unit.
-pub fn publish(store: &Store, plan: &Plan, ours: &dyn Fn(&str) -> bool) -> Result<PathBuf> {
-    let last = plan
-        .units
-        .len()
-        .checked_sub(1)
-        .ok_or_else(|| Error::Internal("an empty plan".into()))?;
-    let unit = unit_ref(plan, last);
-    let record = store
-        .done(&unit)
-        .ok_or_else(|| Error::Internal(format!("unit {} not done", unit.name)))?;
-    let list: Vec<Publish> = serde_json::from_value(record.meta["publish"].clone())
-        .map_err(|e| Error::Internal(format!("unit {} record: {e}", unit.name)))?;
-    let files: Vec<(PathBuf, String)> = list
-        .iter()
-        .map(|p| {
-            let u = crate::store::UnitRef {
-                kind: p.kind.clone(),
-                name: p.unit.clone(),
-            };
-            Ok((store.unit_dir(&u)?.join(&p.file), p.name.clone()))
-        })
-        .collect::<Result<_>>()?;
-    store.publish(&files, MARKER, ours)?;
-    Ok(store.unit_dir(&unit)?.join(MARKER))
+    Ok(Some(marker))
 }

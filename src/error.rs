@@ -45,6 +45,11 @@ pub enum Error {
     #[error("interrupted")]
     Interrupted,
 
+    /// Jobs of a cluster run failed, were cancelled or hit their limits (the message names them;
+    /// the finished units are kept for `--resume`).
+    #[error("{0}")]
+    Jobs(String),
+
     /// A bug or an unexpected condition that the user could not have caused.
     #[error("internal error: {0}")]
     Internal(String),
@@ -77,7 +82,7 @@ impl Error {
             // Another run holds DIR: the user waits or clears a lock they know is stale.
             Error::Busy { .. } => 2,
             Error::Interrupted => 130,
-            Error::Internal(_) | Error::Damaged { .. } => 1,
+            Error::Internal(_) | Error::Damaged { .. } | Error::Jobs(_) => 1,
         }
     }
 }

@@ -59,6 +59,41 @@ enum Command {
         #[arg(long)]
         threads: Option<usize>,
     },
+    /// The units of the run in DIR: done, running, queued, failed, by stage, with the Slurm job
+    /// ids of its latest submission.
+    Status {
+        /// The --out directory of a run.
+        dir: PathBuf,
+    },
+    /// One task of a Slurm job array (what the sbatch scripts of `--executor slurm` run).
+    #[command(hide = true)]
+    SlurmTask {
+        dir: PathBuf,
+        /// The submission's number (DIR/.talus/slurm/N).
+        #[arg(long)]
+        submission: u32,
+        /// The stage: tiling, cores, m3c2, stable, events, volumes, outputs, campaign, publish.
+        #[arg(long)]
+        stage: String,
+        /// The task (default: SLURM_ARRAY_TASK_ID).
+        #[arg(long)]
+        task: Option<usize>,
+    },
+    /// Scaling on paper: a finished run's stages as job arrays (tasks, work, memory from the
+    /// units' records) and the wall time expected on some numbers of nodes.
+    #[command(hide = true)]
+    PlanStats {
+        dir: PathBuf,
+        /// Node counts, comma-separated.
+        #[arg(long, default_value = "1,4,16", value_delimiter = ',')]
+        nodes: Vec<usize>,
+        /// Cores per node (one-CPU tasks per node).
+        #[arg(long, default_value_t = 2)]
+        cores: usize,
+        /// Extrapolate to an input this many times bigger, linearly per tile.
+        #[arg(long, default_value_t = 1.0)]
+        scale: f64,
+    },
     /// Synthesize the cliff scene, compare it and print the events beside the truth.
     Demo {
         /// Where to write the scene and the result.
@@ -113,6 +148,56 @@ struct ParamArgs {
     threads: Option<usize>,
 }
 
+/// Where the units run (SPEC.md §6).
+#[derive(Args)]
+struct ExecArgs {
+    /// local: this machine; slurm: sbatch job arrays on a Slurm cluster whose nodes share DIR.
+    #[arg(long, default_value = "local", value_parser = ["local", "slurm"])]
+    executor: String,
+    /// (slurm) Wait for the last job and exit with the run's status.
+    #[arg(long)]
+    wait: bool,
+    /// (slurm) Arguments for every sbatch, e.g. "-p long -A geo --time=1:00:00".
+    #[arg(long, allow_hyphen_values = true, value_name = "ARGS")]
+    slurm_args: Option<String>,
+    /// (slurm) Write the plan and the sbatch scripts into DIR/.talus/slurm/N, submit nothing.
+    #[arg(long)]
+    plan_only: bool,
+    /// (slurm) Tiles per array task in the tile stages (M3C2, volumes).
+    #[arg(long, default_value_t = 1, value_name = "N")]
+    tiles_per_task: usize,
+}
+
+impl ExecArgs {
+    fn executor(&self) -> talus::Result<talus::exec::Executor> {
+        if self.executor == "local" {
+            if self.wait || self.slurm_args.is_some() || self.plan_only {
+                return Err(talus::Error::Usage(
+                    "--wait, --slurm-args and --plan-only go with --executor slurm".into(),
+                ));
+            }
+            return Ok(talus::exec::Executor::Local);
+        }
+        if self.tiles_per_task == 0 {
+            return Err(talus::Error::Usage(
+                "--tiles-per-task: must be at least 1".into(),
+            ));
+        }
+        if self.wait && self.plan_only {
+            return Err(talus::Error::Usage(
+                "--wait and --plan-only: a plan only is not submitted, there is nothing to wait for"
+                    .into(),
+            ));
+        }
+        Ok(talus::exec::Executor::Slurm(talus::exec::slurm::Options {
+            args: talus::exec::slurm::split_args(self.slurm_args.as_deref().unwrap_or(""))?,
+            wait: self.wait,
+            plan_only: self.plan_only,
+            tiles_per_task: self.tiles_per_task,
+        }))
+    }
+}
+
 #[derive(Args)]
 struct CompareArgs {
     /// The earlier epoch (C1): a point cloud, or a folder or pattern of its tiles.
@@ -131,6 +216,8 @@ struct CompareArgs {
     core_points: Option<PathBuf>,
     #[command(flatten)]
     params: ParamArgs,
+    #[command(flatten)]
+    exec: ExecArgs,
     /// Continue an interrupted run in DIR.
     #[arg(long, conflicts_with = "force")]
     resume: bool,
@@ -165,6 +252,8 @@ struct CampaignArgs {
     config: Option<PathBuf>,
     #[command(flatten)]
     params: ParamArgs,
+    #[command(flatten)]
+    exec: ExecArgs,
     /// Compare each later survey with the first as well.
     #[arg(long)]
     baseline: bool,
@@ -252,9 +341,11 @@ fn run(cli: Cli) -> talus::Result<()> {
                 after_mesh: a.after_mesh,
                 tile_size: a.tile_size,
                 m3c2_only: a.m3c2_only,
+                executor: a.exec.executor()?,
             };
-            let summary = talus::compare::compare(&opts)?;
-            eprintln!("{}", summary.one_line());
+            if let Some(summary) = talus::compare::compare(&opts)? {
+                eprintln!("{}", summary.one_line());
+            }
             Ok(())
         }
         Command::Campaign(a) => {
@@ -267,8 +358,11 @@ fn run(cli: Cli) -> talus::Result<()> {
                 resume: a.resume,
                 force: a.force,
                 tile_size: a.tile_size,
+                executor: a.exec.executor()?,
             };
-            let done = talus::campaign::command::campaign(&opts)?;
+            let Some(done) = talus::campaign::command::campaign(&opts)? else {
+                return Ok(());
+            };
             eprintln!(
                 "talus: campaign of {} surveys, {} pairs, {} tracks; outputs in {}",
                 done.surveys,
@@ -289,6 +383,25 @@ fn run(cli: Cli) -> talus::Result<()> {
             slots,
             threads,
         } => talus::commands::worker(&dir, slots, threads),
+        Command::Status { dir } => talus::exec::slurm::status::print(&dir),
+        Command::SlurmTask {
+            dir,
+            submission,
+            stage,
+            task,
+        } => talus::exec::slurm::task::run(&dir, submission, &stage, task),
+        Command::PlanStats {
+            dir,
+            nodes,
+            cores,
+            scale,
+        } => {
+            print!(
+                "{}",
+                talus::exec::slurm::scaling::report(&dir, &nodes, cores, scale)?
+            );
+            Ok(())
+        }
         Command::Demo { out, view } => talus::commands::demo(&out, view),
     }
 }

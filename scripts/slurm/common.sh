@@ -91,3 +91,19 @@ stop_daemon() {
 ctld_pid="$rundir/slurmctld.pid"
 slurmd_pid="$rundir/slurmd.pid"
 munged_pid="$rundir/munged.pid"
+
+# teardown_on_exit LABEL STOP: the EXIT trap of a test script (trap 'teardown_on_exit ... ' EXIT).
+# With STOP non-empty, stops the cluster (down.sh; a failure there fails the test); on a non-zero
+# exit, says loudly that LABEL failed and where the daemon logs are. Exits with the test's status.
+teardown_on_exit() {
+  local rc=$? label="$1" stop="$2"
+  if [[ -n "$stop" ]]; then
+    echo
+    echo "== teardown (down.sh)"
+    bash "$(dirname "${BASH_SOURCE[0]}")/down.sh" || rc=1
+  fi
+  if [[ $rc != 0 ]]; then
+    echo "******** $label FAILED (exit $rc); daemon logs: $logdir ********" >&2
+  fi
+  exit $rc
+}

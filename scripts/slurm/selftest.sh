@@ -33,17 +33,7 @@ say() { echo "  $*"; }
 section() { echo; echo "== $*"; }
 
 # Always tear down, also when a check fails (set -e or fail): nothing may be left running.
-cleanup() {
-  local rc=$?
-  echo
-  echo "== teardown (down.sh)"
-  bash "$here/down.sh" || rc=1
-  if [[ $rc != 0 ]]; then
-    echo "******** selftest FAILED (exit $rc); daemon logs: $logdir ********" >&2
-  fi
-  exit $rc
-}
-trap cleanup EXIT
+trap 'teardown_on_exit selftest 1' EXIT
 
 section "up.sh"
 eval "$(bash "$here/up.sh")"

@@ -30,6 +30,8 @@ pub struct CampaignOptions {
     pub force: bool,
     /// Force the tile side (tests); None = plan from the memory budget.
     pub tile_size: Option<f64>,
+    /// Where the units run (SPEC.md §6).
+    pub executor: crate::exec::Executor,
 }
 
 /// What a finished campaign reports on the terminal.
@@ -59,8 +61,8 @@ fn entries(path: &Path, table: &toml::Table) -> Result<Vec<EpochEntry>> {
         .collect())
 }
 
-/// Run a campaign.
-pub fn campaign(opts: &CampaignOptions) -> Result<Done> {
+/// Run a campaign; None when it was submitted to Slurm and not waited for.
+pub fn campaign(opts: &CampaignOptions) -> Result<Option<Done>> {
     let (config, entries) = match &opts.config {
         Some(p) => {
             let (u, rest) = UserParams::from_toml_file_with(p, &["epoch"])?;
@@ -95,17 +97,20 @@ pub fn campaign(opts: &CampaignOptions) -> Result<Done> {
         &store,
         opts.force,
         &crate::units::campaign::is_output,
+        &opts.executor,
         |store| plan(store, opts, &user, &epochs, &files),
     );
-    let marker = forget_if_input_error(result, created, &opts.out)?;
+    let Some(marker) = forget_if_input_error(result, created, &opts.out)? else {
+        return Ok(None);
+    };
     let text = std::fs::read(&marker).map_err(|e| Error::output(&marker, e))?;
     let summary: serde_json::Value =
         serde_json::from_slice(&text).map_err(|e| Error::Internal(format!("summary.json: {e}")))?;
-    Ok(Done {
+    Ok(Some(Done {
         surveys: epochs.len(),
         pairs: summary["pairs"].as_array().map_or(0, |p| p.len()),
         summary,
-    })
+    }))
 }
 
 fn plan(

@@ -10,10 +10,13 @@
 //! taken over (its claim is stale). A unit that finds a dependency's file damaged has that
 //! dependency thrown away and both redone, once.
 //!
-//! The executor never publishes: the process holding DIR's lock does, once every unit is done.
+//! [`run`] never publishes: the process holding DIR's lock does, once every unit is done
+//! ([`publish`]; after a Slurm submission, its final job).
 
 pub mod progress;
+pub mod publish;
 pub mod resident;
+pub mod slurm;
 
 use std::collections::HashMap;
 use std::sync::{Condvar, Mutex};
@@ -55,14 +58,53 @@ pub struct Report {
     pub reused: usize,
 }
 
+/// How a command executes its plan (SPEC.md §6).
+#[derive(Debug, Clone, Default)]
+pub enum Executor {
+    /// The plan's units in this process.
+    #[default]
+    Local,
+    /// The plan's units as Slurm job arrays ([`slurm`]).
+    Slurm(slurm::Options),
+}
+
 /// Execute every unit of `plan` not yet done in `store`, with `slots` units at a time, as a
 /// process of run `plan.run` labelled `label` (for claims).
 pub fn run(store: &Store, plan: &Plan, slots: usize, label: &str) -> Result<Report> {
+    run_units(store, plan, None, slots, label)
+}
+
+/// Like [`run`], but only the units `only` (indices into the plan) and whichever of their
+/// dependencies, transitively, are not done (normally none: a Slurm task runs after the stages it
+/// depends on). `None`: every unit.
+pub fn run_units(
+    store: &Store,
+    plan: &Plan,
+    only: Option<&[usize]>,
+    slots: usize,
+    label: &str,
+) -> Result<Report> {
     let n = plan.units.len();
-    let done: Vec<bool> = (0..n)
+    let finished: Vec<bool> = (0..n)
         .map(|i| store.done(&unit_ref(plan, i)).is_some())
         .collect();
-    let reused = done.iter().filter(|&&d| d).count();
+    let reused = finished.iter().filter(|&&d| d).count();
+    // Units outside the wanted set count as done for this run.
+    let wanted = match only {
+        None => vec![true; n],
+        Some(list) => {
+            let mut w = vec![false; n];
+            let mut stack: Vec<usize> = list.to_vec();
+            while let Some(i) = stack.pop() {
+                if i < n && !w[i] && !finished[i] {
+                    w[i] = true;
+                    stack.extend(&plan.units[i].deps);
+                }
+            }
+            w
+        }
+    };
+    let done: Vec<bool> = (0..n).map(|i| finished[i] || !wanted[i]).collect();
     let shared = Mutex::new(Shared {
         state: done
             .iter()

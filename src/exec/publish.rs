@@ -1,0 +1,68 @@
+//! Publishing a finished plan: the last unit's `publish` list placed into DIR as one set
+//! ([`Store::publish`]), then the units no longer in the plan dropped ([`Store::gc`]). Whoever
+//! publishes holds DIR's lock: the command's process after a local run, the final job of a Slurm
+//! submission.
+
+use std::path::PathBuf;
+
+use crate::error::{Error, Result};
+use crate::plan::{Plan, Spec};
+use crate::store::Store;
+use crate::units::outputs::{Publish, MARKER};
+use crate::units::unit_ref;
+
+/// Publish the plan's outputs ([`publish`]) and drop the units no longer in the plan; the caller
+/// holds DIR's lock. Returns the path of the published marker in its unit.
+pub fn publish_and_gc(store: &Store, plan: &Plan, ours: &dyn Fn(&str) -> bool) -> Result<PathBuf> {
+    let marker = publish(store, plan, ours)?;
+    let keep = (0..plan.units.len()).map(|i| unit_ref(plan, i)).collect();
+    store.gc(&keep)?;
+    Ok(marker)
+}
+
+/// The plan's last unit (whose record lists what to publish).
+fn last_unit(plan: &Plan) -> Result<crate::store::UnitRef> {
+    let last = plan
+        .units
+        .len()
+        .checked_sub(1)
+        .ok_or_else(|| Error::Internal("an empty plan".into()))?;
+    Ok(unit_ref(plan, last))
+}
+
+/// The path of the marker (the file published last) in the plan's last unit.
+pub fn marker_path(store: &Store, plan: &Plan) -> Result<PathBuf> {
+    Ok(store.unit_dir(&last_unit(plan)?)?.join(MARKER))
+}
+
+/// Which names in DIR are talus's outputs for this plan (a campaign's or a comparison's), so
+/// that publishing replaces them and nothing else.
+pub fn outputs_of(plan: &Plan) -> fn(&str) -> bool {
+    match plan.units.last().map(|u| u.spec) {
+        Some(Spec::Campaign) => crate::units::campaign::is_output,
+        _ => crate::units::outputs::is_output,
+    }
+}
+
+/// Publish the plan's last unit's `publish` list into DIR as one set; returns the path of the
+/// marker (the file published last) in its unit.
+pub fn publish(store: &Store, plan: &Plan, ours: &dyn Fn(&str) -> bool) -> Result<PathBuf> {
+    let unit = last_unit(plan)?;
+    let record = store
+        .done(&unit)
+        .ok_or_else(|| Error::Internal(format!("unit {} not done", unit.name)))?;
+    let list: Vec<Publish> = serde_json::from_value(record.meta["publish"].clone())
+        .map_err(|e| Error::Internal(format!("unit {} record: {e}", unit.name)))?;
+    let files: Vec<(PathBuf, String)> = list
+        .iter()
+        .map(|p| {
+            let u = crate::store::UnitRef {
+                kind: p.kind.clone(),
+                name: p.unit.clone(),
+            };
+            Ok((store.unit_dir(&u)?.join(&p.file), p.name.clone()))
+        })
+        .collect::<Result<_>>()?;
+    store.publish(&files, MARKER, ours)?;
+    Ok(store.unit_dir(&unit)?.join(MARKER))
+}

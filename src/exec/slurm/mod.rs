@@ -1,0 +1,433 @@
+//! The Slurm executor (SPEC.md §6): a plan's units submitted to a Slurm cluster, whose nodes
+//! share DIR's filesystem, as job arrays — Slurm schedules, talus has no scheduler of its own.
+//!
+//! - **Stages.** The plan's kinds of units in pipeline order (tiling, cores, m3c2, stable, events,
+//!   volumes, outputs, campaign) are the stages: every unit depends only on units of earlier
+//!   stages ([`stages`] checks it). Each stage with units not done becomes one job array; task `i`
+//!   runs its slice of the stage's units (`--tiles-per-task` tiles of the tile stages, one survey
+//!   or pair otherwise) with `talus slurm-task`, i.e. [`crate::exec::run_units`] — the executor a
+//!   local run and `talus worker` use, with the store's claims and per-unit records. A last
+//!   one-task array publishes the outputs (takes DIR's lock, publishes as one set, drops old units).
+//! - **Chaining.** Every array depends `afterok` on the one before, with `--kill-on-invalid-dep=yes`:
+//!   a failed, cancelled or timed-out task cancels every later job at once instead of leaving them
+//!   pending forever. The whole chain is submitted in one go (never onto a job id of an earlier
+//!   submission, which Slurm may have forgotten: afterok on an unknown id runs at once).
+//! - **Records.** `DIR/.talus/slurm/<n>/` per submission ([`record`]): `submission.json` (stages,
+//!   each task's units, the sbatch arguments), a copy of the plan the tasks execute, the sbatch
+//!   scripts and a `submit.sh` with the very sbatch commands, `jobs.json` (the arrays' job ids),
+//!   `logs/` (each task's output) and `tasks/` (each task's own report, written by that task only).
+//! - **Recovery.** Units are content-keyed and each has its own record, so running the command
+//!   again with `--resume` plans again, finds what is done and submits only the rest; `talus
+//!   status DIR` ([`status`]) names the units done, queued, running and failed with their job ids.
+//!
+//! The submitting process holds DIR's lock only while it plans and submits; the tasks never take
+//! it, and the publishing job takes it when it runs (waiting while the submitter still holds it).
+
+mod cluster;
+pub mod record;
+pub mod scaling;
+mod scripts;
+pub mod status;
+pub mod task;
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use crate::error::{Error, Result};
+use crate::plan::Plan;
+use crate::store::{Lock, Store};
+use crate::units::unit_ref;
+
+pub use cluster::TaskState;
+
+/// The stages in pipeline order (store kinds), then the publishing job.
+pub const STAGE_ORDER: [&str; 8] = [
+    "tiling", "cores", "m3c2", "stable", "events", "volumes", "outputs", "campaign",
+];
+
+/// The name of the last job, which publishes the outputs.
+pub const PUBLISH: &str = "publish";
+
+/// At most this many tasks in one array (Slurm's default MaxArraySize is 1001: indices 0..=1000).
+pub const MAX_TASKS: usize = 1000;
+
+/// How `--executor slurm` runs.
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// `--slurm-args`, split like a shell would: given to every sbatch.
+    pub args: Vec<String>,
+    /// Wait for the last job and exit with the run's status.
+    pub wait: bool,
+    /// Write the plan and the scripts, submit nothing.
+    pub plan_only: bool,
+    /// Units of a tile stage (m3c2, volumes) per array task.
+    pub tiles_per_task: usize,
+}
+
+impl Default for Options {
+    fn default() -> Options {
+        Options {
+            args: Vec::new(),
+            wait: false,
+            plan_only: false,
+            tiles_per_task: 1,
+        }
+    }
+}
+
+/// One stage of a submission: the units (plan indices) of each array task.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StagePlan {
+    pub kind: &'static str,
+    pub tasks: Vec<Vec<usize>>,
+}
+
+/// The rank of a store kind in [`STAGE_ORDER`].
+pub fn rank(kind: &str) -> Option<usize> {
+    STAGE_ORDER.iter().position(|k| *k == kind)
+}
+
+/// Whether units of `kind` are one per tile (grouped `tiles_per_task` to a task).
+fn per_tile(kind: &str) -> bool {
+    matches!(kind, "m3c2" | "volumes")
+}
+
+/// The stages of `plan` whose units are not all done (`done[i]`): for each, its units not done
+/// in tasks of `tiles_per_task` (tile stages) or one (the others), at most [`MAX_TASKS`] tasks
+/// (more units per task when there are more). An error if a unit depends on a unit of its own or
+/// a later stage (the stages would not be a valid order).
+pub fn stages(plan: &Plan, done: &[bool], tiles_per_task: usize) -> Result<Vec<StagePlan>> {
+    let ranks: Vec<usize> = plan
+        .units
+        .iter()
+        .map(|u| {
+            rank(u.kind()).ok_or_else(|| {
+                Error::Internal(format!("unit {} of a kind with no Slurm stage", u.name))
+            })
+        })
+        .collect::<Result<_>>()?;
+    for (i, u) in plan.units.iter().enumerate() {
+        if let Some(&d) = u.deps.iter().find(|&&d| ranks[d] >= ranks[i]) {
+            return Err(Error::Internal(format!(
+                "unit {} depends on {} of the same or a later stage",
+                u.name, plan.units[d].name
+            )));
+        }
+    }
+    let mut out = Vec::new();
+    for (r, kind) in STAGE_ORDER.iter().enumerate() {
+        let todo: Vec<usize> = (0..plan.units.len())
+            .filter(|&i| ranks[i] == r && !done[i])
+            .collect();
+        if todo.is_empty() {
+            continue;
+        }
+        let mut per = if per_tile(kind) {
+            tiles_per_task.max(1)
+        } else {
+            1
+        };
+        per = per.max(todo.len().div_ceil(MAX_TASKS));
+        out.push(StagePlan {
+            kind,
+            tasks: todo.chunks(per).map(|c| c.to_vec()).collect(),
+        });
+    }
+    Ok(out)
+}
+
+/// Split `--slurm-args` like a POSIX shell would (blanks separate words; single quotes keep
+/// everything, double quotes everything but `\"` and `\\`, a backslash outside quotes keeps the
+/// next character). No expansion of any kind.
+pub fn split_args(s: &str) -> Result<Vec<String>> {
+    let mut words = Vec::new();
+    let mut cur = String::new();
+    let mut in_word = false;
+    let mut chars = s.chars();
+    while let Some(c) = chars.next() {
+        match c {
+            c if c.is_whitespace() => {
+                if in_word {
+                    words.push(std::mem::take(&mut cur));
+                    in_word = false;
+                }
+            }
+            '\'' => {
+                in_word = true;
+                loop {
+                    match chars.next() {
+                        Some('\'') => break,
+                        Some(c) => cur.push(c),
+                        None => return Err(unclosed(s)),
+                    }
+                }
+            }
+            '"' => {
+                in_word = true;
+                loop {
+                    match chars.next() {
+                        Some('"') => break,
+                        Some('\\') => match chars.next() {
+                            Some(c @ ('"' | '\\')) => cur.push(c),
+                            Some(c) => {
+                                cur.push('\\');
+                                cur.push(c);
+                            }
+                            None => return Err(unclosed(s)),
+                        },
+                        Some(c) => cur.push(c),
+                        None => return Err(unclosed(s)),
+                    }
+                }
+            }
+            '\\' => {
+                in_word = true;
+                match chars.next() {
+                    Some(c) => cur.push(c),
+                    None => cur.push('\\'),
+                }
+            }
+            c => {
+                in_word = true;
+                cur.push(c);
+            }
+        }
+    }
+    if in_word {
+        words.push(cur);
+    }
+    Ok(words)
+}
+
+fn unclosed(s: &str) -> Error {
+    Error::Usage(format!("--slurm-args: unclosed quote in {s:?}"))
+}
+
+/// Refuse to go on while jobs of DIR's latest Slurm submission are queued or running (they would
+/// compute beside this run, or on units `--force` throws away). Without Slurm's client commands
+/// on this machine, or with no submission in DIR, there is nothing to check.
+pub fn check_idle(store: &Store) -> Result<()> {
+    let Some((n, _sub, Some(jobs))) = record::latest(store)? else {
+        return Ok(());
+    };
+    let states = match cluster::states(&jobs.ids) {
+        Ok(s) => s,
+        Err(cluster::Unavailable(why)) => {
+            eprintln!(
+                "talus: note: cannot ask Slurm about the jobs of submission {n} ({why}); going on"
+            );
+            return Ok(());
+        }
+    };
+    // "518: 6 PENDING", one entry per array with tasks not ended.
+    let mut active: Vec<String> = Vec::new();
+    for id in &jobs.ids {
+        let mut counts: Vec<(String, usize)> = Vec::new();
+        for (task, s) in &states {
+            if s.state.is_active() && task.split('_').next() == Some(id.as_str()) {
+                match counts.iter_mut().find(|(n, _)| *n == s.state.0) {
+                    Some(c) => c.1 += 1,
+                    None => counts.push((s.state.0.clone(), 1)),
+                }
+            }
+        }
+        if !counts.is_empty() {
+            let c: Vec<String> = counts.iter().map(|(n, k)| format!("{k} {n}")).collect();
+            active.push(format!("{id}: {}", c.join(", ")));
+        }
+    }
+    if active.is_empty() {
+        return Ok(());
+    }
+    Err(Error::Usage(format!(
+        "{}: jobs of its Slurm submission {n} are still queued or running ({}); wait for them \
+         (talus status {}) or cancel them (scancel {}), then run the command again",
+        store.dir().display(),
+        active.join("; "),
+        store.dir().display(),
+        jobs.ids.join(" ")
+    )))
+}
+
+/// Execute `plan` on Slurm: submit the stages with units not done and the publishing job, print
+/// their job ids (stdout: one `stage job tasks` line each), release DIR's lock, and with `wait`
+/// follow the jobs until the last one ends. Returns the marker's path once the outputs are
+/// published (every unit was done already, or `wait` and the run succeeded), None otherwise.
+pub fn run(
+    store: &Store,
+    plan: &Plan,
+    opts: &Options,
+    command: &str,
+    lock: Lock,
+    ours: &dyn Fn(&str) -> bool,
+) -> Result<Option<PathBuf>> {
+    let done: Vec<bool> = (0..plan.units.len())
+        .map(|i| store.done(&unit_ref(plan, i)).is_some())
+        .collect();
+    let stages = stages(plan, &done, opts.tiles_per_task)?;
+    if stages.is_empty() && !opts.plan_only {
+        let marker = crate::exec::publish::publish_and_gc(store, plan, ours)?;
+        drop(lock);
+        eprintln!(
+            "talus: slurm: every unit of the plan is done: nothing to submit; outputs published"
+        );
+        return Ok(Some(marker));
+    }
+    let talus = std::env::current_exe()
+        .map_err(|e| Error::Internal(format!("the path of this talus binary: {e}")))?;
+    let sub = record::create(store, plan, command, opts, &stages, &talus)?;
+    let dir = record::dir(store, sub.number);
+    if opts.plan_only {
+        drop(lock);
+        eprintln!(
+            "talus: slurm: planned {} job(s), submitted nothing (--plan-only): the plan, the sbatch \
+             scripts and submit.sh (the sbatch commands) are in {}",
+            sub.stages.len(),
+            dir.display()
+        );
+        for s in &sub.stages {
+            println!(
+                "{} {} {}",
+                s.kind,
+                dir.join(&s.script).display(),
+                s.tasks.len()
+            );
+        }
+        return Ok(None);
+    }
+    let ids = cluster::submit_chain(&dir, &sub)?;
+    record::save_jobs(store, sub.number, &ids)?;
+    // The tasks never need the lock; the publishing job takes it.
+    drop(lock);
+    eprintln!(
+        "talus: slurm: submission {} of {} job array(s) in {} (scripts, logs, task reports)",
+        sub.number,
+        ids.len(),
+        dir.display()
+    );
+    for (s, id) in sub.stages.iter().zip(&ids) {
+        println!("{} {} {}", s.kind, id, s.tasks.len());
+    }
+    if !opts.wait {
+        eprintln!(
+            "talus: slurm: submitted; follow with `talus status {}`, the outputs appear when the \
+             {PUBLISH} job {} ends",
+            store.dir().display(),
+            ids.last().map_or("", String::as_str)
+        );
+        return Ok(None);
+    }
+    wait(store, &sub, &ids)?;
+    Ok(Some(crate::exec::publish::marker_path(store, plan)?))
+}
+
+/// How often `--wait` asks Slurm.
+const POLL: Duration = Duration::from_secs(1);
+
+/// Follow submission `sub` (arrays `ids`) until none of its tasks is queued or running; a line
+/// on stderr as each stage ends. Ok when the publishing job completed; otherwise `Error::Jobs`
+/// naming the tasks that failed, were cancelled or timed out.
+fn wait(store: &Store, sub: &record::Submission, ids: &[String]) -> Result<()> {
+    let started = Instant::now();
+    let mut reported = vec![false; ids.len()];
+    let mut last: HashMap<String, cluster::JobState> = HashMap::new();
+    loop {
+        if crate::interrupt::requested() {
+            eprintln!(
+                "talus: slurm: stopped waiting; the jobs go on (talus status {})",
+                store.dir().display()
+            );
+            return Err(Error::Interrupted);
+        }
+        match cluster::states(ids) {
+            Ok(s) => last = s,
+            Err(cluster::Unavailable(why)) => {
+                eprintln!("talus: slurm: squeue failed ({why}); asking again");
+            }
+        }
+        let mut all_final = true;
+        for (k, (stage, id)) in sub.stages.iter().zip(ids).enumerate() {
+            let tasks: Vec<Option<&cluster::JobState>> = (0..stage.tasks.len())
+                .map(|t| last.get(&format!("{id}_{t}")))
+                .collect();
+            // A task Slurm does not (or no longer) list counts as ended: its own report tells.
+            let ended = tasks.iter().all(|s| s.is_none_or(|s| !s.state.is_active()));
+            all_final &= ended;
+            if ended && !reported[k] {
+                reported[k] = true;
+                let mut counts: Vec<(String, usize)> = Vec::new();
+                for s in &tasks {
+                    let name = s.map_or("not listed (never ran)".to_string(), |s| {
+                        s.state.to_string()
+                    });
+                    match counts.iter_mut().find(|(n, _)| *n == name) {
+                        Some(c) => c.1 += 1,
+                        None => counts.push((name, 1)),
+                    }
+                }
+                let counts: Vec<String> = counts.iter().map(|(n, c)| format!("{c} {n}")).collect();
+                eprintln!(
+                    "talus: slurm: {} (job {id}, {} task(s)): {} after {:.0} s",
+                    stage.kind,
+                    stage.tasks.len(),
+                    counts.join(", "),
+                    started.elapsed().as_secs_f64()
+                );
+            }
+        }
+        if all_final {
+            break;
+        }
+        std::thread::sleep(POLL);
+    }
+    let report = status::Report::gather(store)?;
+    let publish_ok = report.submission_ok();
+    if publish_ok {
+        return Ok(());
+    }
+    Err(Error::Jobs(format!(
+        "the Slurm run failed:\n{}\nrun the same command with --resume to submit what is missing",
+        report.failures().join("\n")
+    )))
+}
+
+/// The absolute form of `dir` (scripts and tasks run elsewhere: no relative paths).
+pub fn absolute(dir: &Path) -> Result<PathBuf> {
+    std::fs::canonicalize(dir).map_err(|e| Error::output(dir, e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::scripts::quote;
+    use super::split_args;
+
+    #[test]
+    fn slurm_args_split_like_a_shell() {
+        let v = split_args(r#"-p long  -A geo --time=1:00:00 --comment='a b' "--x=\"y\"" c\ d"#)
+            .unwrap();
+        assert_eq!(
+            v,
+            [
+                "-p",
+                "long",
+                "-A",
+                "geo",
+                "--time=1:00:00",
+                "--comment=a b",
+                "--x=\"y\"",
+                "c d"
+            ]
+        );
+        assert!(split_args("").unwrap().is_empty());
+        assert_eq!(split_args("''").unwrap(), [""]);
+        assert!(split_args("--comment='open").is_err());
+    }
+
+    #[test]
+    fn quoted_words_come_back_through_the_splitter() {
+        for w in ["plain", "a b", "it's", "", "--mem=2G", "$HOME", "x\"y"] {
+            assert_eq!(split_args(&quote(w)).unwrap(), [w]);
+        }
+    }
+}

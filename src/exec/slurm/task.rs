@@ -1,0 +1,141 @@
+//! One Slurm array task (`talus slurm-task DIR --submission N --stage KIND`, what the sbatch
+//! scripts run): the units of its slice of the stage, executed like `talus worker` does
+//! ([`crate::exec::run_units`]: claims, per-unit records, units already done skipped), with its
+//! own report in `tasks/<stage>-<i>.json`. The publishing task takes DIR's lock and publishes.
+
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use super::record::{self, TaskReport};
+use super::PUBLISH;
+use crate::error::{Error, Result};
+use crate::plan::Plan;
+use crate::store::Store;
+
+/// How long the publishing task waits for DIR's lock (the submitter holds it for a moment after
+/// its last sbatch; a `--wait`ing submitter does not hold it).
+const LOCK_PATIENCE: Duration = Duration::from_secs(600);
+
+fn now() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs())
+}
+
+/// Threads for the units: the CPUs Slurm gave the task.
+fn threads() -> usize {
+    ["SLURM_CPUS_PER_TASK", "SLURM_CPUS_ON_NODE"]
+        .iter()
+        .find_map(|v| std::env::var(v).ok()?.trim().parse::<usize>().ok())
+        .filter(|&n| n > 0)
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+        .min(1024)
+}
+
+/// Run task `task` (default `SLURM_ARRAY_TASK_ID`) of stage `stage` of submission `number`.
+pub fn run(dir: &Path, number: u32, stage: &str, task: Option<usize>) -> Result<()> {
+    let store = Store::open(dir, false)?;
+    let (sub, plan) = record::load(&store, number)?;
+    let task = match task {
+        Some(t) => t,
+        None => std::env::var("SLURM_ARRAY_TASK_ID")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .ok_or_else(|| {
+                Error::Usage("slurm-task: no --task and no SLURM_ARRAY_TASK_ID".into())
+            })?,
+    };
+    let s = sub.stages.iter().find(|s| s.kind == stage).ok_or_else(|| {
+        Error::Usage(format!(
+            "slurm-task: no stage {stage} in submission {number}"
+        ))
+    })?;
+    let names = s.tasks.get(task).ok_or_else(|| {
+        Error::Usage(format!(
+            "slurm-task: stage {stage} of submission {number} has {} task(s), not {}",
+            s.tasks.len(),
+            task + 1
+        ))
+    })?;
+    let env = |v: &str| std::env::var(v).unwrap_or_else(|_| "-".into());
+    let sdir = record::dir(&store, number);
+    let report_path = record::task_report_path(&sdir, stage, task);
+    let mut report = TaskReport {
+        state: "running".into(),
+        task_id: format!("{}_{}", env("SLURM_ARRAY_JOB_ID"), task),
+        job_id: env("SLURM_JOB_ID"),
+        host: crate::store::Owner::me().host,
+        pid: std::process::id(),
+        started: now(),
+        ended: None,
+        computed: 0,
+        error: None,
+    };
+    record::save_task_report(&report_path, &report)?;
+    let started = Instant::now();
+    let result = if stage == PUBLISH {
+        publish(&store, &plan).map(|_| 0)
+    } else {
+        units(&store, &plan, names, &report.task_id)
+    };
+    report.ended = Some(now());
+    match &result {
+        Ok(n) => {
+            report.state = "done".into();
+            report.computed = *n;
+        }
+        Err(Error::Interrupted) => report.state = "interrupted".into(),
+        Err(e) => {
+            report.state = "failed".into();
+            report.error = Some(e.to_string());
+        }
+    }
+    record::save_task_report(&report_path, &report)?;
+    let n = result?;
+    eprintln!(
+        "talus slurm-task: {stage} task {task} of submission {number}: {} unit(s) computed of {} in {:.1} s",
+        n,
+        names.len(),
+        started.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+/// Execute the units `names` of `plan`; how many this task computed.
+fn units(store: &Store, plan: &Plan, names: &[String], task_id: &str) -> Result<usize> {
+    let idx: Vec<usize> = names
+        .iter()
+        .map(|n| {
+            plan.units
+                .iter()
+                .position(|u| &u.name == n)
+                .ok_or_else(|| Error::Internal(format!("unit {n} is not in the submission's plan")))
+        })
+        .collect::<Result<_>>()?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads())
+        .build()
+        .map_err(|e| Error::Internal(format!("thread pool: {e}")))?;
+    let label = format!("slurm {task_id}");
+    let report = pool.install(|| crate::exec::run_units(store, plan, Some(&idx), 1, &label))?;
+    Ok(report.computed)
+}
+
+/// Take DIR's lock (waiting while another process holds it), publish, drop old units.
+fn publish(store: &Store, plan: &Plan) -> Result<()> {
+    let command = std::env::args().collect::<Vec<_>>().join(" ");
+    let since = Instant::now();
+    let lock = loop {
+        match store.lock("run", &command) {
+            Ok(l) => break l,
+            Err(Error::Busy { .. }) if since.elapsed() < LOCK_PATIENCE => {
+                crate::interrupt::check()?;
+                std::thread::sleep(Duration::from_millis(500));
+            }
+            Err(e) => return Err(e),
+        }
+    };
+    store.recover()?;
+    crate::exec::publish::publish_and_gc(store, plan, &crate::exec::publish::outputs_of(plan))?;
+    lock.release()
+}

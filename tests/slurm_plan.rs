@@ -1,0 +1,161 @@
+//! `--executor slurm` without a cluster (the run on a real Slurm is scripts/slurm/campaign.sh):
+//! `--plan-only` writes the plan, one sbatch script per stage and `submit.sh` and submits
+//! nothing; `talus status` reads them; the flags are checked; without sbatch on PATH the run
+//! stops with a message naming it.
+
+mod common;
+
+use std::path::Path;
+
+fn synth_pair(dir: &Path) -> (std::path::PathBuf, std::path::PathBuf) {
+    let o = common::run(&[
+        "synth",
+        "hill",
+        "--points",
+        "20000",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let mut laz: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "laz" || e == "las"))
+        .collect();
+    laz.sort();
+    assert_eq!(laz.len(), 2, "{laz:?}");
+    (laz[0].clone(), laz[1].clone())
+}
+
+#[test]
+fn plan_only_writes_the_scripts_and_submits_nothing() {
+    let tmp = common::tempdir();
+    let (a, b) = synth_pair(&tmp.path().join("scene"));
+    let out = tmp.path().join("out");
+    let o = common::run_compare(
+        &a,
+        &b,
+        &out,
+        &[
+            "--executor",
+            "slurm",
+            "--plan-only",
+            "--tiles-per-task",
+            "2",
+            "--tile-size",
+            "12",
+            "--slurm-args",
+            "-p long --comment='a b'",
+        ],
+    );
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    assert!(stderr.contains("--plan-only"), "{stderr}");
+    let sub = out.join(".talus/slurm/1");
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let stages: Vec<&str> = stdout
+        .lines()
+        .map(|l| l.split_whitespace().next().unwrap())
+        .collect();
+    assert_eq!(
+        stages,
+        ["tiling", "m3c2", "stable", "events", "volumes", "outputs", "publish"],
+        "{stdout}"
+    );
+    assert!(
+        !sub.join("jobs.json").exists(),
+        "--plan-only recorded job ids"
+    );
+    assert!(sub.join("plan.json").is_file() && out.join(".talus/plan.json").is_file());
+
+    // Two tiles per task in the tile stages.
+    let json = |p: &Path| -> serde_json::Value {
+        serde_json::from_slice(&std::fs::read(p).unwrap()).unwrap()
+    };
+    // The items of array `key` of `v` whose `field` is "m3c2".
+    let m3c2_of = |v: &serde_json::Value, key: &str, field: &dyn Fn(&serde_json::Value) -> bool| {
+        v[key]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|x| field(x))
+            .cloned()
+            .collect::<Vec<_>>()
+    };
+    let tiles = m3c2_of(&json(&out.join(".talus/plan.json")), "units", &|u| {
+        u["spec"]["kind"] == "m3c2"
+    })
+    .len();
+    assert!(tiles >= 2, "the test wants several tiles, got {tiles}");
+    let m3c2 = m3c2_of(&json(&sub.join("submission.json")), "stages", &|s| {
+        s["kind"] == "m3c2"
+    })
+    .pop()
+    .unwrap();
+    assert_eq!(m3c2["tasks"].as_array().unwrap().len(), tiles.div_ceil(2));
+
+    let script = std::fs::read_to_string(sub.join("02-m3c2.sh")).unwrap();
+    for line in [
+        "#!/bin/bash",
+        &format!("#SBATCH --array=0-{}", tiles.div_ceil(2) - 1),
+        "#SBATCH --kill-on-invalid-dep=yes",
+        "#SBATCH --mem=2048M",
+        "slurm-task",
+        "--stage m3c2",
+    ] {
+        assert!(script.contains(line), "no {line:?} in\n{script}");
+    }
+    let submit = std::fs::read_to_string(sub.join("submit.sh")).unwrap();
+    assert!(
+        submit.contains(
+            r#"sbatch --parsable "--dependency=afterok:$j1" -p long '--comment=a b' 02-m3c2.sh"#
+        ),
+        "{submit}"
+    );
+
+    let o = common::run(&["status", out.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(text.contains("not submitted (--plan-only)"), "{text}");
+    assert!(text.contains("outputs: not published"), "{text}");
+}
+
+#[test]
+fn slurm_flags_are_checked_and_a_missing_sbatch_is_named() {
+    let tmp = common::tempdir();
+    let (a, b) = synth_pair(&tmp.path().join("scene"));
+    for (extra, says) in [
+        (vec!["--wait"], "go with --executor slurm"),
+        (
+            vec!["--executor", "slurm", "--wait", "--plan-only"],
+            "nothing to wait for",
+        ),
+        (
+            vec!["--executor", "slurm", "--slurm-args", "--comment='open"],
+            "unclosed quote",
+        ),
+        (
+            vec!["--executor", "slurm", "--tiles-per-task", "0"],
+            "at least 1",
+        ),
+    ] {
+        let o = common::run_compare(&a, &b, &tmp.path().join("x"), &extra);
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{extra:?}: {stderr}");
+        assert!(stderr.contains(says), "{extra:?}: {stderr}");
+    }
+    // No Slurm client commands on PATH.
+    let empty = tmp.path().join("empty-path");
+    std::fs::create_dir_all(&empty).unwrap();
+    let out = tmp.path().join("out");
+    let o = common::talus()
+        .env("PATH", &empty)
+        .args(["compare", a.to_str().unwrap(), b.to_str().unwrap(), "--out"])
+        .arg(&out)
+        .args(["--executor", "slurm"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("no sbatch on PATH"), "{stderr}");
+}
