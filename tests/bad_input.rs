@@ -459,6 +459,31 @@ fn laz_points_outside_the_header_bounds() {
 }
 
 #[test]
+fn a_laz_record_length_that_is_not_its_items_is_refused_at_once() {
+    // The las crate sized its buffers by the header's record length (65535 × the points: 11 GB
+    // resident for a 100 KB file, 40 s) and the decompressor filled them by the LASzip items.
+    let c = Case::new();
+    let full = c.p("full.laz");
+    common::write_cloud(&full, &plane(3, 20_000, 0.0));
+    let mut b = std::fs::read(&full).unwrap();
+    b[RECORD_LENGTH..RECORD_LENGTH + 2].copy_from_slice(&u16::MAX.to_le_bytes());
+    let f = c.p("long_records.laz");
+    std::fs::write(&f, b).unwrap();
+    let t = std::time::Instant::now();
+    c.fails(
+        &f,
+        &c.p("good2.las"),
+        &[],
+        &["long_records.laz: corrupt LAZ header: its point record length is 65535 bytes"],
+    );
+    assert!(
+        t.elapsed() < std::time::Duration::from_secs(5),
+        "{:?}",
+        t.elapsed()
+    );
+}
+
+#[test]
 fn absurd_las_scale_factors() {
     let c = Case::new();
     let good = std::fs::read(c.p("good1.las")).unwrap();
