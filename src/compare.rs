@@ -165,6 +165,9 @@ fn plan(store: &Store, opts: &CompareOptions, user: &UserParams, inputs: &Inputs
         m3c2_only: opts.m3c2_only,
         units: Vec::new(),
     };
+    let cores = opts.core_points.as_ref().zip(inputs.cores.as_ref());
+    let cores = cores.map(|(p, c)| (format!("the core points {}", p.display()), c.bounds));
+    crate::plan::reach::check(&plan, cores.as_ref().map(|(s, b)| (s.as_str(), b)))?;
     plan.add_pair_units(0, None)?;
     Ok(plan)
 }

@@ -24,14 +24,15 @@
 //! Slow clients: a connection has [`HEAD_DEADLINE`] in total to send its request head (not per
 //! read, so trickling a byte at a time does not extend it), and when all [`MAX_CONNECTIONS`]
 //! are taken, a new connection takes the place of the one that has been sending its head the
-//! longest. A crowd of trickling connections therefore cannot lock out a client that sends its
-//! request at once.
+//! longest, or else of the slowest reader of a response: one under way for [`ANSWER_GRACE`]
+//! that has averaged less than [`MIN_RATE`]. A crowd of trickling connections, or of
+//! connections that read their responses a little at a time (each write progresses, so no
+//! write times out), therefore cannot lock out a client that sends its request at once.
 
-use std::collections::VecDeque;
 use std::io::{self, Read, Write};
 use std::net::{IpAddr, SocketAddr, TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -53,6 +54,17 @@ pub const HEAD_DEADLINE: Duration = Duration::from_secs(5);
 
 /// A client that stops reading the response for this long is dropped.
 const IO_TIMEOUT: Duration = Duration::from_secs(15);
+
+/// When every place is taken, a response under way for this long ...
+pub const ANSWER_GRACE: Duration = Duration::from_secs(1);
+
+/// ... whose client lately read less than this many bytes a second gives its place up. A
+/// browser on this machine reads hundreds of MiB/s. "Lately": over the last [`RATE_WINDOW`]
+/// (not since the start: the socket buffers take megabytes at once, whatever the client reads).
+pub const MIN_RATE: f64 = 1024.0 * 1024.0;
+
+/// The window a response's rate is measured over.
+const RATE_WINDOW: Duration = Duration::from_millis(250);
 
 /// The viewer's files built into the binary: (path relative to `viewer/`, contents).
 mod embedded {
@@ -119,8 +131,7 @@ pub fn serve(
     }
     on_ready(addr);
 
-    let active = Arc::new(AtomicUsize::new(0));
-    let heads = Arc::new(Mutex::new(Heads::default()));
+    let conns = Arc::new(Mutex::new(Conns::default()));
     let loopback_only = bind.is_loopback();
     for conn in listener.incoming() {
         let stream = match conn {
@@ -132,65 +143,173 @@ pub fn serve(
             }
         };
         let _ = stream.set_write_timeout(Some(IO_TIMEOUT));
-        if active.load(Ordering::SeqCst) >= MAX_CONNECTIONS && !lock(&heads).drop_oldest() {
-            let mut stream = stream;
-            let _ = respond_error(&mut stream, 503, "too many connections", false);
-            continue;
+        {
+            let mut c = lock(&conns);
+            if c.list.len() >= MAX_CONNECTIONS && !c.drop_one(Instant::now()) {
+                drop(c);
+                let mut stream = stream;
+                let _ = respond_error(&mut stream, 503, "too many connections", false);
+                continue;
+            }
         }
-        let Ok(id) = lock(&heads).add(&stream) else {
+        let Ok((id, progress)) = lock(&conns).add(&stream) else {
             continue;
         };
-        active.fetch_add(1, Ordering::SeqCst);
-        let guard = ActiveGuard(Arc::clone(&active));
+        // Takes the connection off the list when its thread ends (even by panic).
+        let guard = ConnGuard(Arc::clone(&conns), id);
         let roots = Arc::clone(&roots);
-        let waiting = Arc::clone(&heads);
         let spawned = std::thread::Builder::new()
             .name("talus-view".into())
             .spawn(move || {
-                let _guard = guard;
+                let guard = guard;
                 let mut stream = stream;
                 let head = read_head(&mut stream, Instant::now() + HEAD_DEADLINE);
-                lock(&waiting).remove(id);
+                lock(&guard.0).answering(id, Instant::now());
                 // A client that goes away mid-response is its own business.
-                let _ = handle(&mut stream, head, &roots, loopback_only);
+                let mut counted = Counted {
+                    stream: &mut stream,
+                    progress: &progress,
+                };
+                let _ = handle(&mut counted, head, &roots, loopback_only);
                 let _ = stream.flush();
                 drain_and_close(&mut stream);
             });
-        // If no thread could be made, the closure (and its guard) is dropped: the count recovers.
+        // If no thread could be made, the closure (and its guard) is dropped: the place is free.
         if spawned.is_err() {
-            lock(&heads).remove(id);
             std::thread::sleep(Duration::from_millis(20));
         }
     }
     Ok(())
 }
 
-/// The connections still sending their request head, oldest first (a handle on each, to drop
-/// it when a new connection needs its place).
-#[derive(Default)]
-struct Heads {
-    next_id: u64,
-    waiting: VecDeque<(u64, TcpStream)>,
+/// A connection being served.
+struct Conn {
+    id: u64,
+    /// A handle on it, to shut it down when a new connection needs its place.
+    stream: TcpStream,
+    /// Since when it is being answered (None: still sending its head).
+    answering: Option<Instant>,
+    progress: Arc<Progress>,
 }
 
-impl Heads {
-    fn add(&mut self, stream: &TcpStream) -> io::Result<u64> {
+/// How a response is going: bytes written, and the rate over the last window (updated by the
+/// writes themselves, read by [`Conns::drop_one`]; a torn read of them is harmless).
+struct Progress {
+    base: Instant,
+    sent: AtomicU64,
+    /// When the current window started (µs since `base`) and the bytes sent by then.
+    window_us: AtomicU64,
+    window_bytes: AtomicU64,
+    /// Bytes a second over the last complete window (u64::MAX: none yet).
+    last_rate: AtomicU64,
+    /// When the last write finished (µs since `base`).
+    last_us: AtomicU64,
+}
+
+impl Progress {
+    fn new() -> Progress {
+        Progress {
+            base: Instant::now(),
+            sent: AtomicU64::new(0),
+            window_us: AtomicU64::new(0),
+            window_bytes: AtomicU64::new(0),
+            last_rate: AtomicU64::new(u64::MAX),
+            last_us: AtomicU64::new(0),
+        }
+    }
+
+    fn micros(&self, t: Instant) -> u64 {
+        t.saturating_duration_since(self.base).as_micros() as u64
+    }
+
+    /// Count `n` bytes written at `now`; roll the window when it is over.
+    fn wrote(&self, n: usize, now: Instant) {
+        let sent = self.sent.fetch_add(n as u64, Ordering::Relaxed) + n as u64;
+        let (t, start) = (self.micros(now), self.window_us.load(Ordering::Relaxed));
+        self.last_us.store(t, Ordering::Relaxed);
+        let elapsed = t.saturating_sub(start);
+        if elapsed >= RATE_WINDOW.as_micros() as u64 {
+            let bytes = sent.saturating_sub(self.window_bytes.load(Ordering::Relaxed));
+            let rate = bytes as f64 / (elapsed as f64 * 1e-6);
+            self.last_rate.store(rate as u64, Ordering::Relaxed);
+            self.window_us.store(t, Ordering::Relaxed);
+            self.window_bytes.store(sent, Ordering::Relaxed);
+        }
+    }
+
+    /// Bytes a second lately, at `now`: 0 when no write finished for a window (the client is
+    /// not reading; what the socket buffers took at first does not count), else over the last
+    /// complete window.
+    fn rate(&self, now: Instant) -> f64 {
+        let idle = self
+            .micros(now)
+            .saturating_sub(self.last_us.load(Ordering::Relaxed));
+        if idle >= RATE_WINDOW.as_micros() as u64 {
+            0.0
+        } else {
+            self.last_rate.load(Ordering::Relaxed) as f64
+        }
+    }
+}
+
+/// The connections being served, oldest first.
+#[derive(Default)]
+struct Conns {
+    next_id: u64,
+    list: Vec<Conn>,
+}
+
+impl Conns {
+    fn add(&mut self, stream: &TcpStream) -> io::Result<(u64, Arc<Progress>)> {
         let id = self.next_id;
         self.next_id += 1;
-        self.waiting.push_back((id, stream.try_clone()?));
-        Ok(id)
+        let progress = Arc::new(Progress::new());
+        self.list.push(Conn {
+            id,
+            stream: stream.try_clone()?,
+            answering: None,
+            progress: Arc::clone(&progress),
+        });
+        Ok((id, progress))
+    }
+
+    fn answering(&mut self, id: u64, now: Instant) {
+        if let Some(c) = self.list.iter_mut().find(|c| c.id == id) {
+            c.answering = Some(now);
+            // The rate of the response, not of the head.
+            let t = c.progress.micros(now);
+            c.progress.window_us.store(t, Ordering::Relaxed);
+            c.progress.last_us.store(t, Ordering::Relaxed);
+        }
     }
 
     fn remove(&mut self, id: u64) {
-        self.waiting.retain(|(i, _)| *i != id);
+        self.list.retain(|c| c.id != id);
     }
 
-    /// Shut the oldest waiting connection down (its thread's read returns at once and the
-    /// thread ends); false when none is waiting.
-    fn drop_oldest(&mut self) -> bool {
-        match self.waiting.pop_front() {
-            Some((_, s)) => {
-                let _ = s.shutdown(std::net::Shutdown::Both);
+    /// Shut one connection down to make room (its thread's read or write returns at once and
+    /// the thread ends, freeing the place): the oldest still sending its head, else the slowest
+    /// reader of a response under way for [`ANSWER_GRACE`] read at less than [`MIN_RATE`]
+    /// lately; false when there is none.
+    fn drop_one(&mut self, now: Instant) -> bool {
+        let rate = |c: &Conn| -> Option<f64> {
+            let t = now.saturating_duration_since(c.answering?);
+            (t >= ANSWER_GRACE).then(|| c.progress.rate(now))
+        };
+        let pick = match self.list.iter().position(|c| c.answering.is_none()) {
+            Some(i) => Some(i),
+            None => self
+                .list
+                .iter()
+                .enumerate()
+                .filter_map(|(i, c)| rate(c).filter(|&r| r < MIN_RATE).map(|r| (i, r)))
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .map(|(i, _)| i),
+        };
+        match pick {
+            Some(i) => {
+                let c = self.list.remove(i);
+                let _ = c.stream.shutdown(std::net::Shutdown::Both);
                 true
             }
             None => false,
@@ -199,16 +318,33 @@ impl Heads {
 }
 
 /// The lock, also after a panic elsewhere (the list stays usable).
-fn lock(heads: &Mutex<Heads>) -> std::sync::MutexGuard<'_, Heads> {
-    heads.lock().unwrap_or_else(|e| e.into_inner())
+fn lock(conns: &Mutex<Conns>) -> std::sync::MutexGuard<'_, Conns> {
+    conns.lock().unwrap_or_else(|e| e.into_inner())
 }
 
-/// Decrements the active-connection count when a connection thread ends (even by panic).
-struct ActiveGuard(Arc<AtomicUsize>);
+/// Takes connection `.1` off the list when dropped.
+struct ConnGuard(Arc<Mutex<Conns>>, u64);
 
-impl Drop for ActiveGuard {
+impl Drop for ConnGuard {
     fn drop(&mut self) {
-        self.0.fetch_sub(1, Ordering::SeqCst);
+        lock(&self.0).remove(self.1);
+    }
+}
+
+/// A response stream that counts the bytes written to it.
+struct Counted<'a> {
+    stream: &'a mut TcpStream,
+    progress: &'a Progress,
+}
+
+impl Write for Counted<'_> {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        let n = self.stream.write(buf)?;
+        self.progress.wrote(n, Instant::now());
+        Ok(n)
+    }
+    fn flush(&mut self) -> io::Result<()> {
+        self.stream.flush()
     }
 }
 
@@ -411,7 +547,7 @@ fn content_type(path: &Path) -> &'static str {
 /// Answer one request whose head was read (or not: too long, too slow, gone); every response
 /// closes the connection.
 fn handle(
-    stream: &mut TcpStream,
+    stream: &mut impl Write,
     head: io::Result<Option<Vec<u8>>>,
     roots: &Roots,
     loopback_only: bool,
@@ -482,7 +618,7 @@ fn handle(
     )?;
     if !head_only {
         match file {
-            // std turns File -> TcpStream copies into sendfile/splice on Linux.
+            // Copied through a buffer, not sendfile: the bytes sent are counted (slow readers).
             Ok(mut f) => {
                 io::copy(&mut f, stream)?;
             }
@@ -560,7 +696,12 @@ fn reason(code: u16) -> &'static str {
     }
 }
 
-fn respond_error(stream: &mut TcpStream, code: u16, text: &str, head_only: bool) -> io::Result<()> {
+fn respond_error(
+    stream: &mut impl Write,
+    code: u16,
+    text: &str,
+    head_only: bool,
+) -> io::Result<()> {
     let allow = if code == 405 {
         "Allow: GET, HEAD\r\n"
     } else {

@@ -52,6 +52,28 @@ impl Case {
         assert!(!err.contains("panicked"), "{err}");
         assert!(!out.exists(), "{} was left behind", out.display());
     }
+    /// As [`Case::fails`] for a failure found once M3C2 ran: the stages finished before it print
+    /// their lines, then the error is one line, the last.
+    fn fails_after_m3c2(&self, before: &Path, after: &Path, extra: &[&str], needles: &[&str]) {
+        let out = self.out();
+        let o = common::run_compare(before, after, &out, extra);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "stderr: {err}");
+        let lines: Vec<&str> = err.trim().lines().collect();
+        let (last, stages) = lines.split_last().unwrap();
+        assert!(last.starts_with("talus: error: "), "{err}");
+        for l in stages {
+            assert!(
+                l.starts_with("talus: pass ") && l.contains(" peak "),
+                "{err}"
+            );
+        }
+        for n in needles {
+            assert!(last.contains(n), "'{n}' not in: {err}");
+        }
+        assert!(!err.contains("panicked"), "{err}");
+        assert!(!out.exists(), "{} was left behind", out.display());
+    }
 }
 
 #[test]
@@ -118,6 +140,201 @@ fn epochs_that_do_not_overlap() {
     let far = c.p("far.las");
     common::write_cloud(&far, &plane(6, 2000, 1000.0));
     c.fails(&c.p("good1.las"), &far, &[], &["do not overlap"]);
+}
+
+#[test]
+fn epochs_far_apart_in_z() {
+    // Their footprints overlap, but 100 km of height lie between them: no cylinder reaches both.
+    let c = Case::new();
+    let high: Vec<Point3> = plane(6, 2000, 0.0)
+        .into_iter()
+        .map(|p| [p[0], p[1], p[2] + 100_000.0])
+        .collect();
+    let f = c.p("high.las");
+    common::write_cloud(&f, &high);
+    c.fails(
+        &c.p("good1.las"),
+        &f,
+        &[],
+        &[
+            "good1.las and ",
+            "high.las: the epochs do not overlap: before z 99.9",
+            "; after z 100099.9",
+            "apart, and M3C2's cylinder reaches",
+        ],
+    );
+}
+
+#[test]
+fn an_epoch_mirrored_by_a_negative_scale_does_not_overlap() {
+    // z = record × scale + offset with the z scale negated (and the header's z bounds with it):
+    // a valid file whose cloud lies at z ≈ -100, 200 m below the other epoch.
+    let c = Case::new();
+    let mut b = std::fs::read(c.p("good2.las")).unwrap();
+    let at = |b: &[u8], i: usize| f64::from_le_bytes(b[i..i + 8].try_into().unwrap());
+    let (scale, max_z, min_z) = (at(&b, SCALE_X + 16), at(&b, MAX_Z), at(&b, MAX_Z + 8));
+    assert_eq!(at(&b, SCALE_X + 40), 0.0, "the fixture's z offset");
+    put_f64(&mut b, SCALE_X + 16, -scale);
+    put_f64(&mut b, MAX_Z, -min_z);
+    put_f64(&mut b, MAX_Z + 8, -max_z);
+    let f = c.p("mirrored.las");
+    std::fs::write(&f, b).unwrap();
+    c.fails(
+        &c.p("good1.las"),
+        &f,
+        &[],
+        &[
+            "mirrored.las: the epochs do not overlap",
+            "; after z -100.0",
+        ],
+    );
+}
+
+#[test]
+fn core_points_outside_the_data() {
+    let c = Case::new();
+    let (b, a) = (c.p("good1.las"), c.p("good2.las"));
+    let cores = c.p("cores.csv");
+    let x = OFFSET[0] + 5.0;
+    let y = OFFSET[1] + 5.0;
+    // Beside the data and above it: no core point near either epoch.
+    for (dx, z) in [(0.0, 5000.0), (1000.0, 100.0)] {
+        std::fs::write(
+            &cores,
+            format!(
+                "X,Y,Z\n{},{y},{z}\n{},{},{z}\n",
+                x + dx,
+                x + dx + 1.0,
+                y + 1.0
+            ),
+        )
+        .unwrap();
+        c.fails(
+            &b,
+            &a,
+            &["--core-points", cores.to_str().unwrap()],
+            &[
+                "the core points ",
+                "cores.csv (x 50",
+                "lie outside both epochs' bounds",
+            ],
+        );
+    }
+    // Within the after epoch's reach only (it lies 1 m above the before one): no normals.
+    let up: Vec<Point3> = plane(9, 2000, 0.0)
+        .into_iter()
+        .map(|p| [p[0], p[1], p[2] + 1.0])
+        .collect();
+    let high = c.p("up.las");
+    common::write_cloud(&high, &up);
+    std::fs::write(&cores, format!("X,Y,Z\n{x},{y},101.5\n")).unwrap();
+    c.fails(
+        &b,
+        &high,
+        &[
+            "--core-points",
+            cores.to_str().unwrap(),
+            "--normal-radius",
+            "0.5",
+        ],
+        &[
+            "cores.csv (z 101.500..101.500) lie outside the before epoch's bounds (z 99.9",
+            "beyond the normal radius 0.500",
+        ],
+    );
+}
+
+#[test]
+fn a_run_without_any_distance_is_refused_with_the_reason() {
+    let c = Case::new();
+    let (b, a) = (c.p("good1.las"), c.p("good2.las"));
+    // 2000 points over 10 × 10: 0.2 apart, none within a millimetre of a core point.
+    c.fails_after_m3c2(
+        &b,
+        &a,
+        &["--normal-radius", "0.001"],
+        &[
+            "no distance at any of the ",
+            "no core point has the 3 neighbours a normal needs within the normal radius 0.001 (--normal-radius)",
+        ],
+    );
+    c.fails_after_m3c2(
+        &b,
+        &a,
+        &["--min-points", "100000"],
+        &["no core point has enough points of the before epoch in M3C2's cylinder"],
+    );
+    // The after epoch a metre above, beyond a 10 cm cylinder: normals, but nothing to meet.
+    let up: Vec<Point3> = plane(9, 2000, 0.0)
+        .into_iter()
+        .map(|p| [p[0], p[1], p[2] + 0.5])
+        .collect();
+    let high = c.p("up.las");
+    common::write_cloud(&high, &up);
+    c.fails_after_m3c2(
+        &b,
+        &high,
+        &["--cyl-halflen", "0.3", "--cyl-radius", "0.5"],
+        &[
+            "no core point has enough points of the after epoch",
+            "the epochs do not overlap along the normals",
+        ],
+    );
+}
+
+#[test]
+fn a_campaign_survey_far_from_the_others_is_refused_naming_the_pair() {
+    let c = Case::new();
+    let mut args = vec!["campaign".to_string()];
+    for (k, dz) in [0.0, 0.0, 100_000.0].into_iter().enumerate() {
+        let f = c.p(&format!("survey_2020010{}.las", k + 1));
+        let pts: Vec<Point3> = plane(20 + k as u64, 2000, 0.0)
+            .into_iter()
+            .map(|p| [p[0], p[1], p[2] + dz])
+            .collect();
+        common::write_cloud(&f, &pts);
+        args.push(f.to_str().unwrap().into());
+    }
+    let out = c.out();
+    args.extend(["--out".into(), out.to_str().unwrap().into()]);
+    let o = common::talus().args(&args).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(
+        err.contains("pair 20200102_20200103 (") && err.contains("the epochs do not overlap"),
+        "{err}"
+    );
+    assert!(!out.exists(), "{} was left behind", out.display());
+}
+
+#[test]
+fn a_config_with_a_byte_order_mark_is_read() {
+    let c = Case::new();
+    let cfg = c.p("bom.toml");
+    std::fs::write(&cfg, "\u{feff}normal_radius = -1\n").unwrap();
+    // The key after the mark is read (and its value judged), not taken for a bad name.
+    c.fails(
+        &c.p("good1.las"),
+        &c.p("good2.las"),
+        &["--config", cfg.to_str().unwrap()],
+        &["bom.toml: normal_radius: must be a positive number, got -1"],
+    );
+}
+
+#[test]
+fn one_mesh_without_the_other_is_refused() {
+    let c = Case::new();
+    let mesh = c.p("before.ply");
+    std::fs::write(&mesh, "ply\nformat ascii 1.0\nend_header\n").unwrap();
+    for flag in ["--before-mesh", "--after-mesh"] {
+        c.fails(
+            &c.p("good1.las"),
+            &c.p("good2.las"),
+            &[flag, mesh.to_str().unwrap()],
+            &["before.ply: --before-mesh and --after-mesh go together"],
+        );
+    }
 }
 
 #[test]
@@ -238,6 +455,31 @@ fn laz_points_outside_the_header_bounds() {
             " has z = ",
             "above the header's maximum z 100.0 ",
         ],
+    );
+}
+
+#[test]
+fn a_laz_record_length_that_is_not_its_items_is_refused_at_once() {
+    // The las crate sized its buffers by the header's record length (65535 × the points: 11 GB
+    // resident for a 100 KB file, 40 s) and the decompressor filled them by the LASzip items.
+    let c = Case::new();
+    let full = c.p("full.laz");
+    common::write_cloud(&full, &plane(3, 20_000, 0.0));
+    let mut b = std::fs::read(&full).unwrap();
+    b[RECORD_LENGTH..RECORD_LENGTH + 2].copy_from_slice(&u16::MAX.to_le_bytes());
+    let f = c.p("long_records.laz");
+    std::fs::write(&f, b).unwrap();
+    let t = std::time::Instant::now();
+    c.fails(
+        &f,
+        &c.p("good2.las"),
+        &[],
+        &["long_records.laz: corrupt LAZ header: its point record length is 65535 bytes"],
+    );
+    assert!(
+        t.elapsed() < std::time::Duration::from_secs(5),
+        "{:?}",
+        t.elapsed()
     );
 }
 

@@ -60,6 +60,8 @@ fn start() -> Fixture {
         .map(|i| i.wrapping_mul(37).wrapping_add(200))
         .collect();
     write(&dir.join("terrain.bin"), &terrain);
+    // Far more than the socket buffers between server and client hold.
+    write(&dir.join("big.laz"), &vec![7u8; 16 << 20]);
     write(
         &dir.join("meshes/event_0001_before.ply"),
         b"ply\nformat binary_little_endian 1.0\n",
@@ -394,6 +396,56 @@ fn trickling_clients_cannot_lock_others_out() {
             "closed after {after:?}"
         );
     }
+}
+
+/// Open a connection that asks for the 16 MiB `big.laz` and then reads its response slowly (8
+/// KiB every 300 ms: the server's writes keep progressing, never long enough stuck to time
+/// out), in a thread of its own, until the server closes it or `stop` is set; returns whether
+/// the server closed it.
+fn slow_reader(
+    addr: SocketAddr,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+) -> std::thread::JoinHandle<bool> {
+    let mut s = TcpStream::connect(addr).unwrap();
+    s.write_all(format!("GET /data/big.laz HTTP/1.1\r\nHost: {addr}\r\n\r\n").as_bytes())
+        .unwrap();
+    std::thread::spawn(move || {
+        let mut buf = [0u8; 8192];
+        s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+        while !stop.load(std::sync::atomic::Ordering::SeqCst) {
+            match s.read(&mut buf) {
+                Ok(0) | Err(_) => return true,
+                Ok(_) => std::thread::sleep(Duration::from_millis(300)),
+            }
+        }
+        false
+    })
+}
+
+#[test]
+fn slow_response_readers_cannot_lock_others_out() {
+    let f = start();
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    // More slow readers than the server serves at once, each with its response under way.
+    let slow: Vec<_> = (0..40).map(|_| slow_reader(f.addr, stop.clone())).collect();
+    std::thread::sleep(Duration::from_millis(1500));
+    for _ in 0..3 {
+        let asked = std::time::Instant::now();
+        let r = get(f.addr, "/data/view.json");
+        assert_eq!(r.status, 200);
+        assert!(
+            asked.elapsed() < Duration::from_secs(2),
+            "served after {:?}",
+            asked.elapsed()
+        );
+    }
+    stop.store(true, std::sync::atomic::Ordering::SeqCst);
+    let closed = slow
+        .into_iter()
+        .map(|h| h.join().unwrap())
+        .filter(|&c| c)
+        .count();
+    assert!(closed >= 3, "{closed} slow readers were dropped");
 }
 
 /// A result directory the viewer accepts (view.json and the files the page loads).

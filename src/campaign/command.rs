@@ -164,6 +164,9 @@ fn plan(
         m3c2_only: false,
         units: Vec::new(),
     };
+    // The core points are the first survey's: within its bounds.
+    let what = format!("the core points (from {})", epochs[0].arg.display());
+    crate::plan::reach::check(&plan, Some((&what, &bounds[0])))?;
     let cores = plan.add_thinned_cores(0);
     for k in 0..plan.pairs.len() {
         plan.add_pair_units(k, Some(cores))?;

@@ -347,6 +347,30 @@ fn out_of_bounds(path: &Path, index: u64, p: &Point3, b: &BoundsCheck) -> Error 
     )
 }
 
+/// A LAZ file's points decompress to its LASzip VLR's items, whose sizes must add up to the
+/// header's point record length: the las crate sizes its buffers by the one and the decompressor
+/// fills them by the other, so a record length of 65 535 in a 96 KB file would decode gigabytes
+/// of garbage before failing.
+fn laz_items_match(path: &Path, header: &las::Header) -> Result<()> {
+    if !header.point_format().is_compressed {
+        return Ok(());
+    }
+    let Ok(vlr) = header.laz_vlr() else {
+        return Ok(()); // the decompressor reports a missing LASzip VLR itself
+    };
+    let (items, record) = (vlr.items_size(), u64::from(header.point_format().len()));
+    if items != record {
+        return Err(Error::input(
+            path,
+            format!(
+                "corrupt LAZ header: its point record length is {record} bytes but its LASzip \
+                 VLR's items make {items}"
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// The decoding thread: open the `las::Reader`, report readiness, then stream chunks until the
 /// end, an error, or the consumer hanging up.
 fn decode(
@@ -366,6 +390,10 @@ fn decode(
                     Error::input(&path, format!("truncated or corrupt {kind} file: {e}"))
                 })
             })
+        })
+        .and_then(|r| {
+            laz_items_match(&path, r.header())?;
+            Ok(r)
         });
     let mut reader = match opened {
         Ok(r) => {

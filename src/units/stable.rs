@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 
 use super::m3c2::{pair_count, Merged};
 use super::Ctx;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::events::stable::{measure, Sample, Stable};
 use crate::params::Params;
 use crate::store::UnitWriter;
@@ -51,7 +51,10 @@ pub fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<serde_json::V
     let mut samples = Vec::with_capacity(total.min(SAMPLES) as usize);
     let mut merged = Merged::new(ctx, pair)?;
     let mut n = 0u64;
+    let need = ctx.plan.params.min_points.value.max(1);
+    let mut reached = Reached::default();
     while let Some(k) = merged.next_result()? {
+        reached.add(&k.r, need);
         if n.is_multiple_of(step) && k.r.distance.is_finite() {
             samples.push(Sample {
                 xyz: k.xyz,
@@ -63,11 +66,82 @@ pub fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<serde_json::V
         }
         n += 1;
     }
+    if reached.distances == 0 {
+        return Err(Error::Epochs(reached.why_none(ctx.plan, pair, n)));
+    }
     (ctx.progress)(samples.len() as u64);
     let stable = measure(&samples, ctx.plan.params.core_spacing.value);
     let ground = StableGround { stable };
     super::write_json(out, FILE, &ground)?;
     Ok(serde_json::json!({ "sampled": samples.len() }))
+}
+
+/// How far a pair's core points got: how many have a normal, enough points of each epoch in their
+/// cylinder, a distance.
+#[derive(Debug, Default)]
+struct Reached {
+    normals: u64,
+    before: u64,
+    after: u64,
+    distances: u64,
+}
+
+impl Reached {
+    fn add(&mut self, r: &crate::m3c2::CoreResult, need: u32) {
+        self.normals += u64::from(r.normal[0].is_finite());
+        self.before += u64::from(r.count1 >= need);
+        self.after += u64::from(r.count2 >= need);
+        self.distances += u64::from(r.distance.is_finite());
+    }
+
+    /// Why none of the pair's `n` core points got a distance (a run that yields nothing is
+    /// refused rather than published as a result of empty columns).
+    fn why_none(&self, plan: &crate::plan::Plan, pair: usize, n: u64) -> String {
+        let p = &plan.params;
+        let pr = &plan.pairs[pair];
+        let (b, a) = (&plan.surveys[pr.before], &plan.surveys[pr.after]);
+        let what = if plan.pairs.len() == 1 {
+            format!("{} and {}", b.arg.display(), a.arg.display())
+        } else {
+            format!(
+                "pair {} ({} and {})",
+                pr.label,
+                b.arg.display(),
+                a.arg.display()
+            )
+        };
+        let fmt = |v: f64| format!("{v:.4}");
+        let given = |r: &crate::params::Resolved<f64>, flag: &str| {
+            if r.source == "user" {
+                format!("{} ({flag})", r.value)
+            } else {
+                format!("{} ({})", fmt(r.value), r.source)
+            }
+        };
+        let cylinder = format!(
+            "M3C2's cylinder (radius {}, half-length {}, at least {} point(s) of each epoch)",
+            given(&p.cyl_radius, "--cyl-radius"),
+            given(&p.cyl_halflen, "--cyl-halflen"),
+            p.min_points.value.max(1)
+        );
+        let why = if n == 0 {
+            "no core point lies where the epochs were tiled".to_string()
+        } else if self.normals == 0 {
+            format!(
+                "no core point has the {} neighbours a normal needs within the normal radius {} (the point spacing is {})",
+                crate::m3c2::normals::MIN_NORMAL_POINTS,
+                given(&p.normal_radius, "--normal-radius"),
+                fmt(p.point_spacing.value),
+            )
+        } else if self.before == 0 {
+            format!("no core point has enough points of the before epoch in {cylinder}")
+        } else if self.after == 0 {
+            format!("no core point has enough points of the after epoch in {cylinder}: the epochs do not overlap along the normals")
+        } else {
+            format!("no core point has enough points of both epochs in {cylinder}")
+        };
+        format!("{what}: no distance at any of the {n} core points: {why}")
+    }
 }
 
 /// The stable ground of pair `pair` (its unit must be done).
