@@ -79,6 +79,8 @@ pub fn synth(
 
 /// `talus view DIR`.
 pub fn view(dir: &Path, bind: IpAddr, port: u16) -> Result<()> {
+    // A server has no unit to finish: the first SIGINT or SIGTERM ends it.
+    crate::interrupt::uninstall();
     crate::view::serve(dir, bind, port, &crate::view::Viewer::from_env(), |addr| {
         println!("talus viewer: http://{addr}/");
         use std::io::Write;

@@ -27,6 +27,15 @@ pub fn install() {
     }
 }
 
+/// Give SIGINT and SIGTERM their default action back: a server (`talus view`) has no unit to
+/// finish and must end when asked to, at the first signal.
+pub fn uninstall() {
+    unsafe {
+        libc::signal(libc::SIGINT, libc::SIG_DFL);
+        libc::signal(libc::SIGTERM, libc::SIG_DFL);
+    }
+}
+
 /// Has an interruption been asked for?
 pub fn requested() -> bool {
     REQUESTED.load(Ordering::Relaxed)

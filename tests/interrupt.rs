@@ -78,3 +78,41 @@ fn sigint_and_sigterm_stop_with_130_and_resume_gives_the_uninterrupted_result() 
     interrupted_then_resumed(libc::SIGINT, &before, &after, &reference);
     interrupted_then_resumed(libc::SIGTERM, &before, &after, &reference);
 }
+
+/// `talus view` has no unit to finish: the first SIGTERM or SIGINT ends it (the browser tests stop
+/// their server so; a server that only noted the signal kept them waiting for ever).
+#[test]
+fn the_viewer_server_ends_at_the_first_signal() {
+    let dir = common::tempdir();
+    // The server asks only for a view.json to be there; it is not read before a browser asks.
+    std::fs::write(dir.path().join("view.json"), "{}").unwrap();
+    for signal in [libc::SIGTERM, libc::SIGINT] {
+        let mut child = common::talus()
+            .args(["view", dir.path().to_str().unwrap(), "--port", "0"])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("talus starts");
+        // Serving once it printed its address.
+        let mut line = String::new();
+        std::io::BufRead::read_line(
+            &mut std::io::BufReader::new(child.stdout.take().unwrap()),
+            &mut line,
+        )
+        .unwrap();
+        assert!(line.contains("http://"), "not serving: {line:?}");
+        assert_eq!(unsafe { libc::kill(child.id() as libc::pid_t, signal) }, 0);
+        let t = Instant::now();
+        loop {
+            if let Some(status) = child.try_wait().unwrap() {
+                assert!(!status.success(), "signal {signal}: {status}");
+                break;
+            }
+            assert!(
+                t.elapsed() < Duration::from_secs(10),
+                "signal {signal} did not end it"
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+}
