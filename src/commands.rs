@@ -79,6 +79,8 @@ pub fn synth(
 
 /// `talus view DIR`.
 pub fn view(dir: &Path, bind: IpAddr, port: u16) -> Result<()> {
+    // Serving has nothing to resume: Ctrl-C or SIGTERM end it at once.
+    crate::interrupt::uninstall();
     crate::view::serve(dir, bind, port, &crate::view::Viewer::from_env(), |addr| {
         println!("talus viewer: http://{addr}/");
         use std::io::Write;

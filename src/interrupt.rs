@@ -27,6 +27,15 @@ pub fn install() {
     }
 }
 
+/// Give SIGINT and SIGTERM their default action again (they end the process): for `talus view`
+/// after `talus demo`'s run, whose serving loop never looks at the flag.
+pub fn uninstall() {
+    unsafe {
+        libc::signal(libc::SIGINT, libc::SIG_DFL);
+        libc::signal(libc::SIGTERM, libc::SIG_DFL);
+    }
+}
+
 /// Has an interruption been asked for?
 pub fn requested() -> bool {
     REQUESTED.load(Ordering::Relaxed)
