@@ -79,7 +79,7 @@ pub fn synth(
 
 /// `talus view DIR`.
 pub fn view(dir: &Path, bind: IpAddr, port: u16) -> Result<()> {
-    // A server has no unit to finish: the first SIGINT or SIGTERM ends it.
+    // Serving has nothing to resume: Ctrl-C or SIGTERM end it at once.
     crate::interrupt::uninstall();
     crate::view::serve(dir, bind, port, &crate::view::Viewer::from_env(), |addr| {
         println!("talus viewer: http://{addr}/");
@@ -101,8 +101,7 @@ pub fn demo(out: &Path, view: bool) -> Result<()> {
         force: true,
         ..Default::default()
     };
-    let summary = crate::compare::compare(&opts)?
-        .ok_or_else(|| Error::Internal("demo: no summary".into()))?;
+    let summary = crate::compare::compare(&opts)?;
     let text = std::fs::read_to_string(result.join("events.geojson"))
         .map_err(|e| Error::Internal(format!("events.geojson: {e}")))?;
     let fc: serde_json::Value =

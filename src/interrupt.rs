@@ -27,8 +27,8 @@ pub fn install() {
     }
 }
 
-/// Give SIGINT and SIGTERM their default action back: a server (`talus view`) has no unit to
-/// finish and must end when asked to, at the first signal.
+/// Give SIGINT and SIGTERM their default action again (they end the process): for `talus view`
+/// after `talus demo`'s run, whose serving loop never looks at the flag.
 pub fn uninstall() {
     unsafe {
         libc::signal(libc::SIGINT, libc::SIG_DFL);

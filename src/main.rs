@@ -36,7 +36,7 @@ enum Command {
     /// Write a synthetic pair of epochs (or a campaign of surveys) with exact ground truth
     /// (truth.json).
     Synth(SynthArgs),
-    /// Serve the web viewer for a comparison result on 127.0.0.1.
+    /// Serve the web viewer for a comparison or campaign result on 127.0.0.1.
     View {
         /// A directory written by `talus compare`.
         dir: PathBuf,
@@ -325,7 +325,14 @@ impl ParamArgs {
 }
 
 fn run(cli: Cli) -> talus::Result<()> {
-    talus::interrupt::install();
+    // Commands that run units stop at a safe point on SIGINT/SIGTERM; the others (info, synth,
+    // view) keep the default action: they end at once, having nothing to resume.
+    if matches!(
+        cli.command,
+        Command::Compare(_) | Command::Campaign(_) | Command::Worker { .. } | Command::Demo { .. }
+    ) {
+        talus::interrupt::install();
+    }
     match cli.command {
         Command::Compare(a) => {
             let opts = talus::compare::CompareOptions {

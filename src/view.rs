@@ -2,7 +2,7 @@
 //!
 //! It serves the static viewer (`index.html`, `src/`, and the vendored three.js files under
 //! `vendor/three/`: `build/`, `examples/jsm/` and its `LICENSE`) plus the files of one comparison
-//! result directory under `/data/`. The viewer's files are built into the binary (build.rs), so a
+//! or campaign result directory under `/data/`. The viewer's files are built into the binary (build.rs), so a
 //! copied or `cargo install`ed `talus` serves them with no source tree and no `node_modules`;
 //! `TALUS_VIEWER_DIR` makes it serve a `viewer/` directory from disk instead (for working on the
 //! page). The browser does all the rendering; the server never writes anything and never lists
@@ -104,7 +104,8 @@ const VIEWER_DIRS: [(&[&str], &str); 3] = [
 /// Serve the viewer for the result directory `dir` on `bind:port` until the process ends.
 ///
 /// `port` 0 picks a free port; `on_ready` receives the bound address (print the URL from it)
-/// once the socket is listening. Errors: `dir` is not a result directory (no `view.json`), a
+/// once the socket is listening. Errors: `dir` is not a result directory (no `view.json`, no
+/// `campaign.json`), a
 /// viewer directory lacks the viewer's files, or the address cannot be bound.
 pub fn serve(
     dir: &Path,
@@ -376,10 +377,13 @@ impl Roots {
         let data = dir
             .canonicalize()
             .map_err(|e| Error::input(dir, format!("cannot open result directory: {e}")))?;
-        if !data.join("view.json").is_file() {
+        // A comparison (view.json), or a campaign (campaign.json; each pairs/<label>/ is a
+        // comparison the viewer shows one at a time).
+        if !data.join("view.json").is_file() && !data.join("campaign.json").is_file() {
             return Err(Error::input(
                 dir,
-                "not a talus result directory (no view.json); run `talus compare` first",
+                "not a talus result directory (no view.json or campaign.json); run `talus \
+                 compare` or `talus campaign` first",
             ));
         }
         let viewer = match viewer {

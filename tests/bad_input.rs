@@ -20,6 +20,14 @@ fn plane(seed: u64, n: usize, dx: f64) -> Vec<Point3> {
         .collect()
 }
 
+/// [`plane`] raised by `dz`.
+fn raised(seed: u64, n: usize, dz: f64) -> Vec<Point3> {
+    plane(seed, n, 0.0)
+        .into_iter()
+        .map(|p| [p[0], p[1], p[2] + dz])
+        .collect()
+}
+
 struct Case {
     dir: tempfile::TempDir,
 }
@@ -51,6 +59,10 @@ impl Case {
         }
         assert!(!err.contains("panicked"), "{err}");
         assert!(!out.exists(), "{} was left behind", out.display());
+    }
+    /// [`Case::fails`] on the two good epochs.
+    fn fails_on_good(&self, extra: &[&str], needles: &[&str]) {
+        self.fails(&self.p("good1.las"), &self.p("good2.las"), extra, needles);
     }
     /// As [`Case::fails`] for a failure found once M3C2 ran: the stages finished before it print
     /// their lines, then the error is one line, the last.
@@ -146,10 +158,7 @@ fn epochs_that_do_not_overlap() {
 fn epochs_far_apart_in_z() {
     // Their footprints overlap, but 100 km of height lie between them: no cylinder reaches both.
     let c = Case::new();
-    let high: Vec<Point3> = plane(6, 2000, 0.0)
-        .into_iter()
-        .map(|p| [p[0], p[1], p[2] + 100_000.0])
-        .collect();
+    let high: Vec<Point3> = raised(6, 2000, 100_000.0);
     let f = c.p("high.las");
     common::write_cloud(&f, &high);
     c.fails(
@@ -221,10 +230,7 @@ fn core_points_outside_the_data() {
         );
     }
     // Within the after epoch's reach only (it lies 1 m above the before one): no normals.
-    let up: Vec<Point3> = plane(9, 2000, 0.0)
-        .into_iter()
-        .map(|p| [p[0], p[1], p[2] + 1.0])
-        .collect();
+    let up: Vec<Point3> = raised(9, 2000, 1.0);
     let high = c.p("up.las");
     common::write_cloud(&high, &up);
     std::fs::write(&cores, format!("X,Y,Z\n{x},{y},101.5\n")).unwrap();
@@ -265,10 +271,7 @@ fn a_run_without_any_distance_is_refused_with_the_reason() {
         &["no core point has enough points of the before epoch in M3C2's cylinder"],
     );
     // The after epoch a metre above, beyond a 10 cm cylinder: normals, but nothing to meet.
-    let up: Vec<Point3> = plane(9, 2000, 0.0)
-        .into_iter()
-        .map(|p| [p[0], p[1], p[2] + 0.5])
-        .collect();
+    let up: Vec<Point3> = raised(9, 2000, 0.5);
     let high = c.p("up.las");
     common::write_cloud(&high, &up);
     c.fails_after_m3c2(
@@ -288,10 +291,7 @@ fn a_campaign_survey_far_from_the_others_is_refused_naming_the_pair() {
     let mut args = vec!["campaign".to_string()];
     for (k, dz) in [0.0, 0.0, 100_000.0].into_iter().enumerate() {
         let f = c.p(&format!("survey_2020010{}.las", k + 1));
-        let pts: Vec<Point3> = plane(20 + k as u64, 2000, 0.0)
-            .into_iter()
-            .map(|p| [p[0], p[1], p[2] + dz])
-            .collect();
+        let pts: Vec<Point3> = raised(20 + k as u64, 2000, dz);
         common::write_cloud(&f, &pts);
         args.push(f.to_str().unwrap().into());
     }
@@ -314,9 +314,7 @@ fn a_config_with_a_byte_order_mark_is_read() {
     let cfg = c.p("bom.toml");
     std::fs::write(&cfg, "\u{feff}normal_radius = -1\n").unwrap();
     // The key after the mark is read (and its value judged), not taken for a bad name.
-    c.fails(
-        &c.p("good1.las"),
-        &c.p("good2.las"),
+    c.fails_on_good(
         &["--config", cfg.to_str().unwrap()],
         &["bom.toml: normal_radius: must be a positive number, got -1"],
     );
@@ -328,9 +326,7 @@ fn one_mesh_without_the_other_is_refused() {
     let mesh = c.p("before.ply");
     std::fs::write(&mesh, "ply\nformat ascii 1.0\nend_header\n").unwrap();
     for flag in ["--before-mesh", "--after-mesh"] {
-        c.fails(
-            &c.p("good1.las"),
-            &c.p("good2.las"),
+        c.fails_on_good(
             &[flag, mesh.to_str().unwrap()],
             &["before.ply: --before-mesh and --after-mesh go together"],
         );

@@ -10,7 +10,7 @@ use std::path::Path;
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 
-use pipeline_common::{assert_same_outputs, cliff, compare, unit_times};
+use pipeline_common::{assert_not_redone, assert_same_outputs, compare, spawn_compare, unit_times};
 
 /// Small tiles, so that pass 2 has many units to be interrupted between.
 const ARGS: &[&str] = &["--tile-size", "5", "--core-spacing", "0.25"];
@@ -18,19 +18,7 @@ const ARGS: &[&str] = &["--tile-size", "5", "--core-spacing", "0.25"];
 /// Run compare, send `signal` once its first M3C2 unit is done, and check how it stopped.
 fn interrupted_then_resumed(signal: libc::c_int, before: &Path, after: &Path, reference: &Path) {
     let dir = reference.with_file_name(format!("signal{signal}"));
-    let child = common::talus()
-        .args([
-            "compare",
-            before.to_str().unwrap(),
-            after.to_str().unwrap(),
-            "--out",
-            dir.to_str().unwrap(),
-        ])
-        .args(ARGS)
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("talus starts");
+    let child = spawn_compare(before, after, &dir, ARGS, Stdio::piped());
     let t = Instant::now();
     while unit_times(&dir, "m3c2").is_empty() {
         assert!(t.elapsed() < Duration::from_secs(120), "no M3C2 unit done");
@@ -63,56 +51,14 @@ fn interrupted_then_resumed(signal: libc::c_int, before: &Path, after: &Path, re
 
     compare(before, after, &dir, &[ARGS, &["--resume"]].concat());
     assert_same_outputs(reference, &dir);
-    let now = unit_times(&dir, "m3c2");
-    for (name, time) in &finished {
-        assert_eq!(now.get(name), Some(time), "{name} was computed again");
-    }
+    assert_not_redone(&finished, &unit_times(&dir, "m3c2"));
 }
 
 #[test]
 fn sigint_and_sigterm_stop_with_130_and_resume_gives_the_uninterrupted_result() {
     let tmp = common::tempdir();
-    let (before, after) = cliff(&tmp.path().join("scene"), 100_000);
-    let reference = tmp.path().join("reference");
-    compare(&before, &after, &reference, ARGS);
+    let (before, after, reference) =
+        pipeline_common::cliff_and_reference(tmp.path(), 100_000, ARGS);
     interrupted_then_resumed(libc::SIGINT, &before, &after, &reference);
     interrupted_then_resumed(libc::SIGTERM, &before, &after, &reference);
-}
-
-/// `talus view` has no unit to finish: the first SIGTERM or SIGINT ends it (the browser tests stop
-/// their server so; a server that only noted the signal kept them waiting for ever).
-#[test]
-fn the_viewer_server_ends_at_the_first_signal() {
-    let dir = common::tempdir();
-    // The server asks only for a view.json to be there; it is not read before a browser asks.
-    std::fs::write(dir.path().join("view.json"), "{}").unwrap();
-    for signal in [libc::SIGTERM, libc::SIGINT] {
-        let mut child = common::talus()
-            .args(["view", dir.path().to_str().unwrap(), "--port", "0"])
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("talus starts");
-        // Serving once it printed its address.
-        let mut line = String::new();
-        std::io::BufRead::read_line(
-            &mut std::io::BufReader::new(child.stdout.take().unwrap()),
-            &mut line,
-        )
-        .unwrap();
-        assert!(line.contains("http://"), "not serving: {line:?}");
-        assert_eq!(unsafe { libc::kill(child.id() as libc::pid_t, signal) }, 0);
-        let t = Instant::now();
-        loop {
-            if let Some(status) = child.try_wait().unwrap() {
-                assert!(!status.success(), "signal {signal}: {status}");
-                break;
-            }
-            assert!(
-                t.elapsed() < Duration::from_secs(10),
-                "signal {signal} did not end it"
-            );
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    }
 }

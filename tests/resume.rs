@@ -23,19 +23,7 @@ use pipeline_common::{
 const ARGS: &[&str] = &["--tile-size", "5", "--core-spacing", "0.25"];
 
 fn spawn_compare(before: &Path, after: &Path, out: &Path, extra: &[&str]) -> std::process::Child {
-    common::talus()
-        .args([
-            "compare",
-            before.to_str().unwrap(),
-            after.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ])
-        .args(extra)
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("talus starts")
+    pipeline_common::spawn_compare(before, after, out, extra, Stdio::null())
 }
 
 #[test]
@@ -79,14 +67,7 @@ fn sigkill_at_random_moments_then_resume_gives_the_uninterrupted_result() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert_same_outputs(&reference, &dir);
-    let now = unit_times(&dir, "m3c2");
-    for (name, time) in &finished {
-        assert_eq!(
-            now.get(name),
-            Some(time),
-            "{name} was finished but computed again"
-        );
-    }
+    pipeline_common::assert_not_redone(&finished, &unit_times(&dir, "m3c2"));
 
     // A resume after a complete run reuses both passes.
     assert_eq!(

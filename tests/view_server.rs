@@ -366,6 +366,18 @@ fn trickle(
     })
 }
 
+/// A client that sends its request at once gets view.json within 2 s.
+fn served_at_once(addr: SocketAddr) {
+    let asked = std::time::Instant::now();
+    let r = get(addr, "/data/view.json");
+    assert_eq!(r.status, 200);
+    assert!(
+        asked.elapsed() < Duration::from_secs(2),
+        "served after {:?}",
+        asked.elapsed()
+    );
+}
+
 #[test]
 fn trickling_clients_cannot_lock_others_out() {
     let f = start();
@@ -375,14 +387,7 @@ fn trickling_clients_cannot_lock_others_out() {
         .map(|_| trickle(f.addr, Duration::from_millis(500)))
         .collect();
     std::thread::sleep(Duration::from_millis(300));
-    let asked = std::time::Instant::now();
-    let r = get(f.addr, "/data/view.json");
-    assert_eq!(r.status, 200);
-    assert!(
-        asked.elapsed() < Duration::from_secs(2),
-        "served after {:?}",
-        asked.elapsed()
-    );
+    served_at_once(f.addr);
     // The head has a deadline in total, not per read: every trickler is closed within it (or
     // sooner, when its place was taken), however steadily it sends.
     for h in slow {
@@ -430,14 +435,7 @@ fn slow_response_readers_cannot_lock_others_out() {
     let slow: Vec<_> = (0..40).map(|_| slow_reader(f.addr, stop.clone())).collect();
     std::thread::sleep(Duration::from_millis(1500));
     for _ in 0..3 {
-        let asked = std::time::Instant::now();
-        let r = get(f.addr, "/data/view.json");
-        assert_eq!(r.status, 200);
-        assert!(
-            asked.elapsed() < Duration::from_secs(2),
-            "served after {:?}",
-            asked.elapsed()
-        );
+        served_at_once(f.addr);
     }
     stop.store(true, std::sync::atomic::Ordering::SeqCst);
     let closed = slow
@@ -544,15 +542,21 @@ fn the_binary_alone_serves_the_built_in_viewer() {
     child.wait().unwrap();
 }
 
-#[test]
-fn binding_beyond_loopback_warns() {
+/// `talus view` (the built binary) on a tiny result in a new temporary directory, serving.
+fn tiny_view(extra: &[&str]) -> (tempfile::TempDir, std::process::Child, SocketAddr) {
     let tmp = tempfile::tempdir().unwrap();
     let result = tmp.path().join("result");
     tiny_result(&result);
     let exe = Path::new(env!("CARGO_BIN_EXE_talus"));
+    let (child, addr) = spawn_view(exe, tmp.path(), &result, extra);
+    assert_eq!(get(addr, "/data/view.json").status, 200);
+    (tmp, child, addr)
+}
+
+#[test]
+fn binding_beyond_loopback_warns() {
     for (bind, warns) in [("0.0.0.0", true), ("127.0.0.1", false)] {
-        let (mut child, addr) = spawn_view(exe, tmp.path(), &result, &["--bind", bind]);
-        assert_eq!(get(addr, "/data/view.json").status, 200);
+        let (_tmp, mut child, _) = tiny_view(&["--bind", bind]);
         child.kill().unwrap();
         child.wait().unwrap();
         let mut err = String::new();
@@ -571,4 +575,45 @@ fn binding_beyond_loopback_warns() {
             assert_eq!(err.trim().lines().count(), 1, "{err}");
         }
     }
+}
+
+#[test]
+fn sigint_and_sigterm_end_talus_view_at_once() {
+    // Serving has nothing to resume: one Ctrl-C (or the SIGTERM of a service manager) ends it,
+    // not the second one as for the commands that keep finished units.
+    use std::os::unix::process::ExitStatusExt;
+    for signal in [libc::SIGINT, libc::SIGTERM] {
+        let (_tmp, mut child, _) = tiny_view(&[]);
+        assert_eq!(unsafe { libc::kill(child.id() as libc::pid_t, signal) }, 0);
+        let t = std::time::Instant::now();
+        let status = loop {
+            if let Some(s) = child.try_wait().unwrap() {
+                break s;
+            }
+            if t.elapsed() > Duration::from_secs(5) {
+                child.kill().unwrap();
+                child.wait().unwrap();
+                panic!("talus view still serving 5 s after signal {signal}");
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        };
+        assert_eq!(status.signal(), Some(signal));
+    }
+}
+
+#[test]
+fn a_campaign_directory_is_served() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("campaign");
+    write(&dir.join("campaign.json"), br#"{"pairs":[]}"#);
+    tiny_result(&dir.join("pairs/20200101_20200201"));
+    let exe = Path::new(env!("CARGO_BIN_EXE_talus"));
+    let (mut child, addr) = spawn_view(exe, tmp.path(), &dir, &[]);
+    assert_eq!(get(addr, "/data/campaign.json").status, 200);
+    assert_eq!(
+        get(addr, "/data/pairs/20200101_20200201/view.json").status,
+        200
+    );
+    child.kill().unwrap();
+    child.wait().unwrap();
 }

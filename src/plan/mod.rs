@@ -177,6 +177,19 @@ pub fn slug(s: &str) -> String {
 }
 
 impl Plan {
+    /// Pair `pair` for messages: "BEFORE and AFTER" (the arguments) in a one-pair plan, "pair
+    /// LABEL (BEFORE and AFTER)" in a campaign.
+    pub fn pair_name(&self, pair: usize) -> String {
+        let p = &self.pairs[pair];
+        let (b, a) = (&self.surveys[p.before], &self.surveys[p.after]);
+        let files = format!("{} and {}", b.arg.display(), a.arg.display());
+        if self.pairs.len() == 1 {
+            files
+        } else {
+            format!("pair {} ({files})", p.label)
+        }
+    }
+
     /// Add a unit; returns its index.
     fn push(&mut self, spec: Spec, label: &str, key_parts: &[&str], deps: Vec<usize>) -> usize {
         let dep_keys: Vec<&str> = deps.iter().map(|&d| self.units[d].key.as_str()).collect();

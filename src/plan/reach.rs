@@ -46,19 +46,9 @@ pub fn check(plan: &Plan, cores: Option<(&str, &Bounds)>) -> Result<()> {
     let cylinder = format!(
         "M3C2's cylinder reaches {reach:.3} from a core point (radius {r:.3}, half-length {h:.3})"
     );
-    let one_pair = plan.pairs.len() == 1;
-    for pair in &plan.pairs {
+    for (k, pair) in plan.pairs.iter().enumerate() {
         let (b, a) = (&plan.surveys[pair.before], &plan.surveys[pair.after]);
-        let what = if one_pair {
-            format!("{} and {}", b.arg.display(), a.arg.display())
-        } else {
-            format!(
-                "pair {} ({} and {})",
-                pair.label,
-                b.arg.display(),
-                a.arg.display()
-            )
-        };
+        let what = plan.pair_name(k);
         let g = gap(&b.bounds, &a.bounds);
         if beyond(norm(g), reach) {
             return Err(Error::Epochs(format!(

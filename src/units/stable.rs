@@ -98,18 +98,7 @@ impl Reached {
     /// refused rather than published as a result of empty columns).
     fn why_none(&self, plan: &crate::plan::Plan, pair: usize, n: u64) -> String {
         let p = &plan.params;
-        let pr = &plan.pairs[pair];
-        let (b, a) = (&plan.surveys[pr.before], &plan.surveys[pr.after]);
-        let what = if plan.pairs.len() == 1 {
-            format!("{} and {}", b.arg.display(), a.arg.display())
-        } else {
-            format!(
-                "pair {} ({} and {})",
-                pr.label,
-                b.arg.display(),
-                a.arg.display()
-            )
-        };
+        let what = plan.pair_name(pair);
         let fmt = |v: f64| format!("{v:.4}");
         let given = |r: &crate::params::Resolved<f64>, flag: &str| {
             if r.source == "user" {

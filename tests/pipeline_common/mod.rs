@@ -3,6 +3,7 @@
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
+use std::process::{Child, Stdio};
 
 use crate::common::{run, run_compare};
 
@@ -192,4 +193,50 @@ pub fn unit_dir(dir: &Path, kind: &str, prefix: &str) -> PathBuf {
         .collect();
     assert_eq!(names.len(), 1, "one {kind} unit {prefix}*: {names:?}");
     dir.join(".talus/units").join(kind).join(&names[0])
+}
+
+/// Start `talus compare BEFORE AFTER --out OUT EXTRA...` (stdout discarded, stderr as `stderr`).
+pub fn spawn_compare(
+    before: &Path,
+    after: &Path,
+    out: &Path,
+    extra: &[&str],
+    stderr: Stdio,
+) -> Child {
+    crate::common::talus()
+        .args([
+            "compare",
+            before.to_str().unwrap(),
+            after.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .args(extra)
+        .stdout(Stdio::null())
+        .stderr(stderr)
+        .spawn()
+        .expect("talus starts")
+}
+
+/// Every unit of `finished` (name → record time) still has its record of then in `now`.
+pub fn assert_not_redone(
+    finished: &std::collections::BTreeMap<String, std::time::SystemTime>,
+    now: &std::collections::BTreeMap<String, std::time::SystemTime>,
+) {
+    for (name, time) in finished {
+        assert_eq!(
+            now.get(name),
+            Some(time),
+            "{name} was finished but computed again"
+        );
+    }
+}
+
+/// The cliff scene with `points` per epoch under `tmp`, and an uninterrupted run of it with
+/// `args` in `tmp/reference`: (before, after, reference).
+pub fn cliff_and_reference(tmp: &Path, points: u64, args: &[&str]) -> (PathBuf, PathBuf, PathBuf) {
+    let (before, after) = cliff(&tmp.join("scene"), points);
+    let reference = tmp.join("reference");
+    compare(&before, &after, &reference, args);
+    (before, after, reference)
 }

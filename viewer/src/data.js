@@ -4,7 +4,15 @@
 
 import { parsePly } from './ply.js';
 
-const DATA = '/data/';
+let DATA = '/data/';
+
+/**
+ * Where the result's files are: `/data/` for a comparison, `/data/pairs/<label>/` for a pair of
+ * a campaign (each pair directory is a comparison result).
+ */
+export function setBase(base) {
+  DATA = base;
+}
 
 async function fetchOk(path) {
   const res = await fetch(DATA + path);
@@ -29,9 +37,9 @@ export async function loadView() {
 }
 
 /** summary.json is optional: `null` when absent or unreadable. */
-export async function loadSummary() {
+export async function loadSummary(base = DATA) {
   try {
-    const res = await fetch(DATA + 'summary.json');
+    const res = await fetch(base + 'summary.json');
     return res.ok ? await res.json() : null;
   } catch {
     return null;
@@ -43,8 +51,12 @@ export async function loadSummary() {
  * crs_name (or null).
  */
 export async function loadEvents(origin) {
-  const fc = await (await fetchOk('events.geojson')).json();
-  if (!fc || !Array.isArray(fc.features)) throw new Error('events.geojson: not a FeatureCollection');
+  return parseEvents(await (await fetchOk('events.geojson')).json(), origin, 'events.geojson');
+}
+
+/** An events FeatureCollection (`name` for messages) → what [`loadEvents`] returns. */
+export function parseEvents(fc, origin, name) {
+  if (!fc || !Array.isArray(fc.features)) throw new Error(`${name}: not a FeatureCollection`);
   const events = [];
   for (const f of fc.features) {
     const p = { ...(f.properties || {}) };

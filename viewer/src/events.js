@@ -1,6 +1,10 @@
-// The events in the 3-D scene: per event a marker at its centroid (coloured by kind, diameter
-// ∝ ∛|volume|), a label "+12.3 ± 1.1 m³", and its two solids: "before" translucent with its
-// edges, "after" opaque.
+// The events in the 3-D scene: per event a marker at its centroid (coloured by kind, or by a
+// campaign's pair or track; diameter ∝ ∛|volume|), a label "+12.3 ± 1.1 m³", and its two
+// solids: "before" translucent with its edges, "after" opaque.
+//
+// Labels are decluttered in screen space after every frame (`declutter`): the selected and the
+// hovered event's label first, then by |volume|; a label that would overlap one already shown
+// is hidden (class `crowded`) until the view, the hover or the selection makes room for it.
 
 import * as THREE from 'three';
 import { CSS2DObject } from 'three/addons/renderers/CSS2DRenderer.js';
@@ -37,9 +41,15 @@ function markerTexture(fill, ring) {
   return t;
 }
 
+/** Labels closer than this (CSS pixels) count as overlapping. */
+const LABEL_GAP = 2;
+
 export class EventLayer {
-  /** events: loaded events (with .local). */
-  constructor(events) {
+  /**
+   * events: loaded events (with .local); colourOf(e): a marker colour (0xRRGGBB) instead of the
+   * kind's, or null.
+   */
+  constructor(events, colourOf = null) {
     this.group = new THREE.Group();
     this.markerGroup = new THREE.Group();
     this.labelGroup = new THREE.Group();
@@ -49,24 +59,18 @@ export class EventLayer {
     this.layers = { before: true, after: true, markers: true, labels: true };
     this.filter = () => true;
     this.selected = null;
+    this.hovered = null;
     this.pxScale = 0.001;
+    this.colourOf = colourOf;
 
     // Markers keep their size on screen (sprites without size attenuation): an event stays
     // findable from afar and does not hide its own solids in a close-up. Diameter ∝ ∛|volume|,
     // so the marker's apparent volume is proportional to the event's.
     const vmax = Math.max(1e-9, ...events.map((e) => Math.abs(e.volume_m3) || 0));
     this.materials = {};
-    for (const kind of ['gain', 'loss']) {
-      for (const sel of [false, true]) {
-        this.materials[`${kind}${sel ? '-sel' : ''}`] = new THREE.SpriteMaterial({
-          map: markerTexture(KIND_COLOR[kind], sel), sizeAttenuation: false,
-          depthTest: false, depthWrite: false, transparent: true,
-        });
-      }
-    }
     for (const e of events) {
       const px = Math.max(MIN_PX, MAX_PX * Math.cbrt((Math.abs(e.volume_m3) || 0) / vmax));
-      const marker = new THREE.Sprite(this.materials[e.kind]);
+      const marker = new THREE.Sprite(this.material(e, false));
       marker.position.fromArray(e.local);
       marker.renderOrder = 10; // drawn over the terrain and solids (depthTest off)
       marker.userData.eventId = e.id;
@@ -76,6 +80,8 @@ export class EventLayer {
       const div = document.createElement('div');
       div.className = `event-label ${e.kind}`;
       div.textContent = volumeLabel(e.volume_m3, e.volume_uncertainty_m3);
+      const c = colourOf?.(e);
+      if (c != null) div.style.borderColor = `#${c.toString(16).padStart(6, '0')}`;
       div.dataset.id = String(e.id);
       div.style.marginBottom = `${Math.round(px / 2 + 3)}px`; // sit just above the marker
       wrap.appendChild(div);
@@ -89,6 +95,19 @@ export class EventLayer {
     this.labelRank = new Map(
       [...events].sort((a, b) => Math.abs(b.volume_m3) - Math.abs(a.volume_m3)).map((e, i) => [e.id, i]),
     );
+  }
+
+  /** The marker material of event `e` (selected or not), one per colour. */
+  material(e, sel) {
+    const c = this.colourOf?.(e) ?? KIND_COLOR[e.kind];
+    const key = `${c}${sel ? '-sel' : ''}`;
+    if (!this.materials[key]) {
+      this.materials[key] = new THREE.SpriteMaterial({
+        map: markerTexture(c, sel), sizeAttenuation: false,
+        depthTest: false, depthWrite: false, transparent: true,
+      });
+    }
+    return this.materials[key];
   }
 
   /**
@@ -190,10 +209,53 @@ export class EventLayer {
     for (const [key, it] of this.byId) {
       const on = key === id;
       it.label.element.firstChild.classList.toggle('selected', on);
-      it.marker.material = this.materials[`${it.event.kind}${on ? '-sel' : ''}`];
+      it.marker.material = this.material(it.event, on);
       it.marker.scale.setScalar(it.px * this.pxScale * (on ? 1.25 : 1));
       it.marker.renderOrder = on ? 11 : 10;
     }
+  }
+
+  /** The event under the pointer (its label is shown whatever it overlaps), or null. */
+  hover(id) {
+    this.hovered = id;
+  }
+
+  /**
+   * Hide labels that would overlap a label shown before them, or one of the `obstacles` (the
+   * page's panels over the canvas, DOMRects), in screen space: the selected event's first, then
+   * the hovered one's, then by |volume|. Call after the label renderer has placed them. Returns
+   * how many labels are shown and how many hidden.
+   */
+  declutter(obstacles = []) {
+    const items = [];
+    for (const [id, it] of this.byId) {
+      const div = it.label.element.firstChild;
+      if (!it.label.visible || it.label.element.style.display === 'none') {
+        div.classList.remove('crowded');
+        continue;
+      }
+      const rank = id === this.selected ? -2 : id === this.hovered ? -1 : this.labelRank.get(id);
+      items.push({ rank, div });
+    }
+    items.sort((a, b) => a.rank - b.rank);
+    // All reads first (one layout), then the writes: visibility does not move anything.
+    const rects = items.map((x) => x.div.getBoundingClientRect());
+    const shown = [];
+    const taken = [...obstacles];
+    let hidden = 0;
+    items.forEach((x, k) => {
+      const r = rects[k];
+      const clash = x.rank >= 0 && taken.some((q) => r.left < q.right + LABEL_GAP && q.left < r.right + LABEL_GAP
+        && r.top < q.bottom + LABEL_GAP && q.top < r.bottom + LABEL_GAP);
+      x.div.classList.toggle('crowded', clash);
+      if (clash) hidden++;
+      else {
+        shown.push(r);
+        taken.push(r);
+      }
+    });
+    this.labelCounts = { shown: shown.length, hidden };
+    return this.labelCounts;
   }
 
   /** Radius (m) that frames an event: its box half extents or its marker. */

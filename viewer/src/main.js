@@ -9,15 +9,19 @@
 //
 // Rendering is on demand (controls, hover, filters request a frame), so an idle page costs
 // nothing even with 2M points.
+//
+// A campaign directory (campaign.js) shows one of its pairs at a time, with the campaign's
+// selector, time slider and table.
 
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 import { CSS2DRenderer } from 'three/addons/renderers/CSS2DRenderer.js';
-import { loadView, loadEvents, loadTerrain, loadSummary, loadMesh, meshPaths } from './data.js';
+import { loadView, loadEvents, loadTerrain, loadSummary, loadMesh, meshPaths, setBase } from './data.js';
+import { loadCampaign, readState, goTo, savedCamera, sceneEvents, colouring, drawCampaign, colourKeys } from './campaign.js';
 import { distanceColors, rampHalfWidth } from './colormap.js';
 import { Terrain, interleaveTerrain } from './terrain.js';
 import { EyeDome } from './edl.js';
-import { EventLayer } from './events.js';
+import { EventLayer, KIND_COLOR } from './events.js';
 import { EventTable, showEvent, drawLegend, drawMeta } from './ui.js';
 import { coords, signed, volumeLabel } from './format.js';
 
@@ -52,8 +56,19 @@ async function main() {
   const ms = () => Math.round(performance.now() - t0);
   T.timings = {};
   const loading = $('loading');
+  // A campaign's summary.json lists its pairs; a comparison's does not (or there is none).
+  const top = await loadSummary();
+  const campaign = await loadCampaign(top);
+  const state = campaign ? readState(campaign) : null;
+  if (campaign) {
+    $('app').classList.add('campaign');
+    setBase(`/data/pairs/${encodeURIComponent(state.pair)}/`);
+    window.addEventListener('hashchange', () => location.reload());
+  }
   const view = await loadView();
-  const [{ events, crsName }, summary] = await Promise.all([loadEvents(view.origin), loadSummary()]);
+  const [loaded, summary] = await Promise.all([loadEvents(view.origin), campaign ? loadSummary() : top]);
+  const { crsName } = loaded;
+  const events = campaign ? sceneEvents(campaign, state, view.origin, loaded.events) : loaded.events;
   const origin = view.origin;
   const raw = await loadTerrain(view, (p) => {
     loading.textContent = `Loading terrain… ${Math.round(p * 100)} %`;
@@ -96,7 +111,7 @@ async function main() {
   const diag = Math.max(box.getSize(new THREE.Vector3()).length(), 1);
   const centre = box.getCenter(new THREE.Vector3());
 
-  const layer = new EventLayer(events);
+  const layer = new EventLayer(events, campaign ? colouring(campaign, state) : null);
   scene.add(layer.group);
   const byId = new Map(events.map((e) => [e.id, e]));
 
@@ -136,6 +151,9 @@ async function main() {
     terrain.setDetail(detail);
   }
 
+  // Panels over the canvas: labels under them are hidden like labels under labels.
+  const overlays = ['hud', 'legend', 'readout'].map($);
+
   // --- rendering on demand ------------------------------------------------------------------
   let framePending = false;
   function requestRender() {
@@ -154,6 +172,7 @@ async function main() {
     if (shading) edl.render(renderer, scene, camera);
     else renderer.render(scene, camera);
     labelRenderer.render(scene, camera);
+    T.labels = layer.declutter(overlays.map((el) => el.getBoundingClientRect()));
     T.frames++;
   }
 
@@ -214,7 +233,11 @@ async function main() {
     const dist = Math.max((layer.extent(id) / tanHalf) * 4, diag * 0.02);
     return { target, position: target.clone().addScaledVector(dir, dist) };
   }
-  const home = homePose();
+  // A campaign's pairs share the site: switching pairs keeps the camera where it was.
+  const saved = campaign ? savedCamera() : null;
+  const home = saved
+    ? { position: new THREE.Vector3().fromArray(saved.position), target: new THREE.Vector3().fromArray(saved.target) }
+    : homePose();
   camera.position.copy(home.position);
   controls.target.copy(home.target);
   controls.update();
@@ -233,7 +256,10 @@ async function main() {
     if (fly) flyTo(eventPose(id));
     requestRender();
   }
-  const table = new EventTable($('events'), $('table-note'), events, (id) => select(id, true));
+  const extraColumns = campaign
+    ? [...(state.scope === 'all' ? [{ key: 'pair', label: 'Pair' }] : []), { key: 'track_id', label: 'Track', num: true }]
+    : [];
+  const table = new EventTable($('events'), $('table-note'), events, (id) => select(id, true), extraColumns);
 
   function applyFilter() {
     const min = Math.max(0, Number($('min-volume').value) || 0);
@@ -273,8 +299,21 @@ async function main() {
     requestRender();
   });
 
-  drawLegend($('legend'), half, view.units);
+  drawLegend($('legend'), half, view.units, campaign ? colourKeys(campaign, state, events) : null);
   drawMeta($('meta'), view, crsName, events.length, summary);
+  if (campaign) {
+    const pose = () => ({ position: camera.position.toArray(), target: controls.target.toArray() });
+    drawCampaign($('campaign'), campaign, state, (next) => goTo(next, pose()));
+    const p = campaign.pairs[state.index];
+    const line = document.createElement('div');
+    line.id = 'campaign-line';
+    line.textContent = `campaign of ${campaign.epochs?.length ?? '?'} surveys · pair ${state.index + 1} of ${campaign.pairs.length}: `
+      + `${p.before_date ?? p.before} → ${p.after_date ?? p.after}` + (state.scope === 'all' ? ' · events of all pairs' : '');
+    $('meta').prepend(line);
+    T.campaign = { ...state, pairs: campaign.pairs.map((q) => q.label) };
+    /** The marker colour of every event (0xRRGGBB), by id. */
+    T.markerColours = Object.fromEntries(events.map((e) => [e.id, layer.colourOf?.(e) ?? KIND_COLOR[e.kind]]));
+  }
 
   // --- hover and click ----------------------------------------------------------------------------
   const readout = $('readout');
@@ -332,6 +371,11 @@ async function main() {
     const hit = pickAt(pointer.x, pointer.y);
     T.timings.lastPick = performance.now() - t;
     T.hovered = hit;
+    const hoveredEvent = hit?.kind === 'event' ? hit.id : null;
+    if (hoveredEvent !== layer.hovered) {
+      layer.hover(hoveredEvent);
+      requestRender();
+    }
     readout.textContent = describe(hit);
     canvas.style.cursor = hit?.kind === 'event' ? 'pointer' : '';
     if (pinned == null) showEvent(panel, hit?.kind === 'event' ? byId.get(hit.id) : null, view.units);
@@ -346,6 +390,10 @@ async function main() {
   canvas.addEventListener('pointerleave', () => {
     pointer = null;
     T.hovered = null;
+    if (layer.hovered != null) {
+      layer.hover(null);
+      requestRender();
+    }
     readout.textContent = idleText;
   });
   let down = null;
@@ -372,6 +420,7 @@ async function main() {
   T.origin = origin;
   T.flyTo = (id) => select(id, true);
   T.render = requestRender;
+  T.camera = () => ({ position: camera.position.toArray(), target: controls.target.toArray() });
   /** Client-pixel position of an event centre in the current view (for tests). */
   T.projectLocal = (local) => {
     const v = new THREE.Vector3().fromArray(local).project(camera);
@@ -394,11 +443,13 @@ async function main() {
 
 /** Fetch every event's two solids, six at a time; a broken mesh is skipped with a warning. */
 async function loadSolids(view, events, layer, onLoaded) {
-  const queue = events.filter((e) => meshPaths(view, e.id));
+  // A campaign's events of other pairs have no solids here (mesh_id null).
+  const meshId = (e) => ('mesh_id' in e ? e.mesh_id : e.id);
+  const queue = events.filter((e) => meshId(e) != null && meshPaths(view, meshId(e)));
   const worker = async () => {
     while (queue.length) {
       const e = queue.shift();
-      const paths = meshPaths(view, e.id);
+      const paths = meshPaths(view, meshId(e));
       try {
         const [before, after] = await Promise.all([
           paths.before ? loadMesh(paths.before, view.origin) : null,

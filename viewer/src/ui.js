@@ -9,9 +9,22 @@ import { KIND_COLOR } from './events.js';
 const hex = (c) => `#${c.toString(16).padStart(6, '0')}`;
 
 export class EventTable {
-  /** onPick(id) is called when a row is clicked. */
-  constructor(table, note, events, onPick) {
+  /**
+   * onPick(id) is called when a row is clicked; `extra` columns ([{ key, label, num }]) follow
+   * the kind (a campaign's pair and track).
+   */
+  constructor(table, note, events, onPick, extra = []) {
     this.table = table;
+    this.extra = extra;
+    const kindTh = table.querySelector('th[data-key="kind"]');
+    for (const c of [...extra].reverse()) {
+      const th = document.createElement('th');
+      th.dataset.key = c.key;
+      th.scope = 'col';
+      th.textContent = c.label;
+      if (c.num) th.className = 'num';
+      kindTh.after(th);
+    }
     this.tbody = table.querySelector('tbody');
     this.note = note;
     this.events = events;
@@ -73,6 +86,7 @@ export class EventTable {
       const cells = [
         [String(e.id), ''],
         [e.kind, `kind ${e.kind}`],
+        ...this.extra.map((c) => [e[c.key] == null ? '–' : String(e[c.key]), c.num ? 'num' : '']),
         [volumeLabel(e.volume_m3, e.volume_uncertainty_m3).replace(' m³', ''), 'num'],
         [fixed(e.area_m2, 1), 'num'],
         [fixed(e.max_abs_distance_m, 2), 'num'],
@@ -84,7 +98,7 @@ export class EventTable {
         if (cls) td.className = cls;
         tr.appendChild(td);
       }
-      tr.children[2].dataset.value = String(e.volume_m3);
+      tr.children[2 + this.extra.length].dataset.value = String(e.volume_m3);
       frag.appendChild(tr);
     }
     this.tbody.replaceChildren(frag);
@@ -144,7 +158,7 @@ export function showEvent(panel, e, units) {
   // Anything else the writer added, so the panel shows *all* properties.
   const known = new Set(['id', 'kind', 'volume_m3', 'volume_uncertainty_m3', 'gain_m3', 'loss_m3',
     'n_points', 'area_m2', 'mean_distance_m', 'max_abs_distance_m', 'mean_lod95_m', 'obb',
-    'centroid', 'local']);
+    'centroid', 'local', 'mesh_id']);
   for (const [k, v] of Object.entries(e)) {
     if (known.has(k)) continue;
     add(k, typeof v === 'number' ? String(v) : JSON.stringify(v), k);
@@ -153,7 +167,7 @@ export function showEvent(panel, e, units) {
 }
 
 /** The legend: the distance ramp with ticks and units, marker colours and sizes. */
-export function drawLegend(el, half, units) {
+export function drawLegend(el, half, units, colourKeys = null) {
   const u = units || 'm';
   // Three significant figures, trailing zeros dropped: "+0.3", "−0.0075", "+150".
   const tick = (v) => (v === 0 ? '0' : (v < 0 ? '\u2212' : '+') + String(Number(Math.abs(v).toPrecision(3))));
@@ -166,10 +180,26 @@ export function drawLegend(el, half, units) {
     <div class="ticks">${ticks}</div>
     <div class="keys">
       <span><span class="sw" style="background:rgb(${NO_DATA.join(',')})"></span>not computed</span>
-      <span><span class="dot" style="background:${hex(KIND_COLOR.gain)}"></span>gain</span>
-      <span><span class="dot" style="background:${hex(KIND_COLOR.loss)}"></span>loss</span>
+      ${colourKeys ? '' : `<span><span class="dot" style="background:${hex(KIND_COLOR.gain)}"></span>gain</span>
+      <span><span class="dot" style="background:${hex(KIND_COLOR.loss)}"></span>loss</span>`}
       <span>marker size ∝ ∛|volume|</span>
     </div>`;
+  if (colourKeys) {
+    const keys = document.createElement('div');
+    keys.className = 'keys colour-keys';
+    for (const [c, text] of colourKeys) {
+      const span = document.createElement('span');
+      if (c != null) {
+        const dot = document.createElement('span');
+        dot.className = 'dot';
+        dot.style.background = hex(c);
+        span.appendChild(dot);
+      }
+      span.append(text);
+      keys.appendChild(span);
+    }
+    el.appendChild(keys);
+  }
 }
 
 /** The header: CRS, counts, and tool version and inputs from summary.json when present. */

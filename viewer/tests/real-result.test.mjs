@@ -4,17 +4,16 @@
 
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
-import { spawn, execFileSync } from 'node:child_process';
+import { execFileSync } from 'node:child_process';
 import { existsSync, mkdirSync, mkdtempSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { dirname, join, resolve } from 'node:path';
 import { fileURLToPath } from 'node:url';
-import { chromium } from 'playwright-core';
+import { launchBrowser, serveTalus, stopServer } from './browser.mjs';
 
 const HERE = dirname(fileURLToPath(import.meta.url));
 const REPO = resolve(HERE, '..', '..');
 const ARTIFACTS = join(HERE, '..', 'test-artifacts');
-const CHROMIUM = process.env.CHROMIUM || '/usr/bin/chromium';
 const TALUS = process.env.TALUS_BIN || join(process.env.CARGO_TARGET_DIR || join(REPO, 'target'), 'debug', 'talus');
 
 let tmp;
@@ -37,32 +36,11 @@ before(async () => {
   events = JSON.parse(readFileSync(join(res, 'events.geojson'), 'utf8')).features;
   truth = JSON.parse(readFileSync(join(scene, 'truth.json'), 'utf8')).events;
 
-  const child = spawn(TALUS, ['view', res, '--port', '0'], { cwd: REPO, detached: true, stdio: ['ignore', 'pipe', 'pipe'] });
-  let stderr = '';
-  child.stderr.on('data', (d) => { stderr += d; });
-  const url = await new Promise((ok, fail) => {
-    let out = '';
-    const timer = setTimeout(() => fail(new Error(`talus view printed no URL\n${stderr}`)), 60_000);
-    child.stdout.on('data', (d) => {
-      out += d;
-      const m = /http:\/\/[^\s]+/.exec(out);
-      if (m) { clearTimeout(timer); ok(m[0]); }
-    });
-    child.on('exit', (code) => { clearTimeout(timer); fail(new Error(`talus view exited (${code}):\n${stderr}`)); });
-  });
+  const { child, url } = await serveTalus(TALUS, res, REPO);
   server = child;
   assert.match(url, /^http:\/\/127\.0\.0\.1:\d+\/$/);
 
-  context = await chromium.launchPersistentContext(join(tmp, 'profile'), {
-    executablePath: CHROMIUM,
-    headless: true,
-    viewport: { width: 1400, height: 850 },
-    args: [
-      '--headless', '--no-sandbox', '--disable-gpu', '--enable-unsafe-swiftshader',
-      '--disable-background-networking', '--disable-component-update', '--disable-sync',
-      '--no-first-run',
-    ],
-  });
+  context = await launchBrowser(join(tmp, 'profile'));
   page = context.pages()[0] || (await context.newPage());
   page.on('console', (m) => { if (m.type() === 'error') consoleErrors.push(m.text()); });
   page.on('pageerror', (e) => consoleErrors.push(String(e)));
@@ -75,9 +53,7 @@ before(async () => {
 
 after(async () => {
   await context?.close();
-  if (server?.pid) {
-    try { process.kill(-server.pid, 'SIGTERM'); } catch { /* gone */ }
-  }
+  stopServer(server);
   if (tmp) rmSync(tmp, { recursive: true, force: true });
 });
 

@@ -15,14 +15,13 @@ import { existsSync, mkdirSync, mkdtempSync, readFileSync, rmSync } from 'node:f
 import { tmpdir } from 'node:os';
 import { dirname, join, resolve } from 'node:path';
 import { fileURLToPath } from 'node:url';
-import { chromium } from 'playwright-core';
+import { launchBrowser } from './browser.mjs';
 import { makeFixture } from './make-fixture.mjs';
 import { decodePng } from './png.mjs';
 
 const HERE = dirname(fileURLToPath(import.meta.url));
 const REPO = resolve(HERE, '..', '..');
 const ARTIFACTS = join(HERE, '..', 'test-artifacts');
-const CHROMIUM = process.env.CHROMIUM || '/usr/bin/chromium';
 const BACKGROUND = [0x2b, 0x30, 0x37];
 
 let tmp;
@@ -122,17 +121,7 @@ before(async () => {
   const url = await server.url;
   assert.match(url, /^http:\/\/127\.0\.0\.1:\d+\/$/);
 
-  context = await chromium.launchPersistentContext(join(tmp, 'profile'), {
-    executablePath: CHROMIUM,
-    headless: true,
-    viewport: { width: 1400, height: 850 },
-    deviceScaleFactor: 1,
-    args: [
-      '--headless', '--no-sandbox', '--disable-gpu', '--enable-unsafe-swiftshader',
-      '--disable-background-networking', '--disable-component-update', '--disable-sync',
-      '--no-first-run',
-    ],
-  });
+  context = await launchBrowser(join(tmp, 'profile'));
   page = context.pages()[0] || (await context.newPage());
   page.on('console', (m) => { if (m.type() === 'error') consoleErrors.push(m.text()); });
   page.on('pageerror', (e) => consoleErrors.push(String(e)));
