@@ -101,7 +101,8 @@ pub fn demo(out: &Path, view: bool) -> Result<()> {
         force: true,
         ..Default::default()
     };
-    let summary = crate::compare::compare(&opts)?;
+    let summary = crate::compare::compare(&opts)?
+        .ok_or_else(|| Error::Internal("demo: no summary".into()))?;
     let text = std::fs::read_to_string(result.join("events.geojson"))
         .map_err(|e| Error::Internal(format!("events.geojson: {e}")))?;
     let fc: serde_json::Value =
