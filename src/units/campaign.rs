@@ -300,14 +300,7 @@ pub fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<Value> {
     });
     let text = serde_json::to_vec_pretty(&summary).map_err(|e| Error::Internal(e.to_string()))?;
     super::write_bytes(out, MARKER, &text)?;
-    for f in FILES {
-        publish.push(Publish {
-            kind: "campaign".into(),
-            unit: plan.units[unit].name.clone(),
-            file: f.to_string(),
-            name: f.to_string(),
-        });
-    }
+    publish.extend(FILES.iter().map(|&f| Publish::of(plan, unit, f, f.into())));
     Ok(json!({ "publish": publish, "events": events.len() }))
 }
 

@@ -176,12 +176,25 @@ pub struct Publish {
     pub name: String,
 }
 
-/// Write pair `pair`'s outputs into `out`.
+impl Publish {
+    /// File `file` of the plan's unit `unit`, published as `name`.
+    pub fn of(plan: &crate::plan::Plan, unit: usize, file: &str, name: String) -> Publish {
+        let u = &plan.units[unit];
+        Publish {
+            kind: u.kind().to_string(),
+            unit: u.name.clone(),
+            file: file.to_string(),
+            name,
+        }
+    }
+}
+
 /// Resident bytes of an outputs unit: the merge's one chunk per tile, the LAZ writer's chunk and
 /// buffers, the viewer's terrain sample, the events' records (measured: 110–125 MiB on the
 /// 5.2M-point cliff, 15 tiles).
 pub const NEED: u64 = 128 << 20;
 
+/// Write pair `pair`'s outputs into `out`.
 pub fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<serde_json::Value> {
     let plan = ctx.plan;
     let p = &plan.pairs[pair];
@@ -269,12 +282,7 @@ pub fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<
         }
         let names = mesh_files(id);
         for n in &names {
-            publish.push(Publish {
-                kind: "volumes".into(),
-                unit: plan.units[v].name.clone(),
-                file: n.clone(),
-                name: format!("meshes/{n}"),
-            });
+            publish.push(Publish::of(plan, v, n, format!("meshes/{n}")));
         }
         meshes.push((
             id,
@@ -306,14 +314,11 @@ pub fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<
     if !plan.m3c2_only {
         files.extend(["events.geojson", "events.csv", "event_regions.geojson"]);
     }
-    for f in files {
-        publish.push(Publish {
-            kind: "outputs".into(),
-            unit: plan.units[unit].name.clone(),
-            file: f.into(),
-            name: f.into(),
-        });
-    }
+    publish.extend(
+        files
+            .into_iter()
+            .map(|f| Publish::of(plan, unit, f, f.into())),
+    );
     Ok(serde_json::json!({ "publish": publish, "core_points": written.core_points }))
 }
 
