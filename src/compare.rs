@@ -121,6 +121,7 @@ pub fn survey(store: &Store, label: &str, files: &SurveyFiles) -> Result<Survey>
 /// Plan the comparison of `opts` in `store`.
 fn plan(store: &Store, opts: &CompareOptions, user: &UserParams, inputs: &Inputs) -> Result<Plan> {
     let spacing = sampling::measure(&inputs.before.first().path)?;
+    crate::progress::trace(|| "spacing measured".into());
     let params = Params::resolve(user, spacing.effective_spacing)?;
     let surveys = vec![
         survey(store, "before", &inputs.before)?,
@@ -169,6 +170,7 @@ fn plan(store: &Store, opts: &CompareOptions, user: &UserParams, inputs: &Inputs
     let cores = cores.map(|(p, c)| (format!("the core points {}", p.display()), c.bounds));
     crate::plan::reach::check(&plan, cores.as_ref().map(|(s, b)| (s.as_str(), b)))?;
     plan.add_pair_units(0, None)?;
+    crate::progress::trace(|| "planned".into());
     Ok(plan)
 }
 
@@ -219,6 +221,7 @@ pub fn compare(opts: &CompareOptions) -> Result<Option<Summary>> {
     };
     let user = opts.user.clone().over(config);
     let inputs = check_inputs(opts, &user)?;
+    crate::progress::trace(|| "inputs checked".into());
     let (store, created) = open_store(&opts.out, opts.resume, opts.force)?;
     let result = run_planned(&store, opts.force, &is_output, &opts.executor, |store| {
         plan(store, opts, &user, &inputs)
@@ -274,6 +277,7 @@ pub fn run_planned(
             store.invalidate(&unit_ref(&plan, i))?;
         }
     }
+    crate::progress::trace(|| "plan saved".into());
     if let crate::exec::Executor::Slurm(opts) = executor {
         return crate::exec::slurm::run(store, &plan, opts, &command, lock, ours);
     }
@@ -283,7 +287,9 @@ pub fn run_planned(
         .map_err(|e| Error::Internal(format!("thread pool: {e}")))?;
     let slots = plan.params.threads.value.min(2);
     pool.install(|| crate::exec::run(store, &plan, slots, "run"))?;
+    crate::progress::trace(|| "executed".into());
     let marker = crate::exec::publish::publish_and_gc(store, &plan, ours)?;
+    crate::progress::trace(|| "published".into());
     drop(lock);
     Ok(Some(marker))
 }

@@ -414,6 +414,7 @@ fn run(cli: Cli) -> talus::Result<()> {
 }
 
 fn main() -> ExitCode {
+    talus::progress::start_clock();
     talus::memory::limit_arenas();
     let cli = Cli::parse();
     match run(cli) {

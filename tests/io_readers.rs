@@ -123,6 +123,19 @@ fn sample_points(n: usize) -> Vec<Point3> {
         .collect()
 }
 
+/// Millimetre transforms with UTM-sized offsets, for the LAZ written by las-rs.
+fn millimetre_transforms() -> las::Vector<las::Transform> {
+    let t = |offset: f64| las::Transform {
+        scale: 0.001,
+        offset,
+    };
+    las::Vector {
+        x: t(300_000.0),
+        y: t(5_773_000.0),
+        z: t(0.0),
+    }
+}
+
 fn write_file(path: &Path, bytes: &[u8]) {
     std::fs::write(path, bytes).expect("write fixture");
 }
@@ -441,20 +454,7 @@ fn laz_written_by_las_rs_reads_back() {
     let pts = sample_points(120_000);
     let mut b = las::Builder::from((1, 2));
     b.point_format = las::point::Format::new(3).expect("pf3");
-    b.transforms = las::Vector {
-        x: las::Transform {
-            scale: 0.001,
-            offset: 300_000.0,
-        },
-        y: las::Transform {
-            scale: 0.001,
-            offset: 5_773_000.0,
-        },
-        z: las::Transform {
-            scale: 0.001,
-            offset: 0.0,
-        },
-    };
+    b.transforms = millimetre_transforms();
     let header = b.into_header().expect("header");
     let mut w = las::Writer::from_path(&path, header).expect("writer");
     for p in &pts {
@@ -477,6 +477,57 @@ fn laz_written_by_las_rs_reads_back() {
     for (a, b) in got.iter().zip(&pts) {
         for k in 0..3 {
             assert!((a[k] - b[k]).abs() < 1e-6);
+        }
+    }
+}
+
+/// A LAZ of a layered point format (LAS 1.4, formats 6 to 10), whose other fields vary from
+/// point to point (intensity, GPS time, classification, flags, scan angle, colours): talus
+/// decodes only the coordinates' layers, and gets exactly the coordinates las-rs gets by
+/// decoding everything.
+#[test]
+fn layered_laz_coordinates_equal_a_full_decode() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    for format in [6u8, 7, 8] {
+        let path = dir.path().join(format!("pf{format}.laz"));
+        let pts = sample_points(130_000);
+        let mut b = las::Builder::from((1, 4));
+        b.point_format = las::point::Format::new(format).expect("format");
+        b.point_format.is_compressed = true;
+        b.transforms = millimetre_transforms();
+        let header = b.into_header().expect("header");
+        let mut w = las::Writer::from_path(&path, header).expect("writer");
+        for (i, p) in pts.iter().enumerate() {
+            let k = i as u16;
+            let pt = las::Point {
+                x: p[0],
+                y: p[1],
+                z: p[2],
+                intensity: k.wrapping_mul(7919),
+                return_number: 1 + (k % 3) as u8,
+                number_of_returns: 3,
+                classification: las::point::Classification::new((k % 20) as u8)
+                    .unwrap_or(las::point::Classification::Ground),
+                scan_angle: f32::from(k % 90) - 45.0,
+                user_data: (k % 251) as u8,
+                point_source_id: k % 17,
+                gps_time: Some(1.0e8 + i as f64 * 1.3e-5),
+                color: (format != 6).then(|| las::Color::new(k, k.wrapping_mul(3), !k)),
+                nir: (format == 8).then_some(k.wrapping_mul(5)),
+                ..Default::default()
+            };
+            w.write_point(pt).expect("write");
+        }
+        w.close().expect("close");
+        drop(w);
+        let (info, got) = read_small_chunks(&path);
+        assert_eq!(info.format_detail, format!("LAZ 1.4 point format {format}"));
+        let want = las_rs_points(&path);
+        assert_eq!(got.len(), want.len());
+        for (i, (a, b)) in got.iter().zip(&want).enumerate() {
+            for k in 0..3 {
+                assert_eq!(a[k].to_bits(), b[k].to_bits(), "format {format}, point {i}");
+            }
         }
     }
 }

@@ -80,7 +80,11 @@ fn write_file(path: &Path, crs: &Crs) -> u64 {
 }
 
 fn wkt_crs() -> Crs {
-    let wkt = "PROJCS[\"NAD83 / Oregon GIC Lambert (ft)\",GEOGCS[\"NAD83\"]]";
+    crs_of_wkt("PROJCS[\"NAD83 / Oregon GIC Lambert (ft)\",GEOGCS[\"NAD83\"]]")
+}
+
+/// A CRS given as WKT, with its LAS record.
+fn crs_of_wkt(wkt: &str) -> Crs {
     let mut data = wkt.as_bytes().to_vec();
     data.push(0);
     Crs {
@@ -119,6 +123,15 @@ fn geotiff_crs() -> Crs {
     }
 }
 
+/// Every point of `r`, through las-rs' `Point` API.
+fn all_points(r: &mut las::Reader) -> Vec<las::Point> {
+    r.read_all()
+        .expect("read")
+        .points()
+        .map(|p| p.expect("point"))
+        .collect()
+}
+
 /// Check a written file with las-rs: header, CRS and Extra Bytes VLRs, coordinates and the raw
 /// extra bytes of every record.
 fn check_with_las_rs(path: &Path, crs: &Crs, point_format: u8) {
@@ -146,12 +159,7 @@ fn check_with_las_rs(path: &Path, crs: &Crs, point_format: u8) {
     }
     assert_eq!(h.has_wkt_crs(), crs.wkt.is_some());
 
-    let pts: Vec<las::Point> = r
-        .read_all()
-        .expect("read")
-        .points()
-        .map(|p| p.expect("point"))
-        .collect();
+    let pts = all_points(&mut r);
     assert_eq!(pts.len(), N);
     for (i, p) in pts.iter().enumerate() {
         let (xyz, extra) = point(i);
@@ -334,4 +342,82 @@ fn wrong_extra_values_are_rejected() {
     );
     drop(w);
     assert!(!path.exists());
+}
+
+/// A LAZ written with its point count known beforehand: chunks of `laz_chunk_size` (four, all of
+/// one size but for the few points left over, so that every core compresses), read back whole by
+/// las-rs and laspy; a WKT too long for a VLR goes to an EVLR after the points and is found
+/// there; a different count than expected still gives a valid file.
+#[test]
+fn laz_chunks_sized_from_the_expected_count() {
+    use talus::io::las_out::{laz_chunk_size, CoordinateGrid};
+    let dir = tempfile::tempdir().expect("tempdir");
+    let py = laspy_python();
+    let long_wkt = format!("PROJCS[\"{}\",GEOGCS[\"NAD83\"]]", "x".repeat(70_000));
+    let crs = crs_of_wkt(&long_wkt);
+    let n: usize = 130_001;
+    for (name, expected) in [("sized.laz", n as u64), ("fewer.laz", n as u64 + 40_000)] {
+        let path = dir.path().join(name);
+        let grid = CoordinateGrid::millimetre([299_900.0, 5_773_400.0, 0.0]);
+        let mut w = ResultWriter::create_on_grid(&path, &crs, &DIMS[..1], grid, Some(expected))
+            .expect("create");
+        for i in 0..n {
+            let (xyz, _) = point(i);
+            w.write(xyz, &[(i % 256) as f64]).expect("write");
+        }
+        assert_eq!(w.finish().expect("finish"), n as u64);
+
+        let mut r = las::Reader::from_path(&path).expect("las-rs open");
+        let h = r.header().clone();
+        assert_eq!(h.number_of_points(), n as u64);
+        let chunk = laz_chunk_size(Some(expected));
+        assert_eq!(h.laz_vlr().expect("LASzip VLR").chunk_size(), chunk);
+        let laszip = h
+            .vlrs()
+            .iter()
+            .filter(|v| v.user_id == "laszip encoded")
+            .count();
+        assert_eq!(laszip, 1, "one LASzip VLR");
+        assert_eq!(h.evlrs().len(), 1, "the long WKT is an EVLR");
+        assert_eq!(h.evlrs()[0].record_id, 2112);
+        let pts = all_points(&mut r);
+        assert_eq!(pts.len(), n);
+        for (i, p) in pts.iter().enumerate().step_by(997) {
+            let (xyz, _) = point(i);
+            assert!((p.x - xyz[0]).abs() <= 0.0005 + 1e-9, "x {i}");
+            assert!((p.z - xyz[2]).abs() <= 0.0005 + 1e-9, "z {i}");
+            assert_eq!(f64::from(p.extra_bytes[0]), (i % 256) as f64, "extra {i}");
+        }
+        let last = pts.last().expect("points");
+        assert!((last.y - point(n - 1).0[1]).abs() <= 0.0005 + 1e-9);
+        let info = io::open(&path).expect("open");
+        assert_eq!(info.info().crs.wkt.as_deref(), Some(long_wkt.as_str()));
+        if let Some(py) = &py {
+            let j = laspy_read(py, &path, n);
+            assert_eq!(j["point_count"].as_u64(), Some(n as u64));
+            let got = j["extra"]["m3c2_significant"].as_array().expect("values");
+            assert_eq!(got.len(), n);
+            for (i, v) in got.iter().enumerate().step_by(1009) {
+                assert_eq!(num(v), Some((i % 256) as f64), "laspy extra {i}");
+            }
+        }
+    }
+}
+
+/// The chunk size: one chunk for small files, otherwise a multiple of four chunks of about
+/// 50 000 points with fewer points over than there are chunks, the same whatever the machine.
+#[test]
+fn laz_chunk_sizes() {
+    use talus::io::las_out::laz_chunk_size;
+    assert_eq!(laz_chunk_size(None), 50_000);
+    assert_eq!(laz_chunk_size(Some(0)), 1);
+    assert_eq!(laz_chunk_size(Some(1000)), 1000);
+    assert_eq!(laz_chunk_size(Some(99_856)), 24_964);
+    for n in [40_000u64, 99_856, 130_001, 1_000_003, 31_393_325] {
+        let c = u64::from(laz_chunk_size(Some(n)));
+        let chunks = n / c;
+        assert_eq!(chunks % 4, 0, "{n}: {chunks} chunks of {c}");
+        assert!(n - chunks * c < chunks, "{n}: {} left over", n - chunks * c);
+        assert!((10_000..=50_000).contains(&c), "{n}: chunk {c}");
+    }
 }

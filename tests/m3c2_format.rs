@@ -165,7 +165,8 @@ fn user_core_points_keep_their_precision_and_order() {
         offset: [500_000.0, 5_000_000.0, 0.0],
     };
     let path = dir.path().join("cores.las");
-    let mut w = ResultWriter::create_on_grid(&path, &talus::io::Crs::default(), &[], grid).unwrap();
+    let mut w =
+        ResultWriter::create_on_grid(&path, &talus::io::Crs::default(), &[], grid, None).unwrap();
     for p in &cores {
         w.write(*p, &[]).unwrap();
     }

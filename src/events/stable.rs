@@ -26,6 +26,8 @@
 //! the order given (the callers give them in core-point key order).
 
 use crate::io::Point3;
+use rayon::prelude::*;
+
 use crate::spatial::Index;
 
 /// Residuals beyond this many robust standard deviations are not stable ground.
@@ -287,10 +289,11 @@ fn fit_variogram(samples: &[Sample], keep: &[usize], t: &Point3, spacing: f64) -
         .map(|&i| samples[i].distance - dot(&samples[i].normal, t))
         .collect();
     let n = pts.len();
-    let dist = |a: usize, b: usize| {
+    let dist2 = |a: usize, b: usize| {
         let (p, q) = (&pts[a], &pts[b]);
-        ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt()
+        (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)
     };
+    let dist = |a: usize, b: usize| dist2(a, b).sqrt();
     // Lag bins from one core spacing to the largest distance, 4 per octave.
     let mut rng = SplitMix(0x5EED_7A15);
     let mut max_d: f64 = 0.0;
@@ -307,43 +310,70 @@ fn fit_variogram(samples: &[Sample], keep: &[usize], t: &Point3, spacing: f64) -
     }
     let per_octave = 4.0;
     let bins = ((max_d / h0).log2() * per_octave).ceil() as usize + 1;
-    let bin = |h: f64| -> Option<usize> {
-        if h < h0 * 0.5 {
-            return None;
-        }
-        let b = ((h / h0).log2() * per_octave + 0.5).floor().max(0.0) as usize;
-        (b < bins).then_some(b)
+    // Lag bins of a quarter octave centred on h0·2^(k/4), the first reaching down to h0/2: bin k
+    // holds the squared lags from edges[k] up to edges[k + 1]. Comparing squared lags with the
+    // edges spares a square root and a logarithm per pair (millions of pairs).
+    let edges: Vec<f64> = (0..=bins)
+        .map(|k| {
+            let lo = if k == 0 {
+                0.5 * h0
+            } else {
+                h0 * ((k as f64 - 0.5) / per_octave).exp2()
+            };
+            lo * lo
+        })
+        .collect();
+    let bin = |h2: f64| -> Option<usize> {
+        let k = edges.partition_point(|&e| e <= h2);
+        (k > 0 && k <= bins).then(|| k - 1)
     };
-    let mut sum = vec![0.0; bins];
-    let mut count = vec![0usize; bins];
-    let mut lag = vec![0.0; bins];
-    let mut add = |a: usize, b: usize| {
-        let h = dist(a, b);
-        if let Some(k) = bin(h) {
-            sum[k] += 0.5 * (res[a] - res[b]).powi(2);
-            lag[k] += h;
-            count[k] += 1;
-        }
-    };
-    // Short lags: every neighbour within 8 core spacings of a subset of anchors.
     let index = Index::new(&pts, pts[0]);
     let step = (n / ANCHORS).max(1);
     let reach = 8.0 * h0;
-    for a in (0..n).step_by(step) {
-        let q = index.to_local(&pts[a]);
-        index.for_each_within(&q, reach, |b, _| {
-            if b > a {
-                add(a, b);
-            }
-        });
-    }
-    // Long lags: random pairs.
-    for _ in 0..RANDOM_PAIRS.min(n * (n - 1) / 2) {
-        let (a, b) = (rng.below(n), rng.below(n));
-        if a != b && dist(a, b) > reach {
-            add(a, b);
+    let anchors: Vec<usize> = (0..n).step_by(step).collect();
+    // The pairs are summed in parts of fixed size, in parallel, and the parts added in order:
+    // the same sums whatever the number of threads.
+    let part = |lags: &mut Lags, a: usize, b: usize, h2: f64| {
+        if let Some(k) = bin(h2) {
+            lags.add(k, h2.sqrt(), 0.5 * (res[a] - res[b]).powi(2));
         }
+    };
+    let near: Vec<Lags> = anchors
+        .par_chunks(512)
+        .map(|chunk| {
+            let mut lags = Lags::new(bins);
+            for &a in chunk {
+                let q = index.to_local(&pts[a]);
+                index.for_each_within(&q, reach, |b, h2| {
+                    if b > a {
+                        part(&mut lags, a, b, h2);
+                    }
+                });
+            }
+            lags
+        })
+        .collect();
+    let pairs: Vec<(usize, usize)> = (0..RANDOM_PAIRS.min(n * (n - 1) / 2))
+        .map(|_| (rng.below(n), rng.below(n)))
+        .collect();
+    let far: Vec<Lags> = pairs
+        .par_chunks(16384)
+        .map(|chunk| {
+            let mut lags = Lags::new(bins);
+            for &(a, b) in chunk {
+                let h2 = dist2(a, b);
+                if a != b && h2 > reach * reach {
+                    part(&mut lags, a, b, h2);
+                }
+            }
+            lags
+        })
+        .collect();
+    let mut total = Lags::new(bins);
+    for l in near.iter().chain(&far) {
+        total.merge(l);
     }
+    let Lags { sum, lag, count } = total;
     let obs: Vec<(f64, f64, f64)> = (0..bins)
         .filter(|&k| count[k] >= 30)
         .map(|k| {
@@ -359,6 +389,37 @@ fn fit_variogram(samples: &[Sample], keep: &[usize], t: &Point3, spacing: f64) -
 
 /// Weighted least squares fit of nugget + sill·Sph(h/range) to (lag, γ, weight), the range by a
 /// search over log-spaced candidates, nugget and sill ≥ 0.
+/// Sums per lag bin of a variogram: semivariances, lags, pair counts.
+struct Lags {
+    sum: Vec<f64>,
+    lag: Vec<f64>,
+    count: Vec<usize>,
+}
+
+impl Lags {
+    fn new(bins: usize) -> Self {
+        Lags {
+            sum: vec![0.0; bins],
+            lag: vec![0.0; bins],
+            count: vec![0; bins],
+        }
+    }
+
+    fn add(&mut self, k: usize, h: f64, semivariance: f64) {
+        self.sum[k] += semivariance;
+        self.lag[k] += h;
+        self.count[k] += 1;
+    }
+
+    fn merge(&mut self, other: &Lags) {
+        for k in 0..self.sum.len() {
+            self.sum[k] += other.sum[k];
+            self.lag[k] += other.lag[k];
+            self.count[k] += other.count[k];
+        }
+    }
+}
+
 fn fit_spherical(obs: &[(f64, f64, f64)], h0: f64, max_d: f64) -> Variogram {
     let flat = || {
         let w: f64 = obs.iter().map(|o| o.2).sum();

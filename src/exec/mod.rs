@@ -264,7 +264,15 @@ fn slot(cx: &RunCtx) {
             }
             Err(e) => {
                 sh.state[picked] = State::Todo;
-                sh.error.get_or_insert(e);
+                // A dependency thrown away while this unit ran (another unit found it damaged)
+                // takes its files from under it: run it again once the dependency is redone.
+                let withdrawn = plan.units[picked]
+                    .deps
+                    .iter()
+                    .any(|&d| sh.state[d] != State::Done);
+                if !withdrawn {
+                    sh.error.get_or_insert(e);
+                }
             }
         }
         wake.notify_all();
@@ -320,7 +328,9 @@ fn claim_and_run(
     };
     let mut out = store.begin(&unit)?;
     watch.begin(i);
+    crate::progress::trace(|| format!("unit {} begins", unit.name));
     let ran = units::run(&ctx, i, &mut out);
+    crate::progress::trace(|| format!("unit {} ends", unit.name));
     crate::memory::trim();
     let peak = watch.end(i);
     let mut meta = ran?;
@@ -335,6 +345,7 @@ fn claim_and_run(
         }
     }
     out.commit(meta)?;
+    crate::progress::trace(|| format!("unit {} committed", unit.name));
     drop(claim);
     Ok(Ran::Done)
 }

@@ -27,7 +27,7 @@
 //! GeographicTypeGeoKey 2048; GeoTIFF 1.0 §2.7 / OGC 19-008r4).
 
 use std::fs::File;
-use std::io::{BufReader, Seek};
+use std::io::{BufReader, Seek, SeekFrom};
 use std::panic::AssertUnwindSafe;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -40,9 +40,15 @@ use super::{
 };
 use crate::error::{Error, Result};
 
-/// Points decoded per `fill_points` call: several LAZ chunks (usually 50 000 points each), so
-/// the parallel decompressor has work for every core, yet only ~6 MB of coordinates per chunk.
-const CHUNK: u64 = 250_000;
+/// Points decoded per `fill_points` call from a LAZ file: several LAZ chunks (usually 50 000
+/// points each), so the parallel decompressor has work for every core, yet only ~6 MB of
+/// coordinates per chunk.
+const LAZ_CHUNK: u64 = 250_000;
+
+/// Points read per call from a LAS file: there is nothing to decompress in parallel, and buffers
+/// of 1.5 MB are recycled between calls where fresh 6 MB ones were each mapped and faulted in
+/// anew (a third of the reading thread's time on a 1M-point file).
+const LAS_CHUNK: u64 = 65_536;
 
 /// GeoTIFF key ids (GeoTIFF 1.0 §6.2): projected CRS and geographic CRS.
 const PROJECTED_CS_TYPE_GEO_KEY: u16 = 3072;
@@ -169,16 +175,25 @@ impl LasReader {
             bounds,
             crs: crs_from_header(&header),
             scale: Some(scale),
+            transform: Some([t.x, t.y, t.z].map(|t| [t.scale, t.offset])),
         };
         drop(read);
 
         let (tx, rx) = bounded(2);
         let (recycle, recycle_rx) = bounded(4);
         let (ready_tx, ready_rx) = bounded(1);
-        let owned = path.to_path_buf();
+        let source = Source {
+            path: path.to_path_buf(),
+            kind,
+            total: point_count,
+            accepted,
+            // Point formats 6 to 10 are compressed in layers: only the coordinates' are decoded.
+            layered: (header.point_format().is_compressed && header.point_format().is_extended)
+                .then(|| (header.clone(), u64::from(raw.offset_to_point_data))),
+        };
         std::thread::Builder::new()
             .name("talus-las-reader".into())
-            .spawn(move || decode(owned, kind, point_count, accepted, ready_tx, tx, recycle_rx))
+            .spawn(move || decode(source, ready_tx, tx, recycle_rx))
             .map_err(|e| Error::Internal(format!("cannot start the LAS reader thread: {e}")))?;
         match ready_rx.recv() {
             Ok(Ok(())) => {}
@@ -371,31 +386,54 @@ fn laz_items_match(path: &Path, header: &las::Header) -> Result<()> {
     Ok(())
 }
 
-/// The decoding thread: open the `las::Reader`, report readiness, then stream chunks until the
-/// end, an error, or the consumer hanging up.
-fn decode(
+/// What the decoding thread reads.
+struct Source {
     path: PathBuf,
     kind: &'static str,
     total: u64,
     accepted: BoundsCheck,
+    /// A LAZ file of a layered point format: its header and where its points start.
+    layered: Option<(las::Header, u64)>,
+}
+
+/// The decoding thread: open the file, report readiness, then stream chunks until the end, an
+/// error, or the consumer hanging up.
+fn decode(
+    source: Source,
     ready: Sender<Result<()>>,
     tx: Sender<Result<Vec<Point3>>>,
     recycle: Receiver<Vec<Point3>>,
 ) {
-    let opened = File::open(&path)
-        .map_err(|e| Error::input(&path, format!("cannot open: {e}")))
-        .and_then(|f| {
-            guarded(&path, &format!("{kind} file"), || {
-                las::Reader::new(BufReader::with_capacity(1 << 20, f)).map_err(|e| {
-                    Error::input(&path, format!("truncated or corrupt {kind} file: {e}"))
+    let Source {
+        path,
+        kind,
+        total,
+        accepted,
+        layered,
+    } = source;
+    let opened = match &layered {
+        Some((header, start)) => {
+            coordinates_only(&path, header, *start).map(|l| Decoder::Layers(Box::new(l)))
+        }
+        None => File::open(&path)
+            .map_err(|e| Error::input(&path, format!("cannot open: {e}")))
+            .and_then(|f| {
+                guarded(&path, &format!("{kind} file"), || {
+                    las::Reader::new(BufReader::with_capacity(1 << 20, f)).map_err(|e| {
+                        Error::input(&path, format!("truncated or corrupt {kind} file: {e}"))
+                    })
                 })
             })
-        })
-        .and_then(|r| {
-            laz_items_match(&path, r.header())?;
-            Ok(r)
-        });
-    let mut reader = match opened {
+            .and_then(|r| {
+                laz_items_match(&path, r.header())?;
+                Ok(r)
+            })
+            .map(|r| {
+                let pd = las::PointDataBuilder::new().for_header(r.header()).build();
+                Decoder::Las(Box::new((r, pd)))
+            }),
+    };
+    let mut decoder = match opened {
         Ok(r) => {
             if ready.send(Ok(())).is_err() {
                 return;
@@ -407,14 +445,13 @@ fn decode(
             return;
         }
     };
-    let mut pd = las::PointDataBuilder::new()
-        .for_header(reader.header())
-        .build();
     let mut index = 0u64;
     loop {
+        let mut chunk = recycle.try_recv().unwrap_or_default();
+        chunk.clear();
         let what = format!("{kind} data after {index} of {total} points");
         let filled = guarded(&path, &what, || {
-            reader.fill_points(CHUNK, &mut pd).map_err(|e| {
+            decoder.fill(&mut chunk, total - index).map_err(|e| {
                 Error::input(
                     &path,
                     format!(
@@ -434,10 +471,6 @@ fn decode(
         if n == 0 {
             return;
         }
-        let mut chunk = recycle.try_recv().unwrap_or_default();
-        chunk.clear();
-        chunk.reserve(pd.len());
-        chunk.extend(pd.x().zip(pd.y()).zip(pd.z()).map(|((x, y), z)| [x, y, z]));
         // One pass of comparisons per point (NaN fails them too); the cost is in the noise of
         // decoding, see `outside`.
         if let Some(i) = chunk.iter().position(|p| outside(&accepted, p)) {
@@ -453,6 +486,93 @@ fn decode(
             return; // the consumer dropped the reader
         }
     }
+}
+
+/// How the decoding thread gets points: through `las` (every point format, LAS and LAZ), or
+/// straight from the LAZ decompressor with only the coordinates' layers decoded.
+enum Decoder {
+    Las(Box<(las::Reader, las::PointData)>),
+    Layers(Box<Layers>),
+}
+
+/// A LAZ file of a layered point format (6 to 10) read for its coordinates alone: the
+/// decompressor skips the other layers (intensity, classification, flags, scan angle, user
+/// data, point source, GPS time, colours, extra bytes) instead of decoding them, which was
+/// most of reading such a file (talus uses nothing but x, y, z).
+struct Layers {
+    decompressor: laz::ParLasZipDecompressor<BufReader<File>>,
+    transforms: las::Vector<las::Transform>,
+    record: usize,
+    bytes: Vec<u8>,
+}
+
+impl Decoder {
+    /// Decode up to one chunk of points (at most `left`) into `out`; how many (0: the end).
+    fn fill(&mut self, out: &mut Vec<Point3>, left: u64) -> std::result::Result<u64, String> {
+        match self {
+            Decoder::Las(las) => {
+                let (reader, pd) = &mut **las;
+                let chunk = if reader.header().point_format().is_compressed {
+                    LAZ_CHUNK
+                } else {
+                    LAS_CHUNK
+                };
+                let n = reader.fill_points(chunk, pd).map_err(|e| e.to_string())?;
+                out.reserve(pd.len());
+                out.extend(pd.x().zip(pd.y()).zip(pd.z()).map(|((x, y), z)| [x, y, z]));
+                Ok(n)
+            }
+            Decoder::Layers(l) => {
+                let n = left.min(LAZ_CHUNK) as usize;
+                if n == 0 {
+                    return Ok(0);
+                }
+                l.bytes.resize(n * l.record, 0);
+                l.decompressor
+                    .decompress_many(&mut l.bytes)
+                    .map_err(|e| e.to_string())?;
+                let t = &l.transforms;
+                let at =
+                    |b: &[u8], k: usize| i32::from_le_bytes([b[k], b[k + 1], b[k + 2], b[k + 3]]);
+                out.reserve(n);
+                // Every point format starts with X, Y, Z as i32 (LAS 1.4 R15 §2.6); the
+                // transforms are `las`'s, so the values are the ones it would give.
+                out.extend(l.bytes.chunks_exact(l.record).map(|b| {
+                    [
+                        t.x.direct(at(b, 0)),
+                        t.y.direct(at(b, 4)),
+                        t.z.direct(at(b, 8)),
+                    ]
+                }));
+                Ok(n as u64)
+            }
+        }
+    }
+}
+
+/// Open the points of the layered LAZ file `path` (its `header`, points from byte `start`) for
+/// their coordinates alone.
+fn coordinates_only(path: &Path, header: &las::Header, start: u64) -> Result<Layers> {
+    laz_items_match(path, header)?;
+    let corrupt = |e: String| Error::input(path, format!("truncated or corrupt LAZ file: {e}"));
+    let mut f = BufReader::with_capacity(
+        1 << 20,
+        File::open(path).map_err(|e| Error::input(path, format!("cannot open: {e}")))?,
+    );
+    f.seek(SeekFrom::Start(start))
+        .map_err(|e| corrupt(e.to_string()))?;
+    let vlr = header.laz_vlr().map_err(|e| corrupt(e.to_string()))?;
+    let record = vlr.items_size() as usize;
+    let selection = laz::DecompressionSelection::base().decompress_z();
+    let decompressor = guarded(path, "LAZ file", || {
+        laz::ParLasZipDecompressor::selective(f, vlr, selection).map_err(|e| corrupt(e.to_string()))
+    })?;
+    Ok(Layers {
+        decompressor,
+        transforms: *header.transforms(),
+        record,
+        bytes: Vec::new(),
+    })
 }
 
 impl PointReader for LasReader {

@@ -22,7 +22,7 @@
 //! so nothing half-written is ever left under the final name (SPEC.md §2).
 
 use std::fs::File;
-use std::io::BufWriter;
+use std::io::{BufWriter, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 
 use super::Crs;
@@ -71,9 +71,31 @@ pub struct ExtraDim {
     pub description: &'static str,
 }
 
-/// Points buffered before each hand-over to the `las` writer: four LAZ chunks (of 50 000
-/// points), so that the parallel compressor has a chunk for every core of a small machine.
-const BATCH: usize = 200_000;
+/// Points of a LAZ chunk when the number of points is not known (LASzip's default).
+const CHUNK: u64 = 50_000;
+
+/// Chunks per batch: points are handed to the compressor four chunks at a time, so that the
+/// parallel compressor has a chunk for every core of a small machine.
+const CHUNKS_PER_BATCH: usize = 4;
+
+/// The LAZ chunk size for `n` points: about [`CHUNK`], the chunks a multiple of
+/// [`CHUNKS_PER_BATCH`] in number and all of one size, with fewer points left over (a last,
+/// small chunk) than there are chunks. The compressor compresses the complete chunks of a batch in parallel and a last partial
+/// chunk alone when the file is closed: with fixed 50 000-point chunks the 49 856 points after
+/// the first 50 000 of a 99 856-point file were compressed on one core after the first chunk,
+/// also on one core. Depends only on `n`, so the file's bytes do not depend on the machine.
+pub fn laz_chunk_size(n: Option<u64>) -> u32 {
+    let Some(n) = n else {
+        return CHUNK as u32;
+    };
+    let per = CHUNKS_PER_BATCH as u64;
+    // Below this, one chunk: not worth splitting.
+    if n < per * 10_000 {
+        return n.clamp(1, CHUNK) as u32;
+    }
+    let chunks = n.div_ceil(CHUNK).div_ceil(per) * per;
+    (n / chunks).clamp(1, u64::from(u32::MAX)) as u32
+}
 
 /// The coarsest coordinate scale written: millimetres.
 pub const SCALE: f64 = 0.001;
@@ -147,13 +169,82 @@ fn round_to_km(v: f64) -> f64 {
     }
 }
 
+/// Where the records go: `las`'s writer for LAS, for LAZ the compressor itself, so that the chunk
+/// size is ours ([`laz_chunk_size`]; `las` 0.11 always writes 50 000-point chunks).
+enum Sink {
+    Las(las::Writer<BufWriter<File>>),
+    Laz(Box<LazSink>),
+}
+
+struct LazSink {
+    /// The header as written, counting the points and their bounds as they come.
+    header: las::Header,
+    compressor: laz::ParLasZipCompressor<BufWriter<File>>,
+}
+
+impl Sink {
+    fn write(&mut self, batch: &las::PointData) -> std::result::Result<(), las::Error> {
+        match self {
+            Sink::Las(w) => w.write_points(batch),
+            Sink::Laz(z) => {
+                z.header.add_point_data(batch);
+                z.compressor.compress_many(batch.raw_bytes())?;
+                Ok(())
+            }
+        }
+    }
+
+    /// Complete the file (the last chunk, the chunk table, the EVLRs, the header's counts and
+    /// bounds) and hand back the file.
+    fn close(self) -> std::result::Result<File, std::io::Error> {
+        let w = match self {
+            Sink::Las(mut w) => {
+                // `close` explicitly: `las::Writer`'s own Drop/into_inner would panic on a
+                // failing close.
+                if let Err(e) = w.close() {
+                    std::mem::forget(w);
+                    return Err(to_io(e));
+                }
+                w.into_inner().map_err(to_io)?
+            }
+            Sink::Laz(z) => {
+                let LazSink {
+                    header,
+                    mut compressor,
+                } = *z;
+                compressor
+                    .done()
+                    .map_err(|e| std::io::Error::other(e.to_string()))?;
+                let mut w = compressor.into_inner();
+                let start_of_first_evlr = w.stream_position()?;
+                for evlr in header.evlrs() {
+                    evlr.clone()
+                        .into_raw(true)
+                        .and_then(|r| r.write_to(&mut w))
+                        .map_err(to_io)?;
+                }
+                let mut raw = header.into_raw().map_err(to_io)?;
+                if let Some(e) = raw.evlr.as_mut() {
+                    e.start_of_first_evlr = start_of_first_evlr;
+                }
+                w.seek(SeekFrom::Start(0))?;
+                raw.write_to(&mut w).map_err(to_io)?;
+                w
+            }
+        };
+        w.into_inner().map_err(|e| e.into_error())
+    }
+}
+
 /// A streaming LAS/LAZ writer of result points; see the module doc.
 pub struct ResultWriter {
     path: PathBuf,
     tmp: PathBuf,
-    writer: Option<las::Writer<BufWriter<File>>>,
+    sink: Option<Sink>,
     batch: las::PointData,
     buffered: usize,
+    /// Points handed over at a time.
+    batch_len: usize,
     dims: Vec<ExtraDim>,
     base_len: usize,
     record_len: usize,
@@ -171,15 +262,24 @@ impl ResultWriter {
         dims: &[ExtraDim],
         origin_hint: [f64; 3],
     ) -> Result<Self> {
-        Self::create_on_grid(path, crs, dims, CoordinateGrid::millimetre(origin_hint))
+        Self::create_on_grid(
+            path,
+            crs,
+            dims,
+            CoordinateGrid::millimetre(origin_hint),
+            None,
+        )
     }
 
-    /// [`ResultWriter::create`] with coordinates stored on `grid`.
+    /// [`ResultWriter::create`] with coordinates stored on `grid`; `expected` points, when the
+    /// caller knows how many it will write, size the LAZ chunks ([`laz_chunk_size`]; any number
+    /// may still be written).
     pub fn create_on_grid(
         path: &Path,
         crs: &Crs,
         dims: &[ExtraDim],
         grid: CoordinateGrid,
+        expected: Option<u64>,
     ) -> Result<Self> {
         let mut seen = std::collections::HashSet::new();
         for d in dims {
@@ -271,26 +371,59 @@ impl ResultWriter {
                 builder.vlrs.push(v);
             }
         }
-        let header = builder
-            .into_header()
-            .map_err(|e| Error::Internal(format!("LAS header for {}: {e}", path.display())))?;
+        let chunk = laz_chunk_size(expected);
+        let header_error =
+            |e: las::Error| Error::Internal(format!("LAS header for {}: {e}", path.display()));
+        let laz_vlr = if compress {
+            // The LASzip VLR `las` would write (its items for this point format), with our chunk
+            // size.
+            let mut probe = builder.clone().into_header().map_err(header_error)?;
+            probe.add_laz_vlr().map_err(header_error)?;
+            let items = probe.laz_vlr().map_err(header_error)?.items().clone();
+            let vlr = laz::LazVlrBuilder::new(items)
+                .with_fixed_chunk_size(chunk)
+                .build();
+            let mut data = Vec::new();
+            vlr.write_to(&mut data)
+                .map_err(|e| Error::Internal(format!("LASzip VLR: {e}")))?;
+            builder.vlrs.push(las::Vlr {
+                user_id: laz::LazVlr::USER_ID.to_owned(),
+                record_id: laz::LazVlr::RECORD_ID,
+                description: laz::LazVlr::DESCRIPTION.to_owned(),
+                data,
+            });
+            Some(vlr)
+        } else {
+            None
+        };
+        let header = builder.into_header().map_err(header_error)?;
         let batch = las::PointDataBuilder::new().for_header(&header).build();
         let record_len = batch.record_len();
 
         let file = File::create(&tmp).map_err(|e| Error::output(path, e))?;
-        let writer = match las::Writer::new(BufWriter::with_capacity(1 << 20, file), header) {
-            Ok(w) => w,
+        let mut out = BufWriter::with_capacity(1 << 20, file);
+        let sink = match laz_vlr {
+            None => las::Writer::new(out, header).map(Sink::Las).map_err(to_io),
+            Some(vlr) => header
+                .write_to(&mut out)
+                .map_err(to_io)
+                .and_then(|()| laz::ParLasZipCompressor::new(out, vlr).map_err(to_io_laz))
+                .map(|compressor| Sink::Laz(Box::new(LazSink { header, compressor }))),
+        };
+        let sink = match sink {
+            Ok(s) => s,
             Err(e) => {
                 let _ = std::fs::remove_file(&tmp);
-                return Err(Error::output(path, to_io(e)));
+                return Err(Error::output(path, e));
             }
         };
         Ok(ResultWriter {
             path: path.to_path_buf(),
             tmp,
-            writer: Some(writer),
+            sink: Some(sink),
             batch,
             buffered: 0,
+            batch_len: CHUNKS_PER_BATCH * chunk as usize,
             dims: dims.to_vec(),
             base_len,
             record_len,
@@ -366,7 +499,7 @@ impl ResultWriter {
             at += d.ty.size();
         }
         self.buffered += 1;
-        if self.buffered == BATCH {
+        if self.buffered == self.batch_len {
             self.flush_batch()?;
         }
         Ok(())
@@ -377,12 +510,12 @@ impl ResultWriter {
             return Ok(());
         }
         let w = self
-            .writer
+            .sink
             .as_mut()
             .ok_or_else(|| Error::Internal("write after finish".into()))?;
         // A write that failed half-way may have grown the batch by a record: trim it.
         self.batch.resize_for(self.buffered);
-        w.write_points(&self.batch)
+        w.write(&self.batch)
             .map_err(|e| Error::output(&self.path, to_io(e)))?;
         self.count += self.buffered as u64;
         self.buffered = 0;
@@ -394,20 +527,11 @@ impl ResultWriter {
     /// Returns the number of points written.
     pub fn finish(mut self) -> Result<u64> {
         self.flush_batch()?;
-        let mut w = self
-            .writer
+        let w = self
+            .sink
             .take()
             .ok_or_else(|| Error::Internal("finish called twice".into()))?;
-        // `close` explicitly: `las::Writer`'s own Drop/into_inner would panic on a failing close.
-        if let Err(e) = w.close() {
-            std::mem::forget(w);
-            return Err(Error::output(&self.path, to_io(e)));
-        }
-        let file = w
-            .into_inner()
-            .map_err(|e| Error::output(&self.path, to_io(e)))?
-            .into_inner()
-            .map_err(|e| Error::output(&self.path, e.into_error()))?;
+        let file = w.close().map_err(|e| Error::output(&self.path, e))?;
         file.sync_all().map_err(|e| Error::output(&self.path, e))?;
         drop(file);
         std::fs::rename(&self.tmp, &self.path).map_err(|e| Error::output(&self.path, e))?;
@@ -418,12 +542,10 @@ impl ResultWriter {
 impl Drop for ResultWriter {
     /// Not finished: discard the temporary file.
     fn drop(&mut self) {
-        if let Some(mut w) = self.writer.take() {
-            if w.close().is_err() {
-                // Its Drop would retry `close` and panic; leaking the handle is the lesser evil
-                // on a failure path that is about to delete the file anyway.
-                std::mem::forget(w);
-            }
+        if let Some(w) = self.sink.take() {
+            // A `las::Writer` that fails to close is leaked by `close` (its Drop would retry and
+            // panic); the file is about to be deleted anyway.
+            let _ = w.close();
             let _ = std::fs::remove_file(&self.tmp);
         }
     }
@@ -463,6 +585,10 @@ fn to_las_vlr(v: &super::RawVlr) -> las::Vlr {
         description: v.description.clone(),
         data: v.data.clone(),
     }
+}
+
+fn to_io_laz(e: laz::LasZipError) -> std::io::Error {
+    std::io::Error::other(e.to_string())
 }
 
 fn to_io(e: las::Error) -> std::io::Error {

@@ -114,6 +114,9 @@ pub struct CloudInfo {
     /// The coordinate quantum per axis of a LAS/LAZ file (its scale factors); None for text and
     /// PLY, whose coordinates are decimal or floating point.
     pub scale: Option<[f64; 3]>,
+    /// A LAS/LAZ file's coordinate transform per axis, `[scale, offset]` as its header gives
+    /// them (sign included): its points are `scale · record + offset`. None for text and PLY.
+    pub transform: Option<[[f64; 2]; 3]>,
 }
 
 /// A streaming reader of points. Call [`PointReader::fill`] until it returns 0.

@@ -506,6 +506,7 @@ impl PlyReader {
             bounds,
             crs: Crs::default(),
             scale: None,
+            transform: None,
         };
         Ok(PlyReader {
             info,

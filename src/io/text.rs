@@ -352,6 +352,7 @@ impl TextReader {
             bounds,
             crs: Crs::default(),
             scale: None,
+            transform: None,
         };
         Ok(TextReader {
             info,

@@ -70,7 +70,9 @@ pub fn cylinder_stats_sphere(
 /// surface (reused between cylinders: no allocation per core point).
 #[derive(Debug, Default, Clone)]
 pub struct Projections {
+    /// `t[..len]` are the projections; beyond, scratch.
     t: Vec<f64>,
+    len: usize,
     h: f64,
 }
 
@@ -78,13 +80,18 @@ impl Projections {
     /// Collect the projections of `index`'s points inside the cylinder at `q` (local frame)
     /// with unit axis `n`, radius `r`, half-length `h`.
     pub fn collect(&mut self, index: &Columns, q: &Point3, n: &Point3, r: f64, h: f64) {
-        self.t.clear();
         self.h = h;
-        let t = &mut self.t;
+        let (t, len) = (&mut self.t, &mut self.len);
+        // Without a branch on the verdict (about half of the candidates are outside, in no
+        // pattern a predictor could learn; measured 17 % faster distances): every candidate is
+        // written, and kept by advancing the length only when it is inside.
+        *len = 0;
         index.visit_cylinder(q, n, r, h, |v, inside| {
-            if inside {
-                t.push(v);
+            if *len == t.len() {
+                t.resize(2 * t.len() + 256, 0.0);
             }
+            t[*len] = v;
+            *len += usize::from(inside);
         });
     }
 
@@ -92,18 +99,18 @@ impl Projections {
     /// interval `near` (see the module's "one surface per cylinder"), and that group's span.
     /// Sums are exact, so the result does not depend on the order the points were visited in.
     pub fn surface(&mut self, gap: f64, near: (f64, f64)) -> (CylinderStats, (f64, f64)) {
-        let (lo, hi) = self
-            .t
+        let t = &mut self.t[..self.len];
+        let (lo, hi) = t
             .iter()
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
                 (a.min(x), b.max(x))
             });
         let group = if hi - lo <= gap {
-            &self.t[..]
+            &t[..]
         } else {
-            self.t.sort_unstable_by(|a, b| a.total_cmp(b));
-            let g = nearest_group(&self.t, gap, near);
-            &self.t[g]
+            t.sort_unstable_by(|a, b| a.total_cmp(b));
+            let g = nearest_group(t, gap, near);
+            &t[g]
         };
         let mut m = Moments1::new(self.h);
         for &x in group {

@@ -26,7 +26,7 @@ const FLUSH: u32 = 1 << 10;
 const MAGIC: f64 = 6_755_399_441_055_744.0;
 
 /// Scales values of magnitude up to `extent` to integers of magnitude up to 2²⁶.
-#[derive(Clone, Copy)]
+#[derive(Debug, Clone, Copy)]
 struct Quantiser {
     factor: f64,
 }
@@ -67,7 +67,7 @@ impl Quantiser {
 }
 
 /// Count, mean and population variance of scalar values of magnitude up to the extent.
-#[derive(Clone, Copy)]
+#[derive(Debug, Clone, Copy)]
 pub struct Moments1 {
     q: Quantiser,
     pending: u32,

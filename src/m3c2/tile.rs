@@ -11,9 +11,12 @@ use super::{core_points, CoreResult, M3c2Params};
 use crate::io::Point3;
 use crate::spatial::Columns;
 
-/// One epoch's points in a tile, with whether the tile owns each.
+/// One epoch's points in a tile (as the tile file holds them: a column per coordinate), with
+/// whether the tile owns each.
 pub struct EpochPoints<'a> {
-    pub point: &'a (dyn Fn(usize) -> Point3 + Sync),
+    pub x: &'a [f64],
+    pub y: &'a [f64],
+    pub z: &'a [f64],
     pub owned: &'a [bool],
 }
 
@@ -23,6 +26,11 @@ impl EpochPoints<'_> {
     }
     pub fn is_empty(&self) -> bool {
         self.owned.is_empty()
+    }
+    /// Point `i`.
+    #[inline]
+    pub fn point(&self, i: usize) -> Point3 {
+        [self.x[i], self.y[i], self.z[i]]
     }
 }
 
@@ -46,15 +54,19 @@ pub fn compute(
     params: &M3c2Params,
 ) -> Vec<KeyedResult> {
     let cell = super::column_width(params);
-    let index = |t: &EpochPoints| Columns::from_fn(t.len(), t.point, anchor, cell);
+    let index = |t: &EpochPoints| Columns::from_fn(t.len(), |i| t.point(i), anchor, cell);
     let (b, a) = rayon::join(|| index(before), || index(after));
     let keyed: Vec<(u64, Point3)> = match cores {
         Some(c) => c.to_vec(),
-        None => core_points::thin(before.len(), before.point, &anchor, core_spacing, |i| {
-            before.owned[i]
-        })
+        None => core_points::thin(
+            before.len(),
+            |i| before.point(i),
+            &anchor,
+            core_spacing,
+            |i| before.owned[i],
+        )
         .into_iter()
-        .map(|(k, i)| (k, (before.point)(i)))
+        .map(|(k, i)| (k, before.point(i)))
         .collect(),
     };
     if keyed.is_empty() {

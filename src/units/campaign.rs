@@ -459,6 +459,7 @@ fn write_timeseries(
         &crs.crs,
         &dims,
         CoordinateGrid::for_extent(extent.min, extent.max, &scales),
+        Some(super::m3c2::pair_count(ctx, 0)?),
     )?;
     let mut streams: Vec<super::m3c2::Merged> = (0..plan.pairs.len())
         .map(|k| super::m3c2::Merged::new(ctx, k))

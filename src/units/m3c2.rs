@@ -72,26 +72,23 @@ pub fn run(
         Some(&c) => Some(cores::read(ctx, c, tile)?),
         None => None,
     };
-    let (fb, fa) = (|i: usize| before.point(i), |i: usize| after.point(i));
+    fn epoch(t: &TilePoints) -> EpochPoints<'_> {
+        EpochPoints {
+            x: &t.x,
+            y: &t.y,
+            z: &t.z,
+            owned: &t.owned,
+        }
+    }
     let results = compute(
-        &EpochPoints {
-            point: &fb,
-            owned: &before.owned,
-        },
-        &EpochPoints {
-            point: &fa,
-            owned: &after.owned,
-        },
+        &epoch(&before),
+        &epoch(&after),
         plan.layout.anchor,
         plan.layout.core_spacing,
         user_cores.as_deref(),
         &plan.params.m3c2(),
     );
-    let mut chunks = 0;
-    for (k, part) in results.chunks(CHUNK_ROWS).enumerate() {
-        super::write_columns(out, &chunk_file(k), &to_columns(part))?;
-        chunks = k + 1;
-    }
+    let chunks = write_chunks(out, &results)?;
     let owned = |t: &TilePoints| t.owned.iter().filter(|&&o| o).count() as u64;
     let points = owned(&before) + owned(&after);
     (ctx.progress)(points);
@@ -101,6 +98,27 @@ pub fn run(
         "points": points,
         "halo_points": halo_points,
     }))
+}
+
+/// Write `results` as chunk files of [`CHUNK_ROWS`] rows; returns how many. Chunks are encoded in
+/// parallel, a group at a time (the encoded bytes of a group are held until written), and
+/// written plainly: the unit's commit makes them durable.
+fn write_chunks(out: &mut UnitWriter, results: &[KeyedResult]) -> Result<usize> {
+    use rayon::prelude::*;
+    const GROUP: usize = 16;
+    let parts: Vec<&[KeyedResult]> = results.chunks(CHUNK_ROWS).collect();
+    for (g, group) in parts.chunks(GROUP).enumerate() {
+        let encoded: Vec<std::result::Result<Vec<u8>, String>> = group
+            .par_iter()
+            .map(|part| talus_tiling::encode_tile(&to_columns(part), &Default::default()))
+            .collect();
+        for (i, bytes) in encoded.into_iter().enumerate() {
+            let file = chunk_file(g * GROUP + i);
+            let bytes = bytes.map_err(|p| Error::Internal(format!("{file}: {p}")))?;
+            super::write_bytes(out, &file, &bytes)?;
+        }
+    }
+    Ok(parts.len())
 }
 
 fn f64col(name: &str, v: Vec<f64>) -> Column {
@@ -222,21 +240,39 @@ pub fn pair_count(ctx: &Ctx, pair: usize) -> Result<u64> {
     Ok(n)
 }
 
-/// A pair's M3C2 results in global key order: a k-way merge holding one chunk per tile.
+/// Chunks decoded ahead, over all tiles of a merge: a merge of few tiles decodes several of a
+/// tile's chunks at once, in parallel (a one-tile pair's results were read on one core while the
+/// other waited); a merge of many holds one chunk per tile, as a merge must.
+const LOOKAHEAD: usize = 16;
+
+/// A pair's M3C2 results in global key order: a k-way merge holding one chunk per tile (a few
+/// when the tiles are few, see [`LOOKAHEAD`]).
 pub struct Merged {
     tiles: Vec<Vec<PathBuf>>,
-    /// Per tile: the loaded chunk, position in it, next chunk number.
-    cursors: Vec<(Vec<KeyedResult>, usize, usize)>,
+    /// Per tile: the loaded chunk, position in it, next chunk number, chunks decoded ahead.
+    cursors: Vec<Cursor>,
     heap: BinaryHeap<Reverse<(u64, usize)>>,
+    ahead: usize,
+    total: u64,
+}
+
+#[derive(Default)]
+struct Cursor {
+    chunk: Vec<KeyedResult>,
+    pos: usize,
+    next: usize,
+    decoded: std::collections::VecDeque<Vec<KeyedResult>>,
 }
 
 impl Merged {
     pub fn new(ctx: &Ctx, pair: usize) -> Result<Self> {
         let tiles = pair_chunks(ctx, pair)?;
         let mut m = Merged {
-            cursors: vec![(Vec::new(), 0, 0); tiles.len()],
+            cursors: (0..tiles.len()).map(|_| Cursor::default()).collect(),
+            ahead: (LOOKAHEAD / tiles.len().max(1)).max(1),
             tiles,
             heap: BinaryHeap::new(),
+            total: pair_count(ctx, pair)?,
         };
         for t in 0..m.tiles.len() {
             m.advance_chunk(t)?;
@@ -245,16 +281,33 @@ impl Merged {
     }
 
     fn advance_chunk(&mut self, t: usize) -> Result<()> {
+        let files = &self.tiles[t];
         let c = &mut self.cursors[t];
-        while c.1 >= c.0.len() && c.2 < self.tiles[t].len() {
-            c.0 = read_chunk(&self.tiles[t][c.2])?;
-            c.1 = 0;
-            c.2 += 1;
+        while c.pos >= c.chunk.len() && (c.next < files.len() || !c.decoded.is_empty()) {
+            if c.decoded.is_empty() {
+                use rayon::prelude::*;
+                let end = (c.next + self.ahead).min(files.len());
+                let read: Vec<Result<Vec<KeyedResult>>> = files[c.next..end]
+                    .par_iter()
+                    .map(|f| read_chunk(f))
+                    .collect();
+                for r in read {
+                    c.decoded.push_back(r?);
+                }
+                c.next = end;
+            }
+            c.chunk = c.decoded.pop_front().unwrap_or_default();
+            c.pos = 0;
         }
-        if c.1 < c.0.len() {
-            self.heap.push(Reverse((c.0[c.1].key, t)));
+        if c.pos < c.chunk.len() {
+            self.heap.push(Reverse((c.chunk[c.pos].key, t)));
         }
         Ok(())
+    }
+
+    /// How many results the merge gives in all.
+    pub fn total(&self) -> u64 {
+        self.total
     }
 
     /// The next result in key order.
@@ -263,10 +316,10 @@ impl Merged {
             return Ok(None);
         };
         let c = &mut self.cursors[t];
-        let r = c.0[c.1];
-        c.1 += 1;
-        if c.1 < c.0.len() {
-            self.heap.push(Reverse((c.0[c.1].key, t)));
+        let r = c.chunk[c.pos];
+        c.pos += 1;
+        if c.pos < c.chunk.len() {
+            self.heap.push(Reverse((c.chunk[c.pos].key, t)));
         } else {
             self.advance_chunk(t)?;
         }
@@ -297,9 +350,10 @@ pub mod cores {
             .core_points
             .as_ref()
             .ok_or_else(|| Error::Internal("a core-point unit without core points".into()))?;
-        // A first pass counts each tile's points; then tiles are taken in batches whose points
-        // fit the unit's share of the pool, one pass over the file per batch: never the whole
-        // file at once (a core-point file can be as large as a survey).
+        // When the header's count fits the unit's share of the pool, one pass. Otherwise a first
+        // pass counts each tile's points; then tiles are taken in batches whose points fit the
+        // share, one pass over the file per batch: never the whole file at once (a core-point
+        // file can be as large as a survey).
         let pass = |f: &mut dyn FnMut(u64, usize, Point3) -> Result<()>| -> Result<u64> {
             let mut reader = crate::io::open(&input.path)?;
             let mut buf = Vec::new();
@@ -313,12 +367,29 @@ pub mod cores {
             }
             Ok(n)
         };
+        let share = (ctx.pool.limit() / 4).max(CORE_POINT_BYTES);
+        let total = crate::io::open(&input.path)?.info().point_count;
+        if total * CORE_POINT_BYTES <= share {
+            // All of them fit: one pass.
+            let _held = ctx.reserve(
+                total * CORE_POINT_BYTES + (4 << 20),
+                &format!("{total} core points of {}", input.path.display()),
+            )?;
+            let mut by_tile: Vec<Vec<(u64, Point3)>> = vec![Vec::new(); grid.len()];
+            let n = pass(&mut |k, t, p| {
+                by_tile[t].push((k, p));
+                Ok(())
+            })?;
+            for id in grid.tiles() {
+                write(out, id, &by_tile[grid.index(id)])?;
+            }
+            return Ok(serde_json::json!({ "points": n }));
+        }
         let mut counts = vec![0u64; grid.len()];
         let n = pass(&mut |_, t, _| {
             counts[t] += 1;
             Ok(())
         })?;
-        let share = (ctx.pool.limit() / 4).max(CORE_POINT_BYTES);
         let tiles: Vec<TileId> = grid.tiles().collect();
         let mut start = 0;
         while start < tiles.len() {

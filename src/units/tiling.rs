@@ -3,7 +3,7 @@
 //! point falls in its halo box), so a missing file always means damage. A survey tiled once
 //! serves every pair it belongs to.
 
-use talus_tiling::{TileId, TileSplitter};
+use talus_tiling::{Quantisation, TileId, TileSplitter, WriteOptions};
 
 use super::Ctx;
 use crate::error::Result;
@@ -28,6 +28,20 @@ pub fn need(buffers: u64) -> u64 {
     3 * buffers + (8 << 20)
 }
 
+/// How a survey's tiles are written: a LAS/LAZ survey's coordinates as the integers of its
+/// (first) file's coordinate transform, which is exact (a value that does not come back bit for
+/// bit keeps its column as f64) and takes a third of the bytes, so that tiles compress, are
+/// written and read in a fraction of the time (`talus_tiling::tile_file`'s measurements).
+fn write_options(transform: Option<[[f64; 2]; 3]>) -> WriteOptions {
+    WriteOptions {
+        quantise: transform.map(|t| Quantisation {
+            scale: t.map(|a| a[0]),
+            offset: t.map(|a| a[1]),
+        }),
+        ..WriteOptions::default()
+    }
+}
+
 /// Cut survey `survey` into `out`.
 pub fn run(ctx: &Ctx, survey: usize, out: &mut UnitWriter) -> Result<serde_json::Value> {
     let plan = ctx.plan;
@@ -49,8 +63,11 @@ pub fn run(ctx: &Ctx, survey: usize, out: &mut UnitWriter) -> Result<serde_json:
     let mut buf = Vec::new();
     let mut points = 0u64;
     // A survey delivered as tiles: its files one after the other, in name order.
-    for f in files {
+    for (k, f) in files.iter().enumerate() {
         let mut reader = io::open(&f.path)?;
+        if k == 0 {
+            splitter.set_options(write_options(reader.info().transform));
+        }
         while reader.fill(&mut buf, 1 << 16)? > 0 {
             splitter.push(&buf).map_err(tiling_error)?;
             points += buf.len() as u64;

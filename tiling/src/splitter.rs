@@ -109,6 +109,11 @@ impl TileSplitter {
         self
     }
 
+    /// Use these options from now on (for the segments and the final tile files).
+    pub fn set_options(&mut self, opts: WriteOptions) {
+        self.opts = opts;
+    }
+
     /// The grid being split into.
     pub fn grid(&self) -> &TileGrid {
         &self.grid
@@ -189,11 +194,11 @@ impl TileSplitter {
         self.buffered_bytes -= b.capacity_bytes();
         let n = b.x.len() as u64;
         let cols = into_columns(b);
-        // Segments are temporary: fastest level, same layout choices as the default.
+        // Segments are temporary: fastest level, the tiles' layout choices (quantised
+        // coordinates take a third of the bytes and of the time).
         let seg_opts = WriteOptions {
             level: 1,
-            quantise: None,
-            ..WriteOptions::default()
+            ..self.opts
         };
         let path = self.segment_path(i);
         let bytes = tile_file::encode(&cols, &seg_opts).map_err(|p| Error::invalid(&path, p))?;
@@ -230,8 +235,8 @@ impl TileSplitter {
             if self.flushed[i] == 0 && buffer.x.is_empty() {
                 continue;
             }
-            let mut cols = empty_columns();
-            if self.flushed[i] > 0 {
+            let cols = if self.flushed[i] > 0 {
+                let mut cols = empty_columns();
                 let seg = self.segment_path(i);
                 read_segment(&seg, &mut cols)?;
                 if cols.len() as u64 != self.flushed[i] {
@@ -240,8 +245,12 @@ impl TileSplitter {
                         "segment holds a different point count",
                     ));
                 }
-            }
-            append(&mut cols, into_columns(buffer));
+                append(&mut cols, into_columns(buffer));
+                cols
+            } else {
+                // Never flushed: the buffer is the tile.
+                into_columns(buffer)
+            };
             let path = tile_path(&self.dir, id);
             let digest = tile_file::write_tile_with(&path, &cols, &self.opts)?;
             written.push((id, cols.len() as u64, digest));

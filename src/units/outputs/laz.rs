@@ -96,7 +96,7 @@ pub fn write_m3c2_laz(
     each: &mut dyn FnMut(&KeyedResult),
 ) -> Result<Written> {
     let path = out.path("m3c2.laz")?;
-    let mut w = ResultWriter::create_on_grid(&path, crs, M3C2_DIMS, grid)?;
+    let mut w = ResultWriter::create_on_grid(&path, crs, M3C2_DIMS, grid, Some(results.total()))?;
     let mut written = Written {
         core_points: 0,
         computed: 0,

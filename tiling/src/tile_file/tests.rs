@@ -255,3 +255,58 @@ fn crash_leftover_tmp_leaves_previous_tile_intact() {
     assert_bit_exact(&new, &read_tile(&path).unwrap());
     assert!(!crate::atomic::tmp_path(&path).exists());
 }
+
+/// Every value a LAS record can hold, whatever the file's scale and offset (odd scales, negative
+/// and large offsets, records over the whole i32 range), is found on the lattice and stored
+/// quantised: the reciprocal-and-round search for the integer never misses it.
+#[test]
+fn quantisation_finds_every_las_record() {
+    let mut state = 0x2545_F491_4F6C_DD1Du64;
+    let mut next = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        state
+    };
+    for (scale, offset) in [
+        (0.001, 500_000.0),
+        (0.01, -1234.5),
+        (0.0001, 5_100_000.0),
+        (0.00025, 0.0),
+        (1.0 / 3.0, 17.0),
+        (0.1, -4_000_000.0),
+    ] {
+        let n = 5000;
+        let mut cols = TileColumns::default();
+        for i in 0..n {
+            // Records over the whole i32 range and near zero, as `las` turns them into values.
+            let r = if i % 2 == 0 {
+                next() as i32
+            } else {
+                (next() % 2001) as i32 - 1000
+            };
+            let v = scale * f64::from(r) + offset;
+            cols.x.push(v);
+            cols.y.push(v);
+            cols.z.push(v);
+        }
+        // The columns span the whole i32 range, whose span still fits u32.
+        let q = WriteOptions {
+            quantise: Some(Quantisation {
+                scale: [scale; 3],
+                offset: [offset; 3],
+            }),
+            ..WriteOptions::default()
+        };
+        let bytes = encode(&cols, &q).unwrap();
+        let h = parse_header(&bytes).unwrap();
+        for c in &h.columns[..3] {
+            assert_eq!(
+                c.kind, KIND_QUANT,
+                "scale {scale} offset {offset}: {}",
+                c.name
+            );
+        }
+        assert_bit_exact(&cols, &decode(&bytes).unwrap());
+    }
+}
