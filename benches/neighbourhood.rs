@@ -54,6 +54,7 @@ fn benches(c: &mut Criterion) {
         cyl_halflen: 3.0,
         min_points: 1,
         orientation: Orientation::Up,
+        point_spacing: 0.1,
     };
     let cell = m3c2::column_width(&params);
     let b = Columns::new(&before, [50.0, 50.0, 0.0], cell);

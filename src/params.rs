@@ -487,6 +487,7 @@ impl Params {
             cyl_radius: self.cyl_radius.value,
             cyl_halflen: self.cyl_halflen.value,
             min_points: self.min_points.value,
+            point_spacing: self.point_spacing.value,
             orientation: self
                 .orientation
                 .value

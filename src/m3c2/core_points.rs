@@ -5,7 +5,7 @@
 //! centre, ties to the earlier point (SPEC.md §1). Because the grid is global and tiles are
 //! aligned to it, a tiled run picks exactly the core points of a whole-cloud run.
 
-use std::collections::HashMap;
+use rustc_hash::FxHashMap as HashMap;
 
 use crate::io::Point3;
 
@@ -48,7 +48,7 @@ pub fn thin(
     spacing: f64,
     owned: impl Fn(usize) -> bool,
 ) -> Vec<(u64, usize)> {
-    let mut best: HashMap<Cell, (usize, f64)> = HashMap::new();
+    let mut best: HashMap<Cell, (usize, f64)> = HashMap::default();
     for i in 0..n {
         if !owned(i) {
             continue;

@@ -24,6 +24,8 @@ pub struct M3c2Params {
     /// Fewer points than this in either cylinder → distance NaN.
     pub min_points: u32,
     pub orientation: Orientation,
+    /// The effective point spacing (1 / √density): how many points a column holds.
+    pub point_spacing: f64,
 }
 
 /// The result at one core point, with PDAL's filters.m3c2 field meanings.
@@ -76,12 +78,22 @@ impl CoreResult {
 }
 
 /// The column width of the M3C2 indexes: the cylinder radius, or half the normal radius if that
-/// is smaller. Narrower columns fit a query's disc more tightly (fewer points tested for
-/// nothing) but cost more columns per query, each with its own bounds and search; on the
-/// benchmark surface (`examples/kernel_cost.rs`) this width was the fastest of 0.25, 0.35, 0.5 and
-/// 0.7 m for a 0.5 m cylinder and a 1 m normal radius.
+/// is smaller, but wide enough for about 16 points a column. Narrower columns fit a query's disc
+/// more tightly (fewer points tested for nothing) but cost more columns per query, each with its
+/// own bounds and search. Measured with `examples/kernel_cost.rs` (µs per core point, normal +
+/// two cylinders): at 100 points per m², normal radius 1.0, cylinder 0.5 × 3.0 (the py4dgeo
+/// benchmark), 0.5 m beats 0.35 and 0.7 (5.2 vs 5.7 and 5.6); at 46 points per m², 0.59 and
+/// 0.44 × 4.4 (the 120M-point synthetic pair), 0.59 m (16 points a column) beats the radius
+/// rule's 0.295 (4 a column): 2.45 vs 3.24; at 0.79 per m², 4.49 and 3.37 × 33.7 (the St
+/// Leonards DSM), 4.5 m beats 2.24: 2.20 vs 2.56. The index is exact whatever the width: results
+/// do not change with it.
 pub fn column_width(params: &M3c2Params) -> f64 {
-    params.cyl_radius.min(0.5 * params.normal_radius)
+    let rule = params.cyl_radius.min(0.5 * params.normal_radius);
+    if params.point_spacing.is_finite() && params.point_spacing > 0.0 {
+        rule.max(4.0 * params.point_spacing)
+    } else {
+        rule
+    }
 }
 
 /// A processing order of `cores` along a Z-order curve (cells of size `cell`): consecutive

@@ -22,7 +22,8 @@ pub fn normal_at(index: &Columns, q: &Point3, radius: f64) -> Option<(Point3, f6
     // One pass: exact integer moments (see `moments`), so the result does not depend on the
     // order in which the index visits the neighbourhood, and no second query is needed.
     let mut m = Moments3::new(radius);
-    index.visit_sphere(q, radius, |v, inside| m.add(v, inside));
+    let r2 = radius * radius;
+    index.sphere_candidates(q, radius, |points| m.add_within(points, q, r2));
     if m.count() < MIN_NORMAL_POINTS {
         return None;
     }

@@ -165,12 +165,12 @@ impl PartialOrd for Edge {
 /// Highest C1 point per square cell: the top surface seen from above.
 struct TopSurface {
     cell: f64,
-    top: std::collections::HashMap<(i64, i64), f64>,
+    top: rustc_hash::FxHashMap<(i64, i64), f64>,
 }
 
 impl TopSurface {
     fn new(points: &[Point3], cell: f64) -> Self {
-        let mut top = std::collections::HashMap::new();
+        let mut top = rustc_hash::FxHashMap::default();
         for p in points {
             let key = ((p[0] / cell).floor() as i64, (p[1] / cell).floor() as i64);
             let z = top.entry(key).or_insert(f64::NEG_INFINITY);

@@ -1,7 +1,7 @@
 //! A coarse xy grid over axis-aligned boxes: which boxes may contain a point (the events' search
 //! boxes when points are gathered, their claims when a location's owner is looked up).
 
-use std::collections::HashMap;
+use rustc_hash::FxHashMap as HashMap;
 
 /// Boxes [x0, y0, x1, y1] bucketed on a grid of cells the size of the median box: a box covers a
 /// few cells, a cell holds a few boxes.
@@ -29,7 +29,7 @@ impl BoxIndex {
             origin,
             cell,
             boxes: boxes.to_vec(),
-            cells: HashMap::new(),
+            cells: HashMap::default(),
         };
         for (e, b) in boxes.iter().enumerate() {
             let (lo, hi) = (index.key(b[0], b[1]), index.key(b[2], b[3]));

@@ -292,6 +292,20 @@ impl Columns {
     /// (the verdicts follow no pattern a branch predictor could learn).
     #[inline]
     pub fn visit_sphere(&self, q: &Point3, radius: f64, mut f: impl FnMut(Point3, bool)) {
+        let r2 = radius * radius;
+        self.sphere_candidates(q, radius, |points| {
+            for p in points {
+                let v = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
+                f(v, v[0] * v[0] + v[1] * v[1] + v[2] * v[2] <= r2);
+            }
+        })
+    }
+
+    /// The candidates of the sphere of `radius` at `q` (local frame), a column's run at a time:
+    /// every point within the sphere is in one of the runs given to `f`, with others that are
+    /// not (the caller tests |p − q|² ≤ radius² itself).
+    #[inline]
+    pub fn sphere_candidates(&self, q: &Point3, radius: f64, mut f: impl FnMut(&[Point3])) {
         if self.is_empty() || radius.is_nan() || radius < 0.0 {
             return;
         }
@@ -317,9 +331,8 @@ impl Columns {
                 }
                 let dz = (r2 - d2).sqrt() + pad;
                 let (a, b) = self.heights(j * self.dims[0] + i, q[2] - dz, q[2] + dz);
-                for p in &self.points[a..b] {
-                    let v = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
-                    f(v, v[0] * v[0] + v[1] * v[1] + v[2] * v[2] <= r2);
+                if a < b {
+                    f(&self.points[a..b]);
                 }
             }
         }
@@ -335,6 +348,29 @@ impl Columns {
         r: f64,
         h: f64,
         mut f: impl FnMut(f64, bool),
+    ) {
+        let r2 = r * r;
+        self.cylinder_candidates(q, n, r, h, |points| {
+            for p in points {
+                let v = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
+                let t = v[0] * n[0] + v[1] * n[1] + v[2] * n[2];
+                let radial2 = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]) - t * t;
+                f(t, (t.abs() <= h) & (radial2 <= r2));
+            }
+        })
+    }
+
+    /// The candidates of the cylinder of [`Columns::for_each_in_cylinder`], a column's run at a
+    /// time: every point the exact test accepts (|t| ≤ h and |p − q|² − t² ≤ r², computed as
+    /// written there) is in one of the runs given to `f`, with others it rejects.
+    #[inline]
+    pub fn cylinder_candidates(
+        &self,
+        q: &Point3,
+        n: &Point3,
+        r: f64,
+        h: f64,
+        mut f: impl FnMut(&[Point3]),
     ) {
         if self.is_empty() || !(r >= 0.0 && h >= 0.0) || !n.iter().all(|c| c.is_finite()) {
             return;
@@ -407,11 +443,8 @@ impl Columns {
                 }
                 let (u, v) = (q[2] + t0 * n[2], q[2] + t1 * n[2]);
                 let (a, b) = self.heights(k, u.min(v) - e[2] - pad, u.max(v) + e[2] + pad);
-                for p in &self.points[a..b] {
-                    let v = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
-                    let t = v[0] * n[0] + v[1] * n[1] + v[2] * n[2];
-                    let radial2 = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]) - t * t;
-                    f(t, (t.abs() <= h) & (radial2 <= r2));
+                if a < b {
+                    f(&self.points[a..b]);
                 }
             }
         }

@@ -5,7 +5,7 @@
 //! and loss (in campaign.json), `report.html`, and `summary.json`; and the list of files to
 //! publish: each pair's outputs under `pairs/<before>_<after>/` and the campaign's own.
 
-use std::collections::HashMap;
+use rustc_hash::FxHashMap as HashMap;
 
 use serde::Serialize;
 use serde_json::{json, Value};
@@ -89,7 +89,7 @@ fn polygons(g: &Value) -> Vec<Vec<Vec<Point3>>> {
 fn pair_events(ctx: &Ctx, pair: usize, unit: usize) -> Result<Vec<PairEvent>> {
     let events: Value = read_json(ctx, unit, "events.geojson")?;
     let regions: Value = read_json(ctx, unit, "event_regions.geojson")?;
-    let mut by_id: HashMap<u64, Vec<Vec<Vec<Point3>>>> = HashMap::new();
+    let mut by_id: HashMap<u64, Vec<Vec<Vec<Point3>>>> = HashMap::default();
     for f in regions["features"].as_array().into_iter().flatten() {
         if let Some(id) = f["properties"]["id"].as_u64() {
             by_id.insert(id, polygons(&f["geometry"]));

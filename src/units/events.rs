@@ -7,7 +7,7 @@
 //! and `kept.tile` (every kept core point: key, smoothed distance, event id or 0, normal and
 //! per-epoch spread, for m3c2.laz and for the volumes' claims and uncertainty).
 
-use std::collections::HashMap;
+use rustc_hash::FxHashMap as HashMap;
 
 use serde::{Deserialize, Serialize};
 use talus_tiling::{Column, ColumnData, TileColumns};
@@ -115,7 +115,7 @@ pub fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<serde_json::V
             params.eps.value,
             params.cluster_min_points.value as usize,
         )?;
-        let mut by_label: HashMap<u32, Vec<usize>> = HashMap::new();
+        let mut by_label: HashMap<u32, Vec<usize>> = HashMap::default();
         for (j, &l) in labels.iter().enumerate() {
             if l > 0 {
                 by_label.entry(l).or_default().push(idx[j]);

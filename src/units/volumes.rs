@@ -8,7 +8,7 @@
 //! event with the nearest clustered core point (`volume::ownership`). Writes `volumes.json` and
 //! each event's two solids as PLY.
 
-use std::collections::HashMap;
+use rustc_hash::FxHashMap as HashMap;
 
 use serde::{Deserialize, Serialize};
 use talus_tiling::TileId;
@@ -227,7 +227,7 @@ pub fn run(
     let mut measured: Vec<Measured> = Vec::new();
     let (mut gathered, mut largest) = (0usize, 0usize);
     if !mine.is_empty() {
-        let mut members: HashMap<u32, Vec<&Kept>> = HashMap::new();
+        let mut members: HashMap<u32, Vec<&Kept>> = HashMap::default();
         for k in kept.iter().filter(|k| k.event > 0) {
             members.entry(k.event).or_default().push(k);
         }

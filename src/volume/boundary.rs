@@ -8,13 +8,13 @@
 //! parts separate loops (the region between an incoming and its outgoing edge is the region's
 //! corner at that vertex).
 
-use std::collections::HashMap;
+use rustc_hash::FxHashMap as HashMap;
 
 /// For every edge `edges[k] = (a, b)`, the index of the edge that follows it on its loop (an edge
 /// leaving `b`). `None` for an edge with no successor (an open chain: the edges do not form
 /// closed loops). `pos` gives a vertex's (u, v) position, for the pinch rule.
 pub fn successors(edges: &[(u32, u32)], pos: impl Fn(u32) -> [f64; 2]) -> Vec<Option<usize>> {
-    let mut leaving: HashMap<u32, Vec<usize>> = HashMap::new();
+    let mut leaving: HashMap<u32, Vec<usize>> = HashMap::default();
     for (k, &(a, _)) in edges.iter().enumerate() {
         leaving.entry(a).or_default().push(k);
     }

@@ -148,8 +148,8 @@ pub fn read_ply_mesh(path: &Path) -> Result<Mesh> {
 /// must be used by exactly two faces, once in each direction, and the signed volume must be
 /// positive. The message names the first problem found.
 pub fn check_watertight(mesh: &Mesh) -> std::result::Result<(), String> {
-    use std::collections::HashMap;
-    let mut directed: HashMap<(u32, u32), u32> = HashMap::new();
+    use rustc_hash::FxHashMap as HashMap;
+    let mut directed: HashMap<(u32, u32), u32> = HashMap::default();
     for (k, f) in mesh.faces.iter().enumerate() {
         if f.iter().any(|&i| i as usize >= mesh.vertices.len()) {
             return Err(format!("face {k} refers to a missing vertex"));

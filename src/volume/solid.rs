@@ -27,7 +27,7 @@
 //! - [`grid_top`] (any [`Surface`], e.g. a user mesh): heights sampled on a regular grid over
 //!   the region (2 triangles per square).
 
-use std::collections::HashMap;
+use rustc_hash::FxHashMap as HashMap;
 
 use super::boundary;
 use super::frame::Footprint;
@@ -115,7 +115,7 @@ impl Side {
 /// faces.
 pub fn clipped_top(tin_vertices: &[[f64; 3]], tin_faces: &[[u32; 3]], region: &Region) -> Mesh {
     let cells = &region.cells;
-    let mut index: HashMap<Label, u32> = HashMap::new();
+    let mut index: HashMap<Label, u32> = HashMap::default();
     let mut top = Mesh::default();
     let mut id_of = |label: Label, pos: [f64; 3], top: &mut Mesh| -> u32 {
         *index.entry(label).or_insert_with(|| {
@@ -340,7 +340,7 @@ pub fn grid_top(surface: &dyn Surface, region: &Region, split: usize) -> Option<
         return None;
     }
     let mut top = Mesh::default();
-    let mut id: HashMap<usize, u32> = HashMap::new();
+    let mut id: HashMap<usize, u32> = HashMap::default();
     let mut vertex = |i: usize, j: usize, top: &mut Mesh| -> u32 {
         *id.entry(node(i, j)).or_insert_with(|| {
             top.vertices.push([
@@ -428,7 +428,7 @@ pub fn close(top: Mesh, base: f64, r: &Footprint) -> Mesh {
     let mut solid = top;
     solid.vertices.reserve_exact(2 * edges.len() + 1);
     solid.faces.reserve_exact(3 * edges.len());
-    let mut below: HashMap<Corner, u32> = HashMap::new();
+    let mut below: HashMap<Corner, u32> = HashMap::default();
     let mut base_of = |corner: Corner, a: u32, solid: &mut Mesh| -> u32 {
         *below.entry(corner).or_insert_with(|| {
             let p = solid.vertices[a as usize];

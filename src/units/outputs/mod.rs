@@ -8,7 +8,7 @@ pub mod laz;
 pub mod tables;
 pub mod view;
 
-use std::collections::HashMap;
+use rustc_hash::FxHashMap as HashMap;
 use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
@@ -208,7 +208,7 @@ pub fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<
         (Vec::new(), Vec::new(), Vec::new())
     } else {
         let (drafts, kept) = super::events::read(ctx, pair)?;
-        let mut measured: HashMap<u32, (Measured, usize)> = HashMap::new();
+        let mut measured: HashMap<u32, (Measured, usize)> = HashMap::default();
         for t in grid.tiles() {
             let v = ctx.unit(&Spec::Volumes {
                 pair,
@@ -368,7 +368,7 @@ fn summarize(
     // dependencies are every unit of the pair but the tilings, whose records the M3C2 units'
     // dependencies name).
     let mut order: Vec<&'static str> = Vec::new();
-    let mut stages: HashMap<&'static str, (usize, f64)> = HashMap::new();
+    let mut stages: HashMap<&'static str, (usize, f64)> = HashMap::default();
     let mut seen = std::collections::HashSet::new();
     let mut stack = plan.units[unit].deps.clone();
     while let Some(u) = stack.pop() {
