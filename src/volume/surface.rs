@@ -10,7 +10,10 @@
 //! Outside the data's convex hull a TIN has no height: nothing is extrapolated (SPEC.md §1
 //! "Coverage"; the region of an event keeps only what both epochs cover).
 
-use spade::{DelaunayTriangulation, FloatTriangulation, HasPosition, Point2, Triangulation};
+use spade::{
+    DelaunayTriangulation, FloatTriangulation, HasPosition, HierarchyHintGenerator, Point2,
+    Triangulation,
+};
 
 use crate::error::{Error, Result};
 
@@ -45,8 +48,14 @@ fn snap(x: f64) -> f64 {
 
 /// 2.5-D triangulated surface of local points (u, v, w).
 pub struct Tin {
-    tri: DelaunayTriangulation<Vertex>,
+    tri: Tri,
 }
+
+/// The triangulation, with a hierarchy of coarser ones to find the triangle of a point in
+/// logarithmic time from anywhere: the region's heights are asked for by several threads at
+/// once, and with the default hint (the last vertex found, shared by all threads) each query
+/// walked from wherever another thread had been (a quarter of the volumes' time).
+type Tri = DelaunayTriangulation<Vertex, (), (), (), HierarchyHintGenerator<f64>>;
 
 impl std::fmt::Debug for Tin {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -67,7 +76,7 @@ impl Tin {
                 w: p[2],
             })
             .collect();
-        let tri = DelaunayTriangulation::bulk_load(verts)
+        let tri = Tri::bulk_load(verts)
             .map_err(|e| Error::Epochs(format!("cannot triangulate surface: {e:?}")))?;
         if tri.num_inner_faces() == 0 {
             return Err(Error::Epochs(format!(
