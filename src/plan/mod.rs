@@ -227,10 +227,19 @@ impl Plan {
             self.surveys[s].label.clone(),
             self.layout.key(),
         );
+        // The frames a tile file is written in (their size comes from the memory budget): the
+        // same points in other frames are other bytes.
+        let frames = match self.layout.grid() {
+            Ok(g) => format!(
+                "frame {}",
+                crate::units::tiling::frame_points(self, g.len())
+            ),
+            Err(_) => String::new(),
+        };
         self.push(
             Spec::Tiling { survey: s },
             &label,
-            &[&key, &layout],
+            &[&key, &layout, &frames],
             Vec::new(),
         )
     }

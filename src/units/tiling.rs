@@ -28,6 +28,17 @@ pub fn need(buffers: u64) -> u64 {
     3 * buffers + (8 << 20)
 }
 
+/// Bytes of a tiling unit's splitter buffers under the plan's memory budget.
+pub fn split_budget(plan: &crate::plan::Plan) -> u64 {
+    (plan.params.memory_bytes.value / SPLIT_BUDGET_SHARE).max(8 << 20)
+}
+
+/// Points per frame of the tile files of a survey split into `tiles` tiles (see
+/// `talus_tiling::splitter`): part of the tiling unit's key.
+pub fn frame_points(plan: &crate::plan::Plan, tiles: usize) -> usize {
+    talus_tiling::splitter::frame_points(split_budget(plan), tiles)
+}
+
 /// How a survey's tiles are written: a LAS/LAZ survey's coordinates as the integers of its
 /// (first) file's coordinate transform, which is exact (a value that does not come back bit for
 /// bit keeps its column as f64) and takes a third of the bytes, so that tiles compress, are
@@ -48,7 +59,7 @@ pub fn run(ctx: &Ctx, survey: usize, out: &mut UnitWriter) -> Result<serde_json:
     let layout = &plan.layout;
     let grid = layout.grid()?;
     let files = &plan.surveys[survey].files;
-    let budget = (plan.params.memory_bytes.value / SPLIT_BUDGET_SHARE).max(8 << 20);
+    let budget = split_budget(plan);
     let _held = ctx.reserve(
         need(budget),
         &format!("tiling survey {}", plan.surveys[survey].label),

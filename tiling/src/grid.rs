@@ -215,9 +215,11 @@ impl TileGrid {
     /// Index along `axis` of the half-open cell holding `v`, clamped into the grid.
     fn cell(&self, axis: usize, v: f64) -> u32 {
         let n = if axis == 0 { self.cols } else { self.rows };
-        let guess = ((v - self.origin[axis]) / self.tile_size).floor();
+        let guess = (v - self.origin[axis]) / self.tile_size;
         // NaN and out-of-range guesses clamp; the loops below then fix rounding at edges.
-        let mut k = if guess.is_nan() || guess < 0.0 {
+        // Truncation is the floor of the positive guesses that reach it (`floor` is a library
+        // call on baseline x86-64, and this runs twice per point of a survey).
+        let mut k = if guess.is_nan() || guess <= 0.0 {
             0
         } else if guess >= f64::from(n - 1) {
             n - 1
@@ -261,8 +263,12 @@ impl TileGrid {
     /// Range of indices along `axis` whose halo interval `[edge(k) − h, edge(k+1) + h]` contains
     /// `v` clamped onto the grid's extent (clamping changes nothing inside the grid).
     fn halo_range(&self, axis: usize, v: f64, halo: f64) -> (u32, u32) {
+        self.halo_range_from(axis, v, halo, self.cell(axis, v))
+    }
+
+    /// [`Self::halo_range`] given `own`, the cell of `v` along `axis`.
+    fn halo_range_from(&self, axis: usize, v: f64, halo: f64, own: u32) -> (u32, u32) {
         let n = if axis == 0 { self.cols } else { self.rows };
-        let own = self.cell(axis, v);
         let v = self.clamp(axis, v);
         // The intervals are ordered and overlap only near edges; walk out from the owner with the
         // exact same predicate `halo_box` uses, so the set matches a brute-force check exactly.
@@ -305,6 +311,18 @@ impl TileGrid {
     /// Column and row ranges (inclusive) of [`Self::tiles_touching`].
     pub(crate) fn touching_ranges(&self, x: f64, y: f64, halo: f64) -> [(u32, u32); 2] {
         [self.halo_range(0, x, halo), self.halo_range(1, y, halo)]
+    }
+
+    /// [`Self::owner`] and [`Self::touching_ranges`] at once (each cell found once).
+    pub(crate) fn owner_and_ranges(&self, x: f64, y: f64, halo: f64) -> (TileId, [(u32, u32); 2]) {
+        let (col, row) = (self.cell(0, x), self.cell(1, y));
+        (
+            TileId { col, row },
+            [
+                self.halo_range_from(0, x, halo, col),
+                self.halo_range_from(1, y, halo, row),
+            ],
+        )
     }
 
     /// Position of a tile in [`Self::tiles`] order (`col·rows + row`).

@@ -15,6 +15,7 @@
 
 pub mod atomic;
 pub mod error;
+pub mod framed;
 pub mod grid;
 pub mod hash;
 pub mod manifest;

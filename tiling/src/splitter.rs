@@ -2,37 +2,42 @@
 //!
 //! Each pushed point goes to every tile whose halo box contains it ([`TileGrid::tiles_touching`]),
 //! with an `owned` column (1 in the tile that owns it, 0 where it is only halo). Points wait in
-//! per-tile column buffers; when the buffers' allocated bytes exceed the budget, the largest
-//! buffers are appended as compressed chunks to per-tile segment files until the buffers use at
-//! most half the budget (the hysteresis keeps flushes large). [`TileSplitter::finish`] then
-//! builds each tile file from its segment chunks followed by its remaining buffer, one tile at a
-//! time, and deletes the segments.
+//! per-tile buffers of one frame each; a full buffer is encoded and appended to its tile's file
+//! as a frame ([`crate::framed`]) and emptied. [`TileSplitter::finish`] appends every tile's last,
+//! partial frame and writes the tiles' headers. Each point is encoded once.
 //!
-//! Determinism: a tile's points are always flushed all together and chunks are appended in
-//! order, so a tile file holds its points in input order, whatever the chunk sizes of `push`, the
-//! budget or the flush order.
+//! Determinism: a tile's frames hold its points in input order, `frame_points` at a time, so a
+//! tile file's bytes depend on the input, the grid, the halo and the frame size only (not on
+//! the chunk sizes of `push`); the frame size comes from the budget and the number of tiles.
 //!
-//! Memory: the buffers' allocated capacity (not just their length) is counted against the budget;
-//! a buffer grows by half its size (at least 64 points), so the count overshoots the budget by at
-//! most one growth step. `finish` holds at most one tile's points plus the remaining buffers.
+//! Memory: a buffer is allocated whole (one frame) when its tile gets its first point and kept
+//! until the end, so the buffers never hold more than tiles × frame × 25 bytes ≤ the budget.
 
 use crate::error::{Error, Result};
+use crate::framed::Framed;
 use crate::grid::{TileGrid, TileId};
-use crate::tile_file::{self, Column, ColumnData, FileDigest, TileColumns, WriteOptions};
-use std::fs::{self, OpenOptions};
-use std::io::{Read, Write};
+use crate::tile_file::{Column, ColumnData, FileDigest, TileColumns, WriteOptions};
+use std::fs;
 use std::path::{Path, PathBuf};
 
 /// Name of the per-point ownership column in tile files (u8: 1 owned, 0 halo).
 pub const OWNED_COLUMN: &str = "owned";
 /// Bytes one buffered point takes: x, y, z as f64 plus the owned flag.
 const BYTES_PER_POINT: u64 = 3 * 8 + 1;
-/// Smallest buffer growth, in points.
-const MIN_GROWTH: usize = 64;
+/// The largest frame, in points (25 MiB of buffer): larger ones gain nothing in compression
+/// and hold more memory at once while they are encoded.
+pub const MAX_FRAME_POINTS: usize = 1 << 20;
 
 /// Where the tile `id` of a split lives.
 pub fn tile_path(dir: &Path, id: TileId) -> PathBuf {
     dir.join(format!("{}.tile", id.name()))
+}
+
+/// Points per frame for a split into `tiles` tiles with `budget` bytes for its buffers: every
+/// tile's buffer at once fits the budget.
+pub fn frame_points(budget: u64, tiles: usize) -> usize {
+    let per = budget / (tiles.max(1) as u64 * BYTES_PER_POINT);
+    (per.min(MAX_FRAME_POINTS as u64) as usize).max(1)
 }
 
 #[derive(Default)]
@@ -43,32 +48,23 @@ struct Buffer {
     owned: Vec<u8>,
 }
 
-impl Buffer {
-    fn capacity_bytes(&self) -> u64 {
-        self.x.capacity() as u64 * BYTES_PER_POINT
-    }
-}
-
 /// Splits a stream of points into the tiles of a grid, on disk.
 pub struct TileSplitter {
-    dir: PathBuf,
-    seg_dir: PathBuf,
     grid: TileGrid,
     halo: f64,
-    budget: u64,
+    frame_points: usize,
     opts: WriteOptions,
-    /// One buffer per tile, indexed by [`TileGrid::index`].
+    /// One buffer and one file per tile, indexed by [`TileGrid::index`].
     buffers: Vec<Buffer>,
+    files: Vec<Framed>,
     buffered_bytes: u64,
-    /// Points already appended to each tile's segment file.
-    flushed: Vec<u64>,
 }
 
 impl TileSplitter {
     /// A splitter writing tile files `<dir>/t_CCCC_RRRR.tile`, with `memory_budget_bytes` for its
-    /// buffers. `dir` belongs to the splitter: it is created if missing, and tile files and
-    /// segments left there by an earlier (interrupted) split are removed first, so they can never
-    /// be mistaken for this split's output.
+    /// buffers (see [`frame_points`]). `dir` belongs to the splitter: it is created if missing,
+    /// and tile files and segments left there by an earlier (interrupted) split are removed
+    /// first, so they can never be mistaken for this split's output.
     pub fn new(dir: &Path, grid: TileGrid, halo: f64, memory_budget_bytes: u64) -> Result<Self> {
         if !(halo.is_finite() && halo >= 0.0) {
             return Err(Error::Parameter {
@@ -77,6 +73,7 @@ impl TileSplitter {
             });
         }
         fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+        // Segment files of the splitter before framed tiles.
         let seg_dir = dir.join("segments");
         if seg_dir.exists() {
             fs::remove_dir_all(&seg_dir).map_err(|e| Error::io(&seg_dir, e))?;
@@ -88,28 +85,35 @@ impl TileSplitter {
                 fs::remove_file(&path).map_err(|e| Error::io(&path, e))?;
             }
         }
-        fs::create_dir_all(&seg_dir).map_err(|e| Error::io(&seg_dir, e))?;
         let n = grid.len();
+        let rows = grid.rows() as usize;
+        let files = (0..n)
+            .map(|i| {
+                let id = TileId {
+                    col: (i / rows) as u32,
+                    row: (i % rows) as u32,
+                };
+                Framed::new(&tile_path(dir, id))
+            })
+            .collect();
         Ok(TileSplitter {
-            dir: dir.to_path_buf(),
-            seg_dir,
             grid,
             halo,
-            budget: memory_budget_bytes,
+            frame_points: frame_points(memory_budget_bytes, n),
             opts: WriteOptions::default(),
             buffers: (0..n).map(|_| Buffer::default()).collect(),
+            files,
             buffered_bytes: 0,
-            flushed: vec![0; n],
         })
     }
 
-    /// Use these options for the final tile files (e.g. quantised coordinates).
+    /// Use these options for the tile files (e.g. quantised coordinates).
     pub fn with_options(mut self, opts: WriteOptions) -> Self {
         self.opts = opts;
         self
     }
 
-    /// Use these options from now on (for the segments and the final tile files).
+    /// Use these options from now on (for the frames not yet written).
     pub fn set_options(&mut self, opts: WriteOptions) {
         self.opts = opts;
     }
@@ -119,104 +123,50 @@ impl TileSplitter {
         &self.grid
     }
 
+    /// Points per frame.
+    pub fn frame_points(&self) -> usize {
+        self.frame_points
+    }
+
     /// Bytes currently allocated by the buffers (what the budget bounds).
     pub fn buffered_bytes(&self) -> u64 {
         self.buffered_bytes
     }
 
-    /// Route points to their tiles (in order), flushing buffers to segments when over budget.
+    /// Route points to their tiles (in order), writing a frame whenever a tile's buffer is full.
     /// Points outside the grid go where [`TileGrid::owner`] clamps them (NaN x or y counts as the
     /// grid's min edge); callers should drop non-finite points before pushing.
     pub fn push(&mut self, points: &[[f64; 3]]) -> Result<()> {
         let rows = self.grid.rows() as usize;
+        let frame = self.frame_points;
         for p in points {
-            let owner = self.grid.owner(p[0], p[1]);
-            let [(c0, c1), (r0, r1)] = self.grid.touching_ranges(p[0], p[1], self.halo);
+            let (owner, [(c0, c1), (r0, r1)]) = self.grid.owner_and_ranges(p[0], p[1], self.halo);
             for col in c0..=c1 {
                 for row in r0..=r1 {
                     let i = col as usize * rows + row as usize;
                     let b = &mut self.buffers[i];
-                    if b.x.len() == b.x.capacity() {
-                        let before = b.capacity_bytes();
-                        let grow = (b.x.len() / 2).max(MIN_GROWTH);
-                        b.x.reserve_exact(grow);
-                        b.y.reserve_exact(grow);
-                        b.z.reserve_exact(grow);
-                        b.owned.reserve_exact(grow);
-                        self.buffered_bytes += b.capacity_bytes() - before;
+                    if b.x.capacity() == 0 {
+                        b.x.reserve_exact(frame);
+                        b.y.reserve_exact(frame);
+                        b.z.reserve_exact(frame);
+                        b.owned.reserve_exact(frame);
+                        self.buffered_bytes += frame as u64 * BYTES_PER_POINT;
                     }
                     b.x.push(p[0]);
                     b.y.push(p[1]);
                     b.z.push(p[2]);
                     b.owned.push(u8::from(owner.col == col && owner.row == row));
+                    if b.x.len() == frame {
+                        self.write_frame(i)?;
+                    }
                 }
             }
-            if self.buffered_bytes > self.budget {
-                self.flush_largest()?;
-            }
         }
         Ok(())
     }
 
-    /// Flush the largest buffers until at most half the budget is allocated.
-    fn flush_largest(&mut self) -> Result<()> {
-        let mut order: Vec<usize> = (0..self.buffers.len())
-            .filter(|&i| !self.buffers[i].x.is_empty())
-            .collect();
-        // Largest first; ties by tile order so runs are reproducible.
-        order.sort_by_key(|&i| (std::cmp::Reverse(self.buffers[i].x.len()), i));
-        for i in order {
-            if self.buffered_bytes <= self.budget / 2 {
-                break;
-            }
-            self.flush(i)?;
-        }
-        Ok(())
-    }
-
-    fn segment_path(&self, i: usize) -> PathBuf {
-        let id = self.id_of(i);
-        self.seg_dir.join(format!("{}.seg", id.name()))
-    }
-
-    fn id_of(&self, i: usize) -> TileId {
-        let rows = self.grid.rows() as usize;
-        TileId {
-            col: (i / rows) as u32,
-            row: (i % rows) as u32,
-        }
-    }
-
-    /// Append tile `i`'s buffer to its segment file as one chunk: u64 length + encoded columns
-    /// (the tile file encoding, so each chunk carries its own checksums).
-    fn flush(&mut self, i: usize) -> Result<()> {
-        let b = std::mem::take(&mut self.buffers[i]);
-        self.buffered_bytes -= b.capacity_bytes();
-        let n = b.x.len() as u64;
-        let cols = into_columns(b);
-        // Segments are temporary: fastest level, the tiles' layout choices (quantised
-        // coordinates take a third of the bytes and of the time).
-        let seg_opts = WriteOptions {
-            level: 1,
-            ..self.opts
-        };
-        let path = self.segment_path(i);
-        let bytes = tile_file::encode(&cols, &seg_opts).map_err(|p| Error::invalid(&path, p))?;
-        let mut f = OpenOptions::new()
-            .create(true)
-            .append(true)
-            .open(&path)
-            .map_err(|e| Error::io(&path, e))?;
-        f.write_all(&(bytes.len() as u64).to_le_bytes())
-            .and_then(|_| f.write_all(&bytes))
-            .map_err(|e| Error::io(&path, e))?;
-        self.flushed[i] += n;
-        Ok(())
-    }
-
-    /// Write every non-empty tile file (segments first, then the buffer, i.e. input order), one
-    /// tile at a time, delete the segments, and return the tiles written with their point counts
-    /// (halo points included), in tile order.
+    /// Write every non-empty tile's last frame and header, and return the tiles written with
+    /// their point counts (halo points included), in tile order.
     pub fn finish(self) -> Result<Vec<(TileId, u64)>> {
         Ok(self
             .finish_with_digests()?
@@ -226,42 +176,57 @@ impl TileSplitter {
     }
 
     /// [`TileSplitter::finish`], with each tile file's digest.
-    pub fn finish_with_digests(mut self) -> Result<Vec<(TileId, u64, FileDigest)>> {
+    pub fn finish_with_digests(self) -> Result<Vec<(TileId, u64, FileDigest)>> {
+        let rows = self.grid.rows() as usize;
         let mut written = Vec::new();
-        for i in 0..self.buffers.len() {
-            let id = self.id_of(i);
-            let buffer = std::mem::take(&mut self.buffers[i]);
-            self.buffered_bytes -= buffer.capacity_bytes();
-            if self.flushed[i] == 0 && buffer.x.is_empty() {
-                continue;
+        for (i, (mut buffer, mut file)) in self.buffers.into_iter().zip(self.files).enumerate() {
+            if !buffer.x.is_empty() {
+                write_frame(&mut buffer, &mut file, &self.opts)?;
             }
-            let cols = if self.flushed[i] > 0 {
-                let mut cols = empty_columns();
-                let seg = self.segment_path(i);
-                read_segment(&seg, &mut cols)?;
-                if cols.len() as u64 != self.flushed[i] {
-                    return Err(Error::corrupt(
-                        &seg,
-                        "segment holds a different point count",
-                    ));
-                }
-                append(&mut cols, into_columns(buffer));
-                cols
-            } else {
-                // Never flushed: the buffer is the tile.
-                into_columns(buffer)
-            };
-            let path = tile_path(&self.dir, id);
-            let digest = tile_file::write_tile_with(&path, &cols, &self.opts)?;
-            written.push((id, cols.len() as u64, digest));
-            if self.flushed[i] > 0 {
-                let seg = self.segment_path(i);
-                fs::remove_file(&seg).map_err(|e| Error::io(&seg, e))?;
+            drop(buffer);
+            if file.points() > 0 {
+                let id = TileId {
+                    col: (i / rows) as u32,
+                    row: (i % rows) as u32,
+                };
+                let n = file.points();
+                written.push((id, n, file.finish()?));
             }
         }
-        fs::remove_dir_all(&self.seg_dir).map_err(|e| Error::io(&self.seg_dir, e))?;
         Ok(written)
     }
+
+    fn write_frame(&mut self, i: usize) -> Result<()> {
+        write_frame(&mut self.buffers[i], &mut self.files[i], &self.opts)
+    }
+}
+
+/// Append `b` to `file` as a frame and empty `b` (keeping its allocation for the next frame).
+fn write_frame(b: &mut Buffer, file: &mut Framed, opts: &WriteOptions) -> Result<()> {
+    let cols = TileColumns {
+        x: std::mem::take(&mut b.x),
+        y: std::mem::take(&mut b.y),
+        z: std::mem::take(&mut b.z),
+        extra: vec![Column {
+            name: OWNED_COLUMN.into(),
+            data: ColumnData::U8(std::mem::take(&mut b.owned)),
+        }],
+    };
+    let written = file.append(&cols, opts);
+    let TileColumns { x, y, z, extra } = cols;
+    (b.x, b.y, b.z) = (x, y, z);
+    if let Some(Column {
+        data: ColumnData::U8(o),
+        ..
+    }) = extra.into_iter().next()
+    {
+        b.owned = o;
+    }
+    for v in [&mut b.x, &mut b.y, &mut b.z] {
+        v.clear();
+    }
+    b.owned.clear();
+    written
 }
 
 /// The columns of a tile without points (x, y, z and an empty owned column): what a tile file
@@ -273,59 +238,5 @@ pub fn empty_columns() -> TileColumns {
             data: ColumnData::U8(Vec::new()),
         }],
         ..TileColumns::default()
-    }
-}
-
-fn into_columns(b: Buffer) -> TileColumns {
-    TileColumns {
-        x: b.x,
-        y: b.y,
-        z: b.z,
-        extra: vec![Column {
-            name: OWNED_COLUMN.into(),
-            data: ColumnData::U8(b.owned),
-        }],
-    }
-}
-
-/// Append `more` (same column layout: x, y, z, owned) to `cols`.
-fn append(cols: &mut TileColumns, more: TileColumns) {
-    cols.x.extend_from_slice(&more.x);
-    cols.y.extend_from_slice(&more.y);
-    cols.z.extend_from_slice(&more.z);
-    if let (Some(ColumnData::U8(dst)), Some(ColumnData::U8(src))) = (
-        cols.extra.first_mut().map(|c| &mut c.data),
-        more.extra.first().map(|c| &c.data),
-    ) {
-        dst.extend_from_slice(src);
-    }
-}
-
-/// Decode every chunk of a segment file, in order, into `cols`.
-fn read_segment(path: &Path, cols: &mut TileColumns) -> Result<()> {
-    let mut f = fs::File::open(path).map_err(|e| Error::io(path, e))?;
-    let mut len = [0u8; 8];
-    loop {
-        match f.read_exact(&mut len) {
-            Ok(()) => {}
-            Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => return Ok(()),
-            Err(e) => return Err(Error::io(path, e)),
-        }
-        let n = u64::from_le_bytes(len);
-        let n = usize::try_from(n).map_err(|_| Error::corrupt(path, "chunk too large"))?;
-        let mut chunk = Vec::new();
-        (&mut f)
-            .take(n as u64)
-            .read_to_end(&mut chunk)
-            .map_err(|e| Error::io(path, e))?;
-        if chunk.len() != n {
-            return Err(Error::corrupt(path, "segment chunk is truncated"));
-        }
-        let part = tile_file::decode(&chunk).map_err(|r| Error::corrupt(path, r))?;
-        let owned_ok = matches!(part.column(OWNED_COLUMN), Some(ColumnData::U8(_)));
-        if !owned_ok || part.extra.len() != 1 {
-            return Err(Error::corrupt(path, "segment chunk has unexpected columns"));
-        }
-        append(cols, part);
     }
 }

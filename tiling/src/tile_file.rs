@@ -264,7 +264,29 @@ pub fn read_tile(path: &Path) -> Result<TileColumns> {
     File::open(path)
         .and_then(|mut f| f.read_to_end(&mut bytes))
         .map_err(|e| Error::io(path, e))?;
-    decode(&bytes).map_err(|reason| Error::corrupt(path, reason))
+    let decoded = match version_of(&bytes) {
+        Ok(crate::framed::VERSION) => crate::framed::decode(&bytes),
+        Ok(_) => decode(&bytes),
+        Err(e) => Err(e),
+    };
+    decoded.map_err(|reason| Error::corrupt(path, reason))
+}
+
+/// The format version of a tile file starting with `bytes` (1 or 2).
+fn version_of(bytes: &[u8]) -> Result<u32, String> {
+    if bytes.len() < 12 {
+        return Err("file is truncated".into());
+    }
+    if &bytes[..8] != MAGIC {
+        return Err("bad magic (not a talus tile file)".into());
+    }
+    match u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) {
+        v @ (VERSION | crate::framed::VERSION) => Ok(v),
+        v => Err(format!(
+            "unsupported format version {v} (expected {VERSION} or {})",
+            crate::framed::VERSION
+        )),
+    }
 }
 
 /// Read and verify only a tile file's header (count, bounds, column names).
@@ -272,6 +294,28 @@ pub fn read_tile_header(path: &Path) -> Result<TileHeader> {
     let mut f = File::open(path).map_err(|e| Error::io(path, e))?;
     let mut fixed = [0u8; 16];
     read_exact_or_corrupt(&mut f, &mut fixed, path)?;
+    if version_of(&fixed) == Ok(crate::framed::VERSION) {
+        // The framed header, then the first frame's header for the column names.
+        let mut head = fixed.to_vec();
+        head.resize(crate::framed::HEADER_LEN + 16, 0);
+        read_exact_or_corrupt(&mut f, &mut head[16..], path)?;
+        let h = crate::framed::parse_header(&head).map_err(|r| Error::corrupt(path, r))?;
+        let at = crate::framed::HEADER_LEN;
+        let frame_len =
+            u32::from_le_bytes([head[at + 12], head[at + 13], head[at + 14], head[at + 15]]);
+        if !(16..=1 << 24).contains(&frame_len) {
+            return Err(Error::corrupt(path, "implausible frame header length"));
+        }
+        head.resize(at + frame_len as usize, 0);
+        read_exact_or_corrupt(&mut f, &mut head[at + 16..], path)?;
+        let columns = crate::framed::column_names(&head).map_err(|r| Error::corrupt(path, r))?;
+        return Ok(TileHeader {
+            version: crate::framed::VERSION,
+            point_count: h.point_count,
+            bounds: h.bounds,
+            columns,
+        });
+    }
     let header_len = u32::from_le_bytes([fixed[12], fixed[13], fixed[14], fixed[15]]) as usize;
     check_magic_version(&fixed).map_err(|r| Error::corrupt(path, r))?;
     if !(16..=1 << 24).contains(&header_len) {
@@ -302,8 +346,16 @@ fn read_exact_or_corrupt(f: &mut File, buf: &mut [u8], path: &Path) -> Result<()
     })
 }
 
-/// Encode columns into the bytes of a tile file (also used for splitter segment chunks).
+/// Encode columns into the bytes of a tile file (also a frame of a framed tile).
 pub(crate) fn encode(cols: &TileColumns, opts: &WriteOptions) -> Result<Vec<u8>, String> {
+    encode_with_bounds(cols, opts).map(|(bytes, _)| bytes)
+}
+
+/// [`encode`], and the bounds of the points.
+pub(crate) fn encode_with_bounds(
+    cols: &TileColumns,
+    opts: &WriteOptions,
+) -> Result<(Vec<u8>, Bounds3), String> {
     if let Some(p) = cols.problem() {
         return Err(p);
     }
@@ -409,7 +461,28 @@ pub(crate) fn encode(cols: &TileColumns, opts: &WriteOptions) -> Result<Vec<u8>,
     for column in stored {
         header.extend_from_slice(&column);
     }
-    Ok(header)
+    Ok((header, b))
+}
+
+/// The length of the version-1 encoding at the start of `bytes` (its header checked).
+pub(crate) fn encoded_len(bytes: &[u8]) -> Result<usize, String> {
+    let h = parse_header(bytes)?;
+    let len = (h.header_len as u64)
+        .checked_add(h.payload_len)
+        .ok_or("payload length too large")?;
+    if len > bytes.len() as u64 {
+        return Err("file is truncated".into());
+    }
+    Ok(len as usize)
+}
+
+/// The column names of the version-1 encoding whose header starts `bytes`.
+pub(crate) fn column_names(bytes: &[u8]) -> Result<Vec<String>, String> {
+    Ok(parse_header(bytes)?
+        .columns
+        .into_iter()
+        .map(|c| c.name)
+        .collect())
 }
 
 thread_local! {

@@ -1,0 +1,359 @@
+//! Framed tile files (format version 2): a tile written while its points arrive, in frames of a
+//! fixed number of points.
+//!
+//! ```text
+//! magic        8 bytes  "TALUSTIL"
+//! version      u32      2
+//! header_len   u32      84
+//! point_count  u64      points of all frames
+//! frame_count  u32
+//! reserved     u32      0
+//! bounds       6 × f64  min x, y, z, max x, y, z of the points (+inf/-inf when empty)
+//! header_crc   u32      CRC-32 of every header byte before it
+//! frames       frame_count complete version-1 tile encodings (each with its own header,
+//!              column lengths and CRCs), one after the other, in point order
+//! ```
+//!
+//! The splitter appends a frame to a tile's file whenever the tile has gathered a frame's worth
+//! of points, and writes the header over the placeholder at the start when the split ends. A
+//! tile is then encoded once: the version-1 splitter flushed buffers to segment files, read them
+//! back and encoded every tile a second time (a third of pass 1 on the 120M-point pair). Frames
+//! also decode in parallel. The frame size is the writer's (the splitter derives it from its
+//! memory budget and the grid), so the bytes of a tile depend on it; its points never do.
+
+use std::fs::{File, OpenOptions};
+use std::io::{Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+
+use crate::atomic::{sync_dir, tmp_path};
+use crate::error::{Error, Result};
+use crate::tile_file::{self, Bounds3, Column, ColumnData, FileDigest, TileColumns, WriteOptions};
+
+/// The format version of framed tile files.
+pub const VERSION: u32 = 2;
+/// Bytes of the header.
+pub const HEADER_LEN: usize = 84;
+/// Frames decoded at once when a tile is read (in parallel; the decoded frames are held until
+/// they are appended to the tile's columns).
+const DECODE_GROUP: usize = 8;
+
+/// A framed tile file being written at `path` (through `<path>.tmp` until [`Framed::finish`]).
+#[derive(Debug)]
+pub struct Framed {
+    path: PathBuf,
+    frames: u32,
+    points: u64,
+    bounds: Bounds3,
+    /// CRC-32 and length of the frames written.
+    crc: crc32fast::Hasher,
+    len: u64,
+}
+
+impl Framed {
+    /// A tile file to be written at `path`; nothing is written before the first frame.
+    pub fn new(path: &Path) -> Self {
+        Framed {
+            path: path.to_path_buf(),
+            frames: 0,
+            points: 0,
+            bounds: Bounds3 {
+                min: [f64::INFINITY; 3],
+                max: [f64::NEG_INFINITY; 3],
+            },
+            crc: crc32fast::Hasher::new(),
+            len: 0,
+        }
+    }
+
+    /// Points written so far.
+    pub fn points(&self) -> u64 {
+        self.points
+    }
+
+    /// Append `cols` as one frame (opened for each frame, so that a split over thousands of
+    /// tiles holds no file open between frames).
+    pub fn append(&mut self, cols: &TileColumns, opts: &WriteOptions) -> Result<()> {
+        let tmp = tmp_path(&self.path);
+        let (bytes, b) =
+            tile_file::encode_with_bounds(cols, opts).map_err(|p| Error::invalid(&tmp, p))?;
+        let mut f = if self.frames == 0 {
+            let mut f = File::create(&tmp).map_err(|e| Error::io(&tmp, e))?;
+            f.write_all(&[0; HEADER_LEN])
+                .map_err(|e| Error::io(&tmp, e))?;
+            f
+        } else {
+            OpenOptions::new()
+                .append(true)
+                .open(&tmp)
+                .map_err(|e| Error::io(&tmp, e))?
+        };
+        f.write_all(&bytes).map_err(|e| Error::io(&tmp, e))?;
+        self.crc.update(&bytes);
+        self.len += bytes.len() as u64;
+        self.frames += 1;
+        self.points += cols.len() as u64;
+        for a in 0..3 {
+            self.bounds.min[a] = self.bounds.min[a].min(b.min[a]);
+            self.bounds.max[a] = self.bounds.max[a].max(b.max[a]);
+        }
+        Ok(())
+    }
+
+    /// Write the header, make the file durable and give it its name; the file's digest. At
+    /// least one frame must have been appended.
+    pub fn finish(self) -> Result<FileDigest> {
+        let tmp = tmp_path(&self.path);
+        if self.frames == 0 {
+            return Err(Error::invalid(&self.path, "a framed tile without a frame"));
+        }
+        let header = header_bytes(self.points, self.frames, &self.bounds);
+        let mut f = OpenOptions::new()
+            .write(true)
+            .open(&tmp)
+            .map_err(|e| Error::io(&tmp, e))?;
+        f.seek(SeekFrom::Start(0))
+            .and_then(|_| f.write_all(&header))
+            .and_then(|()| f.sync_all())
+            .map_err(|e| Error::io(&tmp, e))?;
+        drop(f);
+        std::fs::rename(&tmp, &self.path).map_err(|e| Error::io(&self.path, e))?;
+        sync_dir(&self.path)?;
+        let mut crc = crc32fast::Hasher::new();
+        crc.update(&header);
+        crc.combine(&self.crc);
+        Ok(FileDigest {
+            size: HEADER_LEN as u64 + self.len,
+            crc32: crc.finalize(),
+        })
+    }
+}
+
+/// The header of a framed tile.
+fn header_bytes(points: u64, frames: u32, bounds: &Bounds3) -> [u8; HEADER_LEN] {
+    let mut h = Vec::with_capacity(HEADER_LEN);
+    h.extend_from_slice(tile_file::MAGIC);
+    h.extend_from_slice(&VERSION.to_le_bytes());
+    h.extend_from_slice(&(HEADER_LEN as u32).to_le_bytes());
+    h.extend_from_slice(&points.to_le_bytes());
+    h.extend_from_slice(&frames.to_le_bytes());
+    h.extend_from_slice(&0u32.to_le_bytes());
+    for v in bounds.min.iter().chain(&bounds.max) {
+        h.extend_from_slice(&v.to_le_bytes());
+    }
+    let crc = crc32fast::hash(&h);
+    h.extend_from_slice(&crc.to_le_bytes());
+    let mut out = [0; HEADER_LEN];
+    out.copy_from_slice(&h);
+    out
+}
+
+/// What a framed tile's header says: point count, frame count, bounds.
+pub(crate) struct Header {
+    pub point_count: u64,
+    pub frames: u32,
+    pub bounds: Bounds3,
+}
+
+/// Parse and check the header at the start of `bytes` (at least [`HEADER_LEN`] of them).
+pub(crate) fn parse_header(bytes: &[u8]) -> Result<Header, String> {
+    if bytes.len() < HEADER_LEN {
+        return Err("file is truncated".into());
+    }
+    let u32_at =
+        |k: usize| u32::from_le_bytes([bytes[k], bytes[k + 1], bytes[k + 2], bytes[k + 3]]);
+    let u64_at = |k: usize| u64::from_le_bytes(bytes[k..k + 8].try_into().unwrap_or([0; 8]));
+    if &bytes[..8] != tile_file::MAGIC || u32_at(8) != VERSION {
+        return Err("not a framed tile file".into());
+    }
+    if u32_at(12) as usize != HEADER_LEN {
+        return Err("header length is wrong".into());
+    }
+    if crc32fast::hash(&bytes[..HEADER_LEN - 4]) != u32_at(HEADER_LEN - 4) {
+        return Err("header checksum mismatch".into());
+    }
+    let f64_at = |k: usize| f64::from_bits(u64_at(k));
+    Ok(Header {
+        point_count: u64_at(16),
+        frames: u32_at(24),
+        bounds: Bounds3 {
+            min: [f64_at(32), f64_at(40), f64_at(48)],
+            max: [f64_at(56), f64_at(64), f64_at(72)],
+        },
+    })
+}
+
+/// The frames of a framed tile held in `bytes`, each a version-1 encoding, checked to fill the
+/// file exactly.
+fn frames<'a>(bytes: &'a [u8], h: &Header) -> Result<Vec<&'a [u8]>, String> {
+    let mut out = Vec::with_capacity(h.frames as usize);
+    let mut pos = HEADER_LEN;
+    for k in 0..h.frames {
+        let len = tile_file::encoded_len(&bytes[pos..]).map_err(|e| format!("frame {k}: {e}"))?;
+        out.push(&bytes[pos..pos + len]);
+        pos += len;
+    }
+    if pos != bytes.len() {
+        return Err("file is longer than its frames".into());
+    }
+    Ok(out)
+}
+
+/// Decode and verify a whole framed tile held in memory: its frames (in parallel, a group at
+/// a time), appended in order.
+pub(crate) fn decode(bytes: &[u8]) -> Result<TileColumns, String> {
+    use rayon::prelude::*;
+    let h = parse_header(bytes)?;
+    let n = usize::try_from(h.point_count).map_err(|_| "point count too large")?;
+    let mut out: Option<TileColumns> = None;
+    for group in frames(bytes, &h)?.chunks(DECODE_GROUP) {
+        let decoded: Vec<Result<TileColumns, String>> =
+            group.par_iter().map(|f| tile_file::decode(f)).collect();
+        for frame in decoded {
+            let frame = frame?;
+            match &mut out {
+                None => {
+                    let mut first = with_capacity(&frame, n);
+                    append(&mut first, frame)?;
+                    out = Some(first);
+                }
+                Some(cols) => append(cols, frame)?,
+            }
+        }
+    }
+    let cols = out.ok_or("a framed tile without a frame")?;
+    if cols.len() as u64 != h.point_count {
+        return Err(format!(
+            "frames hold {} points, the header says {}",
+            cols.len(),
+            h.point_count
+        ));
+    }
+    Ok(cols)
+}
+
+/// Empty columns shaped like `frame`'s, with room for `n` points.
+fn with_capacity(frame: &TileColumns, n: usize) -> TileColumns {
+    TileColumns {
+        x: Vec::with_capacity(n),
+        y: Vec::with_capacity(n),
+        z: Vec::with_capacity(n),
+        extra: frame
+            .extra
+            .iter()
+            .map(|c| Column {
+                name: c.name.clone(),
+                data: match c.data {
+                    ColumnData::F64(_) => ColumnData::F64(Vec::with_capacity(n)),
+                    ColumnData::U32(_) => ColumnData::U32(Vec::with_capacity(n)),
+                    ColumnData::U8(_) => ColumnData::U8(Vec::with_capacity(n)),
+                },
+            })
+            .collect(),
+    }
+}
+
+/// Append `frame` to `cols`; its columns must be `cols`'s, in the same order and kinds.
+fn append(cols: &mut TileColumns, frame: TileColumns) -> Result<(), String> {
+    if frame.extra.len() != cols.extra.len() {
+        return Err("frames hold different columns".into());
+    }
+    cols.x.extend_from_slice(&frame.x);
+    cols.y.extend_from_slice(&frame.y);
+    cols.z.extend_from_slice(&frame.z);
+    for (c, f) in cols.extra.iter_mut().zip(frame.extra) {
+        if c.name != f.name {
+            return Err("frames hold different columns".into());
+        }
+        match (&mut c.data, f.data) {
+            (ColumnData::F64(a), ColumnData::F64(b)) => a.extend_from_slice(&b),
+            (ColumnData::U32(a), ColumnData::U32(b)) => a.extend_from_slice(&b),
+            (ColumnData::U8(a), ColumnData::U8(b)) => a.extend_from_slice(&b),
+            _ => return Err(format!("column {:?} changes kind between frames", c.name)),
+        }
+    }
+    Ok(())
+}
+
+/// The column names of a framed tile, from its first frame's header (`bytes`: the file's start,
+/// at least the framed header and the first frame's header).
+pub(crate) fn column_names(bytes: &[u8]) -> Result<Vec<String>, String> {
+    tile_file::column_names(&bytes[HEADER_LEN.min(bytes.len())..])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::tile_file::{read_tile, read_tile_header, Quantisation};
+
+    fn frame(start: usize, n: usize) -> TileColumns {
+        let f =
+            |i: usize, k: usize| 500_000.0 + 0.001 * ((i * 7919 + k * 104_729) % 100_000) as f64;
+        TileColumns {
+            x: (start..start + n).map(|i| f(i, 0)).collect(),
+            y: (start..start + n).map(|i| f(i, 1)).collect(),
+            z: (start..start + n).map(|i| f(i, 2) - 499_900.0).collect(),
+            extra: vec![Column {
+                name: "owned".into(),
+                data: ColumnData::U8((start..start + n).map(|i| (i % 3 == 0) as u8).collect()),
+            }],
+        }
+    }
+
+    /// A tile written in frames reads back as its points in order, with the header's count and
+    /// bounds; the digest the writer reports is the file's; any damage is found.
+    #[test]
+    fn frames_read_back_whole_and_damage_is_found() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("t_0000_0000.tile");
+        let opts = WriteOptions {
+            quantise: Some(Quantisation {
+                scale: [0.001; 3],
+                offset: [0.0; 3],
+            }),
+            ..WriteOptions::default()
+        };
+        let mut w = Framed::new(&path);
+        let mut all = TileColumns::default();
+        let mut start = 0;
+        for n in [1000, 1000, 1000, 1000, 1000, 1000, 1000, 1000, 1000, 17] {
+            let f = frame(start, n);
+            w.append(&f, &opts).unwrap();
+            if start == 0 {
+                all = with_capacity(&f, 0);
+            }
+            append(&mut all, f).unwrap();
+            start += n;
+        }
+        assert!(!path.exists(), "nothing under the final name before finish");
+        let digest = w.finish().unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        assert_eq!(digest, FileDigest::of(&bytes));
+        assert_eq!(read_tile(&path).unwrap(), all);
+        let h = read_tile_header(&path).unwrap();
+        assert_eq!((h.version, h.point_count), (VERSION, start as u64));
+        assert_eq!(h.bounds, all.bounds());
+        assert_eq!(h.columns, ["x", "y", "z", "owned"]);
+
+        let damaged = dir.path().join("d.tile");
+        for at in [3, 20, HEADER_LEN + 5, bytes.len() / 2, bytes.len() - 1] {
+            let mut b = bytes.clone();
+            b[at] ^= 0x10;
+            std::fs::write(&damaged, &b).unwrap();
+            assert!(
+                matches!(read_tile(&damaged), Err(Error::Corrupt { .. })),
+                "a flipped byte at {at}"
+            );
+        }
+        for len in [10, HEADER_LEN, bytes.len() / 3, bytes.len() - 1] {
+            std::fs::write(&damaged, &bytes[..len]).unwrap();
+            assert!(
+                matches!(read_tile(&damaged), Err(Error::Corrupt { .. })),
+                "cut at {len}"
+            );
+        }
+        let mut longer = bytes.clone();
+        longer.push(0);
+        std::fs::write(&damaged, &longer).unwrap();
+        assert!(matches!(read_tile(&damaged), Err(Error::Corrupt { .. })));
+    }
+}
