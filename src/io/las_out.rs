@@ -176,19 +176,82 @@ enum Sink {
     Laz(Box<LazSink>),
 }
 
+/// The header as written, counting the points and their bounds as they come, and the
+/// compressor: what the compressing thread holds.
+type Compressing = (las::Header, laz::ParLasZipCompressor<BufWriter<File>>);
+
+/// A LAZ file compressed on a thread of its own, a batch at a time, while the caller fills the
+/// next batch (compressing had the caller wait: a third of writing m3c2.laz at 120M points).
 struct LazSink {
-    /// The header as written, counting the points and their bounds as they come.
-    header: las::Header,
-    compressor: laz::ParLasZipCompressor<BufWriter<File>>,
+    to_thread: Option<crossbeam_channel::Sender<las::PointData>>,
+    /// Batches compressed and emptied, for the caller to fill again.
+    back: crossbeam_channel::Receiver<las::PointData>,
+    thread: Option<std::thread::JoinHandle<std::io::Result<Compressing>>>,
+    /// A batch is being compressed.
+    busy: bool,
+}
+
+impl LazSink {
+    fn start(header: las::Header, compressor: laz::ParLasZipCompressor<BufWriter<File>>) -> Self {
+        let (to_thread, batches) = crossbeam_channel::bounded::<las::PointData>(1);
+        let (done, back) = crossbeam_channel::bounded(2);
+        let thread = std::thread::spawn(move || -> std::io::Result<Compressing> {
+            let (mut header, mut compressor) = (header, compressor);
+            for mut batch in batches {
+                header.add_point_data(&batch);
+                compressor.compress_many(batch.raw_bytes())?;
+                batch.resize_for(0);
+                let _ = done.send(batch);
+            }
+            Ok((header, compressor))
+        });
+        LazSink {
+            to_thread: Some(to_thread),
+            back,
+            thread: Some(thread),
+            busy: false,
+        }
+    }
+
+    /// The compressing thread's outcome, once it has stopped.
+    fn join(&mut self) -> std::io::Result<Compressing> {
+        self.to_thread = None;
+        match self.thread.take().map(|t| t.join()) {
+            Some(Ok(outcome)) => outcome,
+            Some(Err(_)) => Err(std::io::Error::other("the LAZ compressing thread panicked")),
+            None => Err(std::io::Error::other("the LAZ compressing thread is gone")),
+        }
+    }
 }
 
 impl Sink {
-    fn write(&mut self, batch: &las::PointData) -> std::result::Result<(), las::Error> {
+    /// Write `batch`; it comes back empty (for LAZ, another batch of the same layout).
+    fn write(&mut self, batch: &mut las::PointData) -> std::result::Result<(), las::Error> {
         match self {
             Sink::Las(w) => w.write_points(batch),
             Sink::Laz(z) => {
-                z.header.add_point_data(batch);
-                z.compressor.compress_many(batch.raw_bytes())?;
+                let spare = if z.busy {
+                    match z.back.recv() {
+                        Ok(b) => b,
+                        Err(_) => {
+                            return Err(las::Error::Io(z.join().err().unwrap_or_else(|| {
+                                std::io::Error::other("the LAZ compressing thread stopped")
+                            })))
+                        }
+                    }
+                } else {
+                    let mut b = batch.clone();
+                    b.resize_for(0);
+                    b
+                };
+                let full = std::mem::replace(batch, spare);
+                let sent = z.to_thread.as_ref().map(|t| t.send(full));
+                if !matches!(sent, Some(Ok(()))) {
+                    return Err(las::Error::Io(z.join().err().unwrap_or_else(|| {
+                        std::io::Error::other("the LAZ compressing thread stopped")
+                    })));
+                }
+                z.busy = true;
                 Ok(())
             }
         }
@@ -207,11 +270,8 @@ impl Sink {
                 }
                 w.into_inner().map_err(to_io)?
             }
-            Sink::Laz(z) => {
-                let LazSink {
-                    header,
-                    mut compressor,
-                } = *z;
+            Sink::Laz(mut z) => {
+                let (header, mut compressor) = z.join()?;
                 compressor
                     .done()
                     .map_err(|e| std::io::Error::other(e.to_string()))?;
@@ -408,7 +468,7 @@ impl ResultWriter {
                 .write_to(&mut out)
                 .map_err(to_io)
                 .and_then(|()| laz::ParLasZipCompressor::new(out, vlr).map_err(to_io_laz))
-                .map(|compressor| Sink::Laz(Box::new(LazSink { header, compressor }))),
+                .map(|compressor| Sink::Laz(Box::new(LazSink::start(header, compressor)))),
         };
         let sink = match sink {
             Ok(s) => s,
@@ -515,7 +575,7 @@ impl ResultWriter {
             .ok_or_else(|| Error::Internal("write after finish".into()))?;
         // A write that failed half-way may have grown the batch by a record: trim it.
         self.batch.resize_for(self.buffered);
-        w.write(&self.batch)
+        w.write(&mut self.batch)
             .map_err(|e| Error::output(&self.path, to_io(e)))?;
         self.count += self.buffered as u64;
         self.buffered = 0;

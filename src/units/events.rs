@@ -193,8 +193,18 @@ fn to_columns(kept: &[Kept]) -> TileColumns {
 
 /// The events and kept core points of pair `pair` (its events unit must be done).
 pub fn read(ctx: &Ctx, pair: usize) -> Result<(Vec<Draft>, Vec<Kept>)> {
+    Ok((read_drafts(ctx, pair)?, read_kept(ctx, pair)?))
+}
+
+/// The events of pair `pair` (its events unit must be done).
+pub fn read_drafts(ctx: &Ctx, pair: usize) -> Result<Vec<Draft>> {
     let u = ctx.unit(&crate::plan::Spec::Events { pair })?;
-    let drafts: Vec<Draft> = super::read_json(ctx, u, EVENTS)?;
+    super::read_json(ctx, u, EVENTS)
+}
+
+/// The kept core points of pair `pair` (its events unit must be done).
+pub fn read_kept(ctx: &Ctx, pair: usize) -> Result<Vec<Kept>> {
+    let u = ctx.unit(&crate::plan::Spec::Events { pair })?;
     let c = super::read_columns(ctx, u, KEPT)?;
     let kept_path = ctx.input(u, KEPT)?;
     let bad = |name: &str| Error::Damaged {
@@ -225,5 +235,5 @@ pub fn read(ctx: &Ctx, pair: usize) -> Result<(Vec<Draft>, Vec<Kept>)> {
             event: ev[i],
         })
         .collect();
-    Ok((drafts, kept))
+    Ok(kept)
 }

@@ -79,6 +79,24 @@ pub fn search_box(obb: &Obb, params: &Params) -> ([f64; 3], [f64; 4]) {
     (h, xy)
 }
 
+/// The ids of the events with a candidate whose search box overlaps, in xy, one of `mine`'s:
+/// every event whose claim can contain a location of `mine`'s regions.
+fn near_events(drafts: &[Draft], mine: &[&Draft], params: &Params) -> rustc_hash::FxHashSet<u32> {
+    let xy = |d: &Draft| -> Vec<[f64; 4]> {
+        d.candidates
+            .iter()
+            .map(|o| search_box(o, params).1)
+            .collect()
+    };
+    let ours: Vec<[f64; 4]> = mine.iter().flat_map(|d| xy(d)).collect();
+    let index = BoxIndex::new(&ours);
+    drafts
+        .iter()
+        .filter(|d| xy(d).iter().any(|b| index.any_overlaps(b)))
+        .map(|d| d.event.id)
+        .collect()
+}
+
 /// The claims of every event (one per candidate box) over their clustered core points.
 pub fn ownership(
     drafts: &[Draft],
@@ -218,7 +236,7 @@ pub fn run(
     let ground = super::stable::read(ctx, pair)?;
     let params = &ground.params(plan);
     let stable = ground.stable.as_ref();
-    let (drafts, kept) = super::events::read(ctx, pair)?;
+    let drafts = super::events::read_drafts(ctx, pair)?;
     let grid = plan.layout.grid()?;
     let mine: Vec<&Draft> = drafts
         .iter()
@@ -227,11 +245,24 @@ pub fn run(
     let mut measured: Vec<Measured> = Vec::new();
     let (mut gathered, mut largest) = (0usize, 0usize);
     if !mine.is_empty() {
+        // Only the events whose claims can reach this tile's events decide ownership here: an
+        // event owns a location only inside its claim, which lies inside its search boxes, so
+        // the others are never asked (building every event's claim in every unit cost as much
+        // as the tile's own volumes on the 120M-point pair).
+        let near = near_events(&drafts, &mine, params);
+        let kept = super::events::read_kept(ctx, pair)?;
         let mut members: HashMap<u32, Vec<&Kept>> = HashMap::default();
         for k in kept.iter().filter(|k| k.event > 0) {
-            members.entry(k.event).or_default().push(k);
+            if near.contains(&k.event) {
+                members.entry(k.event).or_default().push(k);
+            }
         }
-        let ownership = ownership(&drafts, &members, params);
+        let relevant: Vec<Draft> = drafts
+            .iter()
+            .filter(|d| near.contains(&d.event.id))
+            .cloned()
+            .collect();
+        let ownership = ownership(&relevant, &members, params);
         let user = match &plan.meshes {
             Some([b, a]) => Some((
                 volume::read_ply_mesh(&b.path)?,
@@ -352,10 +383,10 @@ pub fn run(
             };
             if let Some(v) = v {
                 let names = mesh_files(m.id);
+                // Written plainly, with the digest of the bytes in hand: the unit's commit makes
+                // them durable (a sync and a read-back per file cost 2 × 1028 of each at 120M).
                 for (name, solid) in names.iter().zip([&v.before_solid, &v.after_solid]) {
-                    let path = out.path(name)?;
-                    volume::write_ply(&path, solid)?;
-                    out.add_file(name)?;
+                    super::write_bytes(out, name, &volume::ply_bytes(solid))?;
                 }
             }
             measured.push(m);

@@ -16,6 +16,31 @@ pub use super::solid::Mesh;
 use crate::error::{Error, Result};
 use crate::io::ply::{self, Encoding, Property, Scalar};
 
+/// The bytes of a mesh as binary little-endian PLY.
+pub fn ply_bytes(mesh: &Mesh) -> Vec<u8> {
+    let mut w = format!(
+        "ply\nformat binary_little_endian 1.0\ncomment talus event solid\n\
+         element vertex {}\nproperty double x\nproperty double y\nproperty double z\n\
+         element face {}\nproperty list uchar int vertex_indices\nend_header\n",
+        mesh.vertices.len(),
+        mesh.faces.len()
+    )
+    .into_bytes();
+    w.reserve(24 * mesh.vertices.len() + 13 * mesh.faces.len());
+    for p in &mesh.vertices {
+        for c in p {
+            w.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    for f in &mesh.faces {
+        w.push(3u8);
+        for &i in f {
+            w.extend_from_slice(&(i as i32).to_le_bytes());
+        }
+    }
+    w
+}
+
 /// Write a mesh as binary little-endian PLY (atomic: temporary file + rename).
 pub fn write_ply(path: &Path, mesh: &Mesh) -> Result<()> {
     let tmp = path.with_file_name(format!(
@@ -25,28 +50,8 @@ pub fn write_ply(path: &Path, mesh: &Mesh) -> Result<()> {
             .unwrap_or_else(|| "mesh.ply".into())
     ));
     let write = || -> std::io::Result<()> {
-        let f = std::fs::File::create(&tmp)?;
-        let mut w = std::io::BufWriter::new(f);
-        write!(
-            w,
-            "ply\nformat binary_little_endian 1.0\ncomment talus event solid\n\
-             element vertex {}\nproperty double x\nproperty double y\nproperty double z\n\
-             element face {}\nproperty list uchar int vertex_indices\nend_header\n",
-            mesh.vertices.len(),
-            mesh.faces.len()
-        )?;
-        for p in &mesh.vertices {
-            for c in p {
-                w.write_all(&c.to_le_bytes())?;
-            }
-        }
-        for f in &mesh.faces {
-            w.write_all(&[3u8])?;
-            for &i in f {
-                w.write_all(&(i as i32).to_le_bytes())?;
-            }
-        }
-        let f = w.into_inner().map_err(|e| e.into_error())?;
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(&ply_bytes(mesh))?;
         f.sync_all()?;
         std::fs::rename(&tmp, path)
     };
