@@ -245,8 +245,8 @@ impl Sink {
                     b
                 };
                 let full = std::mem::replace(batch, spare);
-                let sent = z.to_thread.as_ref().map(|t| t.send(full));
-                if !matches!(sent, Some(Ok(()))) {
+                let sent = z.to_thread.as_ref().is_some_and(|t| t.send(full).is_ok());
+                if !sent {
                     return Err(las::Error::Io(z.join().err().unwrap_or_else(|| {
                         std::io::Error::other("the LAZ compressing thread stopped")
                     })));
