@@ -10,10 +10,11 @@
 //! Outside the data's convex hull a TIN has no height: nothing is extrapolated (SPEC.md §1
 //! "Coverage"; the region of an event keeps only what both epochs cover).
 
-use spade::{
-    DelaunayTriangulation, FloatTriangulation, HasPosition, HierarchyHintGenerator, Point2,
-    Triangulation,
-};
+use std::cell::Cell;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use spade::handles::FixedVertexHandle;
+use spade::{DelaunayTriangulation, HasPosition, Point2, PositionInTriangulation, Triangulation};
 
 use crate::error::{Error, Result};
 
@@ -48,14 +49,22 @@ fn snap(x: f64) -> f64 {
 
 /// 2.5-D triangulated surface of local points (u, v, w).
 pub struct Tin {
-    tri: Tri,
+    tri: DelaunayTriangulation<Vertex>,
+    /// Tells this TIN's hints from another's in a thread's [`HINT`].
+    id: u64,
 }
 
-/// The triangulation, with a hierarchy of coarser ones to find the triangle of a point in
-/// logarithmic time from anywhere: the region's heights are asked for by several threads at
-/// once, and with the default hint (the last vertex found, shared by all threads) each query
-/// walked from wherever another thread had been (a quarter of the volumes' time).
-type Tri = DelaunayTriangulation<Vertex, (), (), (), HierarchyHintGenerator<f64>>;
+thread_local! {
+    /// Each thread's last vertex found, with the TIN it belongs to: the search for the next
+    /// point's triangle starts there. The heights of a region are asked for row by row by
+    /// several threads at once: with spade's own hint (the last vertex found by any thread)
+    /// each search walked from where another thread had been, across the surface (half of the
+    /// volumes' time at 120M).
+    static HINT: Cell<(u64, Option<FixedVertexHandle>)> = const { Cell::new((0, None)) };
+}
+
+/// Ids of the TINs made.
+static TINS: AtomicU64 = AtomicU64::new(1);
 
 impl std::fmt::Debug for Tin {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -76,7 +85,7 @@ impl Tin {
                 w: p[2],
             })
             .collect();
-        let tri = Tri::bulk_load(verts)
+        let tri = DelaunayTriangulation::bulk_load(verts)
             .map_err(|e| Error::Epochs(format!("cannot triangulate surface: {e:?}")))?;
         if tri.num_inner_faces() == 0 {
             return Err(Error::Epochs(format!(
@@ -84,7 +93,10 @@ impl Tin {
                 tri.num_vertices()
             )));
         }
-        Ok(Tin { tri })
+        Ok(Tin {
+            tri,
+            id: TINS.fetch_add(1, Ordering::Relaxed),
+        })
     }
 
     /// Is (u, v) inside the triangulated area (the convex hull of the points)?
@@ -123,9 +135,39 @@ impl Tin {
 }
 
 impl Surface for Tin {
-    /// Linear (barycentric) interpolation inside the hull, None outside.
+    /// Linear (barycentric) interpolation inside the hull, None outside: spade's
+    /// `barycentric().interpolate`, term for term, with the search for the point's triangle
+    /// started from this thread's last vertex found ([`HINT`]).
     fn height_at(&self, u: f64, v: f64) -> Option<f64> {
         let p = Point2::new(snap(u), snap(v));
-        self.tri.barycentric().interpolate(|h| h.data().w, p)
+        let position = match HINT.get() {
+            (id, Some(hint)) if id == self.id => self.tri.locate_with_hint(p, hint),
+            _ => self.tri.locate(p),
+        };
+        let w = |v: FixedVertexHandle| self.tri.vertex(v).data().w;
+        let (height, near) = match position {
+            PositionInTriangulation::OnVertex(v) => (0.0 + w(v) * 1.0, v),
+            PositionInTriangulation::OnEdge(e) => {
+                let [v0, v1] = self.tri.directed_edge(e).vertices();
+                let (a, b) = (v0.position(), v1.position());
+                let dir = (b.x - a.x, b.y - a.y);
+                let factor = (p.x - a.x) * dir.0 + (p.y - a.y) * dir.1;
+                let rel = factor / (dir.0 * dir.0 + dir.1 * dir.1);
+                (
+                    0.0 + w(v0.fix()) * (1.0 - rel) + w(v1.fix()) * rel,
+                    v0.fix(),
+                )
+            }
+            PositionInTriangulation::OnFace(f) => {
+                let face = self.tri.face(f);
+                let [v0, v1, v2] = face.vertices();
+                let [c0, c1, c2] = face.barycentric_interpolation(p);
+                let h = 0.0 + w(v0.fix()) * c0 + w(v1.fix()) * c1 + w(v2.fix()) * c2;
+                (h, v0.fix())
+            }
+            _ => return None,
+        };
+        HINT.set((self.id, Some(near)));
+        Some(height)
     }
 }
