@@ -60,8 +60,13 @@ thread_local! {
     /// several threads at once: with spade's own hint (the last vertex found by any thread)
     /// each search walked from where another thread had been, across the surface (half of the
     /// volumes' time at 120M).
-    static HINT: Cell<(u64, Option<FixedVertexHandle>)> = const { Cell::new((0, None)) };
+    /// A slot per TIN id modulo [`SLOTS`]: the two epochs' TINs of an event are asked in turn.
+    static HINT: [Cell<(u64, Option<FixedVertexHandle>)>; SLOTS] =
+        const { [const { Cell::new((0, None)) }; SLOTS] };
 }
+
+/// Hint slots per thread.
+const SLOTS: usize = 4;
 
 /// Ids of the TINs made.
 static TINS: AtomicU64 = AtomicU64::new(1);
@@ -140,7 +145,8 @@ impl Surface for Tin {
     /// started from this thread's last vertex found ([`HINT`]).
     fn height_at(&self, u: f64, v: f64) -> Option<f64> {
         let p = Point2::new(snap(u), snap(v));
-        let position = match HINT.get() {
+        let slot = (self.id % SLOTS as u64) as usize;
+        let position = match HINT.with(|h| h[slot].get()) {
             (id, Some(hint)) if id == self.id => self.tri.locate_with_hint(p, hint),
             _ => self.tri.locate(p),
         };
@@ -167,7 +173,7 @@ impl Surface for Tin {
             }
             _ => return None,
         };
-        HINT.set((self.id, Some(near)));
+        HINT.with(|h| h[slot].set((self.id, Some(near))));
         Some(height)
     }
 }
