@@ -29,6 +29,9 @@
 //! Files are written atomically (temporary sibling, fsync, rename; see [`crate::atomic`]) and read
 //! in full with every check: magic, version, header CRC, exact file length, payload CRC, and each
 //! column's decompressed length. Any failure is [`Error::Corrupt`] so the caller rebuilds the tile.
+//!
+//! Format version 2 ([`crate::framed`]) is a tile written in frames, each frame one encoding of
+//! this format; [`read_tile`] and [`read_tile_header`] read both versions.
 
 use crate::atomic::atomic_write;
 use crate::error::{Error, Result};
