@@ -165,19 +165,68 @@ impl PartialOrd for Edge {
 /// Highest C1 point per square cell: the top surface seen from above.
 struct TopSurface {
     cell: f64,
-    top: rustc_hash::FxHashMap<(i64, i64), f64>,
+    /// The highest height per cell over the points' cells `first..first + dims` (−inf where no
+    /// point falls): a dense grid, built in one pass without hashing; a hash map where the
+    /// points are too sparse for one.
+    top: Top,
+}
+
+enum Top {
+    Dense {
+        first: [i64; 2],
+        dims: [usize; 2],
+        z: Vec<f64>,
+    },
+    Sparse(rustc_hash::FxHashMap<(i64, i64), f64>),
+}
+
+/// ⌊v⌋ as an integer (for the finite values of local coordinates over a cell), without the
+/// library call `floor` is on baseline x86-64.
+fn floor_i64(v: f64) -> i64 {
+    let t = v as i64;
+    if (t as f64) > v {
+        t - 1
+    } else {
+        t
+    }
 }
 
 impl TopSurface {
     fn new(points: &[Point3], cell: f64) -> Self {
-        let mut top = rustc_hash::FxHashMap::default();
+        let key = |p: &Point3| [floor_i64(p[0] / cell), floor_i64(p[1] / cell)];
+        let (mut lo, mut hi) = ([i64::MAX; 2], [i64::MIN; 2]);
         for p in points {
-            let key = ((p[0] / cell).floor() as i64, (p[1] / cell).floor() as i64);
-            let z = top.entry(key).or_insert(f64::NEG_INFINITY);
-            if p[2] > *z {
-                *z = p[2];
+            let k = key(p);
+            for a in 0..2 {
+                lo[a] = lo[a].min(k[a]);
+                hi[a] = hi[a].max(k[a]);
             }
         }
+        let dims = [0, 1].map(|a| (hi[a].saturating_sub(lo[a]).max(-1) + 1) as usize);
+        let cells = dims[0].saturating_mul(dims[1]);
+        // At most a cell per point (8 bytes each: less than the hash map's entries once a
+        // quarter of the cells hold a point).
+        let top = if !points.is_empty() && cells <= points.len().max(1024) {
+            let mut z = vec![f64::NEG_INFINITY; cells];
+            for p in points {
+                let k = key(p);
+                let i = (k[1] - lo[1]) as usize * dims[0] + (k[0] - lo[0]) as usize;
+                if p[2] > z[i] {
+                    z[i] = p[2];
+                }
+            }
+            Top::Dense { first: lo, dims, z }
+        } else {
+            let mut top = rustc_hash::FxHashMap::default();
+            for p in points {
+                let k = key(p);
+                let z = top.entry((k[0], k[1])).or_insert(f64::NEG_INFINITY);
+                if p[2] > *z {
+                    *z = p[2];
+                }
+            }
+            Top::Sparse(top)
+        };
         TopSurface { cell, top }
     }
     /// How far C1's top surface lies above `p` in `p`'s cell (0 when the cell has no point or
@@ -186,11 +235,18 @@ impl TopSurface {
         self.at(p[0], p[1]).map_or(0.0, |z| (z - p[2]).max(0.0))
     }
     fn at(&self, x: f64, y: f64) -> Option<f64> {
-        let key = (
-            (x / self.cell).floor() as i64,
-            (y / self.cell).floor() as i64,
-        );
-        self.top.get(&key).copied()
+        let key = [floor_i64(x / self.cell), floor_i64(y / self.cell)];
+        match &self.top {
+            Top::Dense { first, dims, z } => {
+                let (i, j) = (key[0].checked_sub(first[0])?, key[1].checked_sub(first[1])?);
+                if i < 0 || j < 0 || i as usize >= dims[0] || j as usize >= dims[1] {
+                    return None;
+                }
+                let v = z[j as usize * dims[0] + i as usize];
+                (v > f64::NEG_INFINITY).then_some(v)
+            }
+            Top::Sparse(top) => top.get(&(key[0], key[1])).copied(),
+        }
     }
     /// +1 when the terrain is lower on the +h side of `p`, −1 when on the −h side, 0 when the
     /// data cannot tell (a side without points, or no height difference).
