@@ -383,10 +383,11 @@ pub fn run(
             };
             if let Some(v) = v {
                 let names = mesh_files(m.id);
-                // Written plainly, with the digest of the bytes in hand: the unit's commit makes
-                // them durable (a sync and a read-back per file cost 2 × 1028 of each at 120M).
+                // Written plainly, the digest computed on the way: the unit's commit makes them
+                // durable (a sync and a read-back per file cost 2 × 1028 of each at 120M).
                 for (name, solid) in names.iter().zip([&v.before_solid, &v.after_solid]) {
-                    super::write_bytes(out, name, &volume::ply_bytes(solid))?;
+                    let (crc, size) = volume::write_ply_digest(&out.path(name)?, solid)?;
+                    out.add(name, crc, size);
                 }
             }
             measured.push(m);

@@ -16,29 +16,61 @@ pub use super::solid::Mesh;
 use crate::error::{Error, Result};
 use crate::io::ply::{self, Encoding, Property, Scalar};
 
-/// The bytes of a mesh as binary little-endian PLY.
-pub fn ply_bytes(mesh: &Mesh) -> Vec<u8> {
-    let mut w = format!(
+/// Write a mesh to `w` as binary little-endian PLY.
+pub fn write_ply_to(w: &mut impl Write, mesh: &Mesh) -> std::io::Result<()> {
+    write!(
+        w,
         "ply\nformat binary_little_endian 1.0\ncomment talus event solid\n\
          element vertex {}\nproperty double x\nproperty double y\nproperty double z\n\
          element face {}\nproperty list uchar int vertex_indices\nend_header\n",
         mesh.vertices.len(),
         mesh.faces.len()
-    )
-    .into_bytes();
-    w.reserve(24 * mesh.vertices.len() + 13 * mesh.faces.len());
+    )?;
     for p in &mesh.vertices {
         for c in p {
-            w.extend_from_slice(&c.to_le_bytes());
+            w.write_all(&c.to_le_bytes())?;
         }
     }
     for f in &mesh.faces {
-        w.push(3u8);
+        w.write_all(&[3u8])?;
         for &i in f {
-            w.extend_from_slice(&(i as i32).to_le_bytes());
+            w.write_all(&(i as i32).to_le_bytes())?;
         }
     }
-    w
+    Ok(())
+}
+
+/// Write a mesh as binary little-endian PLY to `path` (plainly: in a unit's directory, whose
+/// commit makes it durable), computing the file's CRC-32 and size on the way.
+pub fn write_ply_digest(path: &Path, mesh: &Mesh) -> Result<(u32, u64)> {
+    struct Digest<W> {
+        inner: W,
+        crc: crc32fast::Hasher,
+        size: u64,
+    }
+    impl<W: Write> Write for Digest<W> {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            let n = self.inner.write(buf)?;
+            self.crc.update(&buf[..n]);
+            self.size += n as u64;
+            Ok(n)
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            self.inner.flush()
+        }
+    }
+    let write = || -> std::io::Result<(u32, u64)> {
+        let f = std::fs::File::create(path)?;
+        let mut d = Digest {
+            inner: std::io::BufWriter::with_capacity(1 << 20, f),
+            crc: crc32fast::Hasher::new(),
+            size: 0,
+        };
+        write_ply_to(&mut d, mesh)?;
+        d.flush()?;
+        Ok((d.crc.finalize(), d.size))
+    };
+    write().map_err(|e| Error::output(path, e))
 }
 
 /// Write a mesh as binary little-endian PLY (atomic: temporary file + rename).
@@ -50,8 +82,9 @@ pub fn write_ply(path: &Path, mesh: &Mesh) -> Result<()> {
             .unwrap_or_else(|| "mesh.ply".into())
     ));
     let write = || -> std::io::Result<()> {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(&ply_bytes(mesh))?;
+        let mut w = std::io::BufWriter::new(std::fs::File::create(&tmp)?);
+        write_ply_to(&mut w, mesh)?;
+        let f = w.into_inner().map_err(|e| e.into_error())?;
         f.sync_all()?;
         std::fs::rename(&tmp, path)
     };

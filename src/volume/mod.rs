@@ -36,7 +36,7 @@ pub mod uncertainty;
 pub mod user_mesh;
 
 pub use frame::{Footprint, Frame};
-pub use mesh_ply::{check_watertight, ply_bytes, read_ply_mesh, write_ply};
+pub use mesh_ply::{check_watertight, read_ply_mesh, write_ply, write_ply_digest};
 pub use ownership::{Claim, Ownership};
 pub use region::{Cells, Polygon, Region};
 pub use solid::Mesh;
