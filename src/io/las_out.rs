@@ -78,8 +78,8 @@ const CHUNK: u64 = 50_000;
 /// parallel compressor has a chunk for every core of a small machine.
 const CHUNKS_PER_BATCH: usize = 4;
 
-/// The LAZ chunk size for `n` points: about [`CHUNK`], the chunks a multiple of
-/// [`CHUNKS_PER_BATCH`] in number and all of one size, with fewer points left over (a last,
+/// The LAZ chunk size for `n` points: about `CHUNK` (50 000), the chunks a multiple of
+/// `CHUNKS_PER_BATCH` (4) in number and all of one size, with fewer points left over (a last,
 /// small chunk) than there are chunks. The compressor compresses the complete chunks of a batch in parallel and a last partial
 /// chunk alone when the file is closed: with fixed 50 000-point chunks the 49 856 points after
 /// the first 50 000 of a 99 856-point file were compressed on one core after the first chunk,

@@ -246,7 +246,7 @@ pub fn pair_count(ctx: &Ctx, pair: usize) -> Result<u64> {
 const LOOKAHEAD: usize = 16;
 
 /// A pair's M3C2 results in global key order: a k-way merge holding one chunk per tile (a few
-/// when the tiles are few, see [`LOOKAHEAD`]).
+/// when the tiles are few, see `LOOKAHEAD`).
 pub struct Merged {
     tiles: Vec<Vec<PathBuf>>,
     /// Per tile: the loaded chunk, position in it, next chunk number, chunks decoded ahead.

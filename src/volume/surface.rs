@@ -142,7 +142,7 @@ impl Tin {
 impl Surface for Tin {
     /// Linear (barycentric) interpolation inside the hull, None outside: spade's
     /// `barycentric().interpolate`, term for term, with the search for the point's triangle
-    /// started from this thread's last vertex found ([`HINT`]).
+    /// started from this thread's last vertex found (`HINT`).
     fn height_at(&self, u: f64, v: f64) -> Option<f64> {
         let p = Point2::new(snap(u), snap(v));
         let slot = (self.id % SLOTS as u64) as usize;
