@@ -12,7 +12,7 @@ use std::path::Path;
 
 use crate::error::{Error, Result};
 use crate::io::{self, Bounds, Point3};
-use crate::spatial::Index;
+use crate::spatial::{Footprint, Index};
 
 /// Clouds up to this many points are measured whole.
 pub const WHOLE: u64 = 400_000;
@@ -39,6 +39,12 @@ pub struct Spacing {
 
 /// Measure the point spacing of the cloud at `path`.
 pub fn measure(path: &Path) -> Result<Spacing> {
+    measure_with_footprint(path).map(|(s, _)| s)
+}
+
+/// [`measure`], and the cloud's [`Footprint`] counted on the way (one of the passes reads every
+/// point anyway).
+pub fn measure_with_footprint(path: &Path) -> Result<(Spacing, Footprint)> {
     let mut reader = io::open(path)?;
     let info = reader.info().clone();
     let no_spacing = || {
@@ -53,18 +59,21 @@ pub fn measure(path: &Path) -> Result<Spacing> {
         while reader.fill(&mut buf, 1 << 16)? > 0 {
             all.extend_from_slice(&buf);
         }
+        let mut footprint = Footprint::new(&info.bounds);
+        footprint.add(&all);
         let origin = all.first().copied().unwrap_or_default();
         distinct(&mut all);
         let probes: Vec<usize> = (0..all.len()).collect();
         let index = Index::new(&all, origin);
         let (s, density) = stats(&index, &probes).ok_or_else(no_spacing)?;
-        return Ok(Spacing {
+        let spacing = Spacing {
             spacing: s,
             density,
             effective_spacing: 1.0 / density.sqrt(),
             measured_points: all.len(),
             method: "over all points".into(),
-        });
+        };
+        return Ok((spacing, footprint));
     }
     drop(reader);
     let b = info.bounds;
@@ -73,8 +82,18 @@ pub fn measure(path: &Path) -> Result<Spacing> {
     let density = info.point_count as f64 / area;
     let mut half = 0.5 * (WINDOW_TARGET / density).sqrt();
     let max_half = 0.5 * (b.max[0] - b.min[0]).max(b.max[1] - b.min[1]) + 1.0;
+    // The first pass reads the whole file, whatever the window holds, for the footprint.
+    let mut footprint = Footprint::new(&b);
+    let mut counting = Some(&mut footprint);
     for _ in 0..12 {
-        let pts = window(path, cx, cy, half, 8 * WINDOW_TARGET as usize)?;
+        let pts = window(
+            path,
+            cx,
+            cy,
+            half,
+            8 * WINDOW_TARGET as usize,
+            counting.take(),
+        )?;
         match pts {
             None => half /= 2.0, // denser than expected: shrink
             Some(pts) if pts.len() < 1000 && half < max_half => half *= 3.0,
@@ -88,7 +107,7 @@ pub fn measure(path: &Path) -> Result<Spacing> {
                     .collect();
                 let index = Index::new(&pts, origin);
                 let (s, density) = stats(&index, &inner).ok_or_else(no_spacing)?;
-                return Ok(Spacing {
+                let spacing = Spacing {
                     spacing: s,
                     density,
                     effective_spacing: 1.0 / density.sqrt(),
@@ -98,7 +117,8 @@ pub fn measure(path: &Path) -> Result<Spacing> {
                         2.0 * half,
                         2.0 * half
                     ),
-                });
+                };
+                return Ok((spacing, footprint));
             }
         }
     }
@@ -152,20 +172,40 @@ fn footprint_area(b: &Bounds) -> f64 {
     (e[0] * e[1]).max(1e-12)
 }
 
-/// The points within the XY window, or None when more than `cap` fall in it.
-fn window(path: &Path, cx: f64, cy: f64, half: f64, cap: usize) -> Result<Option<Vec<Point3>>> {
+/// The points within the XY window, or None when more than `cap` fall in it; every point of
+/// the file counted into `footprint` when given (then the whole file is read).
+fn window(
+    path: &Path,
+    cx: f64,
+    cy: f64,
+    half: f64,
+    cap: usize,
+    mut footprint: Option<&mut Footprint>,
+) -> Result<Option<Vec<Point3>>> {
     let mut reader = io::open(path)?;
     let mut buf = Vec::new();
     let mut out = Vec::new();
+    let mut over = false;
     while reader.fill(&mut buf, 1 << 16)? > 0 {
+        if let Some(f) = footprint.as_deref_mut() {
+            f.add(&buf);
+        }
+        if over {
+            continue;
+        }
         for p in &buf {
             if (p[0] - cx).abs() <= half && (p[1] - cy).abs() <= half {
                 out.push(*p);
                 if out.len() > cap {
-                    return Ok(None);
+                    over = true;
+                    out = Vec::new();
+                    break;
                 }
             }
         }
+        if over && footprint.is_none() {
+            return Ok(None);
+        }
     }
-    Ok(Some(out))
+    Ok((!over).then_some(out))
 }

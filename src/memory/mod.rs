@@ -51,16 +51,29 @@ pub fn mib(bytes: u64) -> u64 {
     bytes.div_ceil(1 << 20)
 }
 
-/// Reserve `need` bytes for `what` from `pool`, waiting for others to give back theirs; refused
-/// (exit 2) when no budget left beside the base could hold it, with the smallest that would.
+/// Refuse (exit 2) a need no pool of a `budget`-byte budget could hold, with the smallest
+/// budget that would.
+pub fn refuse_unless_fits(need: u64, budget: u64, what: &str) -> Result<()> {
+    if need > pool_bytes(budget) {
+        return Err(too_small(need, budget, what));
+    }
+    Ok(())
+}
+
+fn too_small(need: u64, budget: u64, what: &str) -> Error {
+    Error::Usage(format!(
+        "--memory {} MiB is too small: {what} needs {} MiB; the smallest budget that works is --memory {}MiB",
+        mib(budget),
+        mib(need),
+        mib(budget_for(need))
+    ))
+}
+
+/// Reserve `need` bytes for `what` from `pool` (a `budget`-byte budget's), waiting for others
+/// to give back theirs; refused as [`refuse_unless_fits`] when the pool could never hold it.
 pub fn reserve<'a>(pool: &'a Pool, need: u64, budget: u64, what: &str) -> Result<Reservation<'a>> {
     if need > pool.limit() {
-        return Err(Error::Usage(format!(
-            "--memory {} MiB is too small: {what} needs {} MiB; the smallest budget that works is --memory {}MiB",
-            mib(budget),
-            mib(need),
-            mib(budget_for(need))
-        )));
+        return Err(too_small(need, budget, what));
     }
     pool.reserve(need, &crate::interrupt::requested)
         .ok_or(Error::Interrupted)
@@ -94,7 +107,7 @@ mod tests {
     #[test]
     fn the_smallest_budget_holds_the_fixed_needs() {
         let pool = pool_bytes(MIN_BUDGET);
-        assert!(crate::units::outputs::NEED <= pool, "outputs do not fit");
+        assert!(crate::units::outputs::need(1) <= pool, "outputs do not fit");
         let split = (MIN_BUDGET / crate::units::tiling::SPLIT_BUDGET_SHARE).max(8 << 20);
         // Two tilings run at once (one per survey of a pair).
         assert!(

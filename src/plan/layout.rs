@@ -7,11 +7,13 @@
 //! holds every neighbourhood a tile's core points need ([`tile_halo`]).
 
 use serde::{Deserialize, Serialize};
+use talus_tiling::grid::TILE_BUDGET_FRACTION;
 use talus_tiling::{BoundsXY, TileGrid};
 
 use crate::error::{Error, Result};
 use crate::io::{Bounds, Point3};
 use crate::params::Params;
+use crate::spatial::Footprint;
 
 /// The size (input units) of the blocks the core-point lattice is anchored on: large next to a
 /// site, so that two runs over it share the anchor, small enough that local coordinates keep
@@ -136,6 +138,42 @@ impl Layout {
     }
 }
 
+/// The density (points per unit², the surveys held at once) to size tiles by: the one at which
+/// a tile's halo box holds what the densest square of its size holds in `footprint` (one
+/// survey's, times `scale` for the surveys a unit holds at once), and never below the bounds'
+/// `mean`. A tile is then sized for where the points are, not for their average over the
+/// bounds; where even the smallest tile (four halos) is denser than the budget allows, the
+/// result keeps the tiles at that smallest side and the M3C2 units' check refuses the budget.
+pub fn tile_density(footprint: &Footprint, scale: f64, mean: f64, params: &Params) -> f64 {
+    let halo = tile_halo(params);
+    let allowed = TILE_BUDGET_FRACTION * params.memory_bytes.value as f64 / BYTES_PER_POINT as f64;
+    let holds = |side: f64| scale * footprint.densest(side + 2.0 * halo) as f64;
+    let box_area = |side: f64| (side + 2.0 * halo).powi(2).max(f64::MIN_POSITIVE);
+    // TileGrid::plan's smallest side.
+    let least = (4.0 * halo).max(f64::MIN_POSITIVE);
+    if scale * footprint.total() as f64 <= allowed {
+        return mean; // one tile holds it all
+    }
+    if holds(least) > allowed {
+        return mean.max(holds(least) / box_area(least));
+    }
+    // The largest side whose box holds no more than allowed: `lo` does, `hi` does not (at the
+    // footprint's extent a square holds every point, more than allowed).
+    let (mut lo, mut hi) = (least, 2.0 * least);
+    while holds(hi) <= allowed {
+        (lo, hi) = (hi, 2.0 * hi);
+    }
+    for _ in 0..40 {
+        let mid = 0.5 * (lo + hi);
+        if holds(mid) <= allowed {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    mean.max(allowed / box_area(lo))
+}
+
 /// The halo of the tile files: how far beyond its square a tile must hold points so that every
 /// neighbourhood a tile's M3C2 unit computes for the core points it owns is the one a whole-cloud
 /// run sees (SPEC.md §3): the normal sphere, the M3C2 cylinder (inside its circumscribed sphere),
@@ -148,4 +186,73 @@ pub fn tile_halo(params: &Params) -> f64 {
     let cyl = (params.cyl_radius.value.powi(2) + params.cyl_halflen.value.powi(2)).sqrt();
     let orient = 4.0 * nr + 0.5 * nr * std::f64::consts::SQRT_2;
     nr.max(cyl).max(orient) + 2.0 * params.core_spacing.value
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::params::UserParams;
+
+    /// A 2000 × 500 strip at 4 points per unit² with a 100 × 100 patch fifteen times denser, as
+    /// a terrestrial scan's near range is: the tiles sized from the densest square hold no more than
+    /// the budget allows there, where tiles sized from the mean would hold several times more.
+    #[test]
+    fn tiles_are_sized_for_the_densest_square_not_the_mean() {
+        let user = UserParams {
+            memory: Some("300MiB".into()),
+            ..UserParams::default()
+        };
+        // Radii of a 0.25-unit spacing: a halo of about 8.5 units, the smallest tile 34 wide.
+        let params = Params::resolve(&user, 0.25).unwrap();
+        let halo = tile_halo(&params);
+        let mut rng = crate::synth::rng::Rng::new(1, 0);
+        let mut uniform = || rng.uniform();
+        let mut points = Vec::new();
+        for _ in 0..4_000_000 {
+            points.push([2000.0 * uniform(), 500.0 * uniform(), 0.0]);
+        }
+        for _ in 0..600_000 {
+            points.push([1200.0 + 100.0 * uniform(), 200.0 + 100.0 * uniform(), 0.0]);
+        }
+        let mut b = Bounds::empty();
+        b.grow(&[0.0, 0.0, 0.0]);
+        b.grow(&[2000.0, 500.0, 1.0]);
+        let mut footprint = Footprint::new(&b);
+        footprint.add(&points);
+        let n = points.len() as f64;
+        // Two epochs held at once.
+        let mean = 2.0 * n / (2000.0 * 500.0);
+        let density = tile_density(&footprint, 2.0, mean, &params);
+        let layout = Layout::plan(&[b], &b, density, &params, None).unwrap();
+        // Sized by the search, not held at the smallest side.
+        assert!(layout.tile_size > 4.0 * halo + params.core_spacing.value);
+        let allowed =
+            TILE_BUDGET_FRACTION * params.memory_bytes.value as f64 / BYTES_PER_POINT as f64;
+        // The densest tile's halo box, counted exactly.
+        let grid = layout.grid().unwrap();
+        let densest = grid
+            .tiles()
+            .map(|t| {
+                let (x0, y0) = (
+                    layout.origin[0] + t.col as f64 * layout.tile_size - halo,
+                    layout.origin[1] + t.row as f64 * layout.tile_size - halo,
+                );
+                let side = layout.tile_size + 2.0 * halo;
+                let inside =
+                    |p: &&Point3| p[0] >= x0 && p[0] < x0 + side && p[1] >= y0 && p[1] < y0 + side;
+                2 * points.iter().filter(inside).count()
+            })
+            .max()
+            .unwrap() as f64;
+        assert!(
+            densest <= allowed,
+            "{densest} points in a tile, {allowed} allowed"
+        );
+        // The mean would have sized tiles that hold far more than allowed over the patch.
+        let by_mean = Layout::plan(&[b], &b, mean, &params, None).unwrap();
+        let side = by_mean.tile_size + 2.0 * halo;
+        assert!(side > 100.0);
+        let patch = 2.0 * 600_000.0 + 2.0 * 4.0 * (side * side - 10_000.0);
+        assert!(patch > 2.0 * allowed, "{patch} vs {allowed}");
+    }
 }

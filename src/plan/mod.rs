@@ -12,6 +12,7 @@
 //! Slurm array task) can run any unit whose dependencies are done. A `compare` is a one-pair
 //! plan; a campaign is a bigger one with the same kinds of units.
 
+pub mod fit;
 pub mod inputs;
 pub mod layout;
 pub mod reach;
@@ -250,6 +251,7 @@ impl Plan {
     /// points are `cores` (a core-point unit), the user's file when the plan has one, else the
     /// pair's before survey thinned tile by tile inside the M3C2 units.
     pub fn add_pair_units(&mut self, pair: usize, cores: Option<usize>) -> Result<usize> {
+        fit::check_planned(self, pair)?;
         let grid = self.layout.grid()?;
         let layout_key = self.layout.key();
         let (b, a) = (self.pairs[pair].before, self.pairs[pair].after);

@@ -66,6 +66,10 @@ pub fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<serde_json::V
     let params = super::stable::read(ctx, pair)?.params(ctx.plan);
     let (tau, reg) = (params.threshold.value, params.reg_error.value);
     let mut kept = Vec::new();
+    let merging = ctx.reserve(
+        super::m3c2::merge_need(ctx.plan.layout.len()),
+        "the merge of the pair's tiles",
+    )?;
     let mut merged = Merged::new(ctx, pair)?;
     while let Some(k) = merged.next_result()? {
         let r = k.r.with_registration(reg);
@@ -82,6 +86,9 @@ pub fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<serde_json::V
             });
         }
     }
+    drop(merged);
+    // Given back before the next reservation: a unit waits only while it holds none.
+    drop(merging);
     // The kept points are known only once streamed (≈ 104 bytes each, held unreserved meanwhile:
     // a small share of what smoothing and clustering then add).
     let _held = ctx.reserve(

@@ -53,6 +53,20 @@ pub fn run(
             .map_err(|e| super::damaged(&path, e))?
             .point_count)
     };
+    // The pair's densest tile first: a budget that cannot hold it is refused by whichever M3C2
+    // unit runs first, not after the tiles before it.
+    if let Some((densest, n)) =
+        crate::plan::fit::densest(plan, &ctx.meta(deps[0])?, &ctx.meta(deps[1])?)?
+    {
+        crate::memory::refuse_unless_fits(
+            need(n),
+            plan.params.memory_bytes.value,
+            &format!(
+                "tile {} ({n} points with its halo, the pair's densest)",
+                densest.name()
+            ),
+        )?;
+    }
     let halo_points = count(deps[0])? + count(deps[1])?;
     let _held = ctx.reserve(
         need(halo_points),
@@ -243,7 +257,22 @@ pub fn pair_count(ctx: &Ctx, pair: usize) -> Result<u64> {
 /// Chunks decoded ahead, over all tiles of a merge: a merge of few tiles decodes several of a
 /// tile's chunks at once, in parallel (a one-tile pair's results were read on one core while the
 /// other waited); a merge of many holds one chunk per tile, as a merge must.
-const LOOKAHEAD: usize = 16;
+const LOOKAHEAD: usize = 8;
+
+/// Chunks a merge of `tiles` tiles decodes ahead per tile.
+fn ahead(tiles: usize) -> usize {
+    (LOOKAHEAD / tiles.max(1)).max(1)
+}
+
+/// Resident bytes of a [`Merged`] over `tiles` tiles: the other tiles' chunks (one each, a few
+/// when the tiles are few) while one tile reads its next ones: its last chunk, the new chunks and
+/// their files' decoded columns (about as large again). A stage that merges reserves it: a layout
+/// of many small tiles (a low budget, a dense site) costs the merge a chunk for each.
+pub fn merge_need(tiles: usize) -> u64 {
+    let chunk = (CHUNK_ROWS * std::mem::size_of::<KeyedResult>()) as u64;
+    let a = ahead(tiles) as u64;
+    ((tiles.max(1) as u64 - 1) * a + 1 + 2 * a) * chunk
+}
 
 /// A pair's M3C2 results in global key order: a k-way merge holding one chunk per tile (a few
 /// when the tiles are few, see `LOOKAHEAD`).
@@ -269,7 +298,7 @@ impl Merged {
         let tiles = pair_chunks(ctx, pair)?;
         let mut m = Merged {
             cursors: (0..tiles.len()).map(|_| Cursor::default()).collect(),
-            ahead: (LOOKAHEAD / tiles.len().max(1)).max(1),
+            ahead: ahead(tiles.len()),
             tiles,
             heap: BinaryHeap::new(),
             total: pair_count(ctx, pair)?,

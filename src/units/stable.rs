@@ -45,8 +45,10 @@ pub fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<serde_json::V
     let total = pair_count(ctx, pair)?;
     let step = total.div_ceil(SAMPLES).max(1);
     let _held = ctx.reserve(
-        total.div_ceil(step) * BYTES_PER_SAMPLE + (8 << 20),
-        "the stable-ground sample",
+        total.div_ceil(step) * BYTES_PER_SAMPLE
+            + (8 << 20)
+            + super::m3c2::merge_need(ctx.plan.layout.len()),
+        "the stable-ground sample and the merge of the pair's tiles",
     )?;
     let mut samples = Vec::with_capacity(total.min(SAMPLES) as usize);
     let mut merged = Merged::new(ctx, pair)?;

@@ -87,8 +87,12 @@ pub fn run(ctx: &Ctx, survey: usize, out: &mut UnitWriter) -> Result<serde_json:
         }
     }
     let mut has_file = vec![false; grid.len()];
-    for (id, _, digest) in splitter.finish_with_digests().map_err(tiling_error)? {
+    // Points per tile (halo included), in grid order: what the pair's M3C2 units check the
+    // budget against before the first of them holds anything (`plan::fit`).
+    let mut tile_points = vec![0u64; grid.len()];
+    for (id, n, digest) in splitter.finish_with_digests().map_err(tiling_error)? {
         has_file[grid.index(id)] = true;
+        tile_points[grid.index(id)] = n;
         out.add(&tile_file(id), digest.crc32, digest.size);
     }
     for id in grid.tiles() {
@@ -100,5 +104,5 @@ pub fn run(ctx: &Ctx, survey: usize, out: &mut UnitWriter) -> Result<serde_json:
             out.add(&name, digest.crc32, digest.size);
         }
     }
-    Ok(serde_json::json!({ "points": points }))
+    Ok(serde_json::json!({ "points": points, "tile_points": tile_points }))
 }

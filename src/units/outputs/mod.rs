@@ -189,10 +189,15 @@ impl Publish {
     }
 }
 
-/// Resident bytes of an outputs unit: the merge's one chunk per tile, the LAZ writer's chunk and
-/// buffers, the viewer's terrain sample, the events' records (measured: 110–125 MiB on the
-/// 5.2M-point cliff, 15 tiles).
-pub const NEED: u64 = 128 << 20;
+/// Resident bytes of an outputs unit beside its merge: the LAZ writer's chunk and buffers, the
+/// viewer's terrain sample, the events' records (measured: 110–125 MiB on the 5.2M-point cliff
+/// with 15 tiles, of which the merge's about 18).
+pub const FIXED: u64 = 112 << 20;
+
+/// Resident bytes of an outputs unit over `tiles` tiles.
+pub fn need(tiles: usize) -> u64 {
+    FIXED + super::m3c2::merge_need(tiles)
+}
 
 /// Write pair `pair`'s outputs into `out`.
 pub fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<serde_json::Value> {
@@ -202,7 +207,10 @@ pub fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<
     let ground = super::stable::read(ctx, pair)?;
     let params = ground.params(plan);
     let grid = plan.layout.grid()?;
-    let _held = ctx.reserve(NEED, "writing the outputs")?;
+    let _held = ctx.reserve(
+        need(plan.layout.len()),
+        "writing the outputs (and the merge of the pair's tiles)",
+    )?;
     // Events with their volumes, in id order.
     let (records, kept, mesh_sources) = if plan.m3c2_only {
         (Vec::new(), Vec::new(), Vec::new())

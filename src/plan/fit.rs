@@ -1,0 +1,83 @@
+//! Whether the memory budget can hold a pair's densest tile, the one need the tile layout cannot
+//! shrink (a tile is at least four halos wide, so a neighbourhood is never cut), and the merge of
+//! all its tiles' results: refused with exit 2 and the smallest budget that works, as early as it
+//! is certain.
+//!
+//! Before anything runs, from the plan alone: every point is owned by exactly one tile, so some
+//! tile's halo box holds at least a pair's points over the number of tiles (a bound that holds
+//! whatever the points' layout; with one tile, the whole pair). Right after the pair's tilings,
+//! from their records' per-tile counts: the densest tile exactly, before any M3C2 unit holds
+//! anything (`units::m3c2::run`), so a dense patch late in the tile order does not cost the
+//! stage's other tiles first.
+
+use talus_tiling::TileId;
+
+use crate::error::Result;
+use crate::memory::refuse_unless_fits;
+use crate::plan::Plan;
+use crate::units::m3c2::need;
+
+/// Refuse the plan when pair `pair`'s densest tile certainly does not fit the budget.
+pub fn check_planned(plan: &Plan, pair: usize) -> Result<()> {
+    let p = &plan.pairs[pair];
+    let points = plan.surveys[p.before].points + plan.surveys[p.after].points;
+    let tiles = plan.layout.len() as u64;
+    let least = points.div_ceil(tiles.max(1));
+    let whose = match plan.pairs.len() {
+        1 => "the pair's".to_string(),
+        _ => format!("pair {}'s", p.label),
+    };
+    let what = if tiles == 1 {
+        format!(
+            "{whose} one tile ({points} points; a tile is at least {:.1} units wide, four halos)",
+            4.0 * plan.layout.halo
+        )
+    } else {
+        format!(
+            "{whose} densest tile (at least {least} points: {points} over {tiles} tiles of side {:.1})",
+            plan.layout.tile_size
+        )
+    };
+    refuse_unless_fits(need(least), plan.params.memory_bytes.value, &what)?;
+    // The largest need that grows with the tile count: the outputs unit's merge holds a chunk of
+    // every tile's results at once (a larger budget has fewer, larger tiles).
+    refuse_unless_fits(
+        crate::units::outputs::need(tiles as usize),
+        plan.params.memory_bytes.value,
+        &format!("writing {whose} outputs, merging the results of its {tiles} tiles"),
+    )
+}
+
+/// The densest tile of a pair from its two tilings' per-tile counts (`tile_points` of their
+/// records, in grid order), with its points; `None` for records without the counts.
+pub fn densest(
+    plan: &Plan,
+    before: &serde_json::Value,
+    after: &serde_json::Value,
+) -> Result<Option<(TileId, u64)>> {
+    let counts = |m: &serde_json::Value| -> Option<Vec<u64>> {
+        m.get("tile_points")?
+            .as_array()?
+            .iter()
+            .map(|v| v.as_u64())
+            .collect()
+    };
+    let (Some(b), Some(a)) = (counts(before), counts(after)) else {
+        return Ok(None);
+    };
+    let grid = plan.layout.grid()?;
+    if b.len() != grid.len() || a.len() != grid.len() {
+        return Ok(None);
+    }
+    Ok(grid
+        .tiles()
+        .map(|t| {
+            let i = grid.index(t);
+            (t, b[i] + a[i])
+        })
+        // The first of the densest, in grid order: the same tile is named whoever checks.
+        .fold(None, |best: Option<(TileId, u64)>, (t, n)| match best {
+            Some((_, m)) if m >= n => best,
+            _ => Some((t, n)),
+        }))
+}
