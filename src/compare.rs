@@ -120,7 +120,7 @@ pub fn survey(store: &Store, label: &str, files: &SurveyFiles) -> Result<Survey>
 
 /// Plan the comparison of `opts` in `store`.
 fn plan(store: &Store, opts: &CompareOptions, user: &UserParams, inputs: &Inputs) -> Result<Plan> {
-    let (spacing, footprint) = sampling::measure_with_footprint(&inputs.before.first().path)?;
+    let (spacing, density_grid) = sampling::measure_with_density(&inputs.before.first().path)?;
     crate::progress::trace(|| "spacing measured".into());
     let params = Params::resolve(user, spacing.effective_spacing)?;
     let surveys = vec![
@@ -142,14 +142,9 @@ fn plan(store: &Store, opts: &CompareOptions, user: &UserParams, inputs: &Inputs
     bounds.extend(inputs.cores.as_ref().map(|c| c.bounds));
     let all = union(&bounds);
     let area = ((all.max[0] - all.min[0]) * (all.max[1] - all.min[1])).max(f64::MIN_POSITIVE);
-    // Both surveys are held at once: C1's footprint scaled to both.
+    // Both surveys are held at once.
     let held = (inputs.before.points() + inputs.after.points()) as f64;
-    let density = crate::plan::layout::tile_density(
-        &footprint,
-        held / footprint.total().max(1) as f64,
-        held / area,
-        &params,
-    );
+    let density = crate::plan::layout::tile_density(&density_grid, held, held / area, &params);
     let layout = Layout::plan(&bounds, &all, density, &params, opts.tile_size)?;
     let mut plan = Plan {
         version: PLAN_VERSION,

@@ -12,7 +12,7 @@ use std::path::Path;
 
 use crate::error::{Error, Result};
 use crate::io::{self, Bounds, Point3};
-use crate::spatial::{Footprint, Index};
+use crate::spatial::{DensityGrid, Index};
 
 /// Clouds up to this many points are measured whole.
 pub const WHOLE: u64 = 400_000;
@@ -39,12 +39,12 @@ pub struct Spacing {
 
 /// Measure the point spacing of the cloud at `path`.
 pub fn measure(path: &Path) -> Result<Spacing> {
-    measure_with_footprint(path).map(|(s, _)| s)
+    measure_with_density(path).map(|(s, _)| s)
 }
 
-/// [`measure`], and the cloud's [`Footprint`] counted on the way (one of the passes reads every
+/// [`measure`], and the cloud's [`DensityGrid`] counted on the way (one of the passes reads every
 /// point anyway).
-pub fn measure_with_footprint(path: &Path) -> Result<(Spacing, Footprint)> {
+pub fn measure_with_density(path: &Path) -> Result<(Spacing, DensityGrid)> {
     let mut reader = io::open(path)?;
     let info = reader.info().clone();
     let no_spacing = || {
@@ -59,8 +59,8 @@ pub fn measure_with_footprint(path: &Path) -> Result<(Spacing, Footprint)> {
         while reader.fill(&mut buf, 1 << 16)? > 0 {
             all.extend_from_slice(&buf);
         }
-        let mut footprint = Footprint::new(&info.bounds);
-        footprint.add(&all);
+        let mut grid = DensityGrid::new(&info.bounds);
+        grid.add(&all);
         let origin = all.first().copied().unwrap_or_default();
         distinct(&mut all);
         let probes: Vec<usize> = (0..all.len()).collect();
@@ -73,7 +73,7 @@ pub fn measure_with_footprint(path: &Path) -> Result<(Spacing, Footprint)> {
             measured_points: all.len(),
             method: "over all points".into(),
         };
-        return Ok((spacing, footprint));
+        return Ok((spacing, grid));
     }
     drop(reader);
     let b = info.bounds;
@@ -82,9 +82,9 @@ pub fn measure_with_footprint(path: &Path) -> Result<(Spacing, Footprint)> {
     let density = info.point_count as f64 / area;
     let mut half = 0.5 * (WINDOW_TARGET / density).sqrt();
     let max_half = 0.5 * (b.max[0] - b.min[0]).max(b.max[1] - b.min[1]) + 1.0;
-    // The first pass reads the whole file, whatever the window holds, for the footprint.
-    let mut footprint = Footprint::new(&b);
-    let mut counting = Some(&mut footprint);
+    // The first pass reads the whole file, whatever the window holds, for the density grid.
+    let mut grid = DensityGrid::new(&b);
+    let mut counting = Some(&mut grid);
     for _ in 0..12 {
         let pts = window(
             path,
@@ -118,7 +118,7 @@ pub fn measure_with_footprint(path: &Path) -> Result<(Spacing, Footprint)> {
                         2.0 * half
                     ),
                 };
-                return Ok((spacing, footprint));
+                return Ok((spacing, grid));
             }
         }
     }
@@ -173,22 +173,22 @@ fn footprint_area(b: &Bounds) -> f64 {
 }
 
 /// The points within the XY window, or None when more than `cap` fall in it; every point of
-/// the file counted into `footprint` when given (then the whole file is read).
+/// the file counted into `grid` when given (then the whole file is read).
 fn window(
     path: &Path,
     cx: f64,
     cy: f64,
     half: f64,
     cap: usize,
-    mut footprint: Option<&mut Footprint>,
+    mut grid: Option<&mut DensityGrid>,
 ) -> Result<Option<Vec<Point3>>> {
     let mut reader = io::open(path)?;
     let mut buf = Vec::new();
     let mut out = Vec::new();
     let mut over = false;
     while reader.fill(&mut buf, 1 << 16)? > 0 {
-        if let Some(f) = footprint.as_deref_mut() {
-            f.add(&buf);
+        if let Some(g) = grid.as_deref_mut() {
+            g.add(&buf);
         }
         if over {
             continue;
@@ -203,7 +203,7 @@ fn window(
                 }
             }
         }
-        if over && footprint.is_none() {
+        if over && grid.is_none() {
             return Ok(None);
         }
     }

@@ -44,8 +44,9 @@ fn planes(dir: &Path, seed: u64, n: usize, w: f64, h: f64) -> (PathBuf, PathBuf)
     (b, a)
 }
 
-/// The stderr of a run that must have been refused with exit 2.
-fn refused(o: &std::process::Output) -> String {
+/// The stderr of `talus compare B A --out OUT EXTRA...`, which must be refused with exit 2.
+fn refused(b: &Path, a: &Path, out: &Path, extra: &[&str]) -> String {
+    let o = run_compare(b, a, out, extra);
     let err = String::from_utf8_lossy(&o.stderr).into_owned();
     assert_eq!(o.status.code(), Some(2), "{err}");
     err
@@ -58,13 +59,12 @@ fn one_tile_beyond_the_budget_is_refused_before_anything_runs() {
     let dir = tempdir();
     let (b, a) = planes(dir.path(), 11, 700_000, 100.0, 100.0);
     let out = dir.path().join("out");
-    let o = run_compare(
+    let err = refused(
         &b,
         &a,
         &out,
         &["--memory", "160MiB", "--normal-radius", "10"],
     );
-    let err = refused(&o);
     assert!(
         err.contains("--memory 160 MiB is too small: the pair's one tile (1400000 points"),
         "{err}"
@@ -89,13 +89,12 @@ fn a_dense_tile_in_the_later_survey_is_refused_before_any_m3c2_unit() {
     after.extend(plane(&mut rng, 1_300_000, 540.0, 40.0, 50.0, 50.0));
     write_cloud(&a, &after);
     let out = dir.path().join("out");
-    let o = run_compare(
+    let err = refused(
         &b,
         &a,
         &out,
         &["--memory", "160MiB", "--normal-radius", "10"],
     );
-    let err = refused(&o);
     assert!(err.contains("pass 1: tiling"), "tiled first: {err}");
     assert!(
         err.contains("--memory 160 MiB is too small: tile t_"),
@@ -120,8 +119,7 @@ fn a_merge_of_too_many_tiles_is_refused_before_anything_runs() {
     let dir = tempdir();
     let (b, a) = planes(dir.path(), 13, 20_000, 100.0, 100.0);
     let out = dir.path().join("out");
-    let o = run_compare(&b, &a, &out, &["--memory", "160MiB", "--tile-size", "10"]);
-    let err = refused(&o);
+    let err = refused(&b, &a, &out, &["--memory", "160MiB", "--tile-size", "10"]);
     assert!(
         err.contains(
             "--memory 160 MiB is too small: writing the pair's outputs, merging the results of its"

@@ -121,7 +121,7 @@ fn plan(
     files: &[SurveyFiles],
 ) -> Result<Plan> {
     // One parameter set: from the first survey, which an appended survey does not change.
-    let (spacing, footprint) = sampling::measure_with_footprint(&files[0].first().path)?;
+    let (spacing, density_grid) = sampling::measure_with_density(&files[0].first().path)?;
     let params = Params::resolve(user, spacing.effective_spacing)?;
     let surveys = epochs
         .iter()
@@ -142,14 +142,10 @@ fn plan(
             f.points() as f64 / ((b.max[0] - b.min[0]) * (b.max[1] - b.min[1])).max(1e-9)
         })
         .fold(0.0, f64::max);
-    // The first survey's footprint, scaled to two of the largest surveys at once.
+    // The first survey's density grid, scaled to two of the largest surveys at once.
     let most = files.iter().map(|f| f.points()).max().unwrap_or(0) as f64;
-    let density = crate::plan::layout::tile_density(
-        &footprint,
-        2.0 * most / footprint.total().max(1) as f64,
-        2.0 * densest,
-        &params,
-    );
+    let density =
+        crate::plan::layout::tile_density(&density_grid, 2.0 * most, 2.0 * densest, &params);
     let layout = Layout::plan(&bounds, &bounds[0], density, &params, opts.tile_size)?;
     let pairs = epochs::pairs(epochs.len(), opts.baseline)
         .into_iter()

@@ -312,7 +312,8 @@ fn fit_variogram(samples: &[Sample], keep: &[usize], t: &Point3, spacing: f64) -
     let bins = ((max_d / h0).log2() * per_octave).ceil() as usize + 1;
     // Lag bins of a quarter octave centred on h0·2^(k/4), the first reaching down to h0/2: bin k
     // holds the squared lags from edges[k] up to edges[k + 1]. Comparing squared lags with the
-    // edges spares a square root and a logarithm per pair (millions of pairs).
+    // edges spares a logarithm per pair (millions of pairs), and the square root of the pairs
+    // no bin holds.
     let edges: Vec<f64> = (0..=bins)
         .map(|k| {
             let lo = if k == 0 {
@@ -387,8 +388,6 @@ fn fit_variogram(samples: &[Sample], keep: &[usize], t: &Point3, spacing: f64) -
     fit_spherical(&obs, h0, max_d)
 }
 
-/// Weighted least squares fit of nugget + sill·Sph(h/range) to (lag, γ, weight), the range by a
-/// search over log-spaced candidates, nugget and sill ≥ 0.
 /// Sums per lag bin of a variogram: semivariances, lags, pair counts.
 struct Lags {
     sum: Vec<f64>,
@@ -420,6 +419,8 @@ impl Lags {
     }
 }
 
+/// Weighted least squares fit of nugget + sill·Sph(h/range) to (lag, γ, weight), the range by a
+/// search over log-spaced candidates, nugget and sill ≥ 0.
 fn fit_spherical(obs: &[(f64, f64, f64)], h0: f64, max_d: f64) -> Variogram {
     let flat = || {
         let w: f64 = obs.iter().map(|o| o.2).sum();

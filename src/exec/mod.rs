@@ -44,6 +44,9 @@ struct Shared {
     state: Vec<State>,
     /// Redos after damage, per unit.
     redone: Vec<u8>,
+    /// Times each unit was thrown away for damage: a unit whose dependency's count moved while
+    /// it ran had that dependency's files taken from under it.
+    withdrawn: Vec<u32>,
     error: Option<Error>,
     /// Units found claimed by another live process at the last look.
     elsewhere: Vec<bool>,
@@ -111,6 +114,7 @@ pub fn run_units(
             .map(|&d| if d { State::Done } else { State::Todo })
             .collect(),
         redone: vec![0; n],
+        withdrawn: vec![0; n],
         error: None,
         elsewhere: vec![false; n],
     });
@@ -178,7 +182,7 @@ fn slot(cx: &RunCtx) {
     let lock = || shared.lock().unwrap_or_else(|e| e.into_inner());
     loop {
         // Pick the first ready unit nobody else holds.
-        let picked = {
+        let (picked, withdrawn_before) = {
             let mut sh = lock();
             loop {
                 if sh.error.is_some() || crate::interrupt::requested() {
@@ -202,7 +206,7 @@ fn slot(cx: &RunCtx) {
                 });
                 if let Some(i) = ready {
                     sh.state[i] = State::Running;
-                    break i;
+                    break (i, deps_withdrawn(plan, &sh, i));
                 }
                 // Nothing ready here: wait for a unit of this process to finish, or look again
                 // at what other processes hold.
@@ -218,6 +222,14 @@ fn slot(cx: &RunCtx) {
         };
         let outcome = claim_and_run(store, plan, picked, label, stages, watch, pool);
         let mut sh = lock();
+        // A dependency thrown away while this unit ran (another unit found it damaged) took its
+        // files from under it: whatever that made it fail with, run it again once the dependency
+        // is redone (the same bytes again), without spending its own redo.
+        if outcome.is_err() && deps_withdrawn(plan, &sh, picked) != withdrawn_before {
+            sh.state[picked] = State::Todo;
+            wake.notify_all();
+            continue;
+        }
         match outcome {
             Ok(Ran::Done) => {
                 computed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
@@ -254,6 +266,7 @@ fn slot(cx: &RunCtx) {
                             sh.error.get_or_insert(e);
                         }
                         sh.state[d] = State::Todo;
+                        sh.withdrawn[d] += 1;
                         sh.state[picked] = State::Todo;
                         stages.reopen(plan, d);
                     }
@@ -264,19 +277,16 @@ fn slot(cx: &RunCtx) {
             }
             Err(e) => {
                 sh.state[picked] = State::Todo;
-                // A dependency thrown away while this unit ran (another unit found it damaged)
-                // takes its files from under it: run it again once the dependency is redone.
-                let withdrawn = plan.units[picked]
-                    .deps
-                    .iter()
-                    .any(|&d| sh.state[d] != State::Done);
-                if !withdrawn {
-                    sh.error.get_or_insert(e);
-                }
+                sh.error.get_or_insert(e);
             }
         }
         wake.notify_all();
     }
+}
+
+/// How many times unit `i`'s dependencies were thrown away so far.
+fn deps_withdrawn(plan: &Plan, sh: &Shared, i: usize) -> u32 {
+    plan.units[i].deps.iter().map(|&d| sh.withdrawn[d]).sum()
 }
 
 /// Units another process held at the last look: done now, or claimable again.

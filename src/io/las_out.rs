@@ -187,14 +187,14 @@ struct LazSink {
     /// Batches compressed and emptied, for the caller to fill again.
     back: crossbeam_channel::Receiver<las::PointData>,
     thread: Option<std::thread::JoinHandle<std::io::Result<Compressing>>>,
-    /// A batch is being compressed.
-    busy: bool,
 }
 
 impl LazSink {
     fn start(header: las::Header, compressor: laz::ParLasZipCompressor<BufWriter<File>>) -> Self {
         let (to_thread, batches) = crossbeam_channel::bounded::<las::PointData>(1);
         let (done, back) = crossbeam_channel::bounded(2);
+        // The caller's first spare batch: an empty one of the file's layout.
+        let _ = done.send(las::PointDataBuilder::new().for_header(&header).build());
         let thread = std::thread::spawn(move || -> std::io::Result<Compressing> {
             let (mut header, mut compressor) = (header, compressor);
             for mut batch in batches {
@@ -209,8 +209,16 @@ impl LazSink {
             to_thread: Some(to_thread),
             back,
             thread: Some(thread),
-            busy: false,
         }
+    }
+
+    /// Why the compressing thread stopped taking batches.
+    fn stopped(&mut self) -> las::Error {
+        las::Error::Io(
+            self.join()
+                .err()
+                .unwrap_or_else(|| std::io::Error::other("the LAZ compressing thread stopped")),
+        )
     }
 
     /// The compressing thread's outcome, once it has stopped.
@@ -230,28 +238,14 @@ impl Sink {
         match self {
             Sink::Las(w) => w.write_points(batch),
             Sink::Laz(z) => {
-                let spare = if z.busy {
-                    match z.back.recv() {
-                        Ok(b) => b,
-                        Err(_) => {
-                            return Err(las::Error::Io(z.join().err().unwrap_or_else(|| {
-                                std::io::Error::other("the LAZ compressing thread stopped")
-                            })))
-                        }
-                    }
-                } else {
-                    let mut b = batch.clone();
-                    b.resize_for(0);
-                    b
+                let Ok(spare) = z.back.recv() else {
+                    return Err(z.stopped());
                 };
                 let full = std::mem::replace(batch, spare);
                 let sent = z.to_thread.as_ref().is_some_and(|t| t.send(full).is_ok());
                 if !sent {
-                    return Err(las::Error::Io(z.join().err().unwrap_or_else(|| {
-                        std::io::Error::other("the LAZ compressing thread stopped")
-                    })));
+                    return Err(z.stopped());
                 }
-                z.busy = true;
                 Ok(())
             }
         }

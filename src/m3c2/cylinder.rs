@@ -27,7 +27,7 @@ use std::ops::Range;
 
 use super::moments::Moments1;
 use crate::io::Point3;
-use crate::spatial::Columns;
+use crate::spatial::{in_cylinder, Columns};
 
 /// Projections of one epoch's points inside one cylinder.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -95,11 +95,9 @@ impl Projections {
             let room = &mut t[*len..*len + points.len()];
             let mut kept = 0;
             for p in points {
-                let v = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
-                let along = v[0] * n[0] + v[1] * n[1] + v[2] * n[2];
-                let radial2 = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]) - along * along;
+                let (along, inside) = in_cylinder(p, q, n, r2, h);
                 room[kept] = along;
-                kept += usize::from((along.abs() <= h) & (radial2 <= r2));
+                kept += usize::from(inside);
             }
             *len += kept;
         });

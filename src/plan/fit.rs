@@ -10,8 +10,6 @@
 //! anything (`units::m3c2::run`), so a dense patch late in the tile order does not cost the
 //! stage's other tiles first.
 
-use talus_tiling::TileId;
-
 use crate::error::Result;
 use crate::memory::refuse_unless_fits;
 use crate::plan::Plan;
@@ -48,13 +46,13 @@ pub fn check_planned(plan: &Plan, pair: usize) -> Result<()> {
     )
 }
 
-/// The densest tile of a pair from its two tilings' per-tile counts (`tile_points` of their
-/// records, in grid order), with its points; `None` for records without the counts.
-pub fn densest(
+/// Points per tile of a pair (both surveys, halos included, in grid order) from its two tilings'
+/// records (`tile_points`); `None` for records written before they kept the counts.
+pub fn pair_tile_points(
     plan: &Plan,
     before: &serde_json::Value,
     after: &serde_json::Value,
-) -> Result<Option<(TileId, u64)>> {
+) -> Result<Option<Vec<u64>>> {
     let counts = |m: &serde_json::Value| -> Option<Vec<u64>> {
         m.get("tile_points")?
             .as_array()?
@@ -62,22 +60,33 @@ pub fn densest(
             .map(|v| v.as_u64())
             .collect()
     };
-    let (Some(b), Some(a)) = (counts(before), counts(after)) else {
-        return Ok(None);
-    };
+    let tiles = plan.layout.len();
+    Ok(match (counts(before), counts(after)) {
+        (Some(b), Some(a)) if b.len() == tiles && a.len() == tiles => {
+            Some(b.iter().zip(&a).map(|(b, a)| b + a).collect())
+        }
+        _ => None,
+    })
+}
+
+/// Refuse the budget when the densest of a pair's tiles (`points` per tile, in grid order, see
+/// [`pair_tile_points`]) does not fit it, naming the first such tile in grid order (the same
+/// whichever unit checks).
+pub fn check_tiled(plan: &Plan, points: &[u64]) -> Result<()> {
     let grid = plan.layout.grid()?;
-    if b.len() != grid.len() || a.len() != grid.len() {
-        return Ok(None);
-    }
-    Ok(grid
+    let Some((densest, &n)) = grid
         .tiles()
-        .map(|t| {
-            let i = grid.index(t);
-            (t, b[i] + a[i])
-        })
-        // The first of the densest, in grid order: the same tile is named whoever checks.
-        .fold(None, |best: Option<(TileId, u64)>, (t, n)| match best {
-            Some((_, m)) if m >= n => best,
-            _ => Some((t, n)),
-        }))
+        .map(|t| (t, &points[grid.index(t)]))
+        .min_by_key(|&(_, n)| std::cmp::Reverse(*n))
+    else {
+        return Ok(());
+    };
+    refuse_unless_fits(
+        need(n),
+        plan.params.memory_bytes.value,
+        &format!(
+            "tile {} ({n} points with its halo, the pair's densest)",
+            densest.name()
+        ),
+    )
 }

@@ -13,7 +13,7 @@ use talus_tiling::{BoundsXY, TileGrid};
 use crate::error::{Error, Result};
 use crate::io::{Bounds, Point3};
 use crate::params::Params;
-use crate::spatial::Footprint;
+use crate::spatial::DensityGrid;
 
 /// The size (input units) of the blocks the core-point lattice is anchored on: large next to a
 /// site, so that two runs over it share the anchor, small enough that local coordinates keep
@@ -139,26 +139,27 @@ impl Layout {
 }
 
 /// The density (points per unit², the surveys held at once) to size tiles by: the one at which
-/// a tile's halo box holds what the densest square of its size holds in `footprint` (one
-/// survey's, times `scale` for the surveys a unit holds at once), and never below the bounds'
-/// `mean`. A tile is then sized for where the points are, not for their average over the
+/// a tile's halo box holds what the densest square of its size holds in `grid` (one
+/// survey's, scaled to the `held` points a unit holds at once over the surveys it compares), and
+/// never below the bounds' `mean`. A tile is then sized for where the points are, not for their average over the
 /// bounds; where even the smallest tile (four halos) is denser than the budget allows, the
 /// result keeps the tiles at that smallest side and the M3C2 units' check refuses the budget.
-pub fn tile_density(footprint: &Footprint, scale: f64, mean: f64, params: &Params) -> f64 {
+pub fn tile_density(grid: &DensityGrid, held: f64, mean: f64, params: &Params) -> f64 {
+    let scale = held / grid.total().max(1) as f64;
     let halo = tile_halo(params);
     let allowed = TILE_BUDGET_FRACTION * params.memory_bytes.value as f64 / BYTES_PER_POINT as f64;
-    let holds = |side: f64| scale * footprint.densest(side + 2.0 * halo) as f64;
+    let holds = |side: f64| scale * grid.densest(side + 2.0 * halo) as f64;
     let box_area = |side: f64| (side + 2.0 * halo).powi(2).max(f64::MIN_POSITIVE);
     // TileGrid::plan's smallest side.
     let least = (4.0 * halo).max(f64::MIN_POSITIVE);
-    if scale * footprint.total() as f64 <= allowed {
+    if held <= allowed {
         return mean; // one tile holds it all
     }
     if holds(least) > allowed {
         return mean.max(holds(least) / box_area(least));
     }
     // The largest side whose box holds no more than allowed: `lo` does, `hi` does not (at the
-    // footprint's extent a square holds every point, more than allowed).
+    // grid's extent a square holds every point, more than allowed).
     let (mut lo, mut hi) = (least, 2.0 * least);
     while holds(hi) <= allowed {
         (lo, hi) = (hi, 2.0 * hi);
@@ -217,12 +218,12 @@ mod tests {
         let mut b = Bounds::empty();
         b.grow(&[0.0, 0.0, 0.0]);
         b.grow(&[2000.0, 500.0, 1.0]);
-        let mut footprint = Footprint::new(&b);
-        footprint.add(&points);
+        let mut counts = DensityGrid::new(&b);
+        counts.add(&points);
         let n = points.len() as f64;
         // Two epochs held at once.
         let mean = 2.0 * n / (2000.0 * 500.0);
-        let density = tile_density(&footprint, 2.0, mean, &params);
+        let density = tile_density(&counts, 2.0 * n, mean, &params);
         let layout = Layout::plan(&[b], &b, density, &params, None).unwrap();
         // Sized by the search, not held at the smallest side.
         assert!(layout.tile_size > 4.0 * halo + params.core_spacing.value);

@@ -30,6 +30,17 @@ fn band_shift(columns: usize) -> u32 {
     shift
 }
 
+/// The exact cylinder test every cylinder query makes: the projection t of `p − q` on the unit
+/// axis `n`, and whether |t| ≤ `h` and |p − q|² − t² ≤ `r2` (no branch: the verdicts follow no
+/// pattern a predictor could learn).
+#[inline(always)]
+pub fn in_cylinder(p: &Point3, q: &Point3, n: &Point3, r2: f64, h: f64) -> (f64, bool) {
+    let v = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
+    let t = v[0] * n[0] + v[1] * n[1] + v[2] * n[2];
+    let radial2 = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]) - t * t;
+    (t, (t.abs() <= h) & (radial2 <= r2))
+}
+
 /// Points in a local frame, bucketed into columns of width `cell`.
 pub struct Columns {
     origin: Point3,
@@ -352,17 +363,15 @@ impl Columns {
         let r2 = r * r;
         self.cylinder_candidates(q, n, r, h, |points| {
             for p in points {
-                let v = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
-                let t = v[0] * n[0] + v[1] * n[1] + v[2] * n[2];
-                let radial2 = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]) - t * t;
-                f(t, (t.abs() <= h) & (radial2 <= r2));
+                let (t, inside) = in_cylinder(p, q, n, r2, h);
+                f(t, inside);
             }
         })
     }
 
     /// The candidates of the cylinder of [`Columns::for_each_in_cylinder`], a column's run at a
-    /// time: every point the exact test accepts (|t| ≤ h and |p − q|² − t² ≤ r², computed as
-    /// written there) is in one of the runs given to `f`, with others it rejects.
+    /// time: every point [`in_cylinder`] accepts is in one of the runs given to `f`, with others
+    /// it rejects.
     #[inline]
     pub fn cylinder_candidates(
         &self,

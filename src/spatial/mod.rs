@@ -6,14 +6,14 @@
 //! - [`Columns`]: a grid of vertical point columns sorted by height, for the two queries M3C2 makes
 //!   at every core point: a sphere (normals) and a cylinder along an arbitrary axis.
 //! - [`BoxIndex`]: which of many xy boxes contain a point (events' search boxes and claims).
-//! - [`Footprint`]: points per XY cell of a survey, and its densest square (tile sizes).
+//! - [`DensityGrid`]: points per XY cell of a survey, and its densest square (tile sizes).
 
 mod boxes;
 mod columns;
-mod footprint;
+mod density;
 mod kdtree;
 
 pub use boxes::BoxIndex;
-pub use columns::Columns;
-pub use footprint::Footprint;
+pub use columns::{in_cylinder, Columns};
+pub use density::DensityGrid;
 pub use kdtree::{median_nn_distance, Index};

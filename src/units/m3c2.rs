@@ -55,19 +55,15 @@ pub fn run(
     };
     // The pair's densest tile first: a budget that cannot hold it is refused by whichever M3C2
     // unit runs first, not after the tiles before it.
-    if let Some((densest, n)) =
-        crate::plan::fit::densest(plan, &ctx.meta(deps[0])?, &ctx.meta(deps[1])?)?
-    {
-        crate::memory::refuse_unless_fits(
-            need(n),
-            plan.params.memory_bytes.value,
-            &format!(
-                "tile {} ({n} points with its halo, the pair's densest)",
-                densest.name()
-            ),
-        )?;
-    }
-    let halo_points = count(deps[0])? + count(deps[1])?;
+    let points =
+        crate::plan::fit::pair_tile_points(plan, &ctx.meta(deps[0])?, &ctx.meta(deps[1])?)?;
+    let halo_points = match points {
+        Some(p) => {
+            crate::plan::fit::check_tiled(plan, &p)?;
+            p[plan.layout.grid()?.index(tile)]
+        }
+        None => count(deps[0])? + count(deps[1])?,
+    };
     let _held = ctx.reserve(
         need(halo_points),
         &format!("tile {} ({halo_points} points with its halo)", tile.name()),
@@ -282,7 +278,6 @@ pub struct Merged {
     cursors: Vec<Cursor>,
     heap: BinaryHeap<Reverse<(u64, usize)>>,
     ahead: usize,
-    total: u64,
 }
 
 #[derive(Default)]
@@ -301,7 +296,6 @@ impl Merged {
             ahead: ahead(tiles.len()),
             tiles,
             heap: BinaryHeap::new(),
-            total: pair_count(ctx, pair)?,
         };
         for t in 0..m.tiles.len() {
             m.advance_chunk(t)?;
@@ -332,11 +326,6 @@ impl Merged {
             self.heap.push(Reverse((c.chunk[c.pos].key, t)));
         }
         Ok(())
-    }
-
-    /// How many results the merge gives in all.
-    pub fn total(&self) -> u64 {
-        self.total
     }
 
     /// The next result in key order.

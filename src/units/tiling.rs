@@ -86,17 +86,16 @@ pub fn run(ctx: &Ctx, survey: usize, out: &mut UnitWriter) -> Result<serde_json:
             crate::interrupt::check()?;
         }
     }
-    let mut has_file = vec![false; grid.len()];
     // Points per tile (halo included), in grid order: what the pair's M3C2 units check the
-    // budget against before the first of them holds anything (`plan::fit`).
+    // budget against before the first of them holds anything (`plan::fit`). A tile without
+    // points has no file from the splitter.
     let mut tile_points = vec![0u64; grid.len()];
     for (id, n, digest) in splitter.finish_with_digests().map_err(tiling_error)? {
-        has_file[grid.index(id)] = true;
         tile_points[grid.index(id)] = n;
         out.add(&tile_file(id), digest.crc32, digest.size);
     }
     for id in grid.tiles() {
-        if !has_file[grid.index(id)] {
+        if tile_points[grid.index(id)] == 0 {
             let name = tile_file(id);
             let digest =
                 talus_tiling::write_tile(&out.path(&name)?, &talus_tiling::empty_columns())

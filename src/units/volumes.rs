@@ -99,7 +99,7 @@ fn near_events(drafts: &[Draft], mine: &[&Draft], params: &Params) -> rustc_hash
 
 /// The claims of every event (one per candidate box) over their clustered core points.
 pub fn ownership(
-    drafts: &[Draft],
+    drafts: &[&Draft],
     members: &HashMap<u32, Vec<&Kept>>,
     params: &Params,
 ) -> volume::Ownership {
@@ -257,10 +257,9 @@ pub fn run(
                 members.entry(k.event).or_default().push(k);
             }
         }
-        let relevant: Vec<Draft> = drafts
+        let relevant: Vec<&Draft> = drafts
             .iter()
             .filter(|d| near.contains(&d.event.id))
-            .cloned()
             .collect();
         let ownership = ownership(&relevant, &members, params);
         let user = match &plan.meshes {

@@ -14,7 +14,9 @@ use std::cell::Cell;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use spade::handles::FixedVertexHandle;
-use spade::{DelaunayTriangulation, HasPosition, Point2, PositionInTriangulation, Triangulation};
+use spade::{
+    DelaunayTriangulation, FloatTriangulation, HasPosition, HintGenerator, Point2, Triangulation,
+};
 
 use crate::error::{Error, Result};
 
@@ -49,9 +51,7 @@ fn snap(x: f64) -> f64 {
 
 /// 2.5-D triangulated surface of local points (u, v, w).
 pub struct Tin {
-    tri: DelaunayTriangulation<Vertex>,
-    /// Tells this TIN's hints from another's in a thread's [`HINT`].
-    id: u64,
+    tri: DelaunayTriangulation<Vertex, (), (), (), ThreadHint>,
 }
 
 thread_local! {
@@ -70,6 +70,60 @@ const SLOTS: usize = 4;
 
 /// Ids of the TINs made.
 static TINS: AtomicU64 = AtomicU64::new(1);
+
+/// spade's hint generator with a hint per thread ([`HINT`]) instead of one shared by all.
+struct ThreadHint {
+    /// Tells this TIN's hints from another's in a thread's [`HINT`].
+    id: u64,
+}
+
+impl Default for ThreadHint {
+    fn default() -> Self {
+        ThreadHint {
+            id: TINS.fetch_add(1, Ordering::Relaxed),
+        }
+    }
+}
+
+impl ThreadHint {
+    fn slot(&self) -> usize {
+        (self.id % SLOTS as u64) as usize
+    }
+    fn set(&self, vertex: Option<FixedVertexHandle>) {
+        HINT.with(|h| h[self.slot()].set((self.id, vertex)));
+    }
+}
+
+impl HintGenerator<f64> for ThreadHint {
+    fn get_hint(&self, _: Point2<f64>) -> FixedVertexHandle {
+        match HINT.with(|h| h[self.slot()].get()) {
+            (id, Some(v)) if id == self.id => v,
+            _ => FixedVertexHandle::from_index(0),
+        }
+    }
+    fn notify_vertex_lookup(&self, vertex: FixedVertexHandle) {
+        self.set(Some(vertex));
+    }
+    fn notify_vertex_inserted(&mut self, vertex: FixedVertexHandle, _: Point2<f64>) {
+        self.set(Some(vertex));
+    }
+    fn notify_vertex_removed(
+        &mut self,
+        _: Option<Point2<f64>>,
+        _: FixedVertexHandle,
+        _: Point2<f64>,
+    ) {
+        // The handles may have moved: start the next search anywhere.
+        self.set(None);
+    }
+    fn initialize_from_triangulation<TR, V>(_: &TR) -> Self
+    where
+        TR: Triangulation,
+        V: HasPosition<Scalar = f64>,
+    {
+        Self::default()
+    }
+}
 
 impl std::fmt::Debug for Tin {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -98,10 +152,7 @@ impl Tin {
                 tri.num_vertices()
             )));
         }
-        Ok(Tin {
-            tri,
-            id: TINS.fetch_add(1, Ordering::Relaxed),
-        })
+        Ok(Tin { tri })
     }
 
     /// Is (u, v) inside the triangulated area (the convex hull of the points)?
@@ -140,40 +191,10 @@ impl Tin {
 }
 
 impl Surface for Tin {
-    /// Linear (barycentric) interpolation inside the hull, None outside: spade's
-    /// `barycentric().interpolate`, term for term, with the search for the point's triangle
-    /// started from this thread's last vertex found (`HINT`).
+    /// Linear (barycentric) interpolation inside the hull, None outside (the search for the
+    /// point's triangle starting from this thread's last vertex found, [`ThreadHint`]).
     fn height_at(&self, u: f64, v: f64) -> Option<f64> {
         let p = Point2::new(snap(u), snap(v));
-        let slot = (self.id % SLOTS as u64) as usize;
-        let position = match HINT.with(|h| h[slot].get()) {
-            (id, Some(hint)) if id == self.id => self.tri.locate_with_hint(p, hint),
-            _ => self.tri.locate(p),
-        };
-        let w = |v: FixedVertexHandle| self.tri.vertex(v).data().w;
-        let (height, near) = match position {
-            PositionInTriangulation::OnVertex(v) => (0.0 + w(v) * 1.0, v),
-            PositionInTriangulation::OnEdge(e) => {
-                let [v0, v1] = self.tri.directed_edge(e).vertices();
-                let (a, b) = (v0.position(), v1.position());
-                let dir = (b.x - a.x, b.y - a.y);
-                let factor = (p.x - a.x) * dir.0 + (p.y - a.y) * dir.1;
-                let rel = factor / (dir.0 * dir.0 + dir.1 * dir.1);
-                (
-                    0.0 + w(v0.fix()) * (1.0 - rel) + w(v1.fix()) * rel,
-                    v0.fix(),
-                )
-            }
-            PositionInTriangulation::OnFace(f) => {
-                let face = self.tri.face(f);
-                let [v0, v1, v2] = face.vertices();
-                let [c0, c1, c2] = face.barycentric_interpolation(p);
-                let h = 0.0 + w(v0.fix()) * c0 + w(v1.fix()) * c1 + w(v2.fix()) * c2;
-                (h, v0.fix())
-            }
-            _ => return None,
-        };
-        HINT.with(|h| h[slot].set((self.id, Some(near))));
-        Some(height)
+        self.tri.barycentric().interpolate(|h| h.data().w, p)
     }
 }

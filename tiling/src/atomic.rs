@@ -40,7 +40,12 @@ pub fn atomic_write_with(
         let _ = fs::remove_file(&tmp);
         return Err(Error::io(&tmp, e));
     }
-    fs::rename(&tmp, path).map_err(|e| Error::io(path, e))?;
+    publish(&tmp, path)
+}
+
+/// Give the durable temporary file `tmp` its name `path`, durably.
+pub fn publish(tmp: &Path, path: &Path) -> Result<()> {
+    fs::rename(tmp, path).map_err(|e| Error::io(path, e))?;
     sync_dir(path)
 }
 

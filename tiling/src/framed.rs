@@ -25,7 +25,7 @@ use std::fs::{File, OpenOptions};
 use std::io::{Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
-use crate::atomic::{sync_dir, tmp_path};
+use crate::atomic::{publish, tmp_path};
 use crate::error::{Error, Result};
 use crate::tile_file::{self, Bounds3, Column, ColumnData, FileDigest, TileColumns, WriteOptions};
 
@@ -116,8 +116,7 @@ impl Framed {
             .and_then(|()| f.sync_all())
             .map_err(|e| Error::io(&tmp, e))?;
         drop(f);
-        std::fs::rename(&tmp, &self.path).map_err(|e| Error::io(&self.path, e))?;
-        sync_dir(&self.path)?;
+        publish(&tmp, &self.path)?;
         let mut crc = crc32fast::Hasher::new();
         crc.update(&header);
         crc.combine(&self.crc);
@@ -159,25 +158,31 @@ pub(crate) fn parse_header(bytes: &[u8]) -> Result<Header, String> {
     if bytes.len() < HEADER_LEN {
         return Err("file is truncated".into());
     }
-    let u32_at =
-        |k: usize| u32::from_le_bytes([bytes[k], bytes[k + 1], bytes[k + 2], bytes[k + 3]]);
-    let u64_at = |k: usize| u64::from_le_bytes(bytes[k..k + 8].try_into().unwrap_or([0; 8]));
-    if &bytes[..8] != tile_file::MAGIC || u32_at(8) != VERSION {
+    let mut c = tile_file::Cursor { bytes, pos: 8 };
+    if &bytes[..8] != tile_file::MAGIC || c.u32()? != VERSION {
         return Err("not a framed tile file".into());
     }
-    if u32_at(12) as usize != HEADER_LEN {
+    if c.u32()? as usize != HEADER_LEN {
         return Err("header length is wrong".into());
     }
-    if crc32fast::hash(&bytes[..HEADER_LEN - 4]) != u32_at(HEADER_LEN - 4) {
+    let stored_crc = tile_file::Cursor {
+        bytes,
+        pos: HEADER_LEN - 4,
+    }
+    .u32()?;
+    if crc32fast::hash(&bytes[..HEADER_LEN - 4]) != stored_crc {
         return Err("header checksum mismatch".into());
     }
-    let f64_at = |k: usize| f64::from_bits(u64_at(k));
+    let point_count = c.u64()?;
+    let frames = c.u32()?;
+    c.pos = 32;
+    let mut corner = || -> Result<[f64; 3], String> { Ok([c.f64()?, c.f64()?, c.f64()?]) };
     Ok(Header {
-        point_count: u64_at(16),
-        frames: u32_at(24),
+        point_count,
+        frames,
         bounds: Bounds3 {
-            min: [f64_at(32), f64_at(40), f64_at(48)],
-            max: [f64_at(56), f64_at(64), f64_at(72)],
+            min: corner()?,
+            max: corner()?,
         },
     })
 }
@@ -272,12 +277,6 @@ fn append(cols: &mut TileColumns, frame: TileColumns) -> Result<(), String> {
         }
     }
     Ok(())
-}
-
-/// The column names of a framed tile, from its first frame's header (`bytes`: the file's start,
-/// at least the framed header and the first frame's header).
-pub(crate) fn column_names(bytes: &[u8]) -> Result<Vec<String>, String> {
-    tile_file::column_names(&bytes[HEADER_LEN.min(bytes.len())..])
 }
 
 #[cfg(test)]

@@ -86,15 +86,10 @@ impl TileSplitter {
             }
         }
         let n = grid.len();
-        let rows = grid.rows() as usize;
-        let files = (0..n)
-            .map(|i| {
-                let id = TileId {
-                    col: (i / rows) as u32,
-                    row: (i % rows) as u32,
-                };
-                Framed::new(&tile_path(dir, id))
-            })
+        // In grid index order, as the buffers.
+        let files = grid
+            .tiles()
+            .map(|id| Framed::new(&tile_path(dir, id)))
             .collect();
         Ok(TileSplitter {
             grid,
@@ -121,11 +116,6 @@ impl TileSplitter {
     /// The grid being split into.
     pub fn grid(&self) -> &TileGrid {
         &self.grid
-    }
-
-    /// Points per frame.
-    pub fn frame_points(&self) -> usize {
-        self.frame_points
     }
 
     /// Bytes currently allocated by the buffers (what the budget bounds).
@@ -177,18 +167,14 @@ impl TileSplitter {
 
     /// [`TileSplitter::finish`], with each tile file's digest.
     pub fn finish_with_digests(self) -> Result<Vec<(TileId, u64, FileDigest)>> {
-        let rows = self.grid.rows() as usize;
         let mut written = Vec::new();
-        for (i, (mut buffer, mut file)) in self.buffers.into_iter().zip(self.files).enumerate() {
+        let tiles = self.grid.tiles().zip(self.buffers).zip(self.files);
+        for ((id, mut buffer), mut file) in tiles {
             if !buffer.x.is_empty() {
                 write_frame(&mut buffer, &mut file, &self.opts)?;
             }
             drop(buffer);
             if file.points() > 0 {
-                let id = TileId {
-                    col: (i / rows) as u32,
-                    row: (i % rows) as u32,
-                };
                 let n = file.points();
                 written.push((id, n, file.finish()?));
             }

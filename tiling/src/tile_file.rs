@@ -267,7 +267,7 @@ pub fn read_tile(path: &Path) -> Result<TileColumns> {
     File::open(path)
         .and_then(|mut f| f.read_to_end(&mut bytes))
         .map_err(|e| Error::io(path, e))?;
-    let decoded = match version_of(&bytes) {
+    let decoded = match check_magic_version(&bytes, &[VERSION, crate::framed::VERSION]) {
         Ok(crate::framed::VERSION) => crate::framed::decode(&bytes),
         Ok(_) => decode(&bytes),
         Err(e) => Err(e),
@@ -275,52 +275,40 @@ pub fn read_tile(path: &Path) -> Result<TileColumns> {
     decoded.map_err(|reason| Error::corrupt(path, reason))
 }
 
-/// The format version of a tile file starting with `bytes` (1 or 2).
-fn version_of(bytes: &[u8]) -> Result<u32, String> {
-    if bytes.len() < 12 {
-        return Err("file is truncated".into());
-    }
-    if &bytes[..8] != MAGIC {
-        return Err("bad magic (not a talus tile file)".into());
-    }
-    match u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) {
-        v @ (VERSION | crate::framed::VERSION) => Ok(v),
-        v => Err(format!(
-            "unsupported format version {v} (expected {VERSION} or {})",
-            crate::framed::VERSION
-        )),
-    }
-}
-
 /// Read and verify only a tile file's header (count, bounds, column names).
 pub fn read_tile_header(path: &Path) -> Result<TileHeader> {
     let mut f = File::open(path).map_err(|e| Error::io(path, e))?;
     let mut fixed = [0u8; 16];
     read_exact_or_corrupt(&mut f, &mut fixed, path)?;
-    if version_of(&fixed) == Ok(crate::framed::VERSION) {
-        // The framed header, then the first frame's header for the column names.
-        let mut head = fixed.to_vec();
-        head.resize(crate::framed::HEADER_LEN + 16, 0);
-        read_exact_or_corrupt(&mut f, &mut head[16..], path)?;
-        let h = crate::framed::parse_header(&head).map_err(|r| Error::corrupt(path, r))?;
-        let at = crate::framed::HEADER_LEN;
-        let frame_len =
-            u32::from_le_bytes([head[at + 12], head[at + 13], head[at + 14], head[at + 15]]);
-        if !(16..=1 << 24).contains(&frame_len) {
-            return Err(Error::corrupt(path, "implausible frame header length"));
-        }
-        head.resize(at + frame_len as usize, 0);
-        read_exact_or_corrupt(&mut f, &mut head[at + 16..], path)?;
-        let columns = crate::framed::column_names(&head).map_err(|r| Error::corrupt(path, r))?;
+    let version = check_magic_version(&fixed, &[VERSION, crate::framed::VERSION])
+        .map_err(|r| Error::corrupt(path, r))?;
+    if version == VERSION {
+        let h = read_v1_header(&mut f, path, fixed)?;
         return Ok(TileHeader {
-            version: crate::framed::VERSION,
+            version,
             point_count: h.point_count,
             bounds: h.bounds,
-            columns,
+            columns: h.columns.into_iter().map(|c| c.name).collect(),
         });
     }
+    // The framed header, then its first frame's (a version-1 header) for the column names.
+    let mut head = fixed.to_vec();
+    head.resize(crate::framed::HEADER_LEN, 0);
+    read_exact_or_corrupt(&mut f, &mut head[16..], path)?;
+    let h = crate::framed::parse_header(&head).map_err(|r| Error::corrupt(path, r))?;
+    read_exact_or_corrupt(&mut f, &mut fixed, path)?;
+    let first = read_v1_header(&mut f, path, fixed)?;
+    Ok(TileHeader {
+        version,
+        point_count: h.point_count,
+        bounds: h.bounds,
+        columns: first.columns.into_iter().map(|c| c.name).collect(),
+    })
+}
+
+/// The version-1 header whose first 16 bytes are `fixed`, the rest read from `f`.
+fn read_v1_header(f: &mut File, path: &Path, fixed: [u8; 16]) -> Result<Header> {
     let header_len = u32::from_le_bytes([fixed[12], fixed[13], fixed[14], fixed[15]]) as usize;
-    check_magic_version(&fixed).map_err(|r| Error::corrupt(path, r))?;
     if !(16..=1 << 24).contains(&header_len) {
         return Err(Error::corrupt(
             path,
@@ -329,14 +317,8 @@ pub fn read_tile_header(path: &Path) -> Result<TileHeader> {
     }
     let mut head = fixed.to_vec();
     head.resize(header_len, 0);
-    read_exact_or_corrupt(&mut f, &mut head[16..], path)?;
-    let h = parse_header(&head).map_err(|r| Error::corrupt(path, r))?;
-    Ok(TileHeader {
-        version: VERSION,
-        point_count: h.point_count,
-        bounds: h.bounds,
-        columns: h.columns.into_iter().map(|c| c.name).collect(),
-    })
+    read_exact_or_corrupt(f, &mut head[16..], path)?;
+    parse_header(&head).map_err(|r| Error::corrupt(path, r))
 }
 
 fn read_exact_or_corrupt(f: &mut File, buf: &mut [u8], path: &Path) -> Result<()> {
@@ -477,15 +459,6 @@ pub(crate) fn encoded_len(bytes: &[u8]) -> Result<usize, String> {
         return Err("file is truncated".into());
     }
     Ok(len as usize)
-}
-
-/// The column names of the version-1 encoding whose header starts `bytes`.
-pub(crate) fn column_names(bytes: &[u8]) -> Result<Vec<String>, String> {
-    Ok(parse_header(bytes)?
-        .columns
-        .into_iter()
-        .map(|c| c.name)
-        .collect())
 }
 
 thread_local! {
@@ -666,13 +639,13 @@ struct Header {
 }
 
 /// Bounds-checked little-endian reader; running out of bytes means the file is truncated.
-struct Cursor<'a> {
-    bytes: &'a [u8],
-    pos: usize,
+pub(crate) struct Cursor<'a> {
+    pub(crate) bytes: &'a [u8],
+    pub(crate) pos: usize,
 }
 
 impl<'a> Cursor<'a> {
-    fn take(&mut self, n: usize) -> Result<&'a [u8], String> {
+    pub(crate) fn take(&mut self, n: usize) -> Result<&'a [u8], String> {
         let end = self.pos.checked_add(n).filter(|&e| e <= self.bytes.len());
         match end {
             Some(end) => {
@@ -683,29 +656,30 @@ impl<'a> Cursor<'a> {
             None => Err("file is truncated".into()),
         }
     }
-    fn array<const N: usize>(&mut self) -> Result<[u8; N], String> {
+    pub(crate) fn array<const N: usize>(&mut self) -> Result<[u8; N], String> {
         let mut a = [0u8; N];
         a.copy_from_slice(self.take(N)?);
         Ok(a)
     }
-    fn u8(&mut self) -> Result<u8, String> {
+    pub(crate) fn u8(&mut self) -> Result<u8, String> {
         Ok(self.take(1)?[0])
     }
-    fn u16(&mut self) -> Result<u16, String> {
+    pub(crate) fn u16(&mut self) -> Result<u16, String> {
         Ok(u16::from_le_bytes(self.array()?))
     }
-    fn u32(&mut self) -> Result<u32, String> {
+    pub(crate) fn u32(&mut self) -> Result<u32, String> {
         Ok(u32::from_le_bytes(self.array()?))
     }
-    fn u64(&mut self) -> Result<u64, String> {
+    pub(crate) fn u64(&mut self) -> Result<u64, String> {
         Ok(u64::from_le_bytes(self.array()?))
     }
-    fn f64(&mut self) -> Result<f64, String> {
+    pub(crate) fn f64(&mut self) -> Result<f64, String> {
         Ok(f64::from_le_bytes(self.array()?))
     }
 }
 
-fn check_magic_version(fixed: &[u8]) -> Result<(), String> {
+/// Check a tile file's magic and that its format version is one of `allowed`; the version.
+fn check_magic_version(fixed: &[u8], allowed: &[u32]) -> Result<u32, String> {
     if fixed.len() < 12 {
         return Err("file is truncated".into());
     }
@@ -713,17 +687,19 @@ fn check_magic_version(fixed: &[u8]) -> Result<(), String> {
         return Err("bad magic (not a talus tile file)".into());
     }
     let version = u32::from_le_bytes([fixed[8], fixed[9], fixed[10], fixed[11]]);
-    if version != VERSION {
+    if !allowed.contains(&version) {
+        let expected: Vec<String> = allowed.iter().map(|v| v.to_string()).collect();
         return Err(format!(
-            "unsupported format version {version} (expected {VERSION})"
+            "unsupported format version {version} (expected {})",
+            expected.join(" or ")
         ));
     }
-    Ok(())
+    Ok(version)
 }
 
 /// Parse and CRC-check the header at the start of `bytes`.
 fn parse_header(bytes: &[u8]) -> Result<Header, String> {
-    check_magic_version(bytes)?;
+    check_magic_version(bytes, &[VERSION])?;
     let mut c = Cursor { bytes, pos: 12 };
     let header_len = c.u32()? as usize;
     if header_len < 16 + 4 || header_len > bytes.len() {

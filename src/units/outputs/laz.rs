@@ -81,14 +81,16 @@ pub struct Written {
     pub significant: u64,
 }
 
-/// Write m3c2.laz into `out` from the pair's results in key order (`results`), with the
+/// Write m3c2.laz into `out` from the pair's `total` results in key order (`results`), with the
 /// registration error `reg_error` in LoD95 and significance. `event_of(key)` gives the smoothed
 /// distance and event id of a core point (NaN, 0 when it is in no event); `each` sees every
 /// result in the same order (the viewer's terrain sample rides on this pass instead of merging
 /// the results again).
+#[allow(clippy::too_many_arguments)]
 pub fn write_m3c2_laz(
     out: &mut UnitWriter,
     results: &mut Merged,
+    total: u64,
     reg_error: f64,
     crs: &Crs,
     grid: CoordinateGrid,
@@ -96,7 +98,7 @@ pub fn write_m3c2_laz(
     each: &mut dyn FnMut(&KeyedResult),
 ) -> Result<Written> {
     let path = out.path("m3c2.laz")?;
-    let mut w = ResultWriter::create_on_grid(&path, crs, M3C2_DIMS, grid, Some(results.total()))?;
+    let mut w = ResultWriter::create_on_grid(&path, crs, M3C2_DIMS, grid, Some(total))?;
     let mut written = Written {
         core_points: 0,
         computed: 0,

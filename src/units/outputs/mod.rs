@@ -275,6 +275,7 @@ pub fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<
     let written = laz::write_m3c2_laz(
         out,
         &mut merged,
+        total,
         params.reg_error.value,
         &crs,
         CoordinateGrid::for_extent(extent.min, extent.max, &scales),

@@ -13,7 +13,7 @@ pub const CELLS: usize = 512;
 
 /// Points per XY cell.
 #[derive(Debug, Clone)]
-pub struct Footprint {
+pub struct DensityGrid {
     origin: [f64; 2],
     cell: f64,
     cols: usize,
@@ -22,15 +22,15 @@ pub struct Footprint {
     total: u64,
 }
 
-impl Footprint {
-    /// An empty footprint over `bounds`.
-    pub fn new(bounds: &Bounds) -> Footprint {
+impl DensityGrid {
+    /// An empty grid over `bounds`.
+    pub fn new(bounds: &Bounds) -> DensityGrid {
         let w = (bounds.max[0] - bounds.min[0]).max(0.0);
         let h = (bounds.max[1] - bounds.min[1]).max(0.0);
         let cell = (w.max(h) / CELLS as f64).max(1e-9);
         let cols = ((w / cell) as usize + 1).min(CELLS);
         let rows = ((h / cell) as usize + 1).min(CELLS);
-        Footprint {
+        DensityGrid {
             origin: [bounds.min[0], bounds.min[1]],
             cell,
             cols,
@@ -127,7 +127,7 @@ mod tests {
         for _ in 0..100 {
             points.push([600.0 + 20.0 * rnd(), 50.0 + 20.0 * rnd(), 0.0]);
         }
-        let mut fp = Footprint::new(&bounds(1000.0, 200.0));
+        let mut fp = DensityGrid::new(&bounds(1000.0, 200.0));
         fp.add(&points);
         assert_eq!(fp.total(), 200);
         for side in [5.0, 20.0, 60.0, 300.0] {
@@ -143,7 +143,7 @@ mod tests {
 
     #[test]
     fn points_outside_or_on_the_edge_are_counted() {
-        let mut fp = Footprint::new(&bounds(10.0, 0.0));
+        let mut fp = DensityGrid::new(&bounds(10.0, 0.0));
         fp.add(&[[10.0, 0.0, 0.0], [-1.0, 3.0, 0.0], [f64::NAN, 0.0, 0.0]]);
         assert_eq!(fp.total(), 3);
         assert_eq!(fp.densest(100.0), 3);
