@@ -55,6 +55,7 @@ fn benches(c: &mut Criterion) {
         min_points: 1,
         orientation: Orientation::Up,
         point_spacing: 0.1,
+        walk: m3c2::Walk::Off,
     };
     let cell = m3c2::column_width(&params);
     let b = Columns::new(&before, [50.0, 50.0, 0.0], cell);

@@ -270,7 +270,7 @@ struct CampaignArgs {
 
 #[derive(Args)]
 struct SynthArgs {
-    /// hill | cube | spheres | cubes | cliff | deposit | hole | events | stable | large |
+    /// hill | cube | spheres | cubes | cliff | deposit | hole | events | stable | large | dense |
     /// campaign
     scene: String,
     #[arg(long)]

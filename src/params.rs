@@ -493,6 +493,18 @@ impl Params {
                 .value
                 .parse()
                 .expect("validated in resolve"),
+            walk: self.walk(),
+        }
+    }
+
+    /// How M3C2 treats a cylinder that holds only one epoch ([`crate::m3c2::reach`]): a derived
+    /// half-length is a search window and the other epoch is sought on along the normal; the
+    /// user's half-length is kept, and what lies beyond it is flagged, not measured.
+    pub fn walk(&self) -> crate::m3c2::Walk {
+        if self.cyl_halflen.source == "user" {
+            crate::m3c2::Walk::Detect
+        } else {
+            crate::m3c2::Walk::Measure
         }
     }
 }

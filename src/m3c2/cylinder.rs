@@ -103,6 +103,15 @@ impl Projections {
         });
     }
 
+    /// The lowest and highest projection ((+∞, −∞) when there is none).
+    pub fn range(&self) -> (f64, f64) {
+        self.t[..self.len]
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+                (a.min(x), b.max(x))
+            })
+    }
+
     /// Statistics of the group of projections, split at gaps wider than `gap`, nearest to the
     /// interval `near` (see the module's "one surface per cylinder"), and that group's span.
     /// Sums are exact, so the result does not depend on the order the points were visited in.

@@ -7,6 +7,7 @@ pub mod cylinder;
 pub mod moments;
 pub mod normals;
 pub mod orientation;
+pub mod reach;
 pub mod tile;
 
 use rayon::prelude::*;
@@ -14,6 +15,7 @@ use rayon::prelude::*;
 use crate::io::Point3;
 use crate::spatial::Columns;
 pub use orientation::Orientation;
+pub use reach::{Extent, Reach, Walk};
 
 /// The M3C2 parameters (lengths in the input's units).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -26,6 +28,8 @@ pub struct M3c2Params {
     pub orientation: Orientation,
     /// The effective point spacing (1 / √density): how many points a column holds.
     pub point_spacing: f64,
+    /// Where one epoch has no point in the cylinder: search on along the axis ([`reach`]).
+    pub walk: Walk,
 }
 
 /// The result at one core point, with PDAL's filters.m3c2 field meanings.
@@ -45,6 +49,8 @@ pub struct CoreResult {
     pub count2: u32,
     /// Oriented unit normal (NaN when undefined).
     pub normal: Point3,
+    /// Whether the distance needed the walk beyond the window, and what came of it.
+    pub reach: Reach,
 }
 
 impl Default for CoreResult {
@@ -54,6 +60,17 @@ impl Default for CoreResult {
 }
 
 impl CoreResult {
+    /// The distance as the M3C2 outputs give it: NaN where the other epoch lies beyond the
+    /// user's half-length (the walk found it, [`Reach::Beyond`], but the user's cylinder does not
+    /// reach it).
+    pub fn measured(&self) -> f64 {
+        if self.reach == Reach::Beyond {
+            f64::NAN
+        } else {
+            self.distance
+        }
+    }
+
     /// The result with the registration error `reg_error` in its LoD95 and significance.
     pub fn with_registration(mut self, reg_error: f64) -> Self {
         if self.distance.is_finite() {
@@ -73,6 +90,7 @@ impl CoreResult {
             count1: 0,
             count2: 0,
             normal,
+            reach: Reach::Window,
         }
     }
 }
@@ -150,18 +168,20 @@ pub fn normals(before: &Columns, cores: &[Point3], params: &M3c2Params) -> Vec<P
 }
 
 /// M3C2 at each core point, given its oriented normal. `before` and `after` must share the local
-/// frame of `cores`. Work is split over rayon's pool; the result does not depend on the thread
-/// count (each core point is computed alone, with exact sums).
+/// frame of `cores`, and hold every point of `extent.held`. Work is split over rayon's pool; the
+/// result does not depend on the thread count (each core point is computed alone, with exact
+/// sums).
 pub fn distances(
     before: &Columns,
     after: &Columns,
     cores: &[Point3],
     normals: &[Point3],
     params: &M3c2Params,
+    extent: &Extent,
 ) -> Vec<CoreResult> {
     debug_assert_eq!(before.origin(), after.origin());
     in_spatial_order(cores, params.cyl_radius.max(params.normal_radius), |i| {
-        core_result(before, after, &cores[i], &normals[i], params)
+        core_result(before, after, &cores[i], &normals[i], params, extent)
     })
 }
 
@@ -172,6 +192,7 @@ fn core_result(
     q: &Point3,
     n: &Point3,
     params: &M3c2Params,
+    extent: &Extent,
 ) -> CoreResult {
     if !n[0].is_finite() {
         return CoreResult::undefined(*n);
@@ -180,26 +201,76 @@ fn core_result(
     // One surface per cylinder (see `cylinder`): projections split at gaps wider than the
     // cylinder's diameter; C1's group is the core point's, C2's the one nearest to it.
     thread_local! {
-        static SCRATCH: std::cell::RefCell<[cylinder::Projections; 2]> = Default::default();
+        static SCRATCH: std::cell::RefCell<([cylinder::Projections; 2], reach::Scratch)> =
+            Default::default();
     }
-    let (c1, c2) = SCRATCH.with(|s| {
-        let [p1, p2] = &mut *s.borrow_mut();
+    SCRATCH.with(|s| {
+        let ([p1, p2], walk) = &mut *s.borrow_mut();
         p1.collect(before, q, n, r, h);
         let (c1, span1) = p1.surface(2.0 * r, (0.0, 0.0));
         p2.collect(after, q, n, r, h);
-        let (c2, _) = p2.surface(2.0 * r, span1);
-        (c1, c2)
-    });
-    let need = params.min_points.max(1);
-    if c1.count < need || c2.count < need {
-        return CoreResult {
+        // Without C1 (the user's core points), C2's surface is the one nearest the core point.
+        let near = if c1.count > 0 { span1 } else { (0.0, 0.0) };
+        let (c2, span2) = p2.surface(2.0 * r, near);
+        let need = params.min_points.max(1);
+        let undefined = || CoreResult {
             count1: c1.count,
             count2: c2.count,
             std_dev1: c1.std_dev,
             std_dev2: c2.std_dev,
             ..CoreResult::undefined(*n)
         };
-    }
+        if c1.count >= need && c2.count >= need {
+            return result(c1, c2, n, Reach::Window);
+        }
+        // One epoch in the window, none of the other: walk on along the axis.
+        let walking = params.walk != Walk::Off;
+        let present = match (c1.count, c2.count) {
+            (k, 0) if k >= need && walking => Some((0, p1.range(), span1)),
+            (0, k) if k >= need && walking => Some((1, p2.range(), span2)),
+            _ => None,
+        };
+        let Some((which, (lo, hi), span)) = present else {
+            return undefined();
+        };
+        let axis = reach::Axis { q: *q, n: *n, r, h };
+        let at = reach::Present {
+            span,
+            beyond: [lo < span.0, hi > span.1],
+        };
+        let (pres, miss) = if which == 0 {
+            (before, after)
+        } else {
+            (after, before)
+        };
+        match reach::walk(pres, miss, &axis, at, extent, walk) {
+            reach::Walked::Found(found) if found.count >= need => {
+                let how = match params.walk {
+                    Walk::Detect => Reach::Beyond,
+                    _ => Reach::Extended,
+                };
+                if which == 0 {
+                    result(c1, found, n, how)
+                } else {
+                    result(found, c2, n, how)
+                }
+            }
+            reach::Walked::Unheld => CoreResult {
+                reach: Reach::Pending,
+                ..undefined()
+            },
+            _ => undefined(),
+        }
+    })
+}
+
+/// The M3C2 result of the two epochs' surfaces in a cylinder (or along its axis).
+fn result(
+    c1: cylinder::CylinderStats,
+    c2: cylinder::CylinderStats,
+    n: &Point3,
+    reach: Reach,
+) -> CoreResult {
     let distance = c2.mean - c1.mean;
     let se = (c1.std_dev * c1.std_dev / c1.count as f64
         + c2.std_dev * c2.std_dev / c2.count as f64)
@@ -214,5 +285,6 @@ fn core_result(
         count1: c1.count,
         count2: c2.count,
         normal: *n,
+        reach,
     }
 }

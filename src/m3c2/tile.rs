@@ -7,7 +7,7 @@
 //! orientation, are then the same whatever the tiling, and a tiled run gives the bytes of a
 //! whole-cloud run.
 
-use super::{core_points, CoreResult, M3c2Params};
+use super::{core_points, CoreResult, Extent, M3c2Params};
 use crate::io::Point3;
 use crate::spatial::Columns;
 
@@ -44,7 +44,9 @@ pub struct KeyedResult {
 
 /// Normals and M3C2 at the core points the tile owns — C1 thinned on the grid anchored at
 /// `anchor` with cells of `core_spacing` (keyed by cell), or the user's `cores` (keyed by input
-/// order) — sorted by key.
+/// order) — sorted by key. `extent` (global coordinates) holds the data's bounds and the tile's
+/// halo box: a core point whose walk ([`super::reach`]) needs points beyond that box comes back
+/// [`Reach::Pending`](super::Reach::Pending), for [`distances_along`].
 pub fn compute(
     before: &EpochPoints,
     after: &EpochPoints,
@@ -52,6 +54,7 @@ pub fn compute(
     core_spacing: f64,
     cores: Option<&[(u64, Point3)]>,
     params: &M3c2Params,
+    extent: &Extent,
 ) -> Vec<KeyedResult> {
     let cell = super::column_width(params);
     let index = |t: &EpochPoints| Columns::from_fn(t.len(), |i| t.point(i), anchor, cell);
@@ -74,7 +77,7 @@ pub fn compute(
     }
     let local: Vec<Point3> = keyed.iter().map(|(_, p)| b.to_local(p)).collect();
     let normals = super::normals(&b, &local, params);
-    let results = super::distances(&b, &a, &local, &normals, params);
+    let results = super::distances(&b, &a, &local, &normals, params, &extent.local(&anchor));
     let mut out: Vec<KeyedResult> = keyed
         .iter()
         .zip(results)
@@ -82,4 +85,32 @@ pub fn compute(
         .collect();
     out.sort_by_key(|k| k.key);
     out
+}
+
+/// M3C2 again at core points whose walk left their tile ([`super::Reach::Pending`]): `before`
+/// and `after` hold every point of each epoch within the cylinder's radius of those core points'
+/// axes, out to the data's bounds (`extent`, global coordinates), and `normals` are the ones the
+/// tile computed. The result is the one a run over the whole surveys gives.
+pub fn distances_along(
+    before: &[Point3],
+    after: &[Point3],
+    anchor: Point3,
+    pending: &[KeyedResult],
+    params: &M3c2Params,
+    extent: &Extent,
+) -> Vec<KeyedResult> {
+    let cell = super::column_width(params);
+    let (b, a) = rayon::join(
+        || Columns::new(before, anchor, cell),
+        || Columns::new(after, anchor, cell),
+    );
+    let local: Vec<Point3> = pending.iter().map(|k| b.to_local(&k.xyz)).collect();
+    let normals: Vec<Point3> = pending.iter().map(|k| k.r.normal).collect();
+    let whole = Extent::whole(extent.data_min, extent.data_max).local(&anchor);
+    let results = super::distances(&b, &a, &local, &normals, params, &whole);
+    pending
+        .iter()
+        .zip(results)
+        .map(|(k, r)| KeyedResult { r, ..*k })
+        .collect()
 }

@@ -7,13 +7,16 @@
 //!   at every core point: a sphere (normals) and a cylinder along an arbitrary axis.
 //! - [`BoxIndex`]: which of many xy boxes contain a point (events' search boxes and claims).
 //! - [`DensityGrid`]: points per XY cell of a survey, and its densest square (tile sizes).
+//! - [`Tubes`]: which of many long thin cylinders hold a point (M3C2's walk across tiles).
 
 mod boxes;
 mod columns;
 mod density;
 mod kdtree;
+mod tubes;
 
 pub use boxes::BoxIndex;
 pub use columns::{in_cylinder, Columns};
 pub use density::DensityGrid;
 pub use kdtree::{median_nn_distance, Index};
+pub use tubes::Tubes;

@@ -62,11 +62,12 @@ pub enum SceneKind {
     Events,
     Stable,
     Large,
+    Dense,
 }
 
 impl SceneKind {
     /// All scenes, in the order of their names.
-    pub const ALL: [SceneKind; 10] = [
+    pub const ALL: [SceneKind; 11] = [
         SceneKind::Hill,
         SceneKind::Cube,
         SceneKind::Spheres,
@@ -77,6 +78,7 @@ impl SceneKind {
         SceneKind::Events,
         SceneKind::Stable,
         SceneKind::Large,
+        SceneKind::Dense,
     ];
 
     /// The scene's name on the command line.
@@ -92,6 +94,7 @@ impl SceneKind {
             SceneKind::Events => "events",
             SceneKind::Stable => "stable",
             SceneKind::Large => "large",
+            SceneKind::Dense => "dense",
         }
     }
 

@@ -168,6 +168,8 @@ pub(crate) fn default_points(kind: SceneKind) -> u64 {
         // 2173 m² at about 0.08 m spacing.
         SceneKind::Events => 350_000,
         SceneKind::Large => 120_000_000,
+        // 990 m² at 1.5 cm spacing.
+        SceneKind::Dense => 4_400_000,
     }
 }
 
@@ -221,6 +223,7 @@ impl SceneModel {
             SceneKind::Events => events(seed),
             SceneKind::Stable => stable(),
             SceneKind::Large => large(points),
+            SceneKind::Dense => dense(),
         }
     }
 
@@ -537,7 +540,17 @@ impl CliffFrame {
 
     /// Beach (with `features`), plateau and face (minus `holes`), in that order.
     pub(crate) fn patches(&self, features: Vec<Feature>, holes: Vec<Hole>) -> Vec<Patch> {
-        let top = Heightfield::new(Base::plane(self.z0 + self.height), Vec::new());
+        self.patches_with(features, Vec::new(), holes)
+    }
+
+    /// [`CliffFrame::patches`] with `on_top` features on the plateau.
+    pub(crate) fn patches_with(
+        &self,
+        features: Vec<Feature>,
+        on_top: Vec<Feature>,
+        holes: Vec<Hole>,
+    ) -> Vec<Patch> {
+        let top = Heightfield::new(Base::plane(self.z0 + self.height), on_top);
         vec![
             height_patch(
                 Heightfield::new(self.beach_base(), features),
@@ -641,6 +654,121 @@ fn cliff() -> SceneModel {
         [Vec::new(), scars],
         events,
         "vertical cliff face with beach and plateau; rockfall scars and a debris fan",
+    )
+}
+
+/// The frame of the `dense` scene: a smaller cliff, so that a terrestrial scanner's spacing
+/// (1.5 cm at the default 4.4M points per epoch) stays within a few million points.
+const DENSE: CliffFrame = CliffFrame {
+    width: 30.0,
+    height: 15.0,
+    beach: 10.0,
+    plateau: 8.0,
+    z0: 100.0,
+};
+
+/// dense: a cliff as a terrestrial scanner delivers it (≈ 1.5 cm spacing at the default 4.4M
+/// points per epoch: 990 m² of beach x ∈ [0, 30], y ∈ [−10, 0], a 15 m vertical face in the
+/// plane y = 0 and an 8 m deep plateau), with changes from 0.1 m to 3 m deep, most of them far
+/// deeper than the derived cylinder half-length (10 × 3 × spacing ≈ 0.45 m):
+/// - on the face: a box rockfall 2.5 m wide, 2 m high and 3 m deep (−15 m³), a half-ellipsoid
+///   scar 2 m deep with semi-axes 2 m (x) and 1.5 m (z) (−(2/3)π·2·2·1.5 ≈ −12.57 m³), and a
+///   shallow box scar 2 m × 1.5 m × 0.1 m (−0.3 m³);
+/// - at its foot: a debris cone R = 3 m, H = 2.5 m against the face (πR²H/6 ≈ +11.78 m³);
+/// - on the beach: a deposit 1.5 m high, a cos² bump R = 2.5 m, 2.5 m in front of the face
+///   (h·R²(π/2 − 2/π) ≈ +8.76 m³);
+/// - on the plateau: a collapse, a box pit 2 m × 2 m × 1 m deep, 3 m behind the edge (−4 m³).
+fn dense() -> SceneModel {
+    let f = DENSE;
+    let z0 = f.z0;
+    let deep = Scar::Box {
+        min: [3.0, z0 + 5.0],
+        max: [5.5, z0 + 7.0],
+        depth: 3.0,
+    };
+    let bowl = Scar::HalfEllipsoid {
+        c: [11.0, z0 + 8.0],
+        a: 2.0,
+        b: 2.0,
+        cz: 1.5,
+    };
+    let shallow = Scar::Box {
+        min: [17.0, z0 + 9.0],
+        max: [19.0, z0 + 10.5],
+        depth: 0.1,
+    };
+    let (cone_c, cone_r, cone_h) = ([24.0, 0.0], 3.0, 2.5);
+    let (bump_c, bump_r, bump_h) = ([8.0, -5.0], 2.5, 1.5);
+    let (pit_min, pit_max, pit_d) = ([14.0, 3.0], [16.0, 5.0], 1.0);
+    let top = z0 + f.height;
+    let scars = vec![deep, bowl, shallow];
+    let mut holes: Vec<Hole> = scars.iter().map(|s| s.hole(z0)).collect();
+    holes.push(Hole::BelowTent {
+        cu: cone_c[0],
+        peak: cone_h,
+        slope: cone_h / cone_r,
+    });
+    let beach2 = vec![
+        Feature::Cone {
+            c: cone_c,
+            radius: cone_r,
+            height: cone_h,
+        },
+        Feature::Bump {
+            c: bump_c,
+            radius: bump_r,
+            height: bump_h,
+        },
+    ];
+    let pit = vec![Feature::Block {
+        min: pit_min,
+        max: pit_max,
+        height: -pit_d,
+    }];
+    let mut p2 = f.patches_with(beach2, pit, holes);
+    p2.extend(scars.iter().flat_map(Scar::patches));
+    p2.extend(box_walls(pit_min, pit_max, top - pit_d, top));
+    let beach = Heightfield::new(f.beach_base(), Vec::new());
+    let cone_y = -4.0 * cone_r / (3.0 * PI);
+    let events = vec![
+        scar_event(&deep, "rockfall: box 2.5 m wide, 2 m high, 3 m deep into the face".into()),
+        scar_event(&bowl, "rockfall scar: half-ellipsoid 2 m × 1.5 m semi-axes, 2 m deep".into()),
+        scar_event(&shallow, "shallow scar: box 2 m × 1.5 m, 0.1 m deep".into()),
+        ModelEvent {
+            volume_m3: PI * cone_r * cone_r * cone_h / 6.0,
+            centre: [cone_c[0], cone_y, z_at(&beach, [cone_c[0], cone_y])],
+            radius_m: cone_r,
+            footprint: ground([cone_c[0] - cone_r, -cone_r], [cone_c[0] + cone_r, 0.0]),
+            covered_volume_m3: None,
+            description: "debris cone at the face foot: R = 3 m, H = 2.5 m".into(),
+        },
+        ModelEvent {
+            volume_m3: bump_volume(bump_r, bump_h),
+            centre: [bump_c[0], bump_c[1], z_at(&beach, bump_c)],
+            radius_m: bump_r,
+            footprint: square(bump_c, bump_r),
+            covered_volume_m3: None,
+            description: "deposit on the beach: cos² bump R = 2.5 m, 1.5 m high".into(),
+        },
+        ModelEvent {
+            volume_m3: -(pit_max[0] - pit_min[0]) * (pit_max[1] - pit_min[1]) * pit_d,
+            centre: [
+                (pit_min[0] + pit_max[0]) / 2.0,
+                (pit_min[1] + pit_max[1]) / 2.0,
+                top,
+            ],
+            radius_m: (pit_max[0] - pit_min[0]).hypot(pit_max[1] - pit_min[1]) / 2.0,
+            footprint: ground(pit_min, pit_max),
+            covered_volume_m3: None,
+            description: "plateau collapse: box pit 2 m × 2 m, 1 m deep".into(),
+        },
+    ];
+    f.model(
+        [f.patches(Vec::new(), Vec::new()), p2],
+        [Vec::new(), scars],
+        events,
+        "terrestrial-scan cliff (1.5 cm spacing): rockfalls 0.1 to 3 m deep, a cone at the foot, \
+         a deposit on the beach, a collapse on the plateau",
     )
 }
 

@@ -329,6 +329,8 @@ fn write_events(
         "mean_distance_m",
         "max_abs_distance_m",
         "mean_lod95_m",
+        "complete",
+        "volume_note",
     ];
     for c in &columns {
         csv.push(',');
@@ -356,7 +358,7 @@ fn write_events(
         for c in &columns {
             row.push(match e.properties.get(*c) {
                 Some(Value::Null) | None => String::new(),
-                Some(Value::String(s)) => s.clone(),
+                Some(Value::String(s)) => super::outputs::tables::csv_text(s),
                 Some(v) => v.to_string(),
             });
         }
@@ -469,7 +471,7 @@ fn write_timeseries(
     loop {
         let first = streams[0].next_result()?;
         let Some(first) = first else { break };
-        values[0] = first.r.distance;
+        values[0] = first.r.measured();
         for (k, s) in streams.iter_mut().enumerate().skip(1) {
             let r = s.next_result()?.ok_or_else(|| {
                 Error::Internal(format!("pair {k} has fewer core points than pair 0"))
@@ -480,7 +482,7 @@ fn write_timeseries(
                     r.key, first.key
                 )));
             }
-            values[k] = r.r.distance;
+            values[k] = r.r.measured();
         }
         w.write(first.xyz, &values)?;
         n += 1;

@@ -30,6 +30,9 @@ pub struct Draft {
     /// The boxes the volume may be extruded along: the mean normal's, and straight up's where the
     /// normal is not steep (see `volume::axis`).
     pub candidates: Vec<Obb>,
+    /// Its core points whose other epoch lies beyond the user's half-length (not measured: the
+    /// event is incomplete).
+    pub beyond_reach: usize,
 }
 
 /// A kept core point.
@@ -44,6 +47,9 @@ pub struct Kept {
     pub smoothed: f64,
     /// 0 = in no event.
     pub event: u32,
+    /// The other epoch lies beyond the user's half-length: `d` is the walk's finding, not a
+    /// measurement (`m3c2::Reach::Beyond`).
+    pub beyond: bool,
 }
 
 /// The candidate boxes of an event with core points `cluster` (see [`Draft::candidates`]).
@@ -73,6 +79,8 @@ pub fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<serde_json::V
     let mut merged = Merged::new(ctx, pair)?;
     while let Some(k) = merged.next_result()? {
         let r = k.r.with_registration(reg);
+        // A core point beyond the user's reach takes part with the distance the walk found: the
+        // change is there, and the event it belongs to says it is incomplete.
         if events::filter::is_kept(r.distance, r.uncertainty, tau) {
             kept.push(Kept {
                 key: k.key,
@@ -83,6 +91,7 @@ pub fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<serde_json::V
                 std_dev: [r.std_dev1, r.std_dev2],
                 smoothed: f64::NAN,
                 event: 0,
+                beyond: r.reach == crate::m3c2::Reach::Beyond,
             });
         }
     }
@@ -160,6 +169,7 @@ pub fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<serde_json::V
             drafts.push(Draft {
                 event: e,
                 candidates,
+                beyond_reach: members.iter().filter(|&&i| kept[i].beyond).count(),
             });
         }
     }
@@ -194,6 +204,7 @@ fn to_columns(kept: &[Kept]) -> TileColumns {
             f("std_dev2", &|k| k.std_dev[1]),
             f("smoothed", &|k| k.smoothed),
             u("event", &|k| k.event),
+            u("beyond", &|k| k.beyond as u32),
         ],
     }
 }
@@ -226,7 +237,7 @@ pub fn read_kept(ctx: &Ctx, pair: usize) -> Result<Vec<Kept>> {
         Some(ColumnData::U32(v)) => Ok(v),
         _ => Err(bad(name)),
     };
-    let (hi, lo, ev) = (g("key_hi")?, g("key_lo")?, g("event")?);
+    let (hi, lo, ev, beyond) = (g("key_hi")?, g("key_lo")?, g("event")?, g("beyond")?);
     let (d, lod, sm) = (f("distance")?, f("lod")?, f("smoothed")?);
     let (nx, ny, nz) = (f("normal_x")?, f("normal_y")?, f("normal_z")?);
     let (s1, s2) = (f("std_dev1")?, f("std_dev2")?);
@@ -240,6 +251,7 @@ pub fn read_kept(ctx: &Ctx, pair: usize) -> Result<Vec<Kept>> {
             std_dev: [s1[i], s2[i]],
             smoothed: sm[i],
             event: ev[i],
+            beyond: beyond[i] == 1,
         })
         .collect();
     Ok(kept)

@@ -13,9 +13,10 @@ use talus_tiling::{Column, ColumnData, TileColumns, TileId};
 use super::{meta_u64, read_tile, Ctx, TilePoints};
 use crate::error::{Error, Result};
 use crate::io::Point3;
-use crate::m3c2::tile::{compute, EpochPoints, KeyedResult};
-use crate::m3c2::CoreResult;
+use crate::m3c2::tile::{compute, distances_along, EpochPoints, KeyedResult};
+use crate::m3c2::{CoreResult, Extent, Reach};
 use crate::plan::Spec;
+use crate::spatial::Tubes;
 use crate::store::UnitWriter;
 
 /// Rows per result chunk file: a merge holds one chunk per tile.
@@ -90,24 +91,151 @@ pub fn run(
             owned: &t.owned,
         }
     }
-    let results = compute(
+    let pair = match plan.units[unit].spec {
+        Spec::M3c2 { pair, .. } => pair,
+        _ => return Err(Error::Internal("an M3C2 unit without a pair".into())),
+    };
+    let extent = tile_extent(plan, pair, tile)?;
+    let params = plan.params.m3c2();
+    let mut results = compute(
         &epoch(&before),
         &epoch(&after),
         plan.layout.anchor,
         plan.layout.core_spacing,
         user_cores.as_deref(),
-        &plan.params.m3c2(),
+        &params,
+        &extent,
     );
-    let chunks = write_chunks(out, &results)?;
     let owned = |t: &TilePoints| t.owned.iter().filter(|&&o| o).count() as u64;
     let points = owned(&before) + owned(&after);
+    // Core points whose walk left the tile: walked again over the points along their axes.
+    let pending: Vec<usize> = (0..results.len())
+        .filter(|&i| results[i].r.reach == Reach::Pending)
+        .collect();
+    let mut along = 0;
+    if !pending.is_empty() {
+        let wanted: Vec<KeyedResult> = pending.iter().map(|&i| results[i]).collect();
+        let [b, a] = gather_along(
+            ctx,
+            [deps[0], deps[1]],
+            tile,
+            [&before, &after],
+            &wanted,
+            &params,
+            &extent,
+        )?;
+        along = b.len() + a.len();
+        drop((before, after));
+        let done = distances_along(&b, &a, plan.layout.anchor, &wanted, &params, &extent);
+        for (&i, r) in pending.iter().zip(done) {
+            results[i] = r;
+        }
+    }
+    let chunks = write_chunks(out, &results)?;
     (ctx.progress)(points);
+    let count = |reach: Reach| results.iter().filter(|k| k.r.reach == reach).count();
     Ok(serde_json::json!({
         "chunks": chunks,
         "core_points": results.len(),
         "points": points,
         "halo_points": halo_points,
+        "extended": count(Reach::Extended),
+        "beyond_reach": count(Reach::Beyond),
+        "walked_beyond_tile": pending.len(),
+        "points_along": along,
     }))
+}
+
+/// Where the walks of tile `tile`'s core points may look (global coordinates): the pair's
+/// surveys' bounds, and the tile's halo box.
+fn tile_extent(plan: &crate::plan::Plan, pair: usize, tile: TileId) -> Result<Extent> {
+    let p = &plan.pairs[pair];
+    let (b, a) = (&plan.surveys[p.before].bounds, &plan.surveys[p.after].bounds);
+    let grid = plan.layout.grid()?;
+    Ok(Extent {
+        data_min: std::array::from_fn(|k| b.min[k].min(a.min[k])),
+        data_max: std::array::from_fn(|k| b.max[k].max(a.max[k])),
+        held: open_box(&grid, tile, plan.layout.halo),
+    })
+}
+
+/// Tile `id`'s square grown by `grow`, [x0, y0, x1, y1], open at the grid's edges: a tile file
+/// holds its halo box, and an edge tile every point beyond the grid (they are clamped onto it).
+fn open_box(grid: &talus_tiling::TileGrid, id: TileId, grow: f64) -> [f64; 4] {
+    let h = grid.halo_box(id, grow);
+    let open = |edge: bool, v: f64, inf: f64| if edge { inf } else { v };
+    [
+        open(id.col == 0, h.min[0], f64::NEG_INFINITY),
+        open(id.row == 0, h.min[1], f64::NEG_INFINITY),
+        open(id.col + 1 == grid.cols(), h.max[0], f64::INFINITY),
+        open(id.row + 1 == grid.rows(), h.max[1], f64::INFINITY),
+    ]
+}
+
+/// Every point of both epochs (owned by its tile: each once) within the cylinder's radius of
+/// the axes of `wanted`'s core points, out to the data's bounds: this tile's from `own`, the
+/// others' read a frame at a time from the tilings `tilings`.
+fn gather_along(
+    ctx: &Ctx,
+    tilings: [usize; 2],
+    tile: TileId,
+    own: [&TilePoints; 2],
+    wanted: &[KeyedResult],
+    params: &crate::m3c2::M3c2Params,
+    extent: &Extent,
+) -> Result<[Vec<Point3>; 2]> {
+    let r = params.cyl_radius;
+    // Each axis as the segment the walk can cover, in global coordinates.
+    let axes: Vec<(Point3, Point3, f64, f64)> = wanted
+        .iter()
+        .map(|k| {
+            let (lo, hi) = extent.axis_limits(&k.xyz, &k.r.normal, r);
+            (k.xyz, k.r.normal, lo, hi)
+        })
+        .collect();
+    let tubes = Tubes::new(&axes, r);
+    // Wider than the walk's exact test by far more than any rounding: a superset is harmless,
+    // the walk tests every point again.
+    let slack = 1e-6 * (1.0 + r);
+    let near = |p: &Point3| tubes.any_holds(p, slack);
+    let xy = tubes.xy_bounds();
+    let mut out = [Vec::new(), Vec::new()];
+    let grid = ctx.plan.layout.grid()?;
+    for id in grid.tiles() {
+        // The points the tile owns lie in its square (beyond it at the grid's edges).
+        let sq = open_box(&grid, id, 0.0);
+        if sq[2] < xy[0] || sq[0] > xy[2] || sq[3] < xy[1] || sq[1] > xy[3] {
+            continue;
+        }
+        for (e, &tiling) in tilings.iter().enumerate() {
+            if id == tile {
+                let t = own[e];
+                out[e].extend(
+                    (0..t.len())
+                        .filter(|&i| t.owned[i])
+                        .map(|i| t.point(i))
+                        .filter(|p| near(p)),
+                );
+                continue;
+            }
+            let path = ctx.input(tiling, &super::tiling::tile_file(id))?;
+            talus_tiling::read_tile_frames(&path, |f| {
+                let owned = match f.column(talus_tiling::OWNED_COLUMN) {
+                    Some(talus_tiling::ColumnData::U8(v)) => v.clone(),
+                    _ => vec![1; f.len()],
+                };
+                out[e].extend(
+                    (0..f.len())
+                        .filter(|&i| owned[i] == 1)
+                        .map(|i| [f.x[i], f.y[i], f.z[i]])
+                        .filter(|p| near(p)),
+                );
+                Ok(())
+            })
+            .map_err(|e| super::damaged(&path, e))?;
+        }
+    }
+    Ok(out)
 }
 
 /// Write `results` as chunk files of [`CHUNK_ROWS`] rows; returns how many. Chunks are encoded in
@@ -167,6 +295,10 @@ fn to_columns(rs: &[KeyedResult]) -> TileColumns {
             f64col("normal_x", col(&|r| r.r.normal[0])),
             f64col("normal_y", col(&|r| r.r.normal[1])),
             f64col("normal_z", col(&|r| r.r.normal[2])),
+            Column {
+                name: "reach".into(),
+                data: ColumnData::U8(rs.iter().map(|r| r.r.reach as u8).collect()),
+            },
         ],
     }
 }
@@ -190,10 +322,13 @@ pub fn read_chunk(path: &std::path::Path) -> Result<Vec<KeyedResult>> {
             _ => Err(missing(name)),
         }
     };
-    let sig = match c.column("significant") {
-        Some(ColumnData::U8(v)) => v,
-        _ => return Err(missing("significant")),
+    let bytes = |name: &str| -> Result<&Vec<u8>> {
+        match c.column(name) {
+            Some(ColumnData::U8(v)) => Ok(v),
+            _ => Err(missing(name)),
+        }
     };
+    let (sig, reach) = (bytes("significant")?, bytes("reach")?);
     let (hi, lo) = (u("key_hi")?, u("key_lo")?);
     let (d, unc, s1, s2) = (
         f("distance")?,
@@ -204,21 +339,27 @@ pub fn read_chunk(path: &std::path::Path) -> Result<Vec<KeyedResult>> {
     let (n1, n2) = (u("count1")?, u("count2")?);
     let (nx, ny, nz) = (f("normal_x")?, f("normal_y")?, f("normal_z")?);
     Ok((0..c.len())
-        .map(|i| KeyedResult {
-            key: (hi[i] as u64) << 32 | lo[i] as u64,
-            xyz: [c.x[i], c.y[i], c.z[i]],
-            r: CoreResult {
-                distance: d[i],
-                uncertainty: unc[i],
-                significant: sig[i] == 1,
-                std_dev1: s1[i],
-                std_dev2: s2[i],
-                count1: n1[i],
-                count2: n2[i],
-                normal: [nx[i], ny[i], nz[i]],
-            },
+        .map(|i| {
+            Ok(KeyedResult {
+                key: (hi[i] as u64) << 32 | lo[i] as u64,
+                xyz: [c.x[i], c.y[i], c.z[i]],
+                r: CoreResult {
+                    distance: d[i],
+                    uncertainty: unc[i],
+                    significant: sig[i] == 1,
+                    std_dev1: s1[i],
+                    std_dev2: s2[i],
+                    count1: n1[i],
+                    count2: n2[i],
+                    normal: [nx[i], ny[i], nz[i]],
+                    reach: Reach::from_code(reach[i]).ok_or_else(|| Error::Damaged {
+                        path: path.to_path_buf(),
+                        problem: format!("reach code {} at row {i}", reach[i]),
+                    })?,
+                },
+            })
         })
-        .collect())
+        .collect::<Result<_>>()?)
 }
 
 /// The chunk files of a pair's M3C2 units, per tile in grid order.

@@ -57,11 +57,11 @@ pub fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<serde_json::V
     let mut reached = Reached::default();
     while let Some(k) = merged.next_result()? {
         reached.add(&k.r, need);
-        if n.is_multiple_of(step) && k.r.distance.is_finite() {
+        if n.is_multiple_of(step) && k.r.measured().is_finite() {
             samples.push(Sample {
                 xyz: k.xyz,
                 normal: k.r.normal,
-                distance: k.r.distance,
+                distance: k.r.measured(),
                 std_dev: [k.r.std_dev1, k.r.std_dev2],
                 lod: k.r.uncertainty,
             });
@@ -93,7 +93,7 @@ impl Reached {
         self.normals += u64::from(r.normal[0].is_finite());
         self.before += u64::from(r.count1 >= need);
         self.after += u64::from(r.count2 >= need);
-        self.distances += u64::from(r.distance.is_finite());
+        self.distances += u64::from(r.measured().is_finite());
     }
 
     /// Why none of the pair's `n` core points got a distance (a run that yields nothing is

@@ -57,8 +57,45 @@ pub struct Measured {
     pub region: Vec<Vec<Vec<Point3>>>,
     /// Whether the two solids were written.
     pub meshes: bool,
-    /// Why there is no volume, when there is none.
+    /// The volume covers the whole change: no core point beyond the M3C2 cylinder's reach, and
+    /// no change running on past the region into ground that was not measured.
+    pub complete: bool,
+    /// Why there is no volume, or why it is incomplete.
     pub note: Option<String>,
+}
+
+/// Edges of open rim (see `volume::OpenRim`) that must have changed before an event is called
+/// incomplete, and the share of the open rim: a single noisy cell at a hole is not a change
+/// running on.
+const OPEN_RIM_CELLS: f64 = 3.0;
+const OPEN_RIM_SHARE: f64 = 0.05;
+
+/// Why event `d`'s volume `v` does not cover its whole change, if it does not: core points
+/// whose other epoch lies beyond the user's half-length, or change still well above the noise
+/// (`noise`: |Δw| a cell of unchanged ground exceeds in 1 of 40) and above a quarter of the
+/// event's own change where the region meets ground not measured.
+fn incomplete(d: &Draft, v: &EventVolume, noise: f64, params: &Params) -> Option<String> {
+    let mut why = Vec::new();
+    if d.beyond_reach > 0 {
+        why.push(format!(
+            "{} of its {} core points have the other survey beyond the M3C2 cylinder's \
+             half-length ({} m, set by the user): their distances were not measured",
+            d.beyond_reach,
+            d.event.n_points,
+            params.cyl_halflen.value
+        ));
+    }
+    let level = noise.max(0.25 * v.open_rim.p90_change);
+    let (changed, open) = v.open_rim.changed_length(level);
+    let cell = (v.region.cells.cell_area()).sqrt();
+    if changed >= (OPEN_RIM_CELLS * cell).max(OPEN_RIM_SHARE * open) && changed > 0.0 {
+        why.push(format!(
+            "its change runs on past {changed:.2} m of its region's edge into ground a survey does \
+             not cover or beyond its footprint (changed by more than {level:.3} m there): the \
+             volume counts the measured part only"
+        ));
+    }
+    (!why.is_empty()).then(|| why.join("; "))
 }
 
 /// Volume margin of SPEC.md §1: cyl_radius + 2 × point spacing.
@@ -66,14 +103,26 @@ pub fn margin(params: &Params) -> f64 {
     params.cyl_radius.value + 2.0 * params.point_spacing.value
 }
 
-/// The box (in the event's frame) whose points the volume needs, and its XY bounds.
-pub fn search_box(obb: &Obb, params: &Params) -> ([f64; 3], [f64; 4]) {
+/// How far from the before surface, along the box's third axis, the volume of event `d` looks
+/// for the two surfaces: the M3C2 cylinder's half-length, or further where the event's
+/// distances reach further (a change deeper than the window, measured by M3C2's walk along the
+/// normal, `m3c2::reach`), with the volume margin beyond its deepest distance.
+pub fn depth(d: &Draft, params: &Params) -> f64 {
+    params
+        .cyl_halflen
+        .value
+        .max(d.event.max_abs_distance + margin(params))
+}
+
+/// The box (in the event's frame) whose points the volume needs, reaching `depth` beyond the
+/// box's own extent along its third axis, and its XY bounds.
+pub fn search_box(obb: &Obb, depth: f64, params: &Params) -> ([f64; 3], [f64; 4]) {
     let s = params.point_spacing.value;
     let m = margin(params);
     let h = [
         obb.half_extents[0] + m + 3.0 * s,
         obb.half_extents[1] + m + 3.0 * s,
-        obb.half_extents[2] + params.cyl_halflen.value,
+        obb.half_extents[2] + depth,
     ];
     let xy = volume::Frame::of_obb(obb).bounds_xy(h.map(|x| -x), h);
     (h, xy)
@@ -85,7 +134,7 @@ fn near_events(drafts: &[Draft], mine: &[&Draft], params: &Params) -> rustc_hash
     let xy = |d: &Draft| -> Vec<[f64; 4]> {
         d.candidates
             .iter()
-            .map(|o| search_box(o, params).1)
+            .map(|o| search_box(o, depth(d, params), params).1)
             .collect()
     };
     let ours: Vec<[f64; 4]> = mine.iter().flat_map(|d| xy(d)).collect();
@@ -113,7 +162,7 @@ pub fn ownership(
             d.candidates
                 .iter()
                 .map(|o| {
-                    let (h, _) = search_box(o, params);
+                    let (h, _) = search_box(o, depth(d, params), params);
                     volume::Claim::new(
                         d.event.id,
                         volume::Frame::of_obb(o),
@@ -281,7 +330,7 @@ pub fn run(
                 };
                 c.iter()
                     .map(|o| {
-                        let (h, xy) = search_box(o, params);
+                        let (h, xy) = search_box(o, depth(d, params), params);
                         (h, xy, *o)
                     })
                     .collect()
@@ -341,8 +390,13 @@ pub fn run(
                 let m = members.get(&id).map(|v| v.as_slice()).unwrap_or(&[]);
                 match v {
                     Ok(v) => {
-                        let u =
-                            uncertainty::propagate(&v.region, &error_model(&v, m, params, stable));
+                        let model = error_model(&v, m, params, stable);
+                        let u = uncertainty::propagate(&v.region, &model);
+                        // A cell's difference on unchanged ground: both epochs' point noise and
+                        // the registration error.
+                        let noise = 2.24
+                            * ((model.variance[0] + model.variance[1]).sqrt() + model.systematic);
+                        let note = incomplete(d, &v, noise, params);
                         (
                             Measured {
                                 id,
@@ -356,7 +410,8 @@ pub fn run(
                                 coverage: Some(v.coverage),
                                 region: v.outline(),
                                 meshes: true,
-                                note: None,
+                                complete: note.is_none(),
+                                note,
                             },
                             Some(v),
                         )
@@ -374,6 +429,7 @@ pub fn run(
                             coverage: None,
                             region: Vec::new(),
                             meshes: false,
+                            complete: false,
                             note: Some(err.to_string()),
                         },
                         None,

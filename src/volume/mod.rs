@@ -38,7 +38,7 @@ pub mod user_mesh;
 pub use frame::{Footprint, Frame};
 pub use mesh_ply::{check_watertight, read_ply_mesh, write_ply, write_ply_digest};
 pub use ownership::{Claim, Ownership};
-pub use region::{Cells, Polygon, Region};
+pub use region::{Cells, OpenRim, Polygon, Region};
 pub use solid::Mesh;
 pub use surface::{Surface, Tin};
 pub use user_mesh::UserMesh;
@@ -85,6 +85,8 @@ pub struct EventVolume {
     pub n_after: usize,
     /// Points of each epoch inside the region (0 for user meshes).
     pub region_points: [usize; 2],
+    /// Where the region borders ground it could not measure, and how much changed there.
+    pub open_rim: region::OpenRim,
 }
 
 impl EventVolume {
@@ -306,6 +308,7 @@ fn finish(
         )));
     }
     let r = region.cells.r;
+    let open_rim = region.open_rim(&|u, v| Some(s2.height_at(u, v)? - s1.height_at(u, v)?));
     // One base plane below both surfaces, one spacing lower still so no wall is flat.
     let base = solid::min_height(&top1).min(solid::min_height(&top2)) - spacing;
     let solid1 = solid::close(top1, base, &r);
@@ -338,6 +341,7 @@ fn finish(
         n_before: n1,
         n_after: n2,
         region_points: [0; 2],
+        open_rim,
     })
 }
 

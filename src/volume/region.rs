@@ -133,6 +133,68 @@ pub struct Region {
     pub covered: Vec<bool>,
 }
 
+/// Where an event's region borders ground it could not measure: the region's cell edges that
+/// face a cell neither epoch pair covers (a hole of either epoch) or the footprint's own edge,
+/// each with the change |Δw| of the region cell behind it. A change that is still large there
+/// runs on beyond what was measured (SPEC.md §1: the event says it is incomplete); ground another
+/// event owns is not open (that event measures it).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct OpenRim {
+    /// (|Δw| of the cell, the edge's length) per open edge.
+    pub edges: Vec<(f32, f32)>,
+    /// The 90th percentile of |Δw| over the region's cells: how large the event's change is.
+    pub p90_change: f64,
+}
+
+impl OpenRim {
+    /// The length of open rim whose cell changed by more than `level`, and the open rim's length.
+    pub fn changed_length(&self, level: f64) -> (f64, f64) {
+        self.edges.iter().fold((0.0, 0.0), |(c, t), &(dw, len)| {
+            let len = len as f64;
+            (c + if dw as f64 > level { len } else { 0.0 }, t + len)
+        })
+    }
+}
+
+impl Region {
+    /// The open rim of the region (see [`OpenRim`]), `change(u, v)` the surfaces' difference.
+    pub fn open_rim(&self, change: &(dyn Fn(f64, f64) -> Option<f64> + Sync)) -> OpenRim {
+        let c = &self.cells;
+        let (du, dv) = ((c.r.u1 - c.r.u0) / c.nu as f64, (c.r.v1 - c.r.v0) / c.nv as f64);
+        let open = |i: isize, j: isize| {
+            i < 0
+                || j < 0
+                || i >= c.nu as isize
+                || j >= c.nv as isize
+                || !self.covered[c.index(i as usize, j as usize)]
+        };
+        let mut edges = Vec::new();
+        let mut all = Vec::new();
+        for j in 0..c.nv {
+            for i in 0..c.nu {
+                if !self.contains(i, j) {
+                    continue;
+                }
+                let [u, v] = c.centre(i, j);
+                let dw = change(u, v).map_or(0.0, f64::abs);
+                all.push(dw);
+                let (ii, jj) = (i as isize, j as isize);
+                for (di, dj, len) in [(-1, 0, dv), (1, 0, dv), (0, -1, du), (0, 1, du)] {
+                    if open(ii + di, jj + dj) {
+                        edges.push((dw as f32, len as f32));
+                    }
+                }
+            }
+        }
+        all.sort_unstable_by(f64::total_cmp);
+        let p90_change = all
+            .get(((all.len() as f64 * 0.9) as usize).min(all.len().saturating_sub(1)))
+            .copied()
+            .unwrap_or(0.0);
+        OpenRim { edges, p90_change }
+    }
+}
+
 /// One polygon of a region's outline in (u, v): an outer ring (counter-clockwise) and its holes
 /// (clockwise), first vertex not repeated.
 #[derive(Debug, Clone, PartialEq)]

@@ -328,6 +328,20 @@ mod tests {
         let bytes = std::fs::read(&path).unwrap();
         assert_eq!(digest, FileDigest::of(&bytes));
         assert_eq!(read_tile(&path).unwrap(), all);
+        // A frame at a time, the same points in the same order.
+        let mut streamed: Option<TileColumns> = None;
+        let mut sizes = Vec::new();
+        crate::tile_file::read_tile_frames(&path, |f| {
+            sizes.push(f.len());
+            match &mut streamed {
+                None => streamed = Some(f),
+                Some(s) => append(s, f).unwrap(),
+            }
+            Ok(())
+        })
+        .unwrap();
+        assert_eq!(streamed.unwrap(), all);
+        assert_eq!(sizes.len(), 10);
         let h = read_tile_header(&path).unwrap();
         assert_eq!((h.version, h.point_count), (VERSION, start as u64));
         assert_eq!(h.bounds, all.bounds());
@@ -342,12 +356,26 @@ mod tests {
                 matches!(read_tile(&damaged), Err(Error::Corrupt { .. })),
                 "a flipped byte at {at}"
             );
+            assert!(
+                matches!(
+                    crate::tile_file::read_tile_frames(&damaged, |_| Ok(())),
+                    Err(Error::Corrupt { .. })
+                ),
+                "a flipped byte at {at}, read a frame at a time"
+            );
         }
         for len in [10, HEADER_LEN, bytes.len() / 3, bytes.len() - 1] {
             std::fs::write(&damaged, &bytes[..len]).unwrap();
             assert!(
                 matches!(read_tile(&damaged), Err(Error::Corrupt { .. })),
                 "cut at {len}"
+            );
+            assert!(
+                matches!(
+                    crate::tile_file::read_tile_frames(&damaged, |_| Ok(())),
+                    Err(Error::Corrupt { .. })
+                ),
+                "cut at {len}, read a frame at a time"
             );
         }
         let mut longer = bytes.clone();

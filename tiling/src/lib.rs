@@ -29,6 +29,6 @@ pub use hash::{hash64, Fnv64};
 pub use manifest::{file_checksum, Manifest, UnitEntry};
 pub use splitter::{empty_columns, tile_path, TileSplitter, OWNED_COLUMN};
 pub use tile_file::{
-    encode_tile, read_tile, read_tile_header, write_tile, write_tile_with, Bounds3, Column,
-    ColumnData, FileDigest, Quantisation, TileColumns, TileHeader, WriteOptions,
+    encode_tile, read_tile, read_tile_frames, read_tile_header, write_tile, write_tile_with,
+    Bounds3, Column, ColumnData, FileDigest, Quantisation, TileColumns, TileHeader, WriteOptions,
 };

@@ -36,7 +36,7 @@
 use crate::atomic::atomic_write;
 use crate::error::{Error, Result};
 use std::fs::File;
-use std::io::Read;
+use std::io::{Read, Seek};
 use std::path::Path;
 
 /// File signature.
@@ -273,6 +273,59 @@ pub fn read_tile(path: &Path) -> Result<TileColumns> {
         Err(e) => Err(e),
     };
     decoded.map_err(|reason| Error::corrupt(path, reason))
+}
+
+/// Read and verify a tile file a frame at a time: `f` gets each frame's columns in order (a
+/// version-1 file is one frame), so a reader that keeps only some points holds one frame's
+/// worth, not the tile's. Damage anywhere is an error, as with [`read_tile`]; `f` may have seen
+/// the frames before the damaged one.
+pub fn read_tile_frames(path: &Path, mut f: impl FnMut(TileColumns) -> Result<()>) -> Result<()> {
+    let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut fixed = [0u8; 16];
+    read_exact_or_corrupt(&mut file, &mut fixed, path)?;
+    let version = check_magic_version(&fixed, &[VERSION, crate::framed::VERSION])
+        .map_err(|r| Error::corrupt(path, r))?;
+    if version == VERSION {
+        return f(read_tile(path)?);
+    }
+    let mut head = fixed.to_vec();
+    head.resize(crate::framed::HEADER_LEN, 0);
+    read_exact_or_corrupt(&mut file, &mut head[16..], path)?;
+    let h = crate::framed::parse_header(&head).map_err(|r| Error::corrupt(path, r))?;
+    let mut points = 0u64;
+    let mut bytes = Vec::new();
+    for k in 0..h.frames {
+        read_exact_or_corrupt(&mut file, &mut fixed, path)?;
+        let fh = read_v1_header(&mut file, path, fixed)?;
+        let len = (fh.header_len as u64)
+            .checked_add(fh.payload_len)
+            .and_then(|l| usize::try_from(l).ok())
+            .ok_or_else(|| Error::corrupt(path, format!("frame {k}: payload length too large")))?;
+        bytes.clear();
+        bytes.extend_from_slice(&fixed);
+        bytes.resize(len, 0);
+        // Back to the frame's start (the header was read to learn the length), then all of it.
+        file.seek(std::io::SeekFrom::Current(-(fh.header_len as i64 - 16)))
+            .map_err(|e| Error::io(path, e))?;
+        read_exact_or_corrupt(&mut file, &mut bytes[16..], path)?;
+        let cols = decode(&bytes).map_err(|r| Error::corrupt(path, format!("frame {k}: {r}")))?;
+        points += cols.len() as u64;
+        f(cols)?;
+    }
+    let mut rest = [0u8; 1];
+    if file.read(&mut rest).map_err(|e| Error::io(path, e))? != 0 {
+        return Err(Error::corrupt(path, "file is longer than its frames"));
+    }
+    if points != h.point_count {
+        return Err(Error::corrupt(
+            path,
+            format!(
+                "frames hold {points} points, the header says {}",
+                h.point_count
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// Read and verify only a tile file's header (count, bounds, column names).

@@ -7,6 +7,7 @@ use crate::error::Result;
 use crate::io::las_out::{CoordinateGrid, ExtraDim, ExtraType, ResultWriter};
 use crate::io::Crs;
 use crate::m3c2::tile::KeyedResult;
+use crate::m3c2::Reach;
 use crate::store::UnitWriter;
 use crate::units::m3c2::Merged;
 
@@ -72,6 +73,11 @@ pub const M3C2_DIMS: &[ExtraDim] = &[
         ty: ExtraType::U32,
         description: "change event, 0 = none",
     },
+    ExtraDim {
+        name: Cow::Borrowed("m3c2_beyond_reach"),
+        ty: ExtraType::U8,
+        description: "1: other epoch past cyl_halflen",
+    },
 ];
 
 /// Counts of what m3c2.laz holds.
@@ -79,6 +85,10 @@ pub struct Written {
     pub core_points: u64,
     pub computed: u64,
     pub significant: u64,
+    /// Distances found by the walk beyond the cylinder's half-length ([`Reach::Extended`]).
+    pub extended: u64,
+    /// Core points whose other epoch lies beyond the user's half-length ([`Reach::Beyond`]).
+    pub beyond_reach: u64,
 }
 
 /// Write m3c2.laz into `out` from the pair's `total` results in key order (`results`), with the
@@ -103,16 +113,24 @@ pub fn write_m3c2_laz(
         core_points: 0,
         computed: 0,
         significant: 0,
+        extended: 0,
+        beyond_reach: 0,
     };
     while let Some(mut k) = results.next_result()? {
         k.r = k.r.with_registration(reg_error);
         each(&k);
         let r = &k.r;
         let (smoothed, event) = event_of(k.key);
+        // Beyond the user's half-length nothing is measured: the flag says why there is none.
+        let beyond = r.reach == Reach::Beyond;
+        let (uncertainty, significant) = match beyond {
+            true => (f64::NAN, false),
+            false => (r.uncertainty, r.significant),
+        };
         let extra = [
-            r.distance,
-            r.uncertainty,
-            r.significant as u8 as f64,
+            r.measured(),
+            uncertainty,
+            significant as u8 as f64,
             r.std_dev1,
             r.std_dev2,
             r.count1 as f64,
@@ -122,11 +140,14 @@ pub fn write_m3c2_laz(
             r.normal[2],
             smoothed,
             event as f64,
+            beyond as u8 as f64,
         ];
         w.write(k.xyz, &extra)?;
         written.core_points += 1;
-        written.computed += r.distance.is_finite() as u64;
-        written.significant += r.significant as u64;
+        written.computed += r.measured().is_finite() as u64;
+        written.significant += significant as u64;
+        written.extended += (r.reach == Reach::Extended) as u64;
+        written.beyond_reach += beyond as u64;
     }
     w.finish()?;
     out.add_file("m3c2.laz")?;

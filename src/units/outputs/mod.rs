@@ -61,6 +61,8 @@ pub struct EventRecord {
     pub region_area_m2: Option<f64>,
     pub coverage: Option<f64>,
     pub volume_note: Option<String>,
+    /// The volume covers the whole change (see `units::volumes::Measured::complete`).
+    pub complete: bool,
     pub region: Vec<Vec<Vec<crate::io::Point3>>>,
     pub meshes: bool,
 }
@@ -81,6 +83,7 @@ impl EventRecord {
             region_area_m2: m.region_area_m2,
             coverage: m.coverage,
             volume_note: m.note,
+            complete: m.complete,
             region: m.region,
             meshes: m.meshes,
         }

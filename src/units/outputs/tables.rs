@@ -44,6 +44,7 @@ fn properties(r: &EventRecord) -> Value {
             "axes": e.obb.axes,
             "half_extents": e.obb.half_extents,
         },
+        "complete": r.complete,
         "volume_note": r.volume_note,
     })
 }
@@ -117,7 +118,7 @@ pub fn write_tables(out: &mut UnitWriter, events: &[EventRecord], crs: &Crs) -> 
         "id,kind,x,y,z,volume_m3,volume_uncertainty_m3,significant,gain_m3,loss_m3,n_points,area_m2,\
          mean_distance_m,max_abs_distance_m,mean_lod95_m,coverage,region_area_m2,obb_center_x,obb_center_y,obb_center_z,\
          obb_axis1_x,obb_axis1_y,obb_axis1_z,obb_axis2_x,obb_axis2_y,obb_axis2_z,\
-         obb_axis3_x,obb_axis3_y,obb_axis3_z,obb_half_1,obb_half_2,obb_half_3\n",
+         obb_axis3_x,obb_axis3_y,obb_axis3_z,obb_half_1,obb_half_2,obb_half_3,complete,volume_note\n",
     );
     let f = |v: Option<f64>| v.map(|x| format!("{x:.6}")).unwrap_or_default();
     for r in events {
@@ -147,8 +148,19 @@ pub fn write_tables(out: &mut UnitWriter, events: &[EventRecord], crs: &Crs) -> 
             row.extend(a.iter().map(|v| format!("{v:.6}")));
         }
         row.extend(o.half_extents.iter().map(|v| format!("{v:.4}")));
+        row.push(r.complete.to_string());
+        row.push(csv_text(r.volume_note.as_deref().unwrap_or("")));
         csv.push_str(&row.join(","));
         csv.push('\n');
     }
     write_bytes(out, "events.csv", csv.as_bytes())
+}
+
+/// A CSV field: quoted (quotes doubled) when it holds a comma, a quote or a line break.
+pub fn csv_text(s: &str) -> String {
+    if s.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
 }

@@ -60,7 +60,7 @@ impl TerrainSample {
             let o = self.origin;
             self.pos
                 .extend(k.xyz.iter().zip(&o).map(|(x, o)| (x - o) as f32));
-            self.dist.push(k.r.distance as f32);
+            self.dist.push(k.r.measured() as f32);
         }
         self.seen += 1;
     }
