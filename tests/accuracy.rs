@@ -598,3 +598,67 @@ fn an_event_half_in_a_hole_is_measured_over_its_covered_half() {
         .unwrap();
     assert!(coverage < 0.95 && coverage > 0.5, "coverage {coverage}");
 }
+
+// ---------------------------------------------------------------- change of any depth
+
+/// Issue "Change of any depth", item 4: a terrestrial-density cliff (`talus synth dense`: 4.4M
+/// points per epoch, about 1.5 cm spacing) with changes from 0.1 m to 3 m deep on the face, at
+/// its foot and on the plateau. With defaults every event is within 2 % and complete: the
+/// derived half-length (about 0.4 m here) is only a search window. With a user-given
+/// `--cyl-halflen 0.3`, every event deeper than that says it is incomplete and why (its core
+/// points have the other survey beyond the half-length), and the shallow scar stays complete.
+#[test]
+fn dense_cliff_within_2_percent_and_a_short_user_halflen_flags_deep_events() {
+    let (truth, found, m) = run_scene("dense", &[]);
+    for (t, i) in truth.events.iter().zip(&m) {
+        let e = &found[i.expect("judged: every event matched")];
+        assert!(e.note.is_none(), "{}: {:?}", t.description, e.note);
+    }
+    let dir = common::tempdir();
+    let data = dir.path().join("data");
+    synth("dense", &[], &data);
+    let res = dir.path().join("short");
+    let o = common::run_compare(
+        &data.join("before.laz"),
+        &data.join("after.laz"),
+        &res,
+        &["--cyl-halflen", "0.3"],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let line = String::from_utf8_lossy(&o.stderr);
+    let gj: Value =
+        serde_json::from_str(&std::fs::read_to_string(res.join("events.geojson")).unwrap())
+            .unwrap();
+    let short: Vec<&Value> = gj["features"].as_array().unwrap().iter().collect();
+    let mut deep = 0;
+    for t in &truth.events {
+        let f = short
+            .iter()
+            .filter(|f| f["properties"]["kind"] == t.kind.as_str())
+            .min_by(|a, b| {
+                let d = |f: &Value| dist(vec3(&f["geometry"]["coordinates"]), t.centre);
+                d(a).total_cmp(&d(b))
+            })
+            .expect("an event of its kind");
+        let p = &f["properties"];
+        let depth = p["max_abs_distance_m"].as_f64().unwrap();
+        if t.description.contains("0.1 m deep") {
+            assert_eq!(p["complete"], true, "{}: {p}", t.description);
+        } else {
+            deep += 1;
+            assert_eq!(p["complete"], false, "{} ({depth} m): {p}", t.description);
+            let note = p["volume_note"].as_str().unwrap_or_default();
+            assert!(
+                note.contains("beyond the M3C2 cylinder's half-length"),
+                "{note}"
+            );
+        }
+    }
+    assert_eq!(deep, 5, "five events deeper than 0.3 m");
+    let summary: Value =
+        serde_json::from_str(&std::fs::read_to_string(res.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["reach"]["rule"], "flag");
+    assert!(summary["reach"]["beyond_reach_points"].as_u64().unwrap() > 0);
+    assert_eq!(summary["reach"]["incomplete_events"], 5);
+    assert!(line.contains("5 event(s) incomplete"), "{line}");
+}

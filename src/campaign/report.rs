@@ -58,12 +58,20 @@ pub struct EventRow {
     pub volume_m3: Option<f64>,
     pub uncertainty_m3: Option<f64>,
     pub significant: bool,
+    /// The volume covers the whole change (events.geojson `complete`); an incomplete event's
+    /// interval is not a 95 % bound and the map draws its outline dashed.
+    #[serde(default = "whole")]
+    pub complete: bool,
     /// 0: none.
     pub track_id: u32,
     pub centroid: [f64; 3],
     /// Region outline: polygons → rings → [x, y, z] (closed rings), as event_regions.geojson
     /// holds them; empty where the event has no region.
     pub region: Vec<Vec<Vec<[f64; 3]>>>,
+}
+
+fn whole() -> bool {
+    true
 }
 
 /// Everything the page shows.
@@ -176,6 +184,7 @@ svg text{font-family:inherit}
 .sw.hg{border-color:var(--gain);background:repeating-linear-gradient(45deg,var(--gain) 0 1.5px,#fff 1.5px 4px)}
 .sw.hl{border-color:var(--loss);background:repeating-linear-gradient(45deg,var(--loss) 0 1.5px,#fff 1.5px 4px)}
 .sw.o{border-color:#b8b8b8;background:none}
+.sw.inc{border:1.2px dashed #555;background:none}
 .maps{display:grid;grid-template-columns:repeat(3,360px);justify-content:space-between;gap:20px 0}
 figure{margin:0}
 figcaption{font-size:12.5px;margin-top:4px;line-height:1.35}
@@ -1023,6 +1032,7 @@ fn maps_section(s: &mut String, report: &Report) {
         "<section id=\"maps\" aria-labelledby=\"h-maps\">\n<h2 id=\"h-maps\">4. Event maps</h2>\n\
          <div class=\"legend\"><span><i class=\"sw g\"></i>Gain</span><span><i class=\"sw l\"></i>Loss</span>\
          <span><i class=\"sw hg\"></i><i class=\"sw hl\"></i>Below its 95 % uncertainty (hollow marks where small)</span>\
+         <span><i class=\"sw inc\"></i>Dashed: incomplete, measured in part only (no 95 % bound)</span>\
          <span><i class=\"sw o\"></i>Events of the other pairs</span><span>T4: track 4 (events at one place across pairs)</span></div>\n",
     );
     let ext = extent(report);
@@ -1213,13 +1223,23 @@ fn map_svg(report: &Report, k: usize, ext: Option<Extent>) -> String {
         } else {
             format!("fill=\"url(#hatch-{}-{k})\"", kind_key(&ev.kind))
         };
+        // An incomplete event's interval is no 95 % bound: none is shown.
+        let interval = if ev.complete {
+            format!(" ± {}", ev.uncertainty_m3.map_or("—".into(), sig3))
+        } else {
+            String::new()
+        };
         let tip = format!(
-            "Event {} ({}): {} ± {} m³{}{}",
+            "Event {} ({}): {}{interval} m³{}{}{}",
             ev.id,
             esc(&ev.kind),
             ev.volume_m3
                 .map_or("no volume".into(), |v| with_sign(v, sig3(v))),
-            ev.uncertainty_m3.map_or("—".into(), sig3),
+            if ev.complete {
+                ""
+            } else {
+                ", incomplete: measured in part only (see volume_note in events.csv)"
+            },
             if ev.significant {
                 ""
             } else {
@@ -1254,10 +1274,15 @@ fn map_svg(report: &Report, k: usize, ext: Option<Extent>) -> String {
         };
         let d = path_of(ev);
         let small = (bx.x1 - bx.x0).max(bx.y1 - bx.y0) < 4.0;
+        let dash = if ev.complete {
+            ""
+        } else {
+            " stroke-dasharray=\"3 2\""
+        };
         if !d.is_empty() {
             w!(
                 s,
-                "<path class=\"event {}\" d=\"{d}\" {fill} fill-rule=\"evenodd\" stroke=\"{colour}\" stroke-width=\"1\" stroke-linejoin=\"round\"><title>{tip}</title></path>\n",
+                "<path class=\"event {}\" d=\"{d}\" {fill} fill-rule=\"evenodd\" stroke=\"{colour}\" stroke-width=\"1\"{dash} stroke-linejoin=\"round\"><title>{tip}</title></path>\n",
                 kind_key(&ev.kind)
             );
         }
@@ -1271,7 +1296,7 @@ fn map_svg(report: &Report, k: usize, ext: Option<Extent>) -> String {
             };
             w!(
                 s,
-                "<circle class=\"event-mark\" cx=\"{}\" cy=\"{}\" r=\"2.4\" {fill} stroke=\"{colour}\" stroke-width=\"1\"><title>{tip}</title></circle>\n",
+                "<circle class=\"event-mark\" cx=\"{}\" cy=\"{}\" r=\"2.4\" {fill} stroke=\"{colour}\" stroke-width=\"1\"{dash}><title>{tip}</title></circle>\n",
                 c(px(ev.centroid[0])),
                 c(py(ev.centroid[1]))
             );
@@ -1699,6 +1724,7 @@ mod tests {
             volume_m3: Some(v),
             uncertainty_m3: Some(0.3 + 0.05 * v.abs()),
             significant,
+            complete: true,
             track_id: track,
             centroid: [x, y, 100.0],
             region: square(x, y, 1.0 + v.abs().sqrt()),
@@ -1824,6 +1850,35 @@ mod tests {
         ));
         assert!(h.contains("<h1>") && h.contains("<h2 id=\"h-maps\">"));
         assert!(h.contains(">WGS 84 / UTM zone 33N</span>"));
+    }
+
+    #[test]
+    fn an_incomplete_event_is_dashed_without_an_interval() {
+        let mut r = sample();
+        let before = html(&r);
+        assert!(!before.contains("stroke-dasharray=\"3 2\""));
+        let e = &mut r.events[0];
+        e.complete = false;
+        let id = e.id;
+        let h = html(&r);
+        assert_eq!(
+            h.matches("stroke-dasharray=\"3 2\"").count(),
+            1,
+            "one dashed outline"
+        );
+        let tip = h
+            .split("<title>")
+            .find(|t| t.starts_with(&format!("Event {id} (")))
+            .expect("the event's tooltip");
+        assert!(tip.contains("incomplete: measured in part only"), "{tip}");
+        assert!(
+            !tip.split("</title>").next().unwrap().contains('±'),
+            "{tip}"
+        );
+        assert!(
+            h.contains("Dashed: incomplete"),
+            "the legend says what dashed means"
+        );
     }
 
     #[test]

@@ -386,7 +386,13 @@ impl Cursor {
             return Step::End;
         }
         let to = (self.from + self.len).min(self.limit);
-        if !extent.holds(&axis.q, &axis.n, axis.r, self.dir * self.from, self.dir * to) {
+        if !extent.holds(
+            &axis.q,
+            &axis.n,
+            axis.r,
+            self.dir * self.from,
+            self.dir * to,
+        ) {
             return Step::Unheld;
         }
         let found = collect(present, axis, self.dir, self.from, to, pres)

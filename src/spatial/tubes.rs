@@ -42,7 +42,9 @@ impl Tubes {
     /// `(q, n, lo, hi)` each.
     pub fn new(axes: &[(Point3, Point3, f64, f64)], r: f64) -> Tubes {
         let total: f64 = axes.iter().map(|a| (a.3 - a.2).abs()).sum();
-        let cell = (2.0 * r).max(2.0 * total / MAX_ENTRIES).max(f64::MIN_POSITIVE);
+        let cell = (2.0 * r)
+            .max(2.0 * total / MAX_ENTRIES)
+            .max(f64::MIN_POSITIVE);
         let origin = axes.first().map_or([0.0; 3], |a| a.0);
         let mut index = Tubes {
             r,
@@ -60,9 +62,9 @@ impl Tubes {
             for s in 0..=steps {
                 let t = (lo + s as f64 * 0.5 * cell).min(hi);
                 let p: Point3 = std::array::from_fn(|a| q[a] + t * n[a]);
-                for a in 0..3 {
-                    index.min[a] = index.min[a].min(p[a] - r);
-                    index.max[a] = index.max[a].max(p[a] + r);
+                for (a, x) in p.iter().enumerate() {
+                    index.min[a] = index.min[a].min(x - r);
+                    index.max[a] = index.max[a].max(x + r);
                 }
                 let key = index.key(&p);
                 if last != Some(key) {
@@ -126,7 +128,12 @@ mod tests {
     fn holds_exactly_what_a_test_of_every_tube_holds() {
         let mut axes = Vec::new();
         for k in 0..20 {
-            axes.push(([1.0 + 0.1 * k as f64, 0.0, 5.0 + 0.3 * k as f64], [0.0, -1.0, 0.0], -2.0, 30.0));
+            axes.push((
+                [1.0 + 0.1 * k as f64, 0.0, 5.0 + 0.3 * k as f64],
+                [0.0, -1.0, 0.0],
+                -2.0,
+                30.0,
+            ));
         }
         axes.push(([3.0, 3.0, 0.0], [0.0, 0.0, 1.0], -1.0, 12.0));
         let r = 0.05;

@@ -731,8 +731,14 @@ fn dense() -> SceneModel {
     let beach = Heightfield::new(f.beach_base(), Vec::new());
     let cone_y = -4.0 * cone_r / (3.0 * PI);
     let events = vec![
-        scar_event(&deep, "rockfall: box 2.5 m wide, 2 m high, 3 m deep into the face".into()),
-        scar_event(&bowl, "rockfall scar: half-ellipsoid 2 m × 1.5 m semi-axes, 2 m deep".into()),
+        scar_event(
+            &deep,
+            "rockfall: box 2.5 m wide, 2 m high, 3 m deep into the face".into(),
+        ),
+        scar_event(
+            &bowl,
+            "rockfall scar: half-ellipsoid 2 m × 1.5 m semi-axes, 2 m deep".into(),
+        ),
         scar_event(&shallow, "shallow scar: box 2 m × 1.5 m, 0.1 m deep".into()),
         ModelEvent {
             volume_m3: PI * cone_r * cone_r * cone_h / 6.0,

@@ -262,6 +262,7 @@ pub fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<Value> {
                     .get("volume_uncertainty_m3")
                     .and_then(Value::as_f64),
                 significant: e.properties.get("significant").and_then(Value::as_bool) == Some(true),
+                complete: e.properties.get("complete").and_then(Value::as_bool) != Some(false),
                 track_id: t,
                 centroid: e.centroid,
                 region: e.region.clone(),

@@ -150,7 +150,10 @@ pub fn run(
 /// surveys' bounds, and the tile's halo box.
 fn tile_extent(plan: &crate::plan::Plan, pair: usize, tile: TileId) -> Result<Extent> {
     let p = &plan.pairs[pair];
-    let (b, a) = (&plan.surveys[p.before].bounds, &plan.surveys[p.after].bounds);
+    let (b, a) = (
+        &plan.surveys[p.before].bounds,
+        &plan.surveys[p.after].bounds,
+    );
     let grid = plan.layout.grid()?;
     Ok(Extent {
         data_min: std::array::from_fn(|k| b.min[k].min(a.min[k])),
@@ -338,7 +341,7 @@ pub fn read_chunk(path: &std::path::Path) -> Result<Vec<KeyedResult>> {
     );
     let (n1, n2) = (u("count1")?, u("count2")?);
     let (nx, ny, nz) = (f("normal_x")?, f("normal_y")?, f("normal_z")?);
-    Ok((0..c.len())
+    (0..c.len())
         .map(|i| {
             Ok(KeyedResult {
                 key: (hi[i] as u64) << 32 | lo[i] as u64,
@@ -359,7 +362,7 @@ pub fn read_chunk(path: &std::path::Path) -> Result<Vec<KeyedResult>> {
                 },
             })
         })
-        .collect::<Result<_>>()?)
+        .collect::<Result<_>>()
 }
 
 /// The chunk files of a pair's M3C2 units, per tile in grid order.

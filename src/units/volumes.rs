@@ -80,9 +80,7 @@ fn incomplete(d: &Draft, v: &EventVolume, noise: f64, params: &Params) -> Option
         why.push(format!(
             "{} of its {} core points have the other survey beyond the M3C2 cylinder's \
              half-length ({} m, set by the user): their distances were not measured",
-            d.beyond_reach,
-            d.event.n_points,
-            params.cyl_halflen.value
+            d.beyond_reach, d.event.n_points, params.cyl_halflen.value
         ));
     }
     let level = noise.max(0.25 * v.open_rim.p90_change);
@@ -218,6 +216,7 @@ fn error_model(
         variance,
         variogram: stable.map(|s| s.variogram),
         systematic,
+        sampling: v.step_variance_m6.max(0.0).sqrt(),
     }
 }
 
@@ -345,7 +344,7 @@ pub fn run(
             largest = largest.max(b.len() + a.len());
         }
         // Gathered tile by tile, the points come in an order that depends on the tiling;
-        // `volume::epoch_tin` sorts what it triangulates, so the volumes do not.
+        // `volume::epoch_local` sorts what it triangulates, so the volumes do not.
         // One event at a time, each with its reservation (the triangulations, grids and solids of
         // a large event are most of the unit's memory); each event's own work is parallel.
         for (i, d) in mine.iter().enumerate() {

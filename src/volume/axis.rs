@@ -17,6 +17,7 @@
 //! candidate with fewer of them (the mean normal on a tie).
 
 use super::frame::{Footprint, Frame};
+use crate::spatial::Index;
 
 /// A pair of points whose w differs by more than this many times their (u, v) distance, plus one
 /// point spacing (so that noise on a flat surface never counts), lies on a part steeper than
@@ -105,6 +106,40 @@ pub fn wall_flags(local: &[[f64; 3]], spacing: f64) -> Vec<bool> {
         .collect()
 }
 
+/// How close (in spacings, 3-D) a point of the other survey must lie for a wall point to count
+/// as unchanged: the two surveys sample the same unchanged surface at about one spacing apart,
+/// so their nearest points are within a spacing or two; a change smaller than this is below
+/// what the surveys resolve there anyway.
+pub const UNCHANGED_WALL_SPACINGS: f64 = 2.0;
+
+/// Per local point of each epoch: is it on a wall in the frame ([`wall_flags`] within its own
+/// epoch) that the other epoch also holds, i.e. the nearest point of the other epoch lies within
+/// [`UNCHANGED_WALL_SPACINGS`] spacings and on a wall of its own epoch? Such points carry no volume (the surface there did not
+/// move), but a height field cannot hold them: the triangulation ramps between points stacked
+/// along w at heights that depend on where each survey happened to sample the wall, so an
+/// unchanged face at the rim of a beach deposit (or a plateau edge above a face scar) adds a
+/// random volume of up to its height × a cell per cell. The volume leaves them out of both
+/// surfaces. A wall only one epoch has (a fresh scar's sides, and the face points at its rim that
+/// stand above them) keeps its points: there the other epoch is a height field.
+pub fn unchanged_walls(local: [&[[f64; 3]]; 2], spacing: f64) -> [Vec<bool>; 2] {
+    let walls = local.map(|l| wall_flags(l, spacing));
+    let reach = UNCHANGED_WALL_SPACINGS * spacing;
+    let mut out = [vec![false; local[0].len()], vec![false; local[1].len()]];
+    if !walls.iter().all(|w| w.contains(&true)) {
+        return out;
+    }
+    for e in 0..2 {
+        let other = Index::new(local[1 - e], [0.0; 3]);
+        for (i, p) in local[e].iter().enumerate() {
+            out[e][i] = walls[e][i]
+                && other
+                    .nearest_one(p)
+                    .is_some_and(|(j, d2)| d2 <= reach * reach && walls[1 - e][j]);
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -140,6 +175,60 @@ mod tests {
         let across = wall_points(&frame(FACE), &r, 10.0, &pts, 0.1);
         assert_eq!(across, 0);
         assert!(along_z > pts.len() / 2, "{along_z} of {}", pts.len());
+    }
+
+    /// A beach (z = 0) in front of a face (the plane y = 0, z up to 3 m), seen along z: both
+    /// epochs hold the face, so its points are unchanged walls in both; a box pit dug in the
+    /// after epoch's beach has sides only that epoch holds, which stay.
+    #[test]
+    fn a_face_both_epochs_hold_is_dropped_and_a_new_pits_sides_are_kept() {
+        let s = 0.1;
+        let beach = |shift: f64, pit: bool| {
+            let mut pts = Vec::new();
+            for i in 0..40 {
+                for j in 0..20 {
+                    let (x, y) = (i as f64 * s + shift, -2.0 + j as f64 * s + shift);
+                    let inside = pit && (1.0..2.0).contains(&x) && (-1.5..-0.8).contains(&y);
+                    pts.push([x, y, if inside { -0.5 } else { 0.0 }]);
+                }
+                for k in 1..30 {
+                    pts.push([i as f64 * s + shift, 0.0, k as f64 * s + shift]);
+                }
+            }
+            if pit {
+                // The pit's sides: x = 1 and x = 2 over its y span, 0.5 m deep.
+                for x in [1.0, 2.0] {
+                    for j in 0..7 {
+                        for k in 1..5 {
+                            pts.push([x, -1.5 + j as f64 * s, -0.1 * k as f64]);
+                        }
+                    }
+                }
+            }
+            pts
+        };
+        let before = beach(0.0, false);
+        let after = beach(0.03, true);
+        let [d1, d2] = unchanged_walls([&before, &after], s);
+        let face = |p: &[f64; 3]| p[1] == 0.0 && p[2] > 0.5;
+        for (pts, drop) in [(&before, &d1), (&after, &d2)] {
+            let (n, gone) = pts
+                .iter()
+                .zip(drop)
+                .filter(|(p, _)| face(p))
+                .fold((0, 0), |(n, g), (_, &d)| (n + 1, g + d as usize));
+            assert_eq!(
+                gone, n,
+                "every face point above the foot is an unchanged wall"
+            );
+        }
+        let sides = after
+            .iter()
+            .zip(&d2)
+            .filter(|(p, _)| p[1] < -0.5 && p[2] < -0.05 && p[2] > -0.45)
+            .collect::<Vec<_>>();
+        assert!(!sides.is_empty());
+        assert!(sides.iter().all(|(_, &d)| !d), "the pit's sides are kept");
     }
 
     #[test]

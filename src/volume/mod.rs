@@ -87,6 +87,9 @@ pub struct EventVolume {
     pub region_points: [usize; 2],
     /// Where the region borders ground it could not measure, and how much changed there.
     pub open_rim: region::OpenRim,
+    /// The variance of the volume from where the points sample its steps (m⁶,
+    /// [`Region::step_variance`]).
+    pub step_variance_m6: f64,
 }
 
 impl EventVolume {
@@ -135,17 +138,16 @@ fn check_params(obb: &Obb, margin: f64, spacing: f64) -> Result<()> {
     Ok(())
 }
 
-/// The TIN of one epoch's (global) points in the event frame, over `r`: points beyond `r` grown
-/// by 3 spacings are dropped. Returns the TIN and the local points it was made from. The points
-/// may come in any order (a tiled run gathers them tile by tile): they are sorted first, because
-/// the triangulation of ties (points sharing u, v) depends on the insertion order.
-pub fn epoch_tin(
+/// One epoch's (global) points in the event frame, over `r`: points beyond `r` grown by 3
+/// spacings are dropped. The points may come in any order (a tiled run gathers them tile by
+/// tile): they are sorted, because the triangulation of ties (points sharing u, v) depends on
+/// the insertion order.
+pub fn epoch_local(
     frame: &Frame,
     r: &Footprint,
     points: &[[f64; 3]],
     spacing: f64,
-    epoch: &str,
-) -> Result<(Tin, Vec<[f64; 3]>)> {
+) -> Vec<[f64; 3]> {
     let keep = r.grown(3.0 * spacing);
     let mut local: Vec<[f64; 3]> = points
         .iter()
@@ -157,9 +159,34 @@ pub fn epoch_tin(
             .then(a[1].total_cmp(&b[1]))
             .then(a[2].total_cmp(&b[2]))
     });
-    let tin = Tin::new(&local)
-        .map_err(|e| Error::Epochs(format!("{epoch} epoch around the event: {e}")))?;
-    Ok((tin, local))
+    local
+}
+
+/// Both epochs' local points ([`epoch_local`]) without the unchanged walls
+/// ([`axis::unchanged_walls`]), and their TINs.
+pub fn epoch_tins(
+    frame: &Frame,
+    r: &Footprint,
+    points: [&[[f64; 3]]; 2],
+    spacing: f64,
+) -> Result<[(Tin, Vec<[f64; 3]>); 2]> {
+    let local = points.map(|p| epoch_local(frame, r, p, spacing));
+    let drop = axis::unchanged_walls([&local[0], &local[1]], spacing);
+    let mut out = Vec::with_capacity(2);
+    for ((l, d), epoch) in local.into_iter().zip(&drop).zip(["before", "after"]) {
+        let kept: Vec<[f64; 3]> = l
+            .into_iter()
+            .zip(d)
+            .filter(|(_, &d)| !d)
+            .map(|(p, _)| p)
+            .collect();
+        let tin = Tin::new(&kept)
+            .map_err(|e| Error::Epochs(format!("{epoch} epoch around the event: {e}")))?;
+        out.push((tin, kept));
+    }
+    let after = out.pop().expect("two epochs");
+    let before = out.pop().expect("two epochs");
+    Ok([before, after])
 }
 
 /// The region of footprint `r`: cells of about one `spacing` whose four corners both surfaces
@@ -225,8 +252,7 @@ pub fn event_volume(
     check_params(obb, margin, spacing)?;
     let frame = Frame::of_obb(obb);
     let r = Footprint::of_obb(obb, margin);
-    let (tin1, local1) = epoch_tin(&frame, &r, before, spacing, "before")?;
-    let (tin2, local2) = epoch_tin(&frame, &r, after, spacing, "after")?;
+    let [(tin1, local1), (tin2, local2)] = epoch_tins(&frame, &r, [before, after], spacing)?;
     let radius = region::COVER_RADIUS * spacing;
     let uv =
         |l: &Vec<[f64; 3]>| region::PointCoverage::new(l.iter().map(|p| [p[0], p[1]]), &r, radius);
@@ -308,7 +334,9 @@ fn finish(
         )));
     }
     let r = region.cells.r;
-    let open_rim = region.open_rim(&|u, v| Some(s2.height_at(u, v)? - s1.height_at(u, v)?));
+    let change = |u: f64, v: f64| Some(s2.height_at(u, v)? - s1.height_at(u, v)?);
+    let open_rim = region.open_rim(&change);
+    let step_variance_m6 = region.step_variance(&change, spacing);
     // One base plane below both surfaces, one spacing lower still so no wall is flat.
     let base = solid::min_height(&top1).min(solid::min_height(&top2)) - spacing;
     let solid1 = solid::close(top1, base, &r);
@@ -342,6 +370,7 @@ fn finish(
         n_after: n2,
         region_points: [0; 2],
         open_rim,
+        step_variance_m6,
     })
 }
 

@@ -14,6 +14,7 @@
 
 use super::boundary;
 use super::frame::Footprint;
+use rayon::prelude::*;
 
 /// A cell is covered by an epoch when one of its points lies within this many point spacings of
 /// the cell's centre. For points on a grid of spacing s the farthest a location can be from its
@@ -160,7 +161,10 @@ impl Region {
     /// The open rim of the region (see [`OpenRim`]), `change(u, v)` the surfaces' difference.
     pub fn open_rim(&self, change: &(dyn Fn(f64, f64) -> Option<f64> + Sync)) -> OpenRim {
         let c = &self.cells;
-        let (du, dv) = ((c.r.u1 - c.r.u0) / c.nu as f64, (c.r.v1 - c.r.v0) / c.nv as f64);
+        let (du, dv) = (
+            (c.r.u1 - c.r.u0) / c.nu as f64,
+            (c.r.v1 - c.r.v0) / c.nv as f64,
+        );
         let open = |i: isize, j: isize| {
             i < 0
                 || j < 0
@@ -192,6 +196,64 @@ impl Region {
             .copied()
             .unwrap_or(0.0);
         OpenRim { edges, p90_change }
+    }
+}
+
+impl Region {
+    /// The variance (m⁶) of the volume from where the points happen to sample a step: a TIN puts
+    /// a step of height H anywhere between the last point before it and the first after, so
+    /// each length `spacing` of a step carries an error H·s·x with x uniform over ±s/2, a
+    /// variance H²s⁴/12, independent from one length to the next. Smooth change gives none (a
+    /// TIN is exact for a plane, and its error goes with the curvature times s²), so the step is
+    /// read from the second difference of the change between neighbouring cells: across a step
+    /// of H between two cell centres, the two cells either side have |D2| = H, hence
+    /// Σ (s² D2)² / 24 over the region's cells. `change(u, v)` is the surfaces' difference.
+    ///
+    /// A box scar 2.2 m wide and 0.67 m deep sampled every 0.26 m: ±0.14 m³ (95 %) from its
+    /// edges alone, where the noise of thousands of points averages to a few litres.
+    pub fn step_variance(
+        &self,
+        change: &(dyn Fn(f64, f64) -> Option<f64> + Sync),
+        spacing: f64,
+    ) -> f64 {
+        let c = &self.cells;
+        let dw: Vec<Option<f64>> = (0..c.nv)
+            .into_par_iter()
+            .flat_map_iter(|j| {
+                (0..c.nu).map(move |i| {
+                    if !self.covered[c.index(i, j)] {
+                        return None;
+                    }
+                    let [u, v] = c.centre(i, j);
+                    change(u, v)
+                })
+            })
+            .collect();
+        let at = |i: isize, j: isize| -> Option<f64> {
+            if i < 0 || j < 0 || i >= c.nu as isize || j >= c.nv as isize {
+                return None;
+            }
+            dw[c.index(i as usize, j as usize)]
+        };
+        let s4 = spacing.powi(4);
+        let mut sum = 0.0;
+        for j in 0..c.nv {
+            for i in 0..c.nu {
+                if !self.contains(i, j) {
+                    continue;
+                }
+                let (ii, jj) = (i as isize, j as isize);
+                let Some(d) = at(ii, jj) else { continue };
+                let second = |a: Option<f64>, b: Option<f64>| match (a, b) {
+                    (Some(a), Some(b)) => (a - 2.0 * d + b).abs(),
+                    _ => 0.0,
+                };
+                let d2 = second(at(ii - 1, jj), at(ii + 1, jj))
+                    .max(second(at(ii, jj - 1), at(ii, jj + 1)));
+                sum += s4 * d2 * d2 / 24.0;
+            }
+        }
+        sum
     }
 }
 

@@ -78,8 +78,8 @@ export class EventLayer {
 
       const wrap = document.createElement('div');
       const div = document.createElement('div');
-      div.className = `event-label ${e.kind}`;
-      div.textContent = volumeLabel(e.volume_m3, e.volume_uncertainty_m3);
+      div.className = `event-label ${e.kind}${e.complete === false ? ' incomplete' : ''}`;
+      div.textContent = volumeLabel(e.volume_m3, e.volume_uncertainty_m3, e.complete);
       const c = colourOf?.(e);
       if (c != null) div.style.borderColor = `#${c.toString(16).padStart(6, '0')}`;
       div.dataset.id = String(e.id);

@@ -18,8 +18,11 @@ function volumeDigits(v) {
 }
 
 /** The marker label: "+12.3 ± 1.1 m³". */
-export function volumeLabel(v, u) {
+export function volumeLabel(v, u, complete = true) {
   const d = volumeDigits(v);
+  // An incomplete event's volume counts the measured part only: its interval is no 95 % bound,
+  // so none is shown beside it (SPEC.md §1 "Change of any depth").
+  if (complete === false) return `${signed(v, d)} m³ (incomplete)`;
   const unc = Number.isFinite(u) ? ` ± ${Math.abs(u).toFixed(d)}` : '';
   return `${signed(v, d)}${unc} m³`;
 }

@@ -352,7 +352,7 @@ async function main() {
     if (hit.kind === 'event') {
       const e = byId.get(hit.id);
       const where = hit.local ? `surface ${coords(toGlobal(hit.local))}` : `centre ${coords(e.centroid)}`;
-      return `Event #${e.id} (${e.kind}) ${volumeLabel(e.volume_m3, e.volume_uncertainty_m3)} · ${where} · ${crsText}`;
+      return `Event #${e.id} (${e.kind}) ${volumeLabel(e.volume_m3, e.volume_uncertainty_m3, e.complete)} · ${where} · ${crsText}`;
     }
     const p = terrain.positions;
     const i = hit.index;

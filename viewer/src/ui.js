@@ -87,7 +87,7 @@ export class EventTable {
         [String(e.id), ''],
         [e.kind, `kind ${e.kind}`],
         ...this.extra.map((c) => [e[c.key] == null ? '–' : String(e[c.key]), c.num ? 'num' : '']),
-        [volumeLabel(e.volume_m3, e.volume_uncertainty_m3).replace(' m³', ''), 'num'],
+        [volumeLabel(e.volume_m3, e.volume_uncertainty_m3, e.complete).replace(' m³', ''), 'num'],
         [fixed(e.area_m2, 1), 'num'],
         [fixed(e.max_abs_distance_m, 2), 'num'],
         [Number.isFinite(e.n_points) ? String(e.n_points) : '–', 'num'],
@@ -134,7 +134,13 @@ export function showEvent(panel, e, units) {
   };
   const u = units || 'm';
   add('Volume', `${signed(e.volume_m3, 2)} ${u}³`, 'volume_m3', 'big');
-  add('Uncertainty', `± ${fixed(e.volume_uncertainty_m3, 2)} ${u}³`, 'volume_uncertainty_m3');
+  if (e.complete === false) {
+    add('Uncertainty', `± ${fixed(e.volume_uncertainty_m3, 2)} ${u}³ of the measured part: not a 95 % bound`,
+      'volume_uncertainty_m3');
+    add('Incomplete', e.volume_note || 'the volume covers part of the change only', 'volume_note', 'warn');
+  } else {
+    add('Uncertainty', `± ${fixed(e.volume_uncertainty_m3, 2)} ${u}³`, 'volume_uncertainty_m3');
+  }
   if (e.gain_m3 !== undefined) add('Gain part', `${signed(e.gain_m3, 2)} ${u}³`, 'gain_m3');
   if (e.loss_m3 !== undefined) add('Loss part', `${signed(e.loss_m3, 2)} ${u}³`, 'loss_m3');
   add('Core points', Number.isFinite(e.n_points) ? String(e.n_points) : '–', 'n_points');
@@ -158,7 +164,7 @@ export function showEvent(panel, e, units) {
   // Anything else the writer added, so the panel shows *all* properties.
   const known = new Set(['id', 'kind', 'volume_m3', 'volume_uncertainty_m3', 'gain_m3', 'loss_m3',
     'n_points', 'area_m2', 'mean_distance_m', 'max_abs_distance_m', 'mean_lod95_m', 'obb',
-    'centroid', 'local', 'mesh_id']);
+    'centroid', 'local', 'mesh_id', 'volume_note']);
   for (const [k, v] of Object.entries(e)) {
     if (known.has(k)) continue;
     add(k, typeof v === 'number' ? String(v) : JSON.stringify(v), k);

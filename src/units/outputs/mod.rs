@@ -136,7 +136,56 @@ pub struct Summary {
     pub total_gain_m3: f64,
     /// Sum of the negative volumes of the significant events, m³ (≤ 0).
     pub total_loss_m3: f64,
+    /// How far M3C2 looked for the other epoch (SPEC.md §1 "Change of any depth").
+    #[serde(default)]
+    pub reach: ReachSummary,
     pub stages: Vec<StageTime>,
+}
+
+/// summary.json `reach`: the rule M3C2 followed where a cylinder held one epoch only, and what it
+/// found.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct ReachSummary {
+    /// "walk" (derived half-length: a search window, the other epoch sought on along the normal
+    /// and measured) or "flag" (the user's half-length: what lies beyond it is flagged, not
+    /// measured).
+    pub rule: String,
+    /// The rule in words.
+    pub description: String,
+    /// Core points whose distance the walk measured beyond the half-length.
+    pub extended_points: u64,
+    /// Core points with the other epoch beyond the user's half-length (`m3c2_beyond_reach`).
+    pub beyond_reach_points: u64,
+    /// Events whose volume does not cover their whole change (`complete: false`).
+    pub incomplete_events: usize,
+}
+
+impl ReachSummary {
+    fn new(params: &Params, written: &laz::Written, records: &[EventRecord]) -> ReachSummary {
+        let (rule, description) = match params.walk() {
+            crate::m3c2::Walk::Detect => (
+                "flag",
+                "cyl_halflen set by the user: a cylinder holding one epoch only is followed on \
+                 along the normal to the data's extent; where the other epoch lies beyond the \
+                 half-length the core point is flagged (m3c2_beyond_reach) and gets no distance, \
+                 and its event is incomplete",
+            ),
+            _ => (
+                "walk",
+                "cyl_halflen derived: a search window only; a cylinder holding one epoch only is \
+                 followed on along the normal, both ways, to the data's extent, and the first \
+                 surface of the missing epoch met (crossing the axis, with the present epoch's \
+                 next surface beyond it) is measured as the distance",
+            ),
+        };
+        ReachSummary {
+            rule: rule.into(),
+            description: description.into(),
+            extended_points: written.extended,
+            beyond_reach_points: written.beyond_reach,
+            incomplete_events: records.iter().filter(|e| !e.complete).count(),
+        }
+    }
 }
 
 impl Summary {
@@ -154,7 +203,28 @@ impl Summary {
             self.loss_events,
             self.total_loss_m3,
             self.tiles,
-        )
+        ) + &self.reach_line()
+    }
+
+    /// What the one line adds about reach: incomplete events (their intervals are not confident
+    /// bounds) and core points beyond a user's half-length.
+    fn reach_line(&self) -> String {
+        let r = &self.reach;
+        let mut s = String::new();
+        if r.incomplete_events > 0 {
+            s += &format!(
+                "; {} event(s) incomplete: measured in part only (see volume_note), their \
+                 intervals are not 95 % bounds",
+                r.incomplete_events
+            );
+        }
+        if r.beyond_reach_points > 0 {
+            s += &format!(
+                "; {} core point(s) with the other survey beyond --cyl-halflen, not measured",
+                r.beyond_reach_points
+            );
+        }
+        s
     }
 }
 
@@ -419,6 +489,7 @@ fn summarize(
         })
         .collect();
     let significant = || records.iter().filter(|e| e.significant);
+    let reach = ReachSummary::new(&params, written, records);
     Summary {
         tool: "talus".into(),
         version: env!("CARGO_PKG_VERSION").into(),
@@ -451,6 +522,7 @@ fn summarize(
             .filter_map(|e| e.volume_m3)
             .filter(|v| *v < 0.0)
             .sum(),
+        reach,
         stages,
     }
 }

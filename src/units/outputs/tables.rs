@@ -28,6 +28,7 @@ fn properties(r: &EventRecord) -> Value {
             "random": u.random_m3,
             "correlated": u.correlated_m3,
             "systematic": u.systematic_m3,
+            "sampling": u.sampling_m3,
         })),
         "gain_m3": opt(r.gain_m3),
         "loss_m3": opt(r.loss_m3),
