@@ -279,8 +279,8 @@ fn a_run_without_any_distance_is_refused_with_the_reason() {
         &high,
         &["--cyl-halflen", "0.3", "--cyl-radius", "0.5"],
         &[
-            "no core point has enough points of the after epoch",
-            "the epochs do not overlap along the normals",
+            "the other epoch lies along the normal beyond the cylinder's half-length 0.3 (--cyl-halflen)",
+            "the epochs do not overlap within it",
         ],
     );
 }

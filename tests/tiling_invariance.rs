@@ -75,3 +75,53 @@ fn tiled_runs_equal_the_whole_cloud_run() {
         );
     }
 }
+
+/// The sum of `key` over the records of the M3C2 units in `dir`'s store.
+fn m3c2_meta_sum(dir: &Path, key: &str) -> u64 {
+    let units = dir.join(".talus/units/m3c2");
+    std::fs::read_dir(&units)
+        .unwrap()
+        .map(|e| {
+            let r: serde_json::Value = serde_json::from_slice(
+                &std::fs::read(e.unwrap().path().join("record.json")).unwrap(),
+            )
+            .unwrap();
+            r["meta"][key].as_u64().unwrap_or(0)
+        })
+        .sum()
+}
+
+/// Issue "Change of any depth", item 5: change deeper than the cylinder, walked along the normal
+/// across tile borders. The dense cliff at 600k points per epoch (about 4 cm spacing: the
+/// derived half-length is about 1.2 m, so the 3 m deep box, the 2 m deep scar, the 2.5 m cone
+/// and the 1.5 m deposit are walked) as one tile and as 3 m tiles: walks leave their tile
+/// (`walked_beyond_tile` > 0) and are finished over the points along their axes; the outputs are
+/// the same bytes.
+#[test]
+fn walks_across_tiles_equal_the_whole_cloud_run() {
+    let tmp = common::tempdir();
+    let scene = tmp.path().join("scene");
+    let o = common::run(&[
+        "synth",
+        "dense",
+        "--points",
+        "600000",
+        "--out",
+        scene.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (before, after) = (scene.join("before.laz"), scene.join("after.laz"));
+    let whole = tmp.path().join("whole");
+    compare(&before, &after, &whole, &["--tile-size", "1000"]);
+    let s = summary_without_timings(&whole);
+    assert!(s["reach"]["extended_points"].as_u64().unwrap() > 1000, "{s}");
+    assert_eq!(m3c2_meta_sum(&whole, "walked_beyond_tile"), 0, "one tile");
+    let tiled = tmp.path().join("tiled");
+    compare(&before, &after, &tiled, &["--tile-size", "3"]);
+    assert!(
+        m3c2_meta_sum(&tiled, "walked_beyond_tile") > 100,
+        "walks must leave their tiles for this test to prove anything"
+    );
+    assert_same_outputs(&whole, &tiled);
+    assert_eq!(s, summary_without_timings(&tiled));
+}

@@ -86,6 +86,8 @@ struct Reached {
     before: u64,
     after: u64,
     distances: u64,
+    /// Core points whose other epoch lies beyond the user's half-length (found by the walk).
+    beyond: u64,
 }
 
 impl Reached {
@@ -94,6 +96,7 @@ impl Reached {
         self.before += u64::from(r.count1 >= need);
         self.after += u64::from(r.count2 >= need);
         self.distances += u64::from(r.measured().is_finite());
+        self.beyond += u64::from(r.reach == crate::m3c2::Reach::Beyond);
     }
 
     /// Why none of the pair's `n` core points got a distance (a run that yields nothing is
@@ -123,6 +126,14 @@ impl Reached {
                 crate::m3c2::normals::MIN_NORMAL_POINTS,
                 given(&p.normal_radius, "--normal-radius"),
                 fmt(p.point_spacing.value),
+            )
+        } else if self.beyond > 0 {
+            format!(
+                "at {} core point(s) the other epoch lies along the normal beyond the cylinder's \
+                 half-length {}: the epochs do not overlap within it (leave --cyl-halflen out and \
+                 talus follows the normal to the other epoch)",
+                self.beyond,
+                given(&p.cyl_halflen, "--cyl-halflen")
             )
         } else if self.before == 0 {
             format!("no core point has enough points of the before epoch in {cylinder}")

@@ -355,6 +355,7 @@ pub fn run(
             )?;
             let (m, v): (Measured, Option<EventVolume>) = {
                 let mut e: Event = d.event.clone();
+                let mut window = boxes[i].first().map_or(f64::INFINITY, |b| b.0[2]);
                 // The extrusion axis: the candidate in which both epochs have the fewest points
                 // on walls or fold-overs (volume::axis); the mean normal on a tie.
                 if boxes[i].len() > 1 {
@@ -369,6 +370,7 @@ pub fn run(
                         .min_by_key(|&k| (counts[k], k))
                         .unwrap_or(0);
                     e.obb = boxes[i][best].2;
+                    window = boxes[i][best].0[2];
                 }
                 let id = e.id;
                 let owned = |x: &Point3| ownership.owner(x) == Some(id);
@@ -382,9 +384,9 @@ pub fn run(
                             &e.obb, margin, &sb, &sa, spacing, &owned,
                         )
                     }
-                    None => {
-                        volume::event_volume(&e.obb, margin, &before[i], &after[i], spacing, &owned)
-                    }
+                    None => volume::event_volume_in(
+                        &e.obb, margin, window, &before[i], &after[i], spacing, &owned,
+                    ),
                 };
                 let m = members.get(&id).map(|v| v.as_slice()).unwrap_or(&[]);
                 match v {

@@ -112,30 +112,94 @@ pub fn wall_flags(local: &[[f64; 3]], spacing: f64) -> Vec<bool> {
 /// what the surveys resolve there anyway.
 pub const UNCHANGED_WALL_SPACINGS: f64 = 2.0;
 
-/// Per local point of each epoch: is it on a wall in the frame ([`wall_flags`] within its own
-/// epoch) that the other epoch also holds, i.e. the nearest point of the other epoch lies within
-/// [`UNCHANGED_WALL_SPACINGS`] spacings and on a wall of its own epoch? Such points carry no volume (the surface there did not
-/// move), but a height field cannot hold them: the triangulation ramps between points stacked
-/// along w at heights that depend on where each survey happened to sample the wall, so an
-/// unchanged face at the rim of a beach deposit (or a plateau edge above a face scar) adds a
-/// random volume of up to its height × a cell per cell. The volume leaves them out of both
-/// surfaces. A wall only one epoch has (a fresh scar's sides, and the face points at its rim that
-/// stand above them) keeps its points: there the other epoch is a height field.
-pub fn unchanged_walls(local: [&[[f64; 3]]; 2], spacing: f64) -> [Vec<bool>; 2] {
+/// Per local point of each epoch: is it on a wall both epochs hold unchanged? A point is on a
+/// wall in the frame ([`wall_flags`] within its own epoch); such a point is *matched* when the
+/// nearest point of the other epoch lies within [`UNCHANGED_WALL_SPACINGS`] spacings (it did not
+/// move); and a wall point is left out when every wall point of either epoch within one spacing
+/// of it in (u, v) — its column — is matched.
+///
+/// Such points carry no volume (the surface there did not move), but a height field cannot hold
+/// them: the triangulation ramps between points stacked along w at heights that depend on where
+/// each survey happened to sample the wall, so an unchanged face at the rim of a beach deposit
+/// (or a plateau edge above a face scar) adds a random volume of up to its height × a cell per
+/// cell. A wall that changed anywhere in its column keeps all its points in both epochs: a fresh
+/// scar's sides (the other epoch is a height field there), a block grown taller (its old lower
+/// wall is matched, its new upper part is not: dropping only the lower part would triangulate
+/// the two epochs' edges differently), a deposit against a face (the face's buried foot).
+///
+/// The points are those of a box: `gathered` in (u, v) and |w| ≤ `window` (the search box;
+/// `f64::INFINITY` when unknown). Near its faces a point's counterpart may lie just outside, so a
+/// wall point within reach of a face counts as matched (the box reaches past the event's
+/// footprint and deepest change: nothing there moved).
+pub fn unchanged_walls(
+    local: [&[[f64; 3]]; 2],
+    spacing: f64,
+    gathered: &Footprint,
+    window: f64,
+) -> [Vec<bool>; 2] {
     let walls = local.map(|l| wall_flags(l, spacing));
-    let reach = UNCHANGED_WALL_SPACINGS * spacing;
     let mut out = [vec![false; local[0].len()], vec![false; local[1].len()]];
     if !walls.iter().all(|w| w.contains(&true)) {
         return out;
     }
+    let reach = UNCHANGED_WALL_SPACINGS * spacing;
+    // Near the gathered box's faces a point's counterpart may lie just outside it.
+    let at_edge = |p: &[f64; 3]| {
+        p[0] - gathered.u0 <= reach
+            || gathered.u1 - p[0] <= reach
+            || p[1] - gathered.v0 <= reach
+            || gathered.v1 - p[1] <= reach
+            || p[2].abs() >= window - reach
+    };
+    // Every wall point of both epochs: (u, v, matched, epoch, index).
+    let mut wall: Vec<([f64; 2], bool, usize, usize)> = Vec::new();
     for e in 0..2 {
         let other = Index::new(local[1 - e], [0.0; 3]);
         for (i, p) in local[e].iter().enumerate() {
-            out[e][i] = walls[e][i]
-                && other
-                    .nearest_one(p)
-                    .is_some_and(|(j, d2)| d2 <= reach * reach && walls[1 - e][j]);
+            if walls[e][i] {
+                let matched = at_edge(p)
+                    || other
+                        .nearest_one(p)
+                        .is_some_and(|(_, d2)| d2 <= reach * reach);
+                wall.push(([p[0], p[1]], matched, e, i));
+            }
         }
+    }
+    // Columns: the wall points within one spacing in (u, v), through a bucket grid.
+    let (mut u0, mut v0) = (f64::INFINITY, f64::INFINITY);
+    for (q, ..) in &wall {
+        u0 = u0.min(q[0]);
+        v0 = v0.min(q[1]);
+    }
+    let cell = |q: &[f64; 2]| {
+        (
+            ((q[0] - u0) / spacing).floor() as i64,
+            ((q[1] - v0) / spacing).floor() as i64,
+        )
+    };
+    let mut buckets: std::collections::HashMap<(i64, i64), Vec<usize>> =
+        std::collections::HashMap::new();
+    for (k, (q, ..)) in wall.iter().enumerate() {
+        buckets.entry(cell(q)).or_default().push(k);
+    }
+    for (q, matched, e, i) in &wall {
+        if !matched {
+            continue;
+        }
+        let (cu, cv) = cell(q);
+        let mut whole = true;
+        'scan: for du in -1..=1 {
+            for dv in -1..=1 {
+                for &k in buckets.get(&(cu + du, cv + dv)).map_or(&[][..], |v| v) {
+                    let (r, ok, ..) = &wall[k];
+                    if !ok && (r[0] - q[0]).hypot(r[1] - q[1]) <= spacing {
+                        whole = false;
+                        break 'scan;
+                    }
+                }
+            }
+        }
+        out[*e][*i] = whole;
     }
     out
 }
@@ -209,7 +273,13 @@ mod tests {
         };
         let before = beach(0.0, false);
         let after = beach(0.03, true);
-        let [d1, d2] = unchanged_walls([&before, &after], s);
+        let all = Footprint {
+            u0: f64::NEG_INFINITY,
+            u1: f64::INFINITY,
+            v0: f64::NEG_INFINITY,
+            v1: f64::INFINITY,
+        };
+        let [d1, d2] = unchanged_walls([&before, &after], s, &all, f64::INFINITY);
         let face = |p: &[f64; 3]| p[1] == 0.0 && p[2] > 0.5;
         for (pts, drop) in [(&before, &d1), (&after, &d2)] {
             let (n, gone) = pts

@@ -163,15 +163,23 @@ pub fn epoch_local(
 }
 
 /// Both epochs' local points ([`epoch_local`]) without the unchanged walls
-/// ([`axis::unchanged_walls`]), and their TINs.
+/// ([`axis::unchanged_walls`], the points gathered within |w| ≤ `window`), and their TINs.
 pub fn epoch_tins(
     frame: &Frame,
     r: &Footprint,
     points: [&[[f64; 3]]; 2],
     spacing: f64,
+    window: f64,
 ) -> Result<[(Tin, Vec<[f64; 3]>); 2]> {
-    let local = points.map(|p| epoch_local(frame, r, p, spacing));
-    let drop = axis::unchanged_walls([&local[0], &local[1]], spacing);
+    // Only the window's points: the gather may bring more (other candidate boxes), cut by
+    // other faces.
+    let local = points.map(|p| {
+        let mut l = epoch_local(frame, r, p, spacing);
+        l.retain(|q| q[2].abs() <= window);
+        l
+    });
+    let gathered = r.grown(3.0 * spacing);
+    let drop = axis::unchanged_walls([&local[0], &local[1]], spacing, &gathered, window);
     let mut out = Vec::with_capacity(2);
     for ((l, d), epoch) in local.into_iter().zip(&drop).zip(["before", "after"]) {
         let kept: Vec<[f64; 3]> = l
@@ -249,10 +257,26 @@ pub fn event_volume(
     spacing: f64,
     owned: Owned,
 ) -> Result<EventVolume> {
+    event_volume_in(obb, margin, f64::INFINITY, before, after, spacing, owned)
+}
+
+/// [`event_volume`] of points gathered within |w| ≤ `window` of the box's centre along its third
+/// axis (the search box): the unchanged walls ([`axis::unchanged_walls`]) know where the window
+/// cut them.
+pub fn event_volume_in(
+    obb: &Obb,
+    margin: f64,
+    window: f64,
+    before: &[[f64; 3]],
+    after: &[[f64; 3]],
+    spacing: f64,
+    owned: Owned,
+) -> Result<EventVolume> {
     check_params(obb, margin, spacing)?;
     let frame = Frame::of_obb(obb);
     let r = Footprint::of_obb(obb, margin);
-    let [(tin1, local1), (tin2, local2)] = epoch_tins(&frame, &r, [before, after], spacing)?;
+    let [(tin1, local1), (tin2, local2)] =
+        epoch_tins(&frame, &r, [before, after], spacing, window)?;
     let radius = region::COVER_RADIUS * spacing;
     let uv =
         |l: &Vec<[f64; 3]>| region::PointCoverage::new(l.iter().map(|p| [p[0], p[1]]), &r, radius);
