@@ -359,8 +359,9 @@ fn finish(
     }
     let r = region.cells.r;
     let change = |u: f64, v: f64| Some(s2.height_at(u, v)? - s1.height_at(u, v)?);
-    let open_rim = region.open_rim(&change);
-    let step_variance_m6 = region.step_variance(&change, spacing);
+    let dw = region.cell_changes(&change);
+    let open_rim = region.open_rim(&dw);
+    let step_variance_m6 = region.step_variance(&dw, spacing);
     // One base plane below both surfaces, one spacing lower still so no wall is flat.
     let base = solid::min_height(&top1).min(solid::min_height(&top2)) - spacing;
     let solid1 = solid::close(top1, base, &r);

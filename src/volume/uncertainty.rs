@@ -179,10 +179,10 @@ mod tests {
         let region = square(side, s);
         let step = |u: f64, _v: f64| Some(if u < 2.05 { 0.0 } else { -h });
         let want = (side / s) * h * h * s.powi(4) / 12.0;
-        let got = region.step_variance(&step, s);
+        let got = region.step_variance(&region.cell_changes(&step), s);
         assert!((got - want).abs() < 1e-9 * want, "{got} vs {want}");
         let plane = |u: f64, v: f64| Some(0.3 * u - 0.2 * v + 1.0);
-        assert!(region.step_variance(&plane, s) < 1e-12 * want);
+        assert!(region.step_variance(&region.cell_changes(&plane), s) < 1e-12 * want);
     }
 
     #[test]
