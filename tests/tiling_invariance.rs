@@ -114,7 +114,10 @@ fn walks_across_tiles_equal_the_whole_cloud_run() {
     let whole = tmp.path().join("whole");
     compare(&before, &after, &whole, &["--tile-size", "1000"]);
     let s = summary_without_timings(&whole);
-    assert!(s["reach"]["extended_points"].as_u64().unwrap() > 1000, "{s}");
+    assert!(
+        s["reach"]["extended_points"].as_u64().unwrap() > 1000,
+        "{s}"
+    );
     assert_eq!(m3c2_meta_sum(&whole, "walked_beyond_tile"), 0, "one tile");
     let tiled = tmp.path().join("tiled");
     compare(&before, &after, &tiled, &["--tile-size", "3"]);
