@@ -24,8 +24,11 @@ bash viewer/tests/run.sh
 # The Slurm executor against a real Slurm (installs and starts a one-node cluster, stops it
 # again; fails, never skips, when Slurm cannot be installed or started). About 1.5 min, with the
 # talus binary `cargo test` built (campaign.sh builds a release one when there is none).
-if [[ -x "$repo/target/debug/talus" ]]; then
-  TALUS_BIN="$repo/target/debug/talus" bash scripts/slurm/campaign.sh
+# Cargo's target directory, wherever CARGO_TARGET_DIR or a config puts it.
+target="$(cargo metadata --format-version 1 --no-deps \
+  | python3 -c 'import json, sys; print(json.load(sys.stdin)["target_directory"])')"
+if [[ -x "$target/debug/talus" ]]; then
+  TALUS_BIN="$target/debug/talus" bash scripts/slurm/campaign.sh
 else
   bash scripts/slurm/campaign.sh
 fi

@@ -178,6 +178,11 @@ pub fn demo(out: &Path, view: bool) -> Result<()> {
 /// `talus worker DIR`: execute units of the run in DIR until every unit is done (the process
 /// that holds DIR's lock publishes).
 pub fn worker(dir: &Path, slots: usize, threads: Option<usize>) -> Result<()> {
+    if slots == 0 {
+        return Err(Error::Usage(
+            "--slots: must be at least 1 (units the worker runs at a time)".into(),
+        ));
+    }
     let store = crate::store::Store::open(dir, false)?;
     let plan = crate::plan::Plan::load(&crate::compare::plan_path(&store))?;
     let threads = match threads {
@@ -190,7 +195,7 @@ pub fn worker(dir: &Path, slots: usize, threads: Option<usize>) -> Result<()> {
         .build()
         .map_err(|e| Error::Internal(format!("thread pool: {e}")))?;
     let label = format!("worker {}", std::process::id());
-    let report = pool.install(|| crate::exec::run(&store, &plan, slots.max(1), &label))?;
+    let report = pool.install(|| crate::exec::run(&store, &plan, slots, &label))?;
     eprintln!(
         "talus worker: {} unit(s) computed, {} found done, in {}",
         report.computed,

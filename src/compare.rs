@@ -181,6 +181,86 @@ pub fn union(bounds: &[crate::io::Bounds]) -> crate::io::Bounds {
     u
 }
 
+/// Names under `dir` (`/`-separated, `.talus` left out) that `ours` takes for talus outputs.
+fn output_names(dir: &Path, rel: &str, ours: &dyn Fn(&str) -> bool, found: &mut Vec<String>) {
+    let Ok(entries) = std::fs::read_dir(dir.join(rel)) else {
+        return;
+    };
+    let mut names: Vec<String> = entries
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    for n in names {
+        if rel.is_empty() && n == ".talus" {
+            continue;
+        }
+        let name = if rel.is_empty() {
+            n
+        } else {
+            format!("{rel}/{n}")
+        };
+        if dir.join(&name).is_dir() {
+            output_names(dir, &name, ours, found);
+        } else if ours(&name) {
+            found.push(name);
+        }
+    }
+}
+
+/// What `--resume` and `--force` may never do: replace a file talus did not write. Before
+/// anything is written, refuse (exit 2) when an input lies where talus publishes an output (a
+/// survey copied to DIR/m3c2.laz would be overwritten by the result), and when DIR has no talus
+/// store yet but holds files with the names of talus outputs (they are the user's: talus wrote
+/// nothing there).
+pub fn check_out_dir(
+    out: &Path,
+    resume: bool,
+    force: bool,
+    ours: &dyn Fn(&str) -> bool,
+    inputs: &[&Path],
+) -> Result<()> {
+    let Ok(dir) = std::fs::canonicalize(out) else {
+        return Ok(());
+    };
+    for input in inputs {
+        let Ok(p) = std::fs::canonicalize(input) else {
+            continue;
+        };
+        if let Ok(rel) = p.strip_prefix(&dir) {
+            let rel = rel.to_string_lossy().replace('\\', "/");
+            if ours(&rel) {
+                return Err(Error::Usage(format!(
+                    "{}: this input lies where talus writes its output {rel} in {}: the result \
+                     would replace it; move it out of the output directory or choose another --out",
+                    input.display(),
+                    out.display()
+                )));
+            }
+        }
+    }
+    if (resume || force) && !dir.join(".talus").is_dir() {
+        let mut found = Vec::new();
+        output_names(&dir, "", ours, &mut found);
+        if !found.is_empty() {
+            let shown: Vec<&str> = found.iter().take(6).map(String::as_str).collect();
+            return Err(Error::Usage(format!(
+                "{}: holds {} file(s) with the names of talus outputs ({}{}) but no talus run \
+                 (.talus/): they are not talus's to replace; move them or choose another --out",
+                out.display(),
+                found.len(),
+                shown.join(", "),
+                if found.len() > shown.len() {
+                    ", …"
+                } else {
+                    ""
+                }
+            )));
+        }
+    }
+    Ok(())
+}
+
 /// Prepare DIR: refuse one that holds something else unless `resume` or `force`; whether this
 /// run created DIR.
 pub fn open_store(out: &Path, resume: bool, force: bool) -> Result<(Store, bool)> {
@@ -219,6 +299,20 @@ pub fn compare(opts: &CompareOptions) -> Result<Option<Summary>> {
     let user = opts.user.clone().over(config);
     let inputs = check_inputs(opts, &user)?;
     crate::progress::trace(|| "inputs checked".into());
+    let mut given: Vec<&Path> = inputs
+        .before
+        .infos
+        .iter()
+        .chain(&inputs.after.infos)
+        .map(|i| i.path.as_path())
+        .collect();
+    given.extend(
+        [&opts.core_points, &opts.before_mesh, &opts.after_mesh]
+            .into_iter()
+            .flatten()
+            .map(PathBuf::as_path),
+    );
+    check_out_dir(&opts.out, opts.resume, opts.force, &is_output, &given)?;
     let (store, created) = open_store(&opts.out, opts.resume, opts.force)?;
     let result = run_planned(&store, opts.force, &is_output, &opts.executor, |store| {
         plan(store, opts, &user, &inputs)

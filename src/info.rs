@@ -82,46 +82,72 @@ pub fn print(files: &[PathBuf], json: bool) -> Result<()> {
         outln!(out, "  crs            {}", r.crs);
         outln!(
             out,
-            "  point spacing  {:.4} median nearest-neighbour distance ({}, {} points)",
+            "  spacing        {:.4} effective point spacing s = 1/√density: the parameters below derive from it",
+            r.spacing.effective_spacing
+        );
+        outln!(
+            out,
+            "  density        {:.2} points per square unit of the CRS (per m² for metric input)",
+            r.spacing.density
+        );
+        outln!(
+            out,
+            "  nearest point  {:.4} median distance from a point to its nearest neighbour ({}, {} points)",
             r.spacing.spacing,
             r.spacing.method,
             r.spacing.measured_points
         );
         outln!(
             out,
-            "  density        {:.2} points per unit² (effective spacing {:.4})",
-            r.spacing.density,
-            r.spacing.effective_spacing
+            "  parameters a comparison with this file as BEFORE would derive:"
         );
-        outln!(out, "  derived parameters:");
-        for (name, v, src) in [
-            ("core_spacing", p.core_spacing.value, &p.core_spacing.source),
+        for (flag, v, src) in [
             (
-                "normal_radius",
+                "--core-spacing",
+                p.core_spacing.value,
+                &p.core_spacing.source,
+            ),
+            (
+                "--normal-radius",
                 p.normal_radius.value,
                 &p.normal_radius.source,
             ),
-            ("cyl_radius", p.cyl_radius.value, &p.cyl_radius.source),
-            ("cyl_halflen", p.cyl_halflen.value, &p.cyl_halflen.source),
-            ("threshold", p.threshold.value, &p.threshold.source),
-            ("smooth_sigma", p.smooth_sigma.value, &p.smooth_sigma.source),
-            ("eps", p.eps.value, &p.eps.source),
+            ("--cyl-radius", p.cyl_radius.value, &p.cyl_radius.source),
+            ("--cyl-halflen", p.cyl_halflen.value, &p.cyl_halflen.source),
+            (
+                "--smooth-sigma",
+                p.smooth_sigma.value,
+                &p.smooth_sigma.source,
+            ),
+            ("--eps", p.eps.value, &p.eps.source),
         ] {
-            outln!(out, "    {name:<14} {v:<10.4} {src}");
+            outln!(out, "    {flag:<22} {v:<10.4} {src}");
         }
         outln!(
             out,
-            "    {:<14} {:<10} {}",
-            "smooth_k",
+            "    {:<22} {:<10} {}",
+            "--smooth-k",
             p.smooth_k.value,
             p.smooth_k.source
         );
         outln!(
             out,
-            "    {:<14} {:<10} {}",
-            "cluster_min",
+            "    {:<22} {:<10} {}",
+            "--cluster-min-points",
             p.cluster_min_points.value,
             p.cluster_min_points.source
+        );
+        outln!(
+            out,
+            "    {:<22} {:<10} measured by the comparison on the pair's stable ground: 3 σ_d + 1.96 × reg_error",
+            "--threshold",
+            "(pair)"
+        );
+        outln!(
+            out,
+            "    {:<22} {:<10} measured by the comparison on the pair's stable ground",
+            "--reg-error",
+            "(pair)"
         );
     }
     write_stdout(&out)

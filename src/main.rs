@@ -38,7 +38,8 @@ enum Command {
     Synth(SynthArgs),
     /// Serve the web viewer for a comparison or campaign result on 127.0.0.1.
     View {
-        /// A directory written by `talus compare`.
+        /// A directory written by `talus compare` or `talus campaign` (or a campaign's
+        /// pairs/<pair>).
         dir: PathBuf,
         /// Port (0 picks a free one).
         #[arg(long, default_value_t = 8080)]
@@ -108,43 +109,57 @@ enum Command {
 /// The method's parameters (every one left out is derived from the data).
 #[derive(Args)]
 struct ParamArgs {
-    /// Effective point spacing the other parameters derive from (default: measured on C1).
-    #[arg(long)]
+    /// Effective point spacing s the other parameters derive from, in the input's units
+    /// (default: measured on the before survey — a campaign's first — as 1/√density).
+    #[arg(long, value_name = "M")]
     point_spacing: Option<f64>,
-    #[arg(long)]
+    /// Distance between core points, where M3C2 distances are computed (default: 2 s).
+    #[arg(long, value_name = "M")]
     core_spacing: Option<f64>,
-    #[arg(long)]
+    /// Radius of the neighbourhood a normal is fitted to (default: 4 s, about 50 points).
+    #[arg(long, value_name = "M")]
     normal_radius: Option<f64>,
-    #[arg(long)]
+    /// Radius of M3C2's cylinder along the normal (default: 3 s, about 28 points per epoch).
+    #[arg(long, value_name = "M")]
     cyl_radius: Option<f64>,
-    #[arg(long)]
+    /// Half-length of M3C2's cylinder (default: 10 × cyl_radius, a search window: deeper change
+    /// is followed along the normal). Given, it is kept: the other survey beyond it is flagged,
+    /// not measured.
+    #[arg(long, value_name = "M")]
     cyl_halflen: Option<f64>,
-    /// Registration error between the epochs (default: measured on the stable ground).
-    #[arg(long)]
+    /// Registration error between the epochs, in the input's units (default: measured on the
+    /// stable ground).
+    #[arg(long, value_name = "M")]
     reg_error: Option<f64>,
-    /// Fewer points than this in either cylinder → no distance.
-    #[arg(long)]
+    /// Fewer points than this in either cylinder → no distance (default: 1).
+    #[arg(long, value_name = "N")]
     min_points: Option<u32>,
-    /// auto | up | X,Y,Z | toward:X,Y,Z
+    /// Normal orientation: auto | up | X,Y,Z | toward:X,Y,Z (default: auto: up where not
+    /// steep, toward the lower terrain on steep faces).
     #[arg(long)]
     orientation: Option<String>,
-    /// Significance threshold τ on |distance| (default: from the measured noise).
-    #[arg(long)]
+    /// Significance threshold τ on |distance|, in the input's units (default: 3 σ_d + 1.96
+    /// reg_error from the stable ground).
+    #[arg(long, value_name = "M")]
     threshold: Option<f64>,
-    #[arg(long)]
+    /// Neighbours of the normalised Gaussian smoothing of the distances (default: 30).
+    #[arg(long, value_name = "N")]
     smooth_k: Option<u32>,
-    #[arg(long)]
+    /// Standard deviation of the smoothing kernel, in the input's units (default: 2 ×
+    /// core_spacing).
+    #[arg(long, value_name = "M")]
     smooth_sigma: Option<f64>,
-    /// DBSCAN neighbourhood radius.
-    #[arg(long)]
+    /// DBSCAN neighbourhood radius, in the input's units (default: 2.5 × core_spacing).
+    #[arg(long, value_name = "M")]
     eps: Option<f64>,
-    /// DBSCAN minimum points.
-    #[arg(long)]
+    /// DBSCAN minimum points of a cluster (default: 10).
+    #[arg(long, value_name = "N")]
     cluster_min_points: Option<u32>,
-    /// Memory budget, e.g. 2GiB.
-    #[arg(long)]
+    /// Memory budget for the whole process, e.g. 2GiB, 512MiB (default: 2 GiB).
+    #[arg(long, value_name = "SIZE")]
     memory: Option<String>,
-    #[arg(long)]
+    /// Worker threads (default: the available cores; the results do not depend on it).
+    #[arg(long, value_name = "N")]
     threads: Option<usize>,
 }
 
@@ -221,7 +236,7 @@ struct CompareArgs {
     /// Continue an interrupted run in DIR.
     #[arg(long, conflicts_with = "force")]
     resume: bool,
-    /// Start over, replacing what DIR holds.
+    /// Start over: throw away DIR's talus run and outputs (never files talus did not write).
     #[arg(long)]
     force: bool,
     /// Use this PLY surface for C1 instead of the local reconstruction.
@@ -260,7 +275,7 @@ struct CampaignArgs {
     /// Continue an interrupted campaign, or one with surveys added, in DIR.
     #[arg(long, conflicts_with = "force")]
     resume: bool,
-    /// Start over, replacing what DIR holds.
+    /// Start over: throw away DIR's talus run and outputs (never files talus did not write).
     #[arg(long)]
     force: bool,
     /// Tile side (tests; default: planned from --memory).
@@ -273,6 +288,8 @@ struct SynthArgs {
     /// hill | cube | spheres | cubes | cliff | deposit | hole | events | stable | large | dense |
     /// campaign
     scene: String,
+    /// Directory to write the epochs (before.laz, after.laz; a campaign's survey_*.laz) and
+    /// truth.json into.
     #[arg(long)]
     out: PathBuf,
     /// Points per epoch (default: per scene).
@@ -281,9 +298,10 @@ struct SynthArgs {
     /// Surveys of `synth campaign` (3 to 41; default 5).
     #[arg(long)]
     epochs: Option<usize>,
+    /// Seed of the random streams that draw the points (the planted changes do not depend on it).
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Noise standard deviation.
+    /// Noise standard deviation along the surface normal, metres (default: per scene).
     #[arg(long)]
     noise: Option<f64>,
     /// Rotate the scene about the vertical axis (degrees).
@@ -427,5 +445,50 @@ fn main() -> ExitCode {
             eprintln!("talus: error: {e}");
             ExitCode::from(e.exit_code() as u8)
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    /// Every option and argument of every (visible) subcommand says what it is: `--help` is where
+    /// a newcomer learns the units and defaults.
+    #[test]
+    fn every_option_has_a_description() {
+        fn walk(cmd: &clap::Command, path: &str, missing: &mut Vec<String>) {
+            for a in cmd.get_arguments() {
+                let id = a.get_id().as_str();
+                if a.is_hide_set() || id == "help" || id == "version" {
+                    continue;
+                }
+                let help = a.get_help().map(|h| h.to_string()).unwrap_or_default();
+                if help.trim().is_empty() {
+                    missing.push(format!("{path} {id}"));
+                }
+            }
+            for sub in cmd.get_subcommands() {
+                if sub.is_hide_set() || sub.get_name() == "help" {
+                    continue;
+                }
+                walk(sub, &format!("{path} {}", sub.get_name()), missing);
+            }
+        }
+        let cli = Cli::command();
+        let mut missing = Vec::new();
+        walk(&cli, "talus", &mut missing);
+        assert!(
+            missing.is_empty(),
+            "options without a description: {missing:?}"
+        );
+        let compare = cli.find_subcommand("compare").unwrap();
+        let memory = compare
+            .get_arguments()
+            .find(|a| a.get_id() == "memory")
+            .and_then(|a| a.get_help())
+            .map(|h| h.to_string())
+            .unwrap_or_default();
+        assert!(memory.contains("2 GiB"), "{memory}");
     }
 }

@@ -109,9 +109,17 @@ impl UserParams {
                 ));
             }
         };
+        // The file's own keys (a value serde_json cannot hold, like nan, would vanish from
+        // `keys_set` and be blamed on a flag the user never passed).
+        let mut keys = user.keys_set();
+        for k in table.keys() {
+            if !keys.contains(k) {
+                keys.push(k.clone());
+            }
+        }
         user.config = Some(ConfigSource {
             path: path.to_path_buf(),
-            keys: user.keys_set(),
+            keys,
         });
         Ok((user, apart))
     }
@@ -417,7 +425,11 @@ impl Params {
             ),
             cyl_radius,
             // Both measured on the stable ground once M3C2 has run (`with_stable`).
-            reg_error: pick(user.reg_error, 0.0, "measured: not yet"),
+            reg_error: pick(
+                user.reg_error,
+                0.0,
+                "measured by a comparison on its stable ground",
+            ),
             min_points: pick(user.min_points, 1, "default: 1 (SPEC.md §1)"),
             orientation: Resolved {
                 source: if user.orientation.is_some() {
@@ -427,7 +439,11 @@ impl Params {
                 },
                 value: orientation,
             },
-            threshold: pick(user.threshold, 0.5 * s, "derived: not yet"),
+            threshold: pick(
+                user.threshold,
+                0.5 * s,
+                "measured by a comparison on its stable ground",
+            ),
             smooth_k: pick(user.smooth_k, 30, "default: 30 (the paper's value)"),
             smooth_sigma: pick(user.smooth_sigma, 2.0 * c, "derived: 2 × core_spacing"),
             eps: pick(user.eps, 2.5 * c, "derived: 2.5 × core_spacing"),

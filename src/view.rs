@@ -377,6 +377,14 @@ impl Roots {
         let data = dir
             .canonicalize()
             .map_err(|e| Error::input(dir, format!("cannot open result directory: {e}")))?;
+        // A publish a crash cut short is finished first (as the next run would): the viewer
+        // shows a whole set, never half of one.
+        // (A campaign's pair folder, pairs/<pair>, is published by its campaign's DIR.)
+        if let Some(run) = data.ancestors().take(3).find(|d| d.join(".talus").is_dir()) {
+            if let Ok(store) = crate::store::Store::open(run, false) {
+                store.finish_interrupted_publish("talus view")?;
+            }
+        }
         // A comparison (view.json), or a campaign (campaign.json; each pairs/<label>/ is a
         // comparison the viewer shows one at a time).
         if !data.join("view.json").is_file() && !data.join("campaign.json").is_file() {

@@ -730,3 +730,283 @@ fn absurd_las_point_counts_and_bounds() {
         &["wide.las", "bounds of x", "1e300", "can express"],
     );
 }
+
+// ---------------------------------------------------------------- issue "Trust, second round"
+
+/// Item 3: a LAS 1.4 file whose legacy point count disagrees with its 64-bit count, and a PLY
+/// whose header count disagrees with its rows, are refused naming the disagreement, as BEFORE
+/// and as AFTER (read by either count, they gave a result from 5 or 10 points).
+#[test]
+fn a_file_that_disagrees_with_itself_is_refused() {
+    let c = Case::new();
+    let mut las = std::fs::read(c.p("good1.las")).unwrap();
+    assert_eq!(&las[24..26], &[1, 4], "LAS 1.4");
+    let big = u64::from_le_bytes(las[247..255].try_into().unwrap());
+    assert_eq!(big, 2000);
+    las[107..111].copy_from_slice(&5u32.to_le_bytes());
+    let f = c.p("counts.las");
+    std::fs::write(&f, &las).unwrap();
+    let needles = [
+        "counts.las",
+        "legacy point count is 5 but its 64-bit point count is 2000",
+    ];
+    c.fails(&c.p("good2.las"), &f, &[], &needles);
+    c.fails(&f, &c.p("good2.las"), &[], &needles);
+
+    let pts = plane(5, 829, 0.0);
+    let rows: String = pts
+        .iter()
+        .map(|p| format!("{:.4} {:.4} {:.4}\n", p[0], p[1], p[2]))
+        .collect();
+    let ply = c.p("rows.ply");
+    std::fs::write(
+        &ply,
+        format!(
+            "ply\nformat ascii 1.0\nelement vertex 10\nproperty double x\nproperty double y\n\
+             property double z\nend_header\n{rows}"
+        ),
+    )
+    .unwrap();
+    let needles = [
+        "rows.ply",
+        "declares 10 vertices but 819 more row(s) follow",
+    ];
+    c.fails(&c.p("good2.las"), &ply, &[], &needles);
+    c.fails(&ply, &c.p("good2.las"), &[], &needles);
+}
+
+/// Item 4: one, two or three points, or 829 identical ones, are refused as AFTER as they are as
+/// BEFORE, with the reason.
+#[test]
+fn degenerate_surveys_are_refused_either_way() {
+    let c = Case::new();
+    let p = plane(6, 3, 0.0);
+    for n in 1..=3 {
+        let f = c.p(&format!("few{n}.las"));
+        common::write_cloud(&f, &p[..n]);
+        let needles = [format!("few{n}.las"), format!("holds {n} point(s)")];
+        let needles: Vec<&str> = needles.iter().map(String::as_str).collect();
+        c.fails(&c.p("good1.las"), &f, &[], &needles);
+        c.fails(&f, &c.p("good1.las"), &[], &needles);
+    }
+    // A text file: its bounds come from its points (write_cloud's LAS header keeps the
+    // writer's own bounds).
+    let f = c.p("same.csv");
+    common::write_text(&f, "x,y,z\n", &vec![p[0]; 829]);
+    c.fails(
+        &c.p("good1.las"),
+        &f,
+        &[],
+        &["same.csv", "all points coincide"],
+    );
+    c.fails(
+        &f,
+        &c.p("good1.las"),
+        &[],
+        &["same.csv", "all points coincide"],
+    );
+}
+
+/// Item 7: a value a config file gives is blamed on the file and its key, even one JSON cannot
+/// hold (nan), never on a flag the user did not pass.
+#[test]
+fn a_non_finite_config_value_is_blamed_on_the_file_and_key() {
+    let c = Case::new();
+    let cfg = c.p("talus.toml");
+    std::fs::write(&cfg, "normal_radius = nan\n").unwrap();
+    c.fails_on_good(
+        &["--config", cfg.to_str().unwrap()],
+        &[
+            "talus.toml",
+            "normal_radius: must be a positive number, got NaN",
+        ],
+    );
+    let o = common::run_compare(
+        &c.p("good1.las"),
+        &c.p("good2.las"),
+        &c.out(),
+        &["--config", cfg.to_str().unwrap()],
+    );
+    assert!(!String::from_utf8_lossy(&o.stderr).contains("--normal-radius"));
+}
+
+/// Item 7: `talus status` of a folder that does not exist says so; `talus worker --slots 0` is
+/// refused.
+#[test]
+fn status_of_nothing_and_a_worker_without_slots_are_refused_clearly() {
+    let c = Case::new();
+    let none = c.p("nothing-here");
+    let o = common::run(&["status", none.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("nothing-here") && err.contains("no such directory"),
+        "{err}"
+    );
+    assert!(!err.contains("cannot write"), "{err}");
+    std::fs::create_dir(&none).unwrap();
+    let o = common::run(&["status", none.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("no talus run here"), "{err}");
+    assert!(!none.join(".talus").exists(), "status wrote nothing");
+    let o = common::run(&["worker", none.to_str().unwrap(), "--slots", "0"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("--slots: must be at least 1"), "{err}");
+}
+
+/// Item 1: `--force` and `--resume` on a folder talus never ran in, holding files with the names
+/// of talus outputs (the user's own), are refused and every file stays; an input where talus
+/// would publish an output is refused even in a folder talus ran in.
+#[test]
+fn force_and_resume_never_replace_files_talus_did_not_write() {
+    let c = Case::new();
+    let out = c.out();
+    std::fs::create_dir_all(out.join("meshes")).unwrap();
+    let mine = [
+        "events.csv",
+        "summary.json",
+        "view.json",
+        "terrain.bin",
+        "events.geojson",
+        "event_regions.geojson",
+        "meshes/event_0001_before.ply",
+    ];
+    for name in mine {
+        std::fs::write(out.join(name), format!("the user's {name}")).unwrap();
+    }
+    for flag in ["--force", "--resume"] {
+        let o = common::run_compare(&c.p("good1.las"), &c.p("good2.las"), &out, &[flag]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{flag}: {err}");
+        assert!(err.contains("not talus's to replace"), "{err}");
+        for name in mine {
+            assert_eq!(
+                std::fs::read_to_string(out.join(name)).unwrap(),
+                format!("the user's {name}"),
+                "{flag}: {name}"
+            );
+        }
+        assert!(!out.join(".talus").exists(), "{flag}: nothing written");
+    }
+    // The input survey copied to DIR/m3c2.laz.
+    let dir = c.p("run");
+    let o = common::run_compare(&c.p("good1.las"), &c.p("good2.las"), &dir, &[]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    std::fs::copy(c.p("good1.las"), dir.join("m3c2.laz")).unwrap();
+    let input = std::fs::read(dir.join("m3c2.laz")).unwrap();
+    for flag in ["--force", "--resume"] {
+        let o = common::run_compare(&dir.join("m3c2.laz"), &c.p("good2.las"), &dir, &[flag]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{flag}: {err}");
+        assert!(
+            err.contains("lies where talus writes its output m3c2.laz"),
+            "{err}"
+        );
+        assert_eq!(
+            std::fs::read(dir.join("m3c2.laz")).unwrap(),
+            input,
+            "{flag}"
+        );
+    }
+}
+
+/// Item 2: a published file damaged in DIR is named by `talus status`, and `--resume` publishes
+/// it again from the store (which the damage did not reach: published files are copies).
+#[test]
+fn a_damaged_published_file_is_named_and_published_again() {
+    let c = Case::new();
+    let dir = c.out();
+    let o = common::run_compare(&c.p("good1.las"), &c.p("good2.las"), &dir, &[]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let good = std::fs::read(dir.join("m3c2.laz")).unwrap();
+    let mut bad = good.clone();
+    let k = bad.len() / 2;
+    bad[k] ^= 0xff;
+    std::fs::write(dir.join("m3c2.laz"), &bad).unwrap();
+    let o = common::run(&["status", dir.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.contains("differ from the run's result") && text.contains("m3c2.laz"),
+        "{text}"
+    );
+    let o = common::run_compare(&c.p("good1.las"), &c.p("good2.las"), &dir, &["--resume"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(std::fs::read(dir.join("m3c2.laz")).unwrap(), good);
+    let o = common::run(&["status", dir.to_str().unwrap()]);
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("published (this plan's)"),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+}
+
+/// Items 5 and 6: a publish cut short (here: the journal a SIGKILL inside publish leaves, with
+/// the marker and a file already gone) is finished by the next command on DIR — `talus status`
+/// too, not only `--resume` — so DIR (and a campaign's pairs/<pair>/, part of the same set) is
+/// whole again.
+#[test]
+fn status_finishes_a_publish_cut_short() {
+    let c = Case::new();
+    let dir = c.out();
+    let o = common::run_compare(&c.p("good1.las"), &c.p("good2.las"), &dir, &[]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let units = dir.join(".talus/units/outputs");
+    let unit = std::fs::read_dir(&units)
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .path();
+    let record: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(unit.join("record.json")).unwrap()).unwrap();
+    let mut files: Vec<(String, String)> = record["meta"]["publish"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| {
+            let src = dir
+                .join(".talus/units")
+                .join(p["kind"].as_str().unwrap())
+                .join(p["unit"].as_str().unwrap())
+                .join(p["file"].as_str().unwrap());
+            (
+                src.to_string_lossy().into_owned(),
+                p["name"].as_str().unwrap().to_string(),
+            )
+        })
+        .collect();
+    files.sort_by_key(|(_, n)| n == "summary.json");
+    let whole: Vec<(String, Vec<u8>)> = files
+        .iter()
+        .map(|(_, n)| (n.clone(), std::fs::read(dir.join(n)).unwrap()))
+        .collect();
+    let journal = serde_json::json!({
+        "files": files,
+        "marker": "summary.json",
+        "remove": [],
+        "dirs": [],
+    });
+    std::fs::write(
+        dir.join(".talus/publishing"),
+        serde_json::to_vec(&journal).unwrap(),
+    )
+    .unwrap();
+    std::fs::remove_file(dir.join("summary.json")).unwrap();
+    std::fs::remove_file(dir.join("events.csv")).unwrap();
+    let o = common::run(&["status", dir.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        !dir.join(".talus/publishing").exists(),
+        "the journal is done"
+    );
+    for (name, bytes) in &whole {
+        assert_eq!(&std::fs::read(dir.join(name)).unwrap(), bytes, "{name}");
+    }
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("published (this plan's)"),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+}

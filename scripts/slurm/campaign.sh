@@ -15,7 +15,7 @@
 # already up is left up. Fails loudly, never skips: without Slurm (not installable, not starting)
 # or without the data, it exits non-zero.
 #
-#   bash scripts/slurm/campaign.sh                   # builds target/release/talus
+#   bash scripts/slurm/campaign.sh                   # builds talus (release) in cargo's target dir
 #   TALUS_BIN=target/debug/talus bash scripts/slurm/campaign.sh
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -37,7 +37,10 @@ mapfile -t surveys < <(ls "$data"/*.laz)
 
 if [[ -z "${TALUS_BIN:-}" ]]; then
   (cd "$repo" && cargo build --release --quiet --bin talus)
-  TALUS_BIN="$repo/target/release/talus"
+  # Cargo's target directory, wherever CARGO_TARGET_DIR or a config puts it.
+  target="$(cd "$repo" && cargo metadata --format-version 1 --no-deps \
+    | python3 -c 'import json, sys; print(json.load(sys.stdin)["target_directory"])')"
+  TALUS_BIN="$target/release/talus"
 fi
 talus="$(cd "$(dirname "$TALUS_BIN")" && pwd)/$(basename "$TALUS_BIN")"
 [[ -x "$talus" ]] || fail "no talus binary at $talus"

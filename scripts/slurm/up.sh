@@ -112,6 +112,40 @@ node_name="$(sed -E 's/^NodeName=([^ ]+).*/\1/' <<<"$node_line")"
 host_short="$(hostname -s)"
 [[ "$node_name" == "$host_short" ]] || note "warning: slurmd -C names the node $node_name, hostname -s says $host_short"
 
+# Ports: the defaults (or TALUS_SLURMCTLD_PORT / TALUS_SLURMD_PORT). When this script's own
+# daemons are not running and a default port is taken (another Slurm on this machine listens on
+# 6817/6818), a free port is picked instead and said; a port the caller set is used as given.
+port_busy() {
+  python3 - "$1" <<'PY'
+import socket, sys
+s = socket.socket()
+s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+try:
+    s.bind(("0.0.0.0", int(sys.argv[1])))
+except OSError:
+    sys.exit(0)
+sys.exit(1)
+PY
+}
+free_port() {
+  python3 -c 'import socket; s = socket.socket(); s.bind(("", 0)); print(s.getsockname()[1])'
+}
+if ! pid_alive slurmctld "$ctld_pid" && ! pid_alive slurmd "$slurmd_pid"; then
+  if [[ -z "${TALUS_SLURMCTLD_PORT:-}" ]] && port_busy "$ctld_port"; then
+    old="$ctld_port"; ctld_port="$(free_port)"
+    note "port $old is taken (another Slurm?): slurmctld listens on $ctld_port instead"
+  fi
+  if [[ -z "${TALUS_SLURMD_PORT:-}" ]] && port_busy "$slurmd_port"; then
+    old="$slurmd_port"; slurmd_port="$(free_port)"
+    while [[ "$slurmd_port" == "$ctld_port" ]]; do slurmd_port="$(free_port)"; done
+    note "port $old is taken (another Slurm?): slurmd listens on $slurmd_port instead"
+  fi
+elif [[ -f "${conf:-}" ]]; then
+  # Our daemons run: keep the ports they were started with.
+  ctld_port="$(sed -n 's/^SlurmctldPort=//p' "$conf" | head -n 1)"
+  slurmd_port="$(sed -n 's/^SlurmdPort=//p' "$conf" | head -n 1)"
+fi
+
 new_conf="$(cat <<EOF
 # Written by talus scripts/slurm/up.sh; rewritten on every run (edit up.sh, not this file).
 ClusterName=talus

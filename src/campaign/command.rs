@@ -9,7 +9,7 @@
 use std::path::{Path, PathBuf};
 
 use super::epochs::{self, EpochEntry};
-use crate::compare::{forget_if_input_error, open_store, run_planned, survey};
+use crate::compare::{check_out_dir, forget_if_input_error, open_store, run_planned, survey};
 use crate::error::{Error, Result};
 use crate::params::{Params, UserParams};
 use crate::plan::inputs::SurveyFiles;
@@ -92,6 +92,17 @@ pub fn campaign(opts: &CampaignOptions) -> Result<Option<Done>> {
     Params::resolve(&user, 1.0)?;
     let bounds: Vec<_> = files.iter().map(|f| f.bounds()).collect();
     user.check_lengths_within(&bounds)?;
+    let given: Vec<&std::path::Path> = files
+        .iter()
+        .flat_map(|f| f.infos.iter().map(|i| i.path.as_path()))
+        .collect();
+    check_out_dir(
+        &opts.out,
+        opts.resume,
+        opts.force,
+        &crate::units::campaign::is_output,
+        &given,
+    )?;
     let (store, created) = open_store(&opts.out, opts.resume, opts.force)?;
     let result = run_planned(
         &store,

@@ -15,9 +15,10 @@
 //!    gains and losses in two colours, events below their uncertainty hatched, the other pairs'
 //!    events as faint outlines, track ids where they do not overlap, a scale bar and north arrow.
 //!
-//! Colours: gain blue (#2166ac) and loss sienna (#a0522d), told apart by lightness and hue by
-//! readers with any common colour-vision deficiency; the marks differ in shape too (circles for
-//! gains, squares for losses).
+//! Colours: the viewer's convention (its distance ramp, ColorBrewer RdBu): gain red (#b2182b),
+//! loss blue (#2166ac), a diverging pair readers with any common colour-vision deficiency tell
+//! apart; the marks differ in shape too (circles for gains, squares for losses), and the legend
+//! says which is which.
 
 use super::powerlaw::{self, PowerLawFit};
 use std::fmt::Write;
@@ -101,8 +102,8 @@ pub fn magnitudes(events: &[EventRow], kind: &str) -> Vec<f64> {
         .collect()
 }
 
-const GAIN: &str = "#2166ac";
-const LOSS: &str = "#a0522d";
+const GAIN: &str = "#b2182b";
+const LOSS: &str = "#2166ac";
 const NET: &str = "#2b2b2b";
 const INK: &str = "#1a1a1a";
 const MUTED: &str = "#5f6368";
@@ -146,7 +147,7 @@ pub fn html(report: &Report) -> String {
 }
 
 const CSS: &str = "\
-:root{--gain:#2166ac;--loss:#a0522d;--ink:#1a1a1a;--muted:#5f6368;--rule:#d0d0d0}
+:root{--gain:#b2182b;--loss:#2166ac;--ink:#1a1a1a;--muted:#5f6368;--rule:#d0d0d0}
 *{box-sizing:border-box}
 body{margin:0;background:#fff;color:var(--ink);font:14px/1.45 system-ui,-apple-system,\"Segoe UI\",Roboto,\"Helvetica Neue\",Arial,sans-serif}
 main{max-width:1180px;margin:0 auto;padding:28px 30px 40px}
@@ -1030,7 +1031,7 @@ fn extent(report: &Report) -> Option<Extent> {
 fn maps_section(s: &mut String, report: &Report) {
     s.push_str(
         "<section id=\"maps\" aria-labelledby=\"h-maps\">\n<h2 id=\"h-maps\">4. Event maps</h2>\n\
-         <div class=\"legend\"><span><i class=\"sw g\"></i>Gain</span><span><i class=\"sw l\"></i>Loss</span>\
+         <div class=\"legend\"><span><i class=\"sw g\"></i>Gain (red: material added)</span><span><i class=\"sw l\"></i>Loss (blue: material removed)</span>\
          <span><i class=\"sw hg\"></i><i class=\"sw hl\"></i>Below its 95 % uncertainty (hollow marks where small)</span>\
          <span><i class=\"sw inc\"></i>Dashed: incomplete, measured in part only (no 95 % bound)</span>\
          <span><i class=\"sw o\"></i>Events of the other pairs</span><span>T4: track 4 (events at one place across pairs)</span></div>\n",
@@ -1879,6 +1880,19 @@ mod tests {
             h.contains("Dashed: incomplete"),
             "the legend says what dashed means"
         );
+    }
+
+    /// One gain/loss convention in the viewer and the report (issue "Trust, second round"): the
+    /// viewer's (gain red, loss blue: its markers and distance ramp, viewer/src/events.js and
+    /// colormap.js), with the legend saying it.
+    #[test]
+    fn gains_are_red_and_losses_blue_as_in_the_viewer_and_the_legend_says_so() {
+        let viewer = include_str!("../../viewer/src/colormap.js");
+        assert!(viewer.contains("blue = loss") && viewer.contains("red = gain"));
+        let h = html(&sample());
+        assert!(h.contains("--gain:#b2182b;--loss:#2166ac"));
+        assert!(h.contains("Gain (red: material added)"));
+        assert!(h.contains("Loss (blue: material removed)"));
     }
 
     #[test]

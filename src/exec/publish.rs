@@ -48,11 +48,7 @@ pub fn outputs_of(plan: &Plan) -> fn(&str) -> bool {
 /// marker (the file published last) in its unit.
 pub fn publish(store: &Store, plan: &Plan, ours: &dyn Fn(&str) -> bool) -> Result<PathBuf> {
     let unit = last_unit(plan)?;
-    let record = store
-        .done(&unit)
-        .ok_or_else(|| Error::Internal(format!("unit {} not done", unit.name)))?;
-    let list: Vec<Publish> = serde_json::from_value(record.meta["publish"].clone())
-        .map_err(|e| Error::Internal(format!("unit {} record: {e}", unit.name)))?;
+    let list = publish_list(store, plan)?;
     let files: Vec<(PathBuf, String)> = list
         .iter()
         .map(|p| {
@@ -65,4 +61,36 @@ pub fn publish(store: &Store, plan: &Plan, ours: &dyn Fn(&str) -> bool) -> Resul
         .collect::<Result<_>>()?;
     store.publish(&files, MARKER, ours)?;
     Ok(store.unit_dir(&unit)?.join(MARKER))
+}
+
+/// The published files in DIR that are not what the plan's run published: missing, or whose
+/// size or CRC-32 differs from their source unit's record (a file edited or damaged in DIR).
+/// Reads every published file once (`talus status`).
+pub fn damaged_outputs(store: &Store, plan: &Plan) -> Result<Vec<String>> {
+    let list = publish_list(store, plan)?;
+    let mut bad = Vec::new();
+    for p in &list {
+        let u = crate::store::UnitRef {
+            kind: p.kind.clone(),
+            name: p.unit.clone(),
+        };
+        let want = store
+            .done(&u)
+            .and_then(|r| r.files.into_iter().find(|f| f.name == p.file));
+        let got = crate::store::crc_and_size(&store.dir().join(&p.name)).ok();
+        if want.is_none_or(|w| got != Some((w.crc32, w.size))) {
+            bad.push(p.name.clone());
+        }
+    }
+    Ok(bad)
+}
+
+/// What the plan's last unit (done) lists to publish.
+fn publish_list(store: &Store, plan: &Plan) -> Result<Vec<Publish>> {
+    let unit = last_unit(plan)?;
+    let record = store
+        .done(&unit)
+        .ok_or_else(|| Error::Internal(format!("unit {} not done", unit.name)))?;
+    serde_json::from_value(record.meta["publish"].clone())
+        .map_err(|e| Error::Internal(format!("unit {} record: {e}", unit.name)))
 }

@@ -101,6 +101,22 @@ impl LasReader {
                 ),
             ));
         }
+        // LAS 1.4 keeps two counts: the legacy 32-bit one must be 0 or equal the 64-bit one.
+        // Which to believe is not ours to guess (a count cut to the legacy field reads 5 points
+        // of 829 and gives a result): a file that disagrees with itself is refused.
+        if let Some(l) = raw.large_file {
+            let legacy = u64::from(raw.number_of_point_records);
+            if legacy > 0 && l.number_of_point_records > 0 && legacy != l.number_of_point_records {
+                return Err(Error::input(
+                    path,
+                    format!(
+                        "LAS header disagrees with itself: its legacy point count is {legacy} \
+                         but its 64-bit point count is {}; corrupt header",
+                        l.number_of_point_records
+                    ),
+                ));
+            }
+        }
         let compressed = raw.point_data_record_format & 0xC0 != 0;
         if !compressed {
             // Uncompressed points are fixed-size records, so truncation shows in the file size.

@@ -302,6 +302,44 @@ impl Pass {
         Ok(pass)
     }
 
+    /// After the last vertex, when the header declares no element after the vertices: the file
+    /// must end (whitespace aside). More rows mean the header's count disagrees with the data
+    /// (a header saying 10 vertices over 829 rows would be read as 10 points): refused.
+    fn check_nothing_after(&mut self) -> Result<()> {
+        if self.header.vertex + 1 != self.header.elements.len() {
+            return Ok(());
+        }
+        let mut rest = Vec::new();
+        (&mut self.r)
+            .take(1 << 20)
+            .read_to_end(&mut rest)
+            .map_err(|e| Error::input(&self.path, format!("cannot read: {e}")))?;
+        let extra = match self.header.encoding {
+            Encoding::Ascii => rest.iter().any(|b| !b.is_ascii_whitespace()),
+            _ => !rest.is_empty(),
+        };
+        if extra {
+            let what = match self.header.encoding {
+                Encoding::Ascii => format!(
+                    "{} more row(s)",
+                    rest.split(|&b| b == b'\n')
+                        .filter(|l| l.iter().any(|b| !b.is_ascii_whitespace()))
+                        .count()
+                ),
+                _ => format!("{} more byte(s)", rest.len()),
+            };
+            return Err(Error::input(
+                &self.path,
+                format!(
+                    "PLY header disagrees with its data: it declares {} vertices but {what} \
+                     follow them (counted up to 1 MiB); corrupt header",
+                    self.vertex_count()
+                ),
+            ));
+        }
+        Ok(())
+    }
+
     fn vertex_count(&self) -> u64 {
         self.header.elements[self.header.vertex].count
     }
@@ -493,6 +531,7 @@ impl PlyReader {
         while let Some(p) = scan.next_point()? {
             bounds.grow(&p);
         }
+        scan.check_nothing_after()?;
         let encoding = match scan.header.encoding {
             Encoding::Ascii => "ascii",
             Encoding::LittleEndian => "binary_little_endian",

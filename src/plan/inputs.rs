@@ -99,6 +99,10 @@ pub struct SurveyFiles {
     pub infos: Vec<CloudInfo>,
 }
 
+/// Fewest points a survey may have: a normal needs a neighbourhood, a volume a triangle of each
+/// epoch, and a handful of points can only give distances at the few core points they touch.
+pub const MIN_SURVEY_POINTS: u64 = 10;
+
 impl SurveyFiles {
     /// Open the headers of every file of `arg`; its tiles must share one CRS.
     pub fn open(arg: &Path) -> Result<SurveyFiles> {
@@ -121,10 +125,41 @@ impl SurveyFiles {
             }
             infos.push(info);
         }
-        Ok(SurveyFiles {
+        let files = SurveyFiles {
             arg: arg.to_path_buf(),
             infos,
-        })
+        };
+        files.check_not_degenerate()?;
+        Ok(files)
+    }
+
+    /// A survey of too few points, or whose points all lie on one vertical line (or coincide),
+    /// describes no surface: refused as BEFORE and as AFTER alike, before anything runs (as
+    /// AFTER it would otherwise give a few distances at the core points it happens to touch and
+    /// a result with no stable ground).
+    fn check_not_degenerate(&self) -> Result<()> {
+        let n = self.points();
+        if n < MIN_SURVEY_POINTS {
+            return Err(Error::input(
+                &self.arg,
+                format!(
+                    "holds {n} point(s): a survey needs at least {MIN_SURVEY_POINTS} to describe \
+                     a surface"
+                ),
+            ));
+        }
+        let b = self.bounds();
+        if b.max[0] - b.min[0] <= 0.0 && b.max[1] - b.min[1] <= 0.0 {
+            return Err(Error::input(
+                &self.arg,
+                format!(
+                    "all points coincide or lie on one vertical line (x {}, y {}): a survey \
+                     must cover an area",
+                    b.min[0], b.min[1]
+                ),
+            ));
+        }
+        Ok(())
     }
 
     /// Points of all files.

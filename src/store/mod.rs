@@ -49,6 +49,7 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 pub use claim::{Claim, ClaimInfo};
+pub use fsops::crc_and_size;
 pub use gc::GcReport;
 pub use lock::{Lock, LockInfo};
 pub use owner_file::Owner;
@@ -90,7 +91,10 @@ impl Store {
                 ))
             }
             Ok(_) => {}
-            Err(e) if !create => return Err(Error::output(dir, e)),
+            Err(e) if !create && e.kind() == std::io::ErrorKind::NotFound => {
+                return Err(Error::input(dir, "no such directory: no talus run here"))
+            }
+            Err(e) if !create => return Err(Error::input(dir, format!("cannot read: {e}"))),
             Err(_) => std::fs::create_dir_all(dir).map_err(out_err(dir))?,
         }
         let work = dir.join(".talus");
@@ -105,9 +109,13 @@ impl Store {
             if create {
                 std::fs::create_dir_all(&p).map_err(out_err(&p))?;
             } else if !p.is_dir() {
-                return Err(Error::output(
-                    &p,
-                    std::io::Error::new(std::io::ErrorKind::NotFound, "no talus store here"),
+                return Err(Error::input(
+                    dir,
+                    format!(
+                        "no talus run here ({} is missing): not the --out directory of a \
+                         talus compare or campaign",
+                        p.strip_prefix(dir).unwrap_or(&p).display()
+                    ),
                 ));
             }
         }

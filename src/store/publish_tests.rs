@@ -99,10 +99,10 @@ fn publish_replaces_the_old_set_and_keeps_the_users_files() {
     s.publish(&files, "summary.json", &ours).unwrap();
     assert_eq!(listing(s.dir()), expected(NEW));
     assert!(!s.work().join("publishing").exists());
-    // Hard links to the unit's files: no copy of 100M-point outputs.
+    // Copies of the unit's files, not links (see the copies test below).
     use std::os::unix::fs::MetadataExt;
     let a = std::fs::metadata(s.dir().join("m3c2.laz")).unwrap().ino();
-    assert_eq!(std::fs::metadata(&files[0].0).unwrap().ino(), a);
+    assert_ne!(std::fs::metadata(&files[0].0).unwrap().ino(), a);
     assert!(super::unit_tests::tmp_entries(&s).is_empty());
     assert_eq!(s.recover().unwrap(), Recovery::Nothing);
 
@@ -218,5 +218,70 @@ fn recover_finishes_a_journal_left_after_the_old_marker_went() {
     assert_eq!(listing(s.dir()), expected(NEW));
 
     std::fs::write(s.work().join("publishing"), b"{damaged").unwrap();
-    assert!(matches!(s.recover(), Err(Error::Output { .. })));
+    assert!(matches!(s.recover(), Err(Error::Input { .. })));
+}
+
+/// Issue "Trust, second round", item 6: `talus status` and `talus view` finish a publish a
+/// crash cut short (they call this), unless a run holds DIR's lock (it finishes it itself).
+#[test]
+fn a_reading_command_finishes_an_interrupted_publish_unless_a_run_holds_dir() {
+    let (_t, s, files) = setup();
+    fault::arm(2, Fault::Crash);
+    assert!(s.publish(&files, "summary.json", &ours).is_err());
+    let lock = s.lock("run", "talus compare …").unwrap();
+    assert_eq!(
+        s.finish_interrupted_publish("talus status").unwrap(),
+        Recovery::Nothing
+    );
+    assert!(s.work().join("publishing").exists(), "left to the run");
+    lock.release().unwrap();
+    assert_eq!(
+        s.finish_interrupted_publish("talus status").unwrap(),
+        Recovery::RolledForward
+    );
+    assert_eq!(listing(s.dir()), expected(NEW));
+    assert!(s.lock_holder().is_none(), "the lock is released again");
+}
+
+/// Item 2: a published file is a copy: editing it in DIR leaves the store's unit file as it was,
+/// and the next publish restores it.
+#[test]
+fn published_files_are_copies_the_next_publish_restores() {
+    use std::os::unix::fs::MetadataExt;
+    let (_t, s, files) = setup();
+    s.publish(&files, "summary.json", &ours).unwrap();
+    let (src, name) = files.iter().find(|(_, n)| n == "m3c2.laz").unwrap();
+    let dest = s.dir().join(name);
+    assert_ne!(
+        std::fs::metadata(src).unwrap().ino(),
+        std::fs::metadata(&dest).unwrap().ino(),
+        "not a hard link"
+    );
+    let original = std::fs::read(src).unwrap();
+    std::fs::write(&dest, b"edited by the user").unwrap();
+    assert_eq!(
+        std::fs::read(src).unwrap(),
+        original,
+        "the store is untouched"
+    );
+    s.publish(&files, "summary.json", &ours).unwrap();
+    assert_eq!(std::fs::read(&dest).unwrap(), original);
+}
+
+/// Item 7: a damaged journal is refused naming what DIR holds.
+#[test]
+fn a_damaged_journal_names_the_files() {
+    let (_t, s, _files) = setup();
+    std::fs::write(s.work().join("publishing"), b"{ not json").unwrap();
+    let e = s.recover().unwrap_err().to_string();
+    for name in [
+        "summary.json",
+        "m3c2.laz",
+        "events.csv",
+        "meshes",
+        "notes.txt",
+    ] {
+        assert!(e.contains(name), "{name} not named in: {e}");
+    }
+    assert!(e.contains("--resume"), "{e}");
 }

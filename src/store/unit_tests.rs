@@ -296,7 +296,7 @@ fn open_refuses_a_file_and_a_missing_store() {
     let missing = t.path().join("none");
     assert!(matches!(
         Store::open(&missing, false),
-        Err(Error::Output { .. })
+        Err(Error::Input { .. })
     ));
     let s = Store::open(&missing, true).unwrap();
     assert_eq!(s.work(), missing.join(".talus"));

@@ -186,8 +186,8 @@ export function drawLegend(el, half, units, colourKeys = null) {
     <div class="ticks">${ticks}</div>
     <div class="keys">
       <span><span class="sw" style="background:rgb(${NO_DATA.join(',')})"></span>not computed</span>
-      ${colourKeys ? '' : `<span><span class="dot" style="background:${hex(KIND_COLOR.gain)}"></span>gain</span>
-      <span><span class="dot" style="background:${hex(KIND_COLOR.loss)}"></span>loss</span>`}
+      ${colourKeys ? '' : `<span><span class="dot" style="background:${hex(KIND_COLOR.gain)}"></span>gain (red: material added)</span>
+      <span><span class="dot" style="background:${hex(KIND_COLOR.loss)}"></span>loss (blue: material removed)</span>`}
       <span>marker size ∝ ∛|volume|</span>
     </div>`;
   if (colourKeys) {

@@ -167,6 +167,12 @@ test('one marker, one label and one table row per event', async () => {
   assert.deepEqual((await visibleLabels()).sort(), expected.sort());
 });
 
+test('the legend says the colour convention (the report uses the same)', async () => {
+  const text = await page.$eval('#legend', (el) => el.textContent);
+  assert.match(text, /gain \(red: material added\)/);
+  assert.match(text, /loss \(blue: material removed\)/);
+});
+
 test('the canvas shows the terrain coloured by distance: red on gains, blue on losses', async () => {
   for (const id of ['show-markers', 'show-labels', 'show-before', 'show-after']) await setChecked(id, false);
   const px = await canvasPixels();

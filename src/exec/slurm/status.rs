@@ -64,8 +64,11 @@ pub struct Report {
     pub submission: Option<(Submission, Option<Jobs>, Vec<Task>)>,
     /// Why Slurm could not be asked, if it could not.
     pub slurm_unavailable: Option<String>,
-    /// DIR's published summary.json is this plan's.
+    /// DIR's published summary.json is this plan's and every published file is as published.
     pub published: bool,
+    /// Published files of this plan that differ from the run's result (edited or damaged in
+    /// DIR); `--resume` publishes them again.
+    pub damaged: Vec<String>,
 }
 
 /// A task's outcome from what Slurm says of it (`asked`: whether Slurm could be asked) and its
@@ -201,12 +204,19 @@ impl Report {
                 }
             })
             .collect();
-        let published = crate::exec::publish::marker_path(store, &plan)
+        let marker = crate::exec::publish::marker_path(store, &plan)
             .ok()
             .and_then(|m| std::fs::read(m).ok())
             .is_some_and(|m| {
                 std::fs::read(store.dir().join(crate::units::outputs::MARKER)).ok() == Some(m)
             });
+        // This plan's marker is there: check every published file against the run's result.
+        let damaged = if marker {
+            crate::exec::publish::damaged_outputs(store, &plan).unwrap_or_default()
+        } else {
+            Vec::new()
+        };
+        let published = marker && damaged.is_empty();
         Ok(Report {
             dir: store.dir().to_path_buf(),
             plan,
@@ -214,6 +224,7 @@ impl Report {
             submission,
             slurm_unavailable,
             published,
+            damaged,
         })
     }
 
@@ -287,15 +298,23 @@ impl Report {
             count(UnitState::Failed),
             count(UnitState::Missing)
         );
-        let _ = writeln!(
-            s,
-            "outputs: {}",
-            if self.published {
-                "published (this plan's)"
-            } else {
-                "not published"
-            }
-        );
+        let _ =
+            writeln!(
+                s,
+                "outputs: {}",
+                if self.published {
+                    "published (this plan's)".to_string()
+                } else if !self.damaged.is_empty() {
+                    format!(
+                    "published, but {} file(s) differ from the run's result (edited or damaged): \
+                     {}; run the command again with --resume to publish them again",
+                    self.damaged.len(),
+                    self.damaged.iter().take(5).cloned().collect::<Vec<_>>().join(", ")
+                )
+                } else {
+                    "not published".to_string()
+                }
+            );
         let sub = self.submission.as_ref();
         if let Some((sub, jobs, _)) = sub {
             let _ = writeln!(
@@ -433,6 +452,7 @@ impl Report {
 /// `talus status DIR`.
 pub fn print(dir: &std::path::Path) -> Result<()> {
     let store = Store::open(dir, false)?;
+    store.finish_interrupted_publish("talus status")?;
     let report = Report::gather(&store)?;
     print!("{}", report.render());
     Ok(())
