@@ -89,8 +89,23 @@ pub fn run_units(
 ) -> Result<Report> {
     let n = plan.units.len();
     let finished: Vec<bool> = (0..n)
-        .map(|i| store.done(&unit_ref(plan, i)).is_some())
-        .collect();
+        .map(|i| -> Result<bool> {
+            let unit = unit_ref(plan, i);
+            let Some(record) = store.done(&unit) else {
+                return Ok(false);
+            };
+            // A file edited after the unit's commit (a published output edited in place: it
+            // is a hard link to the unit's file) is not reused: the unit is thrown away and
+            // computed again, and the next publish puts its files back.
+            let edited = store.edited_files(&unit, &record);
+            if edited.is_empty() {
+                return Ok(true);
+            }
+            crate::progress::trace(|| format!("{}: edited {edited:?}, recomputed", unit.name));
+            store.invalidate(&unit)?;
+            Ok(false)
+        })
+        .collect::<Result<_>>()?;
     let reused = finished.iter().filter(|&&d| d).count();
     // Units outside the wanted set count as done for this run.
     let wanted = match only {

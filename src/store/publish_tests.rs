@@ -99,10 +99,10 @@ fn publish_replaces_the_old_set_and_keeps_the_users_files() {
     s.publish(&files, "summary.json", &ours).unwrap();
     assert_eq!(listing(s.dir()), expected(NEW));
     assert!(!s.work().join("publishing").exists());
-    // Copies of the unit's files, not links (see the copies test below).
+    // Hard links to the unit's files: no copy of 100M-point outputs.
     use std::os::unix::fs::MetadataExt;
     let a = std::fs::metadata(s.dir().join("m3c2.laz")).unwrap().ino();
-    assert_ne!(std::fs::metadata(&files[0].0).unwrap().ino(), a);
+    assert_eq!(std::fs::metadata(&files[0].0).unwrap().ino(), a);
     assert!(super::unit_tests::tmp_entries(&s).is_empty());
     assert_eq!(s.recover().unwrap(), Recovery::Nothing);
 
@@ -243,29 +243,27 @@ fn a_reading_command_finishes_an_interrupted_publish_unless_a_run_holds_dir() {
     assert!(s.lock_holder().is_none(), "the lock is released again");
 }
 
-/// Item 2: a published file is a copy: editing it in DIR leaves the store's unit file as it was,
-/// and the next publish restores it.
+/// Item 2: a published file edited in place (a hard link: the unit's file too) is found by
+/// `edited_files`; an untouched one, or one rewritten with the same bytes, is not.
 #[test]
-fn published_files_are_copies_the_next_publish_restores() {
-    use std::os::unix::fs::MetadataExt;
+fn a_published_file_edited_in_place_is_found() {
     let (_t, s, files) = setup();
     s.publish(&files, "summary.json", &ours).unwrap();
-    let (src, name) = files.iter().find(|(_, n)| n == "m3c2.laz").unwrap();
-    let dest = s.dir().join(name);
-    assert_ne!(
-        std::fs::metadata(src).unwrap().ino(),
-        std::fs::metadata(&dest).unwrap().ino(),
-        "not a hard link"
+    let u = unit("outputs", "pair0-abc");
+    let record = s.done(&u).unwrap();
+    assert!(s.edited_files(&u, &record).is_empty());
+    let dest = s.dir().join("m3c2.laz");
+    let original = std::fs::read(&dest).unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(20));
+    std::fs::write(&dest, &original).unwrap();
+    assert!(
+        s.edited_files(&u, &record).is_empty(),
+        "same bytes: not edited"
     );
-    let original = std::fs::read(src).unwrap();
-    std::fs::write(&dest, b"edited by the user").unwrap();
-    assert_eq!(
-        std::fs::read(src).unwrap(),
-        original,
-        "the store is untouched"
-    );
-    s.publish(&files, "summary.json", &ours).unwrap();
-    assert_eq!(std::fs::read(&dest).unwrap(), original);
+    let mut bad = original.clone();
+    bad[0] ^= 0xff;
+    std::fs::write(&dest, &bad).unwrap();
+    assert_eq!(s.edited_files(&u, &record), vec!["m3c2.laz".to_string()]);
 }
 
 /// Item 7: a damaged journal is refused naming what DIR holds.

@@ -31,6 +31,32 @@ impl Store {
         sizes_ok.then_some(record)
     }
 
+    /// The files of finished `unit` edited since its commit: modified after its record was
+    /// written (an in-place edit of a published file, which is a hard link to the unit's) and
+    /// no longer matching the record's size and CRC-32. Cheap: one `stat` per file, a read only
+    /// of a file modified after the commit.
+    pub fn edited_files(&self, unit: &UnitRef, record: &Record) -> Vec<String> {
+        let Ok(dir) = self.unit_dir(unit) else {
+            return Vec::new();
+        };
+        let Ok(committed) = fs::metadata(dir.join(super::RECORD_FILE)).and_then(|m| m.modified())
+        else {
+            return Vec::new();
+        };
+        record
+            .files
+            .iter()
+            .filter(|f| {
+                let path = dir.join(&f.name);
+                let later = fs::metadata(&path)
+                    .and_then(|m| m.modified())
+                    .is_ok_and(|t| t > committed);
+                later && crc_and_size(&path).map_or(true, |got| got != (f.crc32, f.size))
+            })
+            .map(|f| f.name.clone())
+            .collect()
+    }
+
     /// Re-read every file of finished `unit` and compare size and CRC-32 with `record`. A
     /// missing file is `false`; a file that exists but cannot be read is an error naming it.
     pub fn verify(&self, unit: &UnitRef, record: &Record) -> Result<bool> {
