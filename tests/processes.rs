@@ -254,7 +254,26 @@ fn force_reads_inputs_first_and_spares_user_files() {
     // The user's own files beside the results, one inside meshes/.
     std::fs::write(r.join("notes.txt"), b"field notes").unwrap();
     std::fs::write(r.join("meshes/my_surface.ply"), b"ply\nmine").unwrap();
-    let cores: PathBuf = r.join("m3c2.laz");
+    // The previous result as the core points, where the new result will be published: refused
+    // (it would be replaced), nothing touched.
+    let published: PathBuf = r.join("m3c2.laz");
+    let kept = std::fs::read(&published).unwrap();
+    let out = run_compare(
+        &before,
+        &after,
+        &r,
+        &["--force", "--core-points", published.to_str().unwrap()],
+    );
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("lies where talus writes its output"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(std::fs::read(&published).unwrap(), kept);
+    // A copy of it outside DIR: read first, then DIR's outputs replaced.
+    let cores: PathBuf = tmp.path().join("cores.laz");
+    std::fs::copy(&published, &cores).unwrap();
     let out = run_compare(
         &before,
         &after,

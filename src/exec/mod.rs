@@ -101,7 +101,13 @@ pub fn run_units(
             if edited.is_empty() {
                 return Ok(true);
             }
-            crate::progress::trace(|| format!("{}: edited {edited:?}, recomputed", unit.name));
+            eprintln!(
+                "talus: {}: damaged ({} changed since the unit was computed: size or checksum \
+                 no longer match its record); computing unit {} again",
+                store.unit_dir(&unit)?.display(),
+                edited.join(", "),
+                unit.name
+            );
             store.invalidate(&unit)?;
             Ok(false)
         })
