@@ -19,6 +19,7 @@ use crate::plan::{InputFile, Layout, Pair, Plan, Survey, PLAN_VERSION};
 use crate::sampling;
 use crate::store::Store;
 use crate::units::outputs::{is_output, Summary};
+use crate::units::stage::{plan_units, CoreSource};
 use crate::units::unit_ref;
 
 /// Everything `compare` needs.
@@ -140,7 +141,7 @@ fn plan(store: &Store, opts: &CompareOptions, user: &UserParams, inputs: &Inputs
     };
     let mut bounds = vec![inputs.before.bounds(), inputs.after.bounds()];
     bounds.extend(inputs.cores.as_ref().map(|c| c.bounds));
-    let all = union(&bounds);
+    let all = crate::io::Bounds::union(&bounds);
     let area = ((all.max[0] - all.min[0]) * (all.max[1] - all.min[1])).max(f64::MIN_POSITIVE);
     // Both surveys are held at once.
     let held = (inputs.before.points() + inputs.after.points()) as f64;
@@ -166,19 +167,13 @@ fn plan(store: &Store, opts: &CompareOptions, user: &UserParams, inputs: &Inputs
     let cores = opts.core_points.as_ref().zip(inputs.cores.as_ref());
     let cores = cores.map(|(p, c)| (format!("the core points {}", p.display()), c.bounds));
     crate::plan::reach::check(&plan, cores.as_ref().map(|(s, b)| (s.as_str(), b)))?;
-    plan.add_pair_units(0, None)?;
+    let source = match plan.core_points {
+        Some(_) => CoreSource::UserFile,
+        None => CoreSource::PerPair,
+    };
+    plan_units(&mut plan, source, None)?;
     crate::progress::trace(|| "planned".into());
     Ok(plan)
-}
-
-/// The bounds of all of `bounds`.
-pub fn union(bounds: &[crate::io::Bounds]) -> crate::io::Bounds {
-    let mut u = crate::io::Bounds::empty();
-    for b in bounds {
-        u.grow(&b.min);
-        u.grow(&b.max);
-    }
-    u
 }
 
 /// Names under `dir` (`/`-separated, `.talus` left out) that `ours` takes for talus outputs.

@@ -55,6 +55,17 @@ pub enum Error {
     Internal(String),
 }
 
+/// A tiling-crate error: a file it could not write is an output error naming the file; the rest
+/// are ours. (A damaged tile file read back is [`Error::Damaged`]: see `units::damaged`.)
+impl From<talus_tiling::Error> for Error {
+    fn from(e: talus_tiling::Error) -> Error {
+        match e {
+            talus_tiling::Error::Io { path, source } => Error::output(path, source),
+            other => Error::Internal(other.to_string()),
+        }
+    }
+}
+
 impl Error {
     /// Shorthand for [`Error::Input`].
     pub fn input(path: impl Into<PathBuf>, problem: impl Into<String>) -> Self {

@@ -247,12 +247,27 @@ pub struct Params {
     pub threads: Resolved<usize>,
 }
 
+/// The source of a parameter the user gave (a flag or the config file).
+pub const USER: &str = "user";
+
+impl<T> Resolved<T> {
+    /// A value the user gave.
+    pub fn user(value: T) -> Resolved<T> {
+        Resolved {
+            value,
+            source: USER.into(),
+        }
+    }
+
+    /// Whether the user gave it (else it was derived, measured or a default).
+    pub fn is_user(&self) -> bool {
+        self.source == USER
+    }
+}
+
 fn pick<T: Copy>(user: Option<T>, derived: T, rule: &str) -> Resolved<T> {
     match user {
-        Some(v) => Resolved {
-            value: v,
-            source: "user".into(),
-        },
+        Some(v) => Resolved::user(v),
         None => Resolved {
             value: derived,
             source: rule.into(),
@@ -399,10 +414,9 @@ impl Params {
         let c = core_spacing.value;
         let cyl_radius = pick(user.cyl_radius, 3.0 * s, "derived: 3 × effective spacing");
         let memory = match &user.memory {
-            Some(m) => Resolved {
-                value: parse_size_problem(m).map_err(|p| user.bad_value("memory", p))?,
-                source: "user".into(),
-            },
+            Some(m) => {
+                Resolved::user(parse_size_problem(m).map_err(|p| user.bad_value("memory", p))?)
+            }
             None => Resolved {
                 value: DEFAULT_MEMORY,
                 source: "default: 2GiB".into(),
@@ -433,7 +447,7 @@ impl Params {
             min_points: pick(user.min_points, 1, "default: 1 (SPEC.md §1)"),
             orientation: Resolved {
                 source: if user.orientation.is_some() {
-                    "user".into()
+                    USER.into()
                 } else {
                     "default: auto".into()
                 },
@@ -461,7 +475,7 @@ impl Params {
     /// The registration error and threshold the user left out, from the stable ground's
     /// measurement (or, without one, 0 and half the effective spacing).
     pub fn with_stable(mut self, stable: Option<&crate::events::stable::Stable>) -> Params {
-        if self.reg_error.source != "user" {
+        if !self.reg_error.is_user() {
             self.reg_error = match stable {
                 Some(m) => Resolved {
                     value: m.reg_error,
@@ -476,7 +490,7 @@ impl Params {
                 },
             };
         }
-        if self.threshold.source != "user" {
+        if !self.threshold.is_user() {
             let reg = self.reg_error.value;
             self.threshold = match stable {
                 Some(m) => Resolved {
@@ -517,7 +531,7 @@ impl Params {
     /// half-length is a search window and the other epoch is sought on along the normal; the
     /// user's half-length is kept, and what lies beyond it is flagged, not measured.
     pub fn walk(&self) -> crate::m3c2::Walk {
-        if self.cyl_halflen.source == "user" {
+        if self.cyl_halflen.is_user() {
             crate::m3c2::Walk::Detect
         } else {
             crate::m3c2::Walk::Measure
@@ -546,7 +560,7 @@ mod tests {
         };
         let p = Params::resolve(&user, 0.1).unwrap();
         assert_eq!(p.cyl_radius.value, 0.5);
-        assert_eq!(p.cyl_radius.source, "user");
+        assert!(p.cyl_radius.is_user());
         assert!((p.normal_radius.value - 0.4).abs() < 1e-12);
         assert!((p.cyl_halflen.value - 5.0).abs() < 1e-12);
         assert!(p.normal_radius.source.starts_with("derived"));

@@ -182,10 +182,10 @@ fn plan(
     // The core points are the first survey's: within its bounds.
     let what = format!("the core points (from {})", epochs[0].arg.display());
     crate::plan::reach::check(&plan, Some((&what, &bounds[0])))?;
-    let cores = plan.add_thinned_cores(0);
-    for k in 0..plan.pairs.len() {
-        plan.add_pair_units(k, Some(cores))?;
-    }
-    plan.add_campaign_unit(cores, "campaign");
+    crate::units::stage::plan_units(
+        &mut plan,
+        crate::units::stage::CoreSource::Campaign,
+        Some("campaign"),
+    )?;
     Ok(plan)
 }

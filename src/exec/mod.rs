@@ -382,10 +382,10 @@ fn claim_and_run(
 }
 
 /// The units of `plan` not done in `store`, by kind (for `talus status`).
-pub fn pending(store: &Store, plan: &Plan) -> HashMap<&'static str, (usize, usize)> {
-    let mut m: HashMap<&'static str, (usize, usize)> = HashMap::new();
+pub fn pending(store: &Store, plan: &Plan) -> HashMap<String, (usize, usize)> {
+    let mut m: HashMap<String, (usize, usize)> = HashMap::new();
     for i in 0..plan.units.len() {
-        let e = m.entry(plan.units[i].kind()).or_default();
+        let e = m.entry(plan.units[i].kind().to_string()).or_default();
         e.0 += 1;
         if store.done(&unit_ref(plan, i)).is_some() {
             e.1 += 1;

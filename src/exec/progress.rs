@@ -6,17 +6,7 @@ use std::sync::Mutex;
 
 use crate::plan::Plan;
 use crate::progress::Stage;
-use crate::units::outputs::stage_name;
-
-/// The stages in pipeline order, with the unit their counts are in.
-const STAGES: [(&str, &str); 6] = [
-    ("pass 1: tiling", "points"),
-    ("pass 2: normals and M3C2", "points"),
-    ("stable ground", "core points sampled"),
-    ("events", "events"),
-    ("volumes", "events"),
-    ("outputs", "core points"),
-];
+use crate::units::stage::{registry, Line};
 
 struct Open {
     /// Units of the stage not done yet.
@@ -31,21 +21,25 @@ struct Open {
 }
 
 pub struct Stages {
+    /// The registry's progress lines, in pipeline order.
+    lines: Vec<Line>,
     open: Mutex<Vec<Open>>,
 }
 
-fn index(kind: &str) -> usize {
-    let name = stage_name(kind);
-    STAGES
+/// The index in `lines` of the line units of `kind` count on.
+fn line_of(lines: &[Line], kind: &str) -> usize {
+    let name = registry().get(kind).map(|s| s.line().name).ok();
+    lines
         .iter()
-        .position(|s| s.0 == name)
-        .unwrap_or(STAGES.len() - 1)
+        .position(|l| Some(l.name) == name)
+        .unwrap_or(lines.len().saturating_sub(1))
 }
 
 impl Stages {
     /// The stages of `plan`, `done[i]` telling which units were done before the run.
     pub fn new(plan: &Plan, done: &[bool]) -> Stages {
-        let mut open: Vec<Open> = STAGES
+        let lines = registry().lines();
+        let mut open: Vec<Open> = lines
             .iter()
             .map(|_| Open {
                 remaining: 0,
@@ -56,13 +50,14 @@ impl Stages {
             })
             .collect();
         for (i, u) in plan.units.iter().enumerate() {
-            let s = &mut open[index(u.kind())];
+            let s = &mut open[line_of(&lines, u.kind())];
             s.units += 1;
             if !done[i] {
                 s.remaining += 1;
             }
         }
         Stages {
+            lines,
             open: Mutex::new(open),
         }
     }
@@ -73,10 +68,10 @@ impl Stages {
     }
 
     /// Print the lines of the stages before `upto` whose units were all done already.
-    fn close_reused(open: &mut [Open], upto: usize) {
+    fn close_reused(lines: &[Line], open: &mut [Open], upto: usize) {
         for (k, s) in open.iter_mut().enumerate().take(upto) {
             if !s.closed && s.remaining == 0 && s.stage.is_none() && s.units > 0 {
-                Stage::log_only(STAGES[k].0, STAGES[k].1).finish("reused");
+                Stage::log_only(lines[k].name, lines[k].counts).finish("reused");
                 s.closed = true;
             }
         }
@@ -84,29 +79,21 @@ impl Stages {
 
     /// Unit `i` starts in this process.
     pub fn unit_started(&self, plan: &Plan, i: usize) {
-        let k = index(plan.units[i].kind());
+        let k = line_of(&self.lines, plan.units[i].kind());
+        let line = self.lines[k];
         self.with(|open| {
-            Self::close_reused(open, k);
+            Self::close_reused(&self.lines, open, k);
             let s = &mut open[k];
             if s.stage.is_none() && !s.closed {
-                let total = match k {
-                    0 => Some(plan.surveys.iter().map(|s| s.points).sum()),
-                    1 => Some(
-                        plan.pairs
-                            .iter()
-                            .map(|p| plan.surveys[p.before].points + plan.surveys[p.after].points)
-                            .sum(),
-                    ),
-                    _ => None,
-                };
-                s.stage = Some(Stage::start(STAGES[k].0, total, STAGES[k].1));
+                let total = line.total.of(plan);
+                s.stage = Some(Stage::start(line.name, total, line.counts));
             }
         });
     }
 
     /// Unit `i` handled `n` more items.
     pub fn add(&self, plan: &Plan, i: usize, n: u64) {
-        let k = index(plan.units[i].kind());
+        let k = line_of(&self.lines, plan.units[i].kind());
         self.with(|open| {
             if let Some(s) = &open[k].stage {
                 s.inc(n);
@@ -116,18 +103,18 @@ impl Stages {
 
     /// Unit `i` ran with at most `bytes` resident.
     pub fn peak(&self, plan: &Plan, i: usize, bytes: u64) {
-        let k = index(plan.units[i].kind());
+        let k = line_of(&self.lines, plan.units[i].kind());
         self.with(|open| open[k].peak = open[k].peak.max(bytes));
     }
 
     /// Unit `i` was committed; `done` says which units are done now.
     pub fn unit_done(&self, plan: &Plan, i: usize, done: &[bool]) {
-        let k = index(plan.units[i].kind());
+        let k = line_of(&self.lines, plan.units[i].kind());
         let remaining = plan
             .units
             .iter()
             .enumerate()
-            .filter(|(j, u)| index(u.kind()) == k && !done[*j])
+            .filter(|(j, u)| line_of(&self.lines, u.kind()) == k && !done[*j])
             .count();
         self.with(|open| {
             let s = &mut open[k];
@@ -143,7 +130,7 @@ impl Stages {
 
     /// Unit `i` must be done again (its files were damaged).
     pub fn reopen(&self, plan: &Plan, i: usize) {
-        let k = index(plan.units[i].kind());
+        let k = line_of(&self.lines, plan.units[i].kind());
         self.with(|open| {
             open[k].remaining += 1;
             open[k].closed = false;
@@ -165,7 +152,7 @@ impl Stages {
     pub fn finish_all(&self) {
         self.with(|open| {
             let n = open.len();
-            Self::close_reused(open, n);
+            Self::close_reused(&self.lines, open, n);
             for s in open.iter_mut() {
                 if let Some(stage) = s.stage.take() {
                     stage.finish(&peak_note(s.peak));

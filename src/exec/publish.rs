@@ -6,9 +6,10 @@
 use std::path::PathBuf;
 
 use crate::error::{Error, Result};
-use crate::plan::{Plan, Spec};
+use crate::plan::Plan;
 use crate::store::Store;
 use crate::units::outputs::{Publish, MARKER};
+use crate::units::stage::{final_unit, registry};
 use crate::units::unit_ref;
 
 /// Publish the plan's outputs ([`publish`]) and drop the units no longer in the plan; the caller
@@ -20,14 +21,9 @@ pub fn publish_and_gc(store: &Store, plan: &Plan, ours: &dyn Fn(&str) -> bool) -
     Ok(marker)
 }
 
-/// The plan's last unit (whose record lists what to publish).
+/// The plan's final unit (whose record lists what to publish).
 fn last_unit(plan: &Plan) -> Result<crate::store::UnitRef> {
-    let last = plan
-        .units
-        .len()
-        .checked_sub(1)
-        .ok_or_else(|| Error::Internal("an empty plan".into()))?;
-    Ok(unit_ref(plan, last))
+    Ok(unit_ref(plan, final_unit(plan)?))
 }
 
 /// The path of the marker (the file published last) in the plan's last unit.
@@ -37,11 +33,12 @@ pub fn marker_path(store: &Store, plan: &Plan) -> Result<PathBuf> {
 
 /// Which names in DIR are talus's outputs for this plan (a campaign's or a comparison's), so
 /// that publishing replaces them and nothing else.
-pub fn outputs_of(plan: &Plan) -> fn(&str) -> bool {
-    match plan.units.last().map(|u| u.spec) {
-        Some(Spec::Campaign) => crate::units::campaign::is_output,
-        _ => crate::units::outputs::is_output,
-    }
+pub fn outputs_of(plan: &Plan) -> Result<fn(&str) -> bool> {
+    let last = &plan.units[final_unit(plan)?];
+    registry()
+        .get(last.kind())?
+        .is_output()
+        .ok_or_else(|| Error::Internal(format!("unit {} publishes nothing", last.name)))
 }
 
 /// Publish the plan's last unit's `publish` list into DIR as one set; returns the path of the
@@ -85,12 +82,14 @@ pub fn damaged_outputs(store: &Store, plan: &Plan) -> Result<Vec<String>> {
     Ok(bad)
 }
 
-/// What the plan's last unit (done) lists to publish.
+/// What the plan's final unit (done) lists to publish.
 fn publish_list(store: &Store, plan: &Plan) -> Result<Vec<Publish>> {
     let unit = last_unit(plan)?;
     let record = store
         .done(&unit)
         .ok_or_else(|| Error::Internal(format!("unit {} not done", unit.name)))?;
-    serde_json::from_value(record.meta["publish"].clone())
-        .map_err(|e| Error::Internal(format!("unit {} record: {e}", unit.name)))
+    registry()
+        .get(&unit.kind)?
+        .publish_list(&unit.name, &record.meta)?
+        .ok_or_else(|| Error::Internal(format!("unit {} publishes nothing", unit.name)))
 }

@@ -25,6 +25,16 @@ pub struct Bounds {
 }
 
 impl Bounds {
+    /// The bounds of all of `bounds`.
+    pub fn union(bounds: &[Bounds]) -> Bounds {
+        let mut u = Bounds::empty();
+        for b in bounds {
+            u.grow(&b.min);
+            u.grow(&b.max);
+        }
+        u
+    }
+
     /// Empty bounds (min = +inf, max = -inf), ready to [`Bounds::grow`].
     pub fn empty() -> Self {
         Bounds {

@@ -12,7 +12,6 @@
 //! Slurm array task) can run any unit whose dependencies are done. A `compare` is a one-pair
 //! plan; a campaign is a bigger one with the same kinds of units.
 
-pub mod fit;
 pub mod inputs;
 pub mod layout;
 pub mod reach;
@@ -69,44 +68,59 @@ pub struct Pair {
     pub after: usize,
 }
 
-/// What a unit does.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "snake_case")]
-pub enum Spec {
-    /// Cut a survey into the layout's tiles.
-    Tiling { survey: usize },
-    /// Cut the user's core-point file into the layout's tiles.
-    Cores,
-    /// The core points of every pair of a campaign: a survey thinned on the core-point grid.
-    Thinned { survey: usize },
-    /// Normals and M3C2 for the core points one tile owns.
-    M3c2 { pair: usize, tile: [u32; 2] },
-    /// Noise and registration error on the pair's stable ground.
-    Stable { pair: usize },
-    /// The pair's events: filter, smoothing, signed clustering, description.
-    Events { pair: usize },
-    /// The volumes of the pair's events whose centroid a tile owns.
-    Volumes { pair: usize, tile: [u32; 2] },
-    /// The pair's outputs, ready to publish.
-    Outputs { pair: usize },
-    /// The campaign's outputs: table, tracks, time series, magnitude–frequency, report.
-    Campaign,
+/// What a unit does: its kind (a stage's [`crate::units::stage::Stage::KIND`]) and which survey,
+/// pair or tile it is for. Serialized as `{"kind": .., "survey" | "pair", "tile"}`, part of the
+/// unit's key.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Spec {
+    pub kind: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub survey: Option<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pair: Option<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tile: Option<[u32; 2]>,
 }
 
 impl Spec {
-    /// The kind, as in unit names and store directories.
-    pub fn kind(&self) -> &'static str {
-        match self {
-            Spec::Tiling { .. } => "tiling",
-            Spec::Cores => "cores",
-            Spec::Thinned { .. } => "cores",
-            Spec::M3c2 { .. } => "m3c2",
-            Spec::Stable { .. } => "stable",
-            Spec::Events { .. } => "events",
-            Spec::Volumes { .. } => "volumes",
-            Spec::Outputs { .. } => "outputs",
-            Spec::Campaign => "campaign",
+    /// The one unit of `kind` in a run.
+    pub fn run(kind: &str) -> Spec {
+        Spec {
+            kind: kind.into(),
+            survey: None,
+            pair: None,
+            tile: None,
         }
+    }
+
+    /// The unit of `kind` for survey `survey`.
+    pub fn survey(kind: &str, survey: usize) -> Spec {
+        Spec {
+            survey: Some(survey),
+            ..Spec::run(kind)
+        }
+    }
+
+    /// The unit of `kind` for pair `pair`.
+    pub fn pair(kind: &str, pair: usize) -> Spec {
+        Spec {
+            pair: Some(pair),
+            ..Spec::run(kind)
+        }
+    }
+
+    /// The unit of `kind` for tile `tile` of pair `pair`.
+    pub fn tile(kind: &str, pair: usize, tile: TileId) -> Spec {
+        Spec {
+            pair: Some(pair),
+            tile: Some([tile.col, tile.row]),
+            ..Spec::run(kind)
+        }
+    }
+
+    /// Whether this is a unit of `kind`.
+    pub fn is(&self, kind: &str) -> bool {
+        self.kind == kind
     }
 }
 
@@ -130,8 +144,8 @@ pub struct Unit {
 }
 
 impl Unit {
-    pub fn kind(&self) -> &'static str {
-        self.spec.kind()
+    pub fn kind(&self) -> &str {
+        &self.spec.kind
     }
 }
 
@@ -191,8 +205,9 @@ impl Plan {
         }
     }
 
-    /// Add a unit; returns its index.
-    fn push(&mut self, spec: Spec, label: &str, key_parts: &[&str], deps: Vec<usize>) -> usize {
+    /// Add a unit: its key is over its spec, `key_parts` (what it computes from: parameters,
+    /// input files' keys) and its dependencies' keys; returns its index.
+    pub fn push(&mut self, spec: Spec, label: &str, key_parts: &[&str], deps: Vec<usize>) -> usize {
         let dep_keys: Vec<&str> = deps.iter().map(|&d| self.units[d].key.as_str()).collect();
         // The spec itself (which survey, pair, tile) is part of what the unit computes.
         let what = serde_json::to_string(&spec).unwrap_or_default();
@@ -209,174 +224,6 @@ impl Plan {
         self.units.len() - 1
     }
 
-    /// The unit of the campaign's core points: survey `survey` thinned on the core-point grid.
-    pub fn add_thinned_cores(&mut self, survey: usize) -> usize {
-        let t = self.tiling_unit(survey);
-        let c = self.params.core_spacing.value.to_string();
-        let label = format!("thinned-{}", self.surveys[survey].label);
-        self.push(Spec::Thinned { survey }, &label, &[&c], vec![t])
-    }
-
-    /// The tiling unit of survey `s` (added when missing): a survey tiled once serves every pair
-    /// it is in.
-    fn tiling_unit(&mut self, s: usize) -> usize {
-        if let Some(i) = self.find(&Spec::Tiling { survey: s }) {
-            return i;
-        }
-        let (key, label, layout) = (
-            self.surveys[s].key.clone(),
-            self.surveys[s].label.clone(),
-            self.layout.key(),
-        );
-        // The frames a tile file is written in (their size comes from the memory budget): the
-        // same points in other frames are other bytes.
-        let frames = match self.layout.grid() {
-            Ok(g) => format!(
-                "frame {}",
-                crate::units::tiling::frame_points(self, g.len())
-            ),
-            Err(_) => String::new(),
-        };
-        self.push(
-            Spec::Tiling { survey: s },
-            &label,
-            &[&key, &layout, &frames],
-            Vec::new(),
-        )
-    }
-
-    /// The units of pair `pair`, appended: its surveys' tilings (when not there yet), an M3C2
-    /// unit per tile, the stable ground, the events, a volumes unit per tile and the outputs (no
-    /// events, volumes with `m3c2_only`); the pair's outputs unit becomes the run's id. The core
-    /// points are `cores` (a core-point unit), the user's file when the plan has one, else the
-    /// pair's before survey thinned tile by tile inside the M3C2 units.
-    pub fn add_pair_units(&mut self, pair: usize, cores: Option<usize>) -> Result<usize> {
-        fit::check_planned(self, pair)?;
-        let grid = self.layout.grid()?;
-        let layout_key = self.layout.key();
-        let (b, a) = (self.pairs[pair].before, self.pairs[pair].after);
-        let label = self.pairs[pair].label.clone();
-        let (tb, ta) = (self.tiling_unit(b), self.tiling_unit(a));
-        let m3c2 = format!(
-            "{:?}|{}",
-            self.params.m3c2(),
-            self.params.core_spacing.value
-        );
-        let core_unit = match (cores, self.core_points.clone()) {
-            (Some(c), _) => Some(c),
-            (None, Some(c)) => Some(match self.find(&Spec::Cores) {
-                Some(i) => i,
-                None => self.push(Spec::Cores, "cores", &[&c.key, &layout_key], Vec::new()),
-            }),
-            (None, None) => None,
-        };
-        // The core points are a core-point unit's (its key is a dependency's), or the thinning's.
-        let cores = match core_unit {
-            Some(_) => "core-point unit".to_string(),
-            None => "thinned C1".to_string(),
-        };
-        let tiles: Vec<TileId> = grid.tiles().collect();
-        let m3c2_units: Vec<usize> = tiles
-            .iter()
-            .map(|t| {
-                self.push(
-                    Spec::M3c2 {
-                        pair,
-                        tile: [t.col, t.row],
-                    },
-                    &format!("{label}-{}", t.name()),
-                    &[&m3c2, &cores],
-                    [tb, ta].into_iter().chain(core_unit).collect(),
-                )
-            })
-            .collect();
-        let samples = crate::units::stable::SAMPLES.to_string();
-        let stable = self.push(
-            Spec::Stable { pair },
-            &label,
-            &[&samples],
-            m3c2_units.clone(),
-        );
-        let mut final_deps = vec![stable];
-        final_deps.extend(&m3c2_units);
-        if !self.m3c2_only {
-            let p = &self.params;
-            let user = |r: &crate::params::Resolved<f64>| {
-                if r.source == "user" {
-                    r.value.to_string()
-                } else {
-                    "measured".into()
-                }
-            };
-            let events_params = format!(
-                "{}|{}|{}|{}|{}|{}",
-                user(&p.reg_error),
-                user(&p.threshold),
-                p.smooth_k.value,
-                p.smooth_sigma.value,
-                p.eps.value,
-                p.cluster_min_points.value
-            );
-            let mut deps = vec![stable];
-            deps.extend(&m3c2_units);
-            let events = self.push(Spec::Events { pair }, &label, &[&events_params], deps);
-            let meshes = self
-                .meshes
-                .as_ref()
-                .map_or("points".to_string(), |[m1, m2]| {
-                    format!("{}|{}", m1.key, m2.key)
-                });
-            let volume_params = format!(
-                "{}|{}|{}",
-                self.params.cyl_radius.value,
-                self.params.cyl_halflen.value,
-                self.params.point_spacing.value
-            );
-            let volumes: Vec<usize> = tiles
-                .iter()
-                .map(|t| {
-                    self.push(
-                        Spec::Volumes {
-                            pair,
-                            tile: [t.col, t.row],
-                        },
-                        &format!("{label}-{}", t.name()),
-                        &[&volume_params, &meshes],
-                        vec![events, stable, tb, ta],
-                    )
-                })
-                .collect();
-            final_deps.push(events);
-            final_deps.extend(volumes);
-        }
-        let inputs: Vec<String> = [b, a]
-            .iter()
-            .map(|&s| serde_json::to_string(&self.surveys[s]).unwrap_or_default())
-            .collect();
-        let version = format!("{}|{}", env!("CARGO_PKG_VERSION"), self.m3c2_only);
-        let out = self.push(
-            Spec::Outputs { pair },
-            &label,
-            &[&version, &inputs[0], &inputs[1], &cores],
-            final_deps,
-        );
-        self.run = self.units[out].key.clone();
-        Ok(out)
-    }
-
-    /// The campaign unit over every pair's outputs (and M3C2 units, for the time series); it
-    /// becomes the run's id.
-    pub fn add_campaign_unit(&mut self, cores: usize, title: &str) -> usize {
-        let mut deps = vec![cores];
-        deps.extend(self.of_kind("outputs").collect::<Vec<_>>());
-        deps.extend(self.of_kind("m3c2").collect::<Vec<_>>());
-        let pairs = serde_json::to_string(&self.pairs).unwrap_or_default();
-        let version = env!("CARGO_PKG_VERSION");
-        let c = self.push(Spec::Campaign, "campaign", &[version, &pairs, title], deps);
-        self.run = self.units[c].key.clone();
-        c
-    }
-
     /// The index of the unit of `spec`.
     pub fn find(&self, spec: &Spec) -> Option<usize> {
         self.units.iter().position(|u| &u.spec == spec)
@@ -387,11 +234,17 @@ impl Plan {
         (0..self.units.len()).filter(move |&i| self.units[i].kind() == kind)
     }
 
+    /// The units of `kind` for pair `pair`, in plan order.
+    pub fn of_pair<'a>(&'a self, kind: &'a str, pair: usize) -> impl Iterator<Item = usize> + 'a {
+        self.of_kind(kind)
+            .filter(move |&i| self.units[i].spec.pair == Some(pair))
+    }
+
     /// Write the plan to `path` atomically.
     pub fn save(&self, path: &Path) -> Result<()> {
         let text =
             serde_json::to_vec_pretty(self).map_err(|e| Error::Internal(format!("plan: {e}")))?;
-        talus_tiling::atomic_write(path, &text).map_err(layout::tiling_error)
+        Ok(talus_tiling::atomic_write(path, &text)?)
     }
 
     /// Read the plan at `path`.

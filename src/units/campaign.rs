@@ -7,10 +7,13 @@
 
 use rustc_hash::FxHashMap as HashMap;
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 
-use super::outputs::{Publish, Summary};
+use super::cores::ThinnedStage;
+use super::m3c2::M3c2Stage;
+use super::outputs::{OutputsStage, Publish, Summary};
+use super::stage::{Line, Planner, Publishes, Scope, Stage};
 use super::{read_json, Ctx};
 use crate::campaign::powerlaw::{self, PowerLawFit};
 use crate::campaign::report::{self, EventRow, PairRow, Report};
@@ -121,10 +124,62 @@ struct Row {
     threshold_m: f64,
 }
 
+/// The campaign's outputs: table, tracks, time series, magnitude–frequency, report.
+pub struct CampaignStage;
+
+/// What the campaign unit records.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct CampaignMeta {
+    /// The files to publish into DIR (the pairs' under `pairs/<label>/`).
+    pub publish: Vec<Publish>,
+    /// Events over all pairs.
+    pub events: usize,
+}
+
+impl Stage for CampaignStage {
+    const KIND: &'static str = "campaign";
+    const SCOPE: Scope = Scope::Run;
+    const LINE: Line = OutputsStage::LINE;
+    type Meta = CampaignMeta;
+
+    /// One per campaign, over every pair's outputs and M3C2 units (the time series) and the
+    /// campaign's core points.
+    fn plan(p: &mut Planner) -> Result<()> {
+        let Some(title) = p.campaign.clone() else {
+            return Ok(());
+        };
+        let mut deps = vec![p.the(&Spec::survey(ThinnedStage::KIND, 0))?];
+        deps.extend(p.plan.of_kind(OutputsStage::KIND).collect::<Vec<_>>());
+        deps.extend(p.plan.of_kind(M3c2Stage::KIND).collect::<Vec<_>>());
+        let pairs = serde_json::to_string(&p.plan.pairs).unwrap_or_default();
+        let version = env!("CARGO_PKG_VERSION");
+        p.add(
+            Spec::run(Self::KIND),
+            "campaign",
+            &[version, &pairs, &title],
+            deps,
+        );
+        Ok(())
+    }
+
+    fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<CampaignMeta> {
+        run(ctx, unit, out)
+    }
+
+    fn publishes() -> Option<Publishes<CampaignMeta>> {
+        Some(Publishes {
+            is_output,
+            list: |m| &m.publish,
+        })
+    }
+}
+
 /// Write the campaign's files into `out`.
-pub fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<Value> {
+fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<CampaignMeta> {
     let plan = ctx.plan;
-    let cores = plan.units[unit].deps[0];
+    let cores = ctx
+        .dep::<ThinnedStage>(unit)
+        .ok_or_else(|| Error::Internal("a campaign without its core points".into()))?;
     let date = |s: usize| plan.surveys[s].date.clone().unwrap_or_default();
     let days = |s: usize| crate::campaign::epochs::Date::parse(&date(s)).map_or(0, |d| d.days());
     // Per pair: its summary and its events.
@@ -132,7 +187,7 @@ pub fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<Value> {
     let mut events: Vec<PairEvent> = Vec::new();
     let mut publish: Vec<Publish> = Vec::new();
     for (k, p) in plan.pairs.iter().enumerate() {
-        let o = ctx.unit(&Spec::Outputs { pair: k })?;
+        let o = ctx.unit(&Spec::pair(OutputsStage::KIND, k))?;
         let summary: Summary = read_json(ctx, o, super::outputs::MARKER)?;
         let mine = pair_events(ctx, k, o)?;
         let volumes: Vec<f64> = mine
@@ -167,12 +222,7 @@ pub fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<Value> {
         });
         events.extend(mine);
         // The pair's outputs go under pairs/<label>/.
-        let rec = ctx
-            .store
-            .done(&ctx.unit_ref(o))
-            .ok_or_else(|| Error::Internal(format!("outputs of {} not done", p.label)))?;
-        let list: Vec<Publish> = serde_json::from_value(rec.meta["publish"].clone())
-            .map_err(|e| Error::Internal(format!("outputs record: {e}")))?;
+        let list = ctx.meta::<OutputsStage>(o)?.publish;
         publish.extend(list.into_iter().map(|x| Publish {
             name: format!("pairs/{}/{}", p.label, x.name),
             ..x
@@ -302,7 +352,10 @@ pub fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<Value> {
     let text = serde_json::to_vec_pretty(&summary).map_err(|e| Error::Internal(e.to_string()))?;
     super::write_bytes(out, MARKER, &text)?;
     publish.extend(FILES.iter().map(|&f| Publish::of(plan, unit, f, f.into())));
-    Ok(json!({ "publish": publish, "events": events.len() }))
+    Ok(CampaignMeta {
+        publish,
+        events: events.len(),
+    })
 }
 
 fn write_events(

@@ -12,12 +12,15 @@ use rustc_hash::FxHashMap as HashMap;
 use serde::{Deserialize, Serialize};
 use talus_tiling::{Column, ColumnData, TileColumns};
 
-use super::m3c2::Merged;
+use super::m3c2::{M3c2Stage, Merged};
+use super::stable::StableStage;
+use super::stage::{Line, Planner, Scope, Stage, Total};
 use super::Ctx;
 use crate::error::{Error, Result};
 use crate::events::{self, Event, Kind, Obb};
 use crate::io::Point3;
 use crate::m3c2::orientation::STEEP_NZ;
+use crate::plan::Spec;
 use crate::store::UnitWriter;
 
 pub const EVENTS: &str = "events.json";
@@ -62,13 +65,72 @@ pub fn candidate_boxes(e: &Event, cluster: &[Point3]) -> Vec<Obb> {
     boxes
 }
 
-/// Run pair `pair`'s events into `out`.
 /// Resident bytes per kept core point in the events unit: the kept record (104), its copies for
 /// smoothing and clustering (40), the kd-tree and neighbour lists of smoothing (k = 10: ≈ 160),
 /// the clustering's labels and union-find (≈ 24), the columns written (≈ 70).
 pub const BYTES_PER_KEPT: u64 = 400;
 
-pub fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<serde_json::Value> {
+/// The pair's events: filter, smoothing, signed clustering, description.
+pub struct EventsStage;
+
+/// What an events unit records.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+pub struct EventsMeta {
+    /// Events described.
+    pub events: usize,
+    /// Core points kept by the filter.
+    pub kept: usize,
+}
+
+impl Stage for EventsStage {
+    const KIND: &'static str = "events";
+    const SCOPE: Scope = Scope::Pair;
+    const LINE: Line = Line {
+        name: "events",
+        counts: "events",
+        total: Total::Unknown,
+    };
+    type Meta = EventsMeta;
+
+    /// One per pair (none with `--m3c2-only`), over its stable ground and M3C2 units; its key
+    /// has the parameters the user gave (a measured one comes from the stable unit's key).
+    fn plan(p: &mut Planner) -> Result<()> {
+        if p.plan.m3c2_only {
+            return Ok(());
+        }
+        let params = &p.plan.params;
+        let user = |r: &crate::params::Resolved<f64>| {
+            if r.is_user() {
+                r.value.to_string()
+            } else {
+                "measured".into()
+            }
+        };
+        let key = format!(
+            "{}|{}|{}|{}|{}|{}",
+            user(&params.reg_error),
+            user(&params.threshold),
+            params.smooth_k.value,
+            params.smooth_sigma.value,
+            params.eps.value,
+            params.cluster_min_points.value
+        );
+        for pair in 0..p.plan.pairs.len() {
+            let mut deps = vec![p.the(&Spec::pair(StableStage::KIND, pair))?];
+            deps.extend(p.of_pair(M3c2Stage::KIND, pair));
+            let label = p.plan.pairs[pair].label.clone();
+            p.add(Spec::pair(Self::KIND, pair), &label, &[&key], deps);
+        }
+        Ok(())
+    }
+
+    fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<EventsMeta> {
+        run(ctx, ctx.pair(unit)?, out)
+    }
+}
+
+/// Run pair `pair`'s events into `out`.
+fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<EventsMeta> {
     let params = super::stable::read(ctx, pair)?.params(ctx.plan);
     let (tau, reg) = (params.threshold.value, params.reg_error.value);
     let mut kept = Vec::new();
@@ -176,7 +238,10 @@ pub fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<serde_json::V
     (ctx.progress)(drafts.len() as u64);
     super::write_json(out, EVENTS, &drafts)?;
     super::write_columns(out, KEPT, &to_columns(&kept))?;
-    Ok(serde_json::json!({ "events": drafts.len(), "kept": kept.len() }))
+    Ok(EventsMeta {
+        events: drafts.len(),
+        kept: kept.len(),
+    })
 }
 
 fn to_columns(kept: &[Kept]) -> TileColumns {
@@ -216,13 +281,13 @@ pub fn read(ctx: &Ctx, pair: usize) -> Result<(Vec<Draft>, Vec<Kept>)> {
 
 /// The events of pair `pair` (its events unit must be done).
 pub fn read_drafts(ctx: &Ctx, pair: usize) -> Result<Vec<Draft>> {
-    let u = ctx.unit(&crate::plan::Spec::Events { pair })?;
+    let u = ctx.unit(&Spec::pair(EventsStage::KIND, pair))?;
     super::read_json(ctx, u, EVENTS)
 }
 
 /// The kept core points of pair `pair` (its events unit must be done).
 pub fn read_kept(ctx: &Ctx, pair: usize) -> Result<Vec<Kept>> {
-    let u = ctx.unit(&crate::plan::Spec::Events { pair })?;
+    let u = ctx.unit(&Spec::pair(EventsStage::KIND, pair))?;
     let c = super::read_columns(ctx, u, KEPT)?;
     let kept_path = ctx.input(u, KEPT)?;
     let bad = |name: &str| Error::Damaged {

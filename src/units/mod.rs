@@ -1,31 +1,37 @@
-//! What each kind of unit does (SPEC.md §3 "Units"), one module per kind, in pipeline order:
-//! [`tiling`] (a survey → tile files) → [`m3c2`] (a tile's normals and distances for a pair) →
-//! [`stable`] (a pair's noise and registration error) → [`events`] (a pair's filter, smoothing,
-//! clustering, description) → [`volumes`] (a tile's events' volumes) → [`outputs`] (a pair's
-//! files, ready to publish).
+//! What each kind of unit does (SPEC.md §3 "Units"), one module per stage, in pipeline order:
+//! [`tiling`] (a survey → tile files) → [`cores`] (the user's core points, or a campaign's) →
+//! [`m3c2`] (a tile's normals and distances for a pair) → [`stable`] (a pair's noise and
+//! registration error) → [`events`] (a pair's filter, smoothing, clustering, description) →
+//! [`volumes`] (a tile's events' volumes) → [`outputs`] (a pair's files, ready to publish) →
+//! [`campaign`] (a campaign's files). Each module's stage type implements [`stage::Stage`] and is
+//! registered in [`stage::default_stages`].
 //!
 //! The unit contract: a unit reads only the plan and the files of the units it depends on, and
-//! writes only into its own [`UnitWriter`]; it returns a small JSON `meta` kept in its record
-//! (counts, seconds). It is a pure function of those inputs — whichever process, machine or run
-//! executes it, and in whatever order the units run, its files are the same bytes. A stage is
-//! added by writing one more such module and the units of its kind in [`crate::plan`].
+//! writes only into its own [`UnitWriter`]; it returns its stage's typed meta, kept in its record
+//! beside the executor's [`stage::Timing`]. It is a pure function of those inputs — whichever
+//! process, machine or run executes it, and in whatever order the units run, its files are the
+//! same bytes.
 
 pub mod campaign;
+pub mod cores;
 pub mod events;
 pub mod m3c2;
 pub mod outputs;
 pub mod stable;
+pub mod stage;
 pub mod tiling;
 pub mod volumes;
 
 use std::path::{Path, PathBuf};
 
+use serde::Deserialize;
 use talus_tiling::TileId;
 
 use crate::error::{Error, Result};
 use crate::io::Point3;
 use crate::plan::{Plan, Spec};
 use crate::store::{Store, UnitRef, UnitWriter};
+use stage::Stage;
 
 /// What a unit sees while it runs.
 pub struct Ctx<'a> {
@@ -54,12 +60,78 @@ impl Ctx<'_> {
         Ok(self.store.unit_dir(&self.unit_ref(i))?.join(file))
     }
 
-    /// The record's meta of finished unit `i`.
-    pub fn meta(&self, i: usize) -> Result<serde_json::Value> {
+    /// The record of finished unit `i`.
+    fn record(&self, i: usize) -> Result<crate::store::Record> {
         self.store
             .done(&self.unit_ref(i))
-            .map(|r| r.meta)
             .ok_or_else(|| Error::Internal(format!("unit {} is not done", self.plan.units[i].name)))
+    }
+
+    /// The typed meta of finished unit `i`, of stage `S`. A record whose meta is not `S`'s (a
+    /// field missing) is damaged: the executor redoes that unit.
+    pub fn meta<S: Stage>(&self, i: usize) -> Result<S::Meta> {
+        let u = &self.plan.units[i];
+        if u.kind() != S::KIND {
+            return Err(Error::Internal(format!(
+                "unit {} is a {} unit, not {}",
+                u.name,
+                u.kind(),
+                S::KIND
+            )));
+        }
+        let rec = self.record(i)?;
+        S::Meta::deserialize(&rec.meta).map_err(|e| Error::Damaged {
+            path: self
+                .store
+                .unit_dir(&self.unit_ref(i))
+                .map(|d| d.join(crate::store::RECORD_FILE))
+                .unwrap_or_default(),
+            problem: format!("unit {}: its record's meta: {e}", u.name),
+        })
+    }
+
+    /// What the executor recorded of finished unit `i`: its seconds and peak memory.
+    pub fn timing(&self, i: usize) -> Result<stage::Timing> {
+        stage::typed_meta(&self.plan.units[i].name, &self.record(i)?.meta)
+    }
+
+    /// The pair unit `i` is for.
+    pub fn pair(&self, i: usize) -> Result<usize> {
+        let u = &self.plan.units[i];
+        u.spec
+            .pair
+            .ok_or_else(|| Error::Internal(format!("unit {} without a pair", u.name)))
+    }
+
+    /// The survey unit `i` is for.
+    pub fn survey(&self, i: usize) -> Result<usize> {
+        let u = &self.plan.units[i];
+        u.spec
+            .survey
+            .ok_or_else(|| Error::Internal(format!("unit {} without a survey", u.name)))
+    }
+
+    /// The tile unit `i` is for.
+    pub fn tile(&self, i: usize) -> Result<TileId> {
+        let u = &self.plan.units[i];
+        u.spec
+            .tile
+            .map(crate::plan::tile_id)
+            .ok_or_else(|| Error::Internal(format!("unit {} without a tile", u.name)))
+    }
+
+    /// The tiling unit of survey `survey`.
+    pub fn tiling(&self, survey: usize) -> Result<usize> {
+        self.unit(&Spec::survey(tiling::TilingStage::KIND, survey))
+    }
+
+    /// The dependency of unit `i` of stage `S`, if it has one.
+    pub fn dep<S: Stage>(&self, i: usize) -> Option<usize> {
+        self.plan.units[i]
+            .deps
+            .iter()
+            .copied()
+            .find(|&d| self.plan.units[d].kind() == S::KIND)
     }
 
     /// The index of the unit of `spec` (it must be in the plan).
@@ -81,17 +153,9 @@ pub fn unit_ref(plan: &Plan, i: usize) -> UnitRef {
 
 /// Run unit `i` of the plan, writing its files into `out`; returns the meta for its record.
 pub fn run(ctx: &Ctx, i: usize, out: &mut UnitWriter) -> Result<serde_json::Value> {
-    match ctx.plan.units[i].spec {
-        Spec::Tiling { survey } => tiling::run(ctx, survey, out),
-        Spec::Cores => m3c2::cores::run(ctx, out),
-        Spec::Thinned { .. } => m3c2::cores::thinned(ctx, i, out),
-        Spec::Campaign => campaign::run(ctx, i, out),
-        Spec::M3c2 { tile, .. } => m3c2::run(ctx, i, crate::plan::tile_id(tile), out),
-        Spec::Stable { pair } => stable::run(ctx, pair, out),
-        Spec::Events { pair } => events::run(ctx, pair, out),
-        Spec::Volumes { pair, tile } => volumes::run(ctx, i, pair, crate::plan::tile_id(tile), out),
-        Spec::Outputs { pair } => outputs::run(ctx, i, pair, out),
-    }
+    stage::registry()
+        .get(ctx.plan.units[i].kind())?
+        .run(ctx, i, out)
 }
 
 /// A damaged file of a finished unit: the executor throws that unit away and redoes it (a tile
@@ -102,7 +166,7 @@ pub fn damaged(path: &Path, e: talus_tiling::Error) -> Error {
             path: path.to_path_buf(),
             problem: reason,
         },
-        other => crate::plan::layout::tiling_error(other),
+        other => other.into(),
     }
 }
 
@@ -149,13 +213,6 @@ pub fn read_tile(ctx: &Ctx, tiling: usize, id: TileId) -> Result<TilePoints> {
     })
 }
 
-/// A number of the record's meta.
-pub fn meta_u64(meta: &serde_json::Value, key: &str) -> Result<u64> {
-    meta[key]
-        .as_u64()
-        .ok_or_else(|| Error::Internal(format!("unit record without {key}: {meta}")))
-}
-
 /// Serialize `value` as JSON into `file` of `out`, recorded with its digest.
 pub fn write_json(out: &mut UnitWriter, file: &str, value: &impl serde::Serialize) -> Result<()> {
     let bytes = serde_json::to_vec(value).map_err(|e| Error::Internal(format!("{file}: {e}")))?;
@@ -191,7 +248,7 @@ pub fn write_columns(
     cols: &talus_tiling::TileColumns,
 ) -> Result<()> {
     let path = out.path(file)?;
-    let d = talus_tiling::write_tile(&path, cols).map_err(crate::plan::layout::tiling_error)?;
+    let d = talus_tiling::write_tile(&path, cols)?;
     out.add(file, d.crc32, d.size);
     Ok(())
 }

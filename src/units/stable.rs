@@ -5,11 +5,13 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::m3c2::{pair_count, Merged};
+use super::m3c2::{pair_count, M3c2Stage, Merged};
+use super::stage::{Line, Planner, Scope, Stage, Total};
 use super::Ctx;
 use crate::error::{Error, Result};
 use crate::events::stable::{measure, Sample, Stable};
 use crate::params::Params;
+use crate::plan::Spec;
 use crate::store::UnitWriter;
 
 /// Core points sampled (evenly, in key order) for the measurement: enough for the fit and the
@@ -40,8 +42,44 @@ impl StableGround {
     }
 }
 
+/// The pair's stable ground: noise and registration error.
+pub struct StableStage;
+
+/// What a stable-ground unit records.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct StableMeta {
+    /// Core points sampled for the measurement.
+    pub sampled: usize,
+}
+
+impl Stage for StableStage {
+    const KIND: &'static str = "stable";
+    const SCOPE: Scope = Scope::Pair;
+    const LINE: Line = Line {
+        name: "stable ground",
+        counts: "core points sampled",
+        total: Total::Unknown,
+    };
+    type Meta = StableMeta;
+
+    /// One per pair, over the pair's M3C2 units.
+    fn plan(p: &mut Planner) -> Result<()> {
+        let samples = SAMPLES.to_string();
+        for pair in 0..p.plan.pairs.len() {
+            let m3c2 = p.of_pair(M3c2Stage::KIND, pair);
+            let label = p.plan.pairs[pair].label.clone();
+            p.add(Spec::pair(Self::KIND, pair), &label, &[&samples], m3c2);
+        }
+        Ok(())
+    }
+
+    fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<StableMeta> {
+        run(ctx, ctx.pair(unit)?, out)
+    }
+}
+
 /// Measure pair `pair`'s stable ground into `out`.
-pub fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<serde_json::Value> {
+fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<StableMeta> {
     let total = pair_count(ctx, pair)?;
     let step = total.div_ceil(SAMPLES).max(1);
     let _held = ctx.reserve(
@@ -75,7 +113,9 @@ pub fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<serde_json::V
     let stable = measure(&samples, ctx.plan.params.core_spacing.value);
     let ground = StableGround { stable };
     super::write_json(out, FILE, &ground)?;
-    Ok(serde_json::json!({ "sampled": samples.len() }))
+    Ok(StableMeta {
+        sampled: samples.len(),
+    })
 }
 
 /// How far a pair's core points got: how many have a normal, enough points of each epoch in their
@@ -106,7 +146,7 @@ impl Reached {
         let what = plan.pair_name(pair);
         let fmt = |v: f64| format!("{v:.4}");
         let given = |r: &crate::params::Resolved<f64>, flag: &str| {
-            if r.source == "user" {
+            if r.is_user() {
                 format!("{} ({flag})", r.value)
             } else {
                 format!("{} ({})", fmt(r.value), r.source)
@@ -148,6 +188,6 @@ impl Reached {
 
 /// The stable ground of pair `pair` (its unit must be done).
 pub fn read(ctx: &Ctx, pair: usize) -> Result<StableGround> {
-    let u = ctx.unit(&crate::plan::Spec::Stable { pair })?;
+    let u = ctx.unit(&Spec::pair(StableStage::KIND, pair))?;
     super::read_json(ctx, u, FILE)
 }

@@ -5,10 +5,11 @@
 
 use talus_tiling::{Quantisation, TileId, TileSplitter, WriteOptions};
 
+use super::stage::{Line, Planner, Scope, Stage, Total};
 use super::Ctx;
 use crate::error::Result;
 use crate::io;
-use crate::plan::layout::tiling_error;
+use crate::plan::Spec;
 use crate::store::UnitWriter;
 
 /// The file of tile `id` in a tiling unit.
@@ -53,8 +54,64 @@ fn write_options(transform: Option<[[f64; 2]; 3]>) -> WriteOptions {
     }
 }
 
+/// A survey cut into the layout's tiles: one unit per survey, serving every pair it is in.
+pub struct TilingStage;
+
+/// What a tiling unit records.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+pub struct TilingMeta {
+    /// The survey's points.
+    pub points: u64,
+    /// Points per tile (halo included), in grid order: what the pair's M3C2 units check the
+    /// budget against before the first of them holds anything (`units::m3c2::fit`).
+    pub tile_points: Vec<u64>,
+}
+
+impl Stage for TilingStage {
+    const KIND: &'static str = "tiling";
+    const SCOPE: Scope = Scope::Survey;
+    const LINE: Line = Line {
+        name: "pass 1: tiling",
+        counts: "points",
+        total: Total::SurveyPoints,
+    };
+    type Meta = TilingMeta;
+
+    /// The tiling of each pair's two surveys, once each.
+    fn plan(p: &mut Planner) -> Result<()> {
+        for k in 0..p.plan.pairs.len() {
+            let (b, a) = (p.plan.pairs[k].before, p.plan.pairs[k].after);
+            for s in [b, a] {
+                let survey = &p.plan.surveys[s];
+                let (key, label, layout) = (
+                    survey.key.clone(),
+                    survey.label.clone(),
+                    p.plan.layout.key(),
+                );
+                // The frames a tile file is written in (their size comes from the memory budget):
+                // the same points in other frames are other bytes.
+                let frames = match p.plan.layout.grid() {
+                    Ok(g) => format!("frame {}", frame_points(p.plan, g.len())),
+                    Err(_) => String::new(),
+                };
+                p.add(
+                    Spec::survey(Self::KIND, s),
+                    &label,
+                    &[&key, &layout, &frames],
+                    Vec::new(),
+                );
+            }
+        }
+        Ok(())
+    }
+
+    fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<TilingMeta> {
+        run(ctx, ctx.survey(unit)?, out)
+    }
+}
+
 /// Cut survey `survey` into `out`.
-pub fn run(ctx: &Ctx, survey: usize, out: &mut UnitWriter) -> Result<serde_json::Value> {
+fn run(ctx: &Ctx, survey: usize, out: &mut UnitWriter) -> Result<TilingMeta> {
     let plan = ctx.plan;
     let layout = &plan.layout;
     let grid = layout.grid()?;
@@ -70,7 +127,7 @@ pub fn run(ctx: &Ctx, survey: usize, out: &mut UnitWriter) -> Result<serde_json:
         .parent()
         .map(|d| d.to_path_buf())
         .ok_or_else(|| crate::error::Error::Internal("a unit without a directory".into()))?;
-    let mut splitter = TileSplitter::new(&dir, grid, layout.halo, budget).map_err(tiling_error)?;
+    let mut splitter = TileSplitter::new(&dir, grid, layout.halo, budget)?;
     let mut buf = Vec::new();
     let mut points = 0u64;
     // A survey delivered as tiles: its files one after the other, in name order.
@@ -80,17 +137,16 @@ pub fn run(ctx: &Ctx, survey: usize, out: &mut UnitWriter) -> Result<serde_json:
             splitter.set_options(write_options(reader.info().transform));
         }
         while reader.fill(&mut buf, 1 << 16)? > 0 {
-            splitter.push(&buf).map_err(tiling_error)?;
+            splitter.push(&buf)?;
             points += buf.len() as u64;
             (ctx.progress)(buf.len() as u64);
             crate::interrupt::check()?;
         }
     }
-    // Points per tile (halo included), in grid order: what the pair's M3C2 units check the
-    // budget against before the first of them holds anything (`plan::fit`). A tile without
-    // points has no file from the splitter.
+    // Points per tile (halo included), in grid order. A tile without points has no file from
+    // the splitter.
     let mut tile_points = vec![0u64; grid.len()];
-    for (id, n, digest) in splitter.finish_with_digests().map_err(tiling_error)? {
+    for (id, n, digest) in splitter.finish_with_digests()? {
         tile_points[grid.index(id)] = n;
         out.add(&tile_file(id), digest.crc32, digest.size);
     }
@@ -98,10 +154,12 @@ pub fn run(ctx: &Ctx, survey: usize, out: &mut UnitWriter) -> Result<serde_json:
         if tile_points[grid.index(id)] == 0 {
             let name = tile_file(id);
             let digest =
-                talus_tiling::write_tile(&out.path(&name)?, &talus_tiling::empty_columns())
-                    .map_err(tiling_error)?;
+                talus_tiling::write_tile(&out.path(&name)?, &talus_tiling::empty_columns())?;
             out.add(&name, digest.crc32, digest.size);
         }
     }
-    Ok(serde_json::json!({ "points": points, "tile_points": tile_points }))
+    Ok(TilingMeta {
+        points,
+        tile_points,
+    })
 }

@@ -13,13 +13,17 @@ use rustc_hash::FxHashMap as HashMap;
 use serde::{Deserialize, Serialize};
 use talus_tiling::TileId;
 
-use super::events::{Draft, Kept};
+use super::events::{Draft, EventsStage, Kept};
+use super::stable::StableStage;
+use super::stage::{Line, Planner, Scope, Stage, Total};
+use super::tiling::TilingStage;
 use super::{read_tile, Ctx};
 use crate::error::Result;
 use crate::events::stable::Stable;
 use crate::events::{Event, Obb};
 use crate::io::Point3;
 use crate::params::Params;
+use crate::plan::Spec;
 use crate::spatial::BoxIndex;
 use crate::store::UnitWriter;
 use crate::volume::{self, uncertainty, EventVolume};
@@ -203,7 +207,7 @@ fn error_model(
         (cluster_area * own + (area - cluster_area) * rest) / area.max(f64::MIN_POSITIVE)
     });
     let systematic = match stable {
-        Some(s) if params.reg_error.source != "user" => (members
+        Some(s) if !params.reg_error.is_user() => (members
             .iter()
             .map(|m| s.along(&m.normal).powi(2))
             .sum::<f64>()
@@ -271,16 +275,80 @@ fn gather(
     Ok(out)
 }
 
+/// The volumes of the pair's events whose centroid a tile owns.
+pub struct VolumesStage;
+
+/// What a volumes unit records.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct VolumesMeta {
+    /// Events measured.
+    pub events: usize,
+    /// Points gathered for them, both surveys.
+    pub points: usize,
+    /// The most points one event gathered.
+    pub largest_event_points: usize,
+}
+
+impl Stage for VolumesStage {
+    const KIND: &'static str = "volumes";
+    const SCOPE: Scope = Scope::Tile;
+    const LINE: Line = Line {
+        name: "volumes",
+        counts: "events",
+        total: Total::Unknown,
+    };
+    type Meta = VolumesMeta;
+
+    /// One per pair and tile (none with `--m3c2-only`), over the pair's events, stable ground
+    /// and both tilings (the points around the events), or the user's surfaces.
+    fn plan(p: &mut Planner) -> Result<()> {
+        if p.plan.m3c2_only {
+            return Ok(());
+        }
+        let grid = p.plan.layout.grid()?;
+        let meshes = p
+            .plan
+            .meshes
+            .as_ref()
+            .map_or("points".to_string(), |[m1, m2]| {
+                format!("{}|{}", m1.key, m2.key)
+            });
+        let params = &p.plan.params;
+        let key = format!(
+            "{}|{}|{}",
+            params.cyl_radius.value, params.cyl_halflen.value, params.point_spacing.value
+        );
+        for pair in 0..p.plan.pairs.len() {
+            let (b, a) = (p.plan.pairs[pair].before, p.plan.pairs[pair].after);
+            let deps = vec![
+                p.the(&Spec::pair(EventsStage::KIND, pair))?,
+                p.the(&Spec::pair(StableStage::KIND, pair))?,
+                p.the(&Spec::survey(TilingStage::KIND, b))?,
+                p.the(&Spec::survey(TilingStage::KIND, a))?,
+            ];
+            let label = p.plan.pairs[pair].label.clone();
+            for t in grid.tiles() {
+                p.add(
+                    Spec::tile(Self::KIND, pair, t),
+                    &format!("{label}-{}", t.name()),
+                    &[&key, &meshes],
+                    deps.clone(),
+                );
+            }
+        }
+        Ok(())
+    }
+
+    fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<VolumesMeta> {
+        run(ctx, ctx.pair(unit)?, ctx.tile(unit)?, out)
+    }
+}
+
 /// Measure the events of pair `pair` whose centroid tile `tile` owns, into `out`.
-pub fn run(
-    ctx: &Ctx,
-    unit: usize,
-    pair: usize,
-    tile: TileId,
-    out: &mut UnitWriter,
-) -> Result<serde_json::Value> {
+fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<VolumesMeta> {
     let plan = ctx.plan;
-    let deps = &plan.units[unit].deps;
+    let p = &plan.pairs[pair];
+    let tilings = [ctx.tiling(p.before)?, ctx.tiling(p.after)?];
     let ground = super::stable::read(ctx, pair)?;
     let params = &ground.params(plan);
     let stable = ground.stable.as_ref();
@@ -337,7 +405,7 @@ pub fn run(
             .collect();
         let [before, after] = match user {
             Some(_) => [vec![Vec::new(); mine.len()], vec![Vec::new(); mine.len()]],
-            None => gather(ctx, [deps[2], deps[3]], &boxes)?,
+            None => gather(ctx, tilings, &boxes)?,
         };
         for (b, a) in before.iter().zip(&after) {
             gathered += b.len() + a.len();
@@ -451,9 +519,9 @@ pub fn run(
     }
     (ctx.progress)(measured.len() as u64);
     super::write_json(out, FILE, &measured)?;
-    Ok(serde_json::json!({
-        "events": measured.len(),
-        "points": gathered,
-        "largest_event_points": largest,
-    }))
+    Ok(VolumesMeta {
+        events: measured.len(),
+        points: gathered,
+        largest_event_points: largest,
+    })
 }

@@ -37,14 +37,10 @@ use std::time::{Duration, Instant};
 use crate::error::{Error, Result};
 use crate::plan::Plan;
 use crate::store::{Lock, Store};
+use crate::units::stage::{registry, Registered, Scope};
 use crate::units::unit_ref;
 
 pub use cluster::TaskState;
-
-/// The stages in pipeline order (store kinds), then the publishing job.
-pub const STAGE_ORDER: [&str; 8] = [
-    "tiling", "cores", "m3c2", "stable", "events", "volumes", "outputs", "campaign",
-];
 
 /// The name of the last job, which publishes the outputs.
 pub const PUBLISH: &str = "publish";
@@ -83,14 +79,14 @@ pub struct StagePlan {
     pub tasks: Vec<Vec<usize>>,
 }
 
-/// The rank of a store kind in [`STAGE_ORDER`].
-pub fn rank(kind: &str) -> Option<usize> {
-    STAGE_ORDER.iter().position(|k| *k == kind)
+/// The stages in pipeline order (the registry's), each one job array.
+pub fn stage_order() -> impl Iterator<Item = &'static dyn Registered> {
+    registry().stages().iter().copied()
 }
 
-/// Whether units of `kind` are one per tile (grouped `tiles_per_task` to a task).
-fn per_tile(kind: &str) -> bool {
-    matches!(kind, "m3c2" | "volumes")
+/// The rank of a store kind in pipeline order.
+pub fn rank(kind: &str) -> Option<usize> {
+    registry().rank(kind)
 }
 
 /// The stages of `plan` whose units are not all done (`done[i]`): for each, its units not done
@@ -116,14 +112,16 @@ pub fn stages(plan: &Plan, done: &[bool], tiles_per_task: usize) -> Result<Vec<S
         }
     }
     let mut out = Vec::new();
-    for (r, kind) in STAGE_ORDER.iter().enumerate() {
+    for (r, stage) in stage_order().enumerate() {
         let todo: Vec<usize> = (0..plan.units.len())
             .filter(|&i| ranks[i] == r && !done[i])
             .collect();
         if todo.is_empty() {
             continue;
         }
-        let mut per = if per_tile(kind) {
+        let kind = stage.kind();
+        // Units one per tile are grouped `tiles_per_task` to a task.
+        let mut per = if stage.scope() == Scope::Tile {
             tiles_per_task.max(1)
         } else {
             1

@@ -47,7 +47,7 @@ pub struct Submission {
 /// One array of a submission.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct StageRecord {
-    /// A store kind of [`super::STAGE_ORDER`], or [`PUBLISH`].
+    /// A stage's kind (`super::stage_order`), or [`PUBLISH`].
     pub kind: String,
     /// Its sbatch script, in the submission's directory.
     pub script: String,
@@ -101,7 +101,7 @@ pub fn task_log_path(dir: &Path, kind: &str, task: usize) -> PathBuf {
 fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
     let bytes = serde_json::to_vec_pretty(value)
         .map_err(|e| Error::Internal(format!("{}: {e}", path.display())))?;
-    talus_tiling::atomic_write(path, &bytes).map_err(crate::plan::layout::tiling_error)
+    Ok(talus_tiling::atomic_write(path, &bytes)?)
 }
 
 fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
@@ -216,7 +216,7 @@ pub fn create(
         dir: abs,
         sbatch_args: opts.args.clone(),
         mem_mib: plan.params.memory_bytes.value.div_ceil(1 << 20),
-        cpus: (threads.source == "user").then_some(threads.value),
+        cpus: (threads.is_user()).then_some(threads.value),
         stages: records,
     };
     super::scripts::write(&d, &sub)?;

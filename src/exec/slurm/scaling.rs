@@ -11,10 +11,11 @@
 
 use std::fmt::Write as _;
 
-use super::{rank, STAGE_ORDER};
+use super::{rank, stage_order};
 use crate::error::{Error, Result};
 use crate::plan::Plan;
 use crate::store::Store;
+use crate::units::stage::{typed_meta, Scope, Timing};
 use crate::units::unit_ref;
 
 /// Seconds from one array's end to the start of the next (afterok): 0.6–1 s measured on the test
@@ -56,7 +57,8 @@ pub fn report(dir: &std::path::Path, nodes: &[usize], cores: usize, scale: f64) 
     let plan = Plan::load(&store.work().join("plan.json"))?;
     let mut stages: Vec<StageWork> = Vec::new();
     let mut secs = vec![0.0; plan.units.len()];
-    for (r, kind) in STAGE_ORDER.iter().enumerate() {
+    for (r, stage) in stage_order().enumerate() {
+        let kind = stage.kind();
         let idx: Vec<usize> = (0..plan.units.len())
             .filter(|&i| rank(plan.units[i].kind()) == Some(r))
             .collect();
@@ -73,12 +75,12 @@ pub fn report(dir: &std::path::Path, nodes: &[usize], cores: usize, scale: f64) 
                     plan.units[i].name
                 ))
             })?;
-            let s = rec.meta["seconds"].as_f64().unwrap_or(0.0);
-            secs[i] = s;
-            tasks.push(s);
-            peak = peak.max(rec.meta["peak_rss_bytes"].as_u64().unwrap_or(0));
+            let t: Timing = typed_meta(&plan.units[i].name, &rec.meta)?;
+            secs[i] = t.seconds;
+            tasks.push(t.seconds);
+            peak = peak.max(t.peak_rss_bytes.unwrap_or(0));
         }
-        let tile = matches!(*kind, "m3c2" | "volumes");
+        let tile = stage.scope() == Scope::Tile;
         let tasks = if tile {
             let n = (tasks.len() as f64 * scale).round() as usize;
             (0..n).map(|k| tasks[k % tasks.len()]).collect()
@@ -89,7 +91,8 @@ pub fn report(dir: &std::path::Path, nodes: &[usize], cores: usize, scale: f64) 
             kind,
             tasks,
             peak,
-            scaled_peak: !tile && *kind != "tiling" && scale > 1.0,
+            // A survey's tiling holds its splitter's buffers whatever the survey's size.
+            scaled_peak: !tile && stage.scope() != Scope::Survey && scale > 1.0,
         });
     }
     // Critical path along the dependencies alone (no stage barriers), unscaled.

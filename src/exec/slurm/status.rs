@@ -9,7 +9,7 @@ use std::fmt::Write as _;
 
 use super::cluster::{self, JobState};
 use super::record::{self, Jobs, Submission, TaskReport};
-use super::{PUBLISH, STAGE_ORDER};
+use super::{stage_order, PUBLISH};
 use crate::error::{Error, Result};
 use crate::plan::Plan;
 use crate::store::{Store, DEFAULT_LEASE};
@@ -339,7 +339,7 @@ impl Report {
             "{:<9} {:>6} {:>6} {:>8} {:>7} {:>7}  {:<8} tasks",
             "stage", "units", "done", "running", "queued", "failed", "job"
         );
-        let mut rows: Vec<&str> = STAGE_ORDER.to_vec();
+        let mut rows: Vec<&str> = stage_order().map(|s| s.kind()).collect();
         rows.push(PUBLISH);
         for kind in rows {
             let idx: Vec<usize> = (0..self.plan.units.len())

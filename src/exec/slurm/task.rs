@@ -136,6 +136,6 @@ fn publish(store: &Store, plan: &Plan) -> Result<()> {
         }
     };
     store.recover()?;
-    crate::exec::publish::publish_and_gc(store, plan, &crate::exec::publish::outputs_of(plan))?;
+    crate::exec::publish::publish_and_gc(store, plan, &crate::exec::publish::outputs_of(plan)?)?;
     lock.release()
 }

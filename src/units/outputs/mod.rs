@@ -13,7 +13,12 @@ use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
 
-use super::volumes::{mesh_files, Measured};
+use super::cores::{ThinnedStage, UserCoresStage};
+use super::events::EventsStage;
+use super::m3c2::M3c2Stage;
+use super::stable::StableStage;
+use super::stage::{registry, Line, Planner, Publishes, Scope, Stage, Total};
+use super::volumes::{mesh_files, Measured, VolumesStage};
 use super::Ctx;
 use crate::error::{Error, Result};
 use crate::events::stable::Stable;
@@ -228,18 +233,6 @@ impl Summary {
     }
 }
 
-/// The stage a unit kind belongs to, as the progress lines and summary.json name it.
-pub fn stage_name(kind: &str) -> &'static str {
-    match kind {
-        "tiling" | "cores" => "pass 1: tiling",
-        "m3c2" => "pass 2: normals and M3C2",
-        "stable" => "stable ground",
-        "events" => "events",
-        "volumes" => "volumes",
-        _ => "outputs",
-    }
-}
-
 /// A file the executor publishes: from unit `unit` (its name and kind), `file`, as `name` in DIR.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Publish {
@@ -272,8 +265,83 @@ pub fn need(tiles: usize) -> u64 {
     FIXED + super::m3c2::merge_need(tiles)
 }
 
+/// A pair's outputs, ready to publish.
+pub struct OutputsStage;
+
+/// What an outputs unit records.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct OutputsMeta {
+    /// The files to publish into DIR.
+    pub publish: Vec<Publish>,
+    /// Core points written to m3c2.laz.
+    pub core_points: u64,
+}
+
+impl Stage for OutputsStage {
+    const KIND: &'static str = "outputs";
+    const SCOPE: Scope = Scope::Pair;
+    const LINE: Line = Line {
+        name: "outputs",
+        counts: "core points",
+        total: Total::Unknown,
+    };
+    type Meta = OutputsMeta;
+
+    /// One per pair, over every unit of the pair but the tilings. Its need grows with the tile
+    /// count (the merge holds a chunk of every tile's results), so it is checked here.
+    fn plan(p: &mut Planner) -> Result<()> {
+        let tiles = p.plan.layout.len();
+        let core_unit = p
+            .find(&Spec::run(UserCoresStage::KIND))
+            .or_else(|| p.find(&Spec::survey(ThinnedStage::KIND, 0)));
+        let cores = super::m3c2::cores_key(core_unit);
+        let version = format!("{}|{}", env!("CARGO_PKG_VERSION"), p.plan.m3c2_only);
+        for pair in 0..p.plan.pairs.len() {
+            let whose = match p.plan.pairs.len() {
+                1 => "the pair's".to_string(),
+                _ => format!("pair {}'s", p.plan.pairs[pair].label),
+            };
+            crate::memory::refuse_unless_fits(
+                need(tiles),
+                p.plan.params.memory_bytes.value,
+                &format!("writing {whose} outputs, merging the results of its {tiles} tiles"),
+            )?;
+            let (b, a) = (p.plan.pairs[pair].before, p.plan.pairs[pair].after);
+            let mut deps = vec![p.the(&Spec::pair(StableStage::KIND, pair))?];
+            deps.extend(p.of_pair(M3c2Stage::KIND, pair));
+            if let Some(e) = p.find(&Spec::pair(EventsStage::KIND, pair)) {
+                deps.push(e);
+                deps.extend(p.of_pair(VolumesStage::KIND, pair));
+            }
+            let inputs: Vec<String> = [b, a]
+                .iter()
+                .map(|&s| serde_json::to_string(&p.plan.surveys[s]).unwrap_or_default())
+                .collect();
+            let label = p.plan.pairs[pair].label.clone();
+            p.add(
+                Spec::pair(Self::KIND, pair),
+                &label,
+                &[&version, &inputs[0], &inputs[1], cores],
+                deps,
+            );
+        }
+        Ok(())
+    }
+
+    fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<OutputsMeta> {
+        run(ctx, unit, ctx.pair(unit)?, out)
+    }
+
+    fn publishes() -> Option<Publishes<OutputsMeta>> {
+        Some(Publishes {
+            is_output,
+            list: |m| &m.publish,
+        })
+    }
+}
+
 /// Write pair `pair`'s outputs into `out`.
-pub fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<serde_json::Value> {
+fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<OutputsMeta> {
     let plan = ctx.plan;
     let p = &plan.pairs[pair];
     let bs = &plan.surveys[p.before];
@@ -291,10 +359,7 @@ pub fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<
         let (drafts, kept) = super::events::read(ctx, pair)?;
         let mut measured: HashMap<u32, (Measured, usize)> = HashMap::default();
         for t in grid.tiles() {
-            let v = ctx.unit(&Spec::Volumes {
-                pair,
-                tile: [t.col, t.row],
-            })?;
+            let v = ctx.unit(&Spec::tile(VolumesStage::KIND, pair, t))?;
             let list: Vec<Measured> = super::read_json(ctx, v, super::volumes::FILE)?;
             for m in list {
                 measured.insert(m.id, (m, v));
@@ -330,7 +395,7 @@ pub fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<
     let crs = io::open(&bs.files[0].path)?.info().crs.clone();
     // The pair's own inputs (not the campaign's union: a survey added later must not change a
     // finished pair's file).
-    let mut extent = crate::compare::union(&[bs.bounds, plan.surveys[p.after].bounds]);
+    let mut extent = Bounds::union(&[bs.bounds, plan.surveys[p.after].bounds]);
     if let Some(c) = &plan.core_points {
         if let Ok(r) = io::open(&c.path) {
             extent.grow(&r.info().bounds.min);
@@ -338,8 +403,8 @@ pub fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<
         }
     }
     // A campaign's core points come from its first survey.
-    for u in &plan.units {
-        if let Spec::Thinned { survey } = u.spec {
+    for u in plan.of_kind(ThinnedStage::KIND) {
+        if let Some(survey) = plan.units[u].spec.survey {
             extent.grow(&plan.surveys[survey].bounds.min);
             extent.grow(&plan.surveys[survey].bounds.max);
         }
@@ -388,7 +453,7 @@ pub fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<
         &records,
         &written,
         kept.len(),
-    );
+    )?;
     let text = serde_json::to_string_pretty(&summary)
         .map_err(|e| Error::Internal(format!("summary: {e}")))?;
     super::write_bytes(out, MARKER, text.as_bytes())?;
@@ -401,7 +466,10 @@ pub fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<
             .into_iter()
             .map(|f| Publish::of(plan, unit, f, f.into())),
     );
-    Ok(serde_json::json!({ "publish": publish, "core_points": written.core_points }))
+    Ok(OutputsMeta {
+        publish,
+        core_points: written.core_points,
+    })
 }
 
 /// The LAS scale of the user's core-point file, if it has one.
@@ -420,7 +488,7 @@ fn summarize(
     records: &[EventRecord],
     written: &laz::Written,
     kept: usize,
-) -> Summary {
+) -> Result<Summary> {
     let plan = ctx.plan;
     let p = &plan.pairs[pair];
     let input = |s: &crate::plan::Survey| InputSummary {
@@ -449,7 +517,6 @@ fn summarize(
     // Stage work from the records of the units this one depends on (transitively: its direct
     // dependencies are every unit of the pair but the tilings, whose records the M3C2 units'
     // dependencies name).
-    let mut order: Vec<&'static str> = Vec::new();
     let mut stages: HashMap<&'static str, (usize, f64)> = HashMap::default();
     let mut seen = std::collections::HashSet::new();
     let mut stack = plan.units[unit].deps.clone();
@@ -458,26 +525,19 @@ fn summarize(
             continue;
         }
         stack.extend(&plan.units[u].deps);
-        let name = stage_name(plan.units[u].kind());
-        let secs = ctx
-            .meta(u)
-            .ok()
-            .and_then(|m| m["seconds"].as_f64())
-            .unwrap_or(0.0);
-        let e = stages.entry(name).or_insert_with(|| {
-            order.push(name);
-            (0, 0.0)
-        });
+        let name = registry().get(plan.units[u].kind())?.line().name;
+        let secs = ctx.timing(u)?.seconds;
+        let e = stages.entry(name).or_insert((0, 0.0));
         e.0 += 1;
         e.1 += secs;
     }
-    let pipeline = [
-        "pass 1: tiling",
-        "pass 2: normals and M3C2",
-        "stable ground",
-        "events",
-        "volumes",
-    ];
+    // The pipeline's lines before this stage's own.
+    let pipeline: Vec<&str> = registry()
+        .lines()
+        .into_iter()
+        .map(|l| l.name)
+        .filter(|&n| n != OutputsStage::LINE.name)
+        .collect();
     let stages = pipeline
         .iter()
         .filter_map(|&s| {
@@ -490,7 +550,7 @@ fn summarize(
         .collect();
     let significant = || records.iter().filter(|e| e.significant);
     let reach = ReachSummary::new(&params, written, records);
-    Summary {
+    Ok(Summary {
         tool: "talus".into(),
         version: env!("CARGO_PKG_VERSION").into(),
         inputs,
@@ -524,5 +584,5 @@ fn summarize(
             .sum(),
         reach,
         stages,
-    }
+    })
 }

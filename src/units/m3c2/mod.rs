@@ -10,7 +10,12 @@ use std::path::PathBuf;
 
 use talus_tiling::{Column, ColumnData, TileColumns, TileId};
 
-use super::{meta_u64, read_tile, Ctx, TilePoints};
+pub mod fit;
+
+use super::cores::{ThinnedStage, UserCoresStage};
+use super::stage::{Line, Planner, Scope, Stage, Total};
+use super::tiling::TilingStage;
+use super::{read_tile, Ctx, TilePoints};
 use crate::error::{Error, Result};
 use crate::io::Point3;
 use crate::m3c2::tile::{compute, distances_along, EpochPoints, KeyedResult};
@@ -27,60 +32,127 @@ pub fn chunk_file(k: usize) -> String {
     format!("r_{k:05}.tile")
 }
 
-/// Resident bytes per point (both epochs, halo included) while a tile is computed: its
-/// coordinates and owned flags as read (25), the column index (≈ 40), the per-core-point results
-/// (a core point per ≈ 7 points, ≈ 120 each) and the tile file's bytes while decoding. Measured
-/// 89–101 bytes per point (unit peak less the process's base, over the tile's points with its
-/// halo) on the 5.2M-point cliff's tiles at 300 MiB and 1 GiB. The tile layout sizes tiles by it.
-pub const BYTES_PER_POINT: u64 = 104;
+/// Resident bytes per point while a tile is computed: the layout sizes tiles by it.
+pub const BYTES_PER_POINT: u64 = crate::plan::layout::BYTES_PER_POINT;
 
 /// Resident bytes of an M3C2 unit over `points` points.
 pub fn need(points: u64) -> u64 {
     points * BYTES_PER_POINT + (4 << 20)
 }
 
-/// Compute tile `tile` of unit `unit`'s pair into `out`.
-pub fn run(
-    ctx: &Ctx,
-    unit: usize,
-    tile: TileId,
-    out: &mut UnitWriter,
-) -> Result<serde_json::Value> {
-    let plan = ctx.plan;
-    let deps = &plan.units[unit].deps;
-    let count = |t: usize| -> Result<u64> {
-        let path = ctx.input(t, &super::tiling::tile_file(tile))?;
-        Ok(talus_tiling::read_tile_header(&path)
-            .map_err(|e| super::damaged(&path, e))?
-            .point_count)
+/// Normals and M3C2 for the core points one tile owns, for one pair.
+pub struct M3c2Stage;
+
+/// What an M3C2 unit records.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+pub struct M3c2Meta {
+    /// Result chunk files ([`chunk_file`]).
+    pub chunks: usize,
+    /// Core points the tile owns (rows over its chunks).
+    pub core_points: u64,
+    /// Points the tile owns, both surveys.
+    pub points: u64,
+    /// Points of both surveys in the tile's halo box.
+    pub halo_points: u64,
+    /// Core points whose walk left the tile, walked again over the points along their axes.
+    pub walked_beyond_tile: usize,
+    /// Points gathered along those axes.
+    pub points_along: usize,
+    /// Core points whose missing survey was measured beyond the cylinder ([`Reach::Extended`]).
+    pub extended: usize,
+    /// Core points whose other survey lies beyond the user's half-length.
+    pub beyond_reach: usize,
+}
+
+impl Stage for M3c2Stage {
+    const KIND: &'static str = "m3c2";
+    const SCOPE: Scope = Scope::Tile;
+    const LINE: Line = Line {
+        name: "pass 2: normals and M3C2",
+        counts: "points",
+        total: Total::PairPoints,
     };
+    type Meta = M3c2Meta;
+
+    /// An M3C2 unit per pair and tile, reading the pair's two tilings and the run's core points
+    /// (the user's, a campaign's, or none: the before survey thinned inside the unit).
+    fn plan(p: &mut Planner) -> Result<()> {
+        let grid = p.plan.layout.grid()?;
+        let m3c2 = format!(
+            "{:?}|{}",
+            p.plan.params.m3c2(),
+            p.plan.params.core_spacing.value
+        );
+        let core_unit = p
+            .find(&Spec::run(UserCoresStage::KIND))
+            .or_else(|| p.find(&Spec::survey(ThinnedStage::KIND, 0)));
+        let cores = cores_key(core_unit);
+        for pair in 0..p.plan.pairs.len() {
+            fit::check_planned(p.plan, pair)?;
+            let (b, a) = (p.plan.pairs[pair].before, p.plan.pairs[pair].after);
+            let tb = p.the(&Spec::survey(TilingStage::KIND, b))?;
+            let ta = p.the(&Spec::survey(TilingStage::KIND, a))?;
+            let label = p.plan.pairs[pair].label.clone();
+            for t in grid.tiles() {
+                p.add(
+                    Spec::tile(Self::KIND, pair, t),
+                    &format!("{label}-{}", t.name()),
+                    &[&m3c2, cores],
+                    [tb, ta].into_iter().chain(core_unit).collect(),
+                );
+            }
+        }
+        Ok(())
+    }
+
+    fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<M3c2Meta> {
+        run(ctx, unit, out)
+    }
+}
+
+/// Where the core points come from, as the M3C2 and outputs units' keys say it: a core-point
+/// unit's (its key is a dependency's), or each M3C2 unit's own thinning of the before survey.
+pub fn cores_key(core_unit: Option<usize>) -> &'static str {
+    match core_unit {
+        Some(_) => "core-point unit",
+        None => "thinned C1",
+    }
+}
+
+/// Compute unit `unit` (a tile of a pair) into `out`.
+fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<M3c2Meta> {
+    let plan = ctx.plan;
+    let (pair, tile) = (ctx.pair(unit)?, ctx.tile(unit)?);
+    let p = &plan.pairs[pair];
+    let (tb, ta) = (ctx.tiling(p.before)?, ctx.tiling(p.after)?);
     // The pair's densest tile first: a budget that cannot hold it is refused by whichever M3C2
     // unit runs first, not after the tiles before it.
-    let points =
-        crate::plan::fit::pair_tile_points(plan, &ctx.meta(deps[0])?, &ctx.meta(deps[1])?)?;
-    let halo_points = match points {
-        Some(p) => {
-            crate::plan::fit::check_tiled(plan, &p)?;
-            p[plan.layout.grid()?.index(tile)]
-        }
-        None => count(deps[0])? + count(deps[1])?,
-    };
+    let points = fit::pair_tile_points(
+        plan,
+        &ctx.meta::<TilingStage>(tb)?,
+        &ctx.meta::<TilingStage>(ta)?,
+    )?;
+    fit::check_tiled(plan, &points)?;
+    let halo_points = points[plan.layout.grid()?.index(tile)];
     let _held = ctx.reserve(
         need(halo_points),
         &format!("tile {} ({halo_points} points with its halo)", tile.name()),
     )?;
     let (before, after) = std::thread::scope(|s| {
         // Both epochs at once: decompressing a tile is one thread's work.
-        let a = s.spawn(|| read_tile(ctx, deps[1], tile));
-        let b = read_tile(ctx, deps[0], tile);
+        let a = s.spawn(|| read_tile(ctx, ta, tile));
+        let b = read_tile(ctx, tb, tile);
         let a = a
             .join()
             .unwrap_or_else(|_| Err(Error::Internal("a tile reader panicked".into())));
         (b, a)
     });
     let (before, after) = (before?, after?);
-    let user_cores = match deps.get(2) {
-        Some(&c) => Some(cores::read(ctx, c, tile)?),
+    let core_unit = ctx
+        .dep::<UserCoresStage>(unit)
+        .or_else(|| ctx.dep::<ThinnedStage>(unit));
+    let user_cores = match core_unit {
+        Some(c) => Some(super::cores::read(ctx, c, tile)?),
         None => None,
     };
     fn epoch(t: &TilePoints) -> EpochPoints<'_> {
@@ -91,10 +163,6 @@ pub fn run(
             owned: &t.owned,
         }
     }
-    let pair = match plan.units[unit].spec {
-        Spec::M3c2 { pair, .. } => pair,
-        _ => return Err(Error::Internal("an M3C2 unit without a pair".into())),
-    };
     let extent = tile_extent(plan, pair, tile)?;
     let params = plan.params.m3c2();
     let mut results = compute(
@@ -117,7 +185,7 @@ pub fn run(
         let wanted: Vec<KeyedResult> = pending.iter().map(|&i| results[i]).collect();
         let [b, a] = gather_along(
             ctx,
-            [deps[0], deps[1]],
+            [tb, ta],
             tile,
             [&before, &after],
             &wanted,
@@ -134,16 +202,16 @@ pub fn run(
     let chunks = write_chunks(out, &results)?;
     (ctx.progress)(points);
     let count = |reach: Reach| results.iter().filter(|k| k.r.reach == reach).count();
-    Ok(serde_json::json!({
-        "chunks": chunks,
-        "core_points": results.len(),
-        "points": points,
-        "halo_points": halo_points,
-        "extended": count(Reach::Extended),
-        "beyond_reach": count(Reach::Beyond),
-        "walked_beyond_tile": pending.len(),
-        "points_along": along,
-    }))
+    Ok(M3c2Meta {
+        chunks,
+        core_points: results.len() as u64,
+        points,
+        halo_points,
+        extended: count(Reach::Extended),
+        beyond_reach: count(Reach::Beyond),
+        walked_beyond_tile: pending.len(),
+        points_along: along,
+    })
 }
 
 /// Where the walks of tile `tile`'s core points may look (global coordinates): the pair's
@@ -370,11 +438,8 @@ pub fn pair_chunks(ctx: &Ctx, pair: usize) -> Result<Vec<Vec<PathBuf>>> {
     let grid = ctx.plan.layout.grid()?;
     grid.tiles()
         .map(|t| {
-            let u = ctx.unit(&Spec::M3c2 {
-                pair,
-                tile: [t.col, t.row],
-            })?;
-            let n = meta_u64(&ctx.meta(u)?, "chunks")? as usize;
+            let u = ctx.unit(&Spec::tile(M3c2Stage::KIND, pair, t))?;
+            let n = ctx.meta::<M3c2Stage>(u)?.chunks;
             (0..n).map(|k| ctx.input(u, &chunk_file(k))).collect()
         })
         .collect()
@@ -385,11 +450,8 @@ pub fn pair_count(ctx: &Ctx, pair: usize) -> Result<u64> {
     let grid = ctx.plan.layout.grid()?;
     let mut n = 0;
     for t in grid.tiles() {
-        let u = ctx.unit(&Spec::M3c2 {
-            pair,
-            tile: [t.col, t.row],
-        })?;
-        n += meta_u64(&ctx.meta(u)?, "core_points")?;
+        let u = ctx.unit(&Spec::tile(M3c2Stage::KIND, pair, t))?;
+        n += ctx.meta::<M3c2Stage>(u)?.core_points;
     }
     Ok(n)
 }
@@ -486,175 +548,5 @@ impl Merged {
             self.advance_chunk(t)?;
         }
         Ok(Some(r))
-    }
-}
-
-/// The user's core points (`--core-points`), cut into the layout's tiles once for every M3C2
-/// unit: each tile's file holds the points it owns, keyed by their order in the input (so
-/// m3c2.laz gives them back in that order).
-pub mod cores {
-    use super::*;
-
-    /// The file of tile `id`'s core points.
-    pub fn file(id: TileId) -> String {
-        format!("c_{}.tile", id.name())
-    }
-
-    /// Resident bytes per user core point while it is cut: the key and point (32), the columns
-    /// written (32).
-    pub const CORE_POINT_BYTES: u64 = 64;
-
-    /// Cut the plan's core-point file into `out`.
-    pub fn run(ctx: &Ctx, out: &mut UnitWriter) -> Result<serde_json::Value> {
-        let plan = ctx.plan;
-        let grid = plan.layout.grid()?;
-        let input = plan
-            .core_points
-            .as_ref()
-            .ok_or_else(|| Error::Internal("a core-point unit without core points".into()))?;
-        // When the header's count fits the unit's share of the pool, one pass. Otherwise a first
-        // pass counts each tile's points; then tiles are taken in batches whose points fit the
-        // share, one pass over the file per batch: never the whole file at once (a core-point
-        // file can be as large as a survey).
-        let pass = |f: &mut dyn FnMut(u64, usize, Point3) -> Result<()>| -> Result<u64> {
-            let mut reader = crate::io::open(&input.path)?;
-            let mut buf = Vec::new();
-            let mut n = 0u64;
-            while reader.fill(&mut buf, 1 << 16)? > 0 {
-                for p in &buf {
-                    f(n, grid.index(grid.owner(p[0], p[1])), *p)?;
-                    n += 1;
-                }
-                crate::interrupt::check()?;
-            }
-            Ok(n)
-        };
-        let share = (ctx.pool.limit() / 4).max(CORE_POINT_BYTES);
-        let total = crate::io::open(&input.path)?.info().point_count;
-        if total * CORE_POINT_BYTES <= share {
-            // All of them fit: one pass.
-            let _held = ctx.reserve(
-                total * CORE_POINT_BYTES + (4 << 20),
-                &format!("{total} core points of {}", input.path.display()),
-            )?;
-            let mut by_tile: Vec<Vec<(u64, Point3)>> = vec![Vec::new(); grid.len()];
-            let n = pass(&mut |k, t, p| {
-                by_tile[t].push((k, p));
-                Ok(())
-            })?;
-            for id in grid.tiles() {
-                write(out, id, &by_tile[grid.index(id)])?;
-            }
-            return Ok(serde_json::json!({ "points": n }));
-        }
-        let mut counts = vec![0u64; grid.len()];
-        let n = pass(&mut |_, t, _| {
-            counts[t] += 1;
-            Ok(())
-        })?;
-        let tiles: Vec<TileId> = grid.tiles().collect();
-        let mut start = 0;
-        while start < tiles.len() {
-            let mut end = start + 1;
-            let mut points = counts[grid.index(tiles[start])];
-            while end < tiles.len()
-                && (points + counts[grid.index(tiles[end])]) * CORE_POINT_BYTES <= share
-            {
-                points += counts[grid.index(tiles[end])];
-                end += 1;
-            }
-            let _held = ctx.reserve(
-                points * CORE_POINT_BYTES + (4 << 20),
-                &format!("{points} core points of {}", input.path.display()),
-            )?;
-            let mut by_tile: Vec<Vec<(u64, Point3)>> = vec![Vec::new(); end - start];
-            let batch: Vec<usize> = tiles[start..end].iter().map(|&t| grid.index(t)).collect();
-            pass(&mut |k, t, p| {
-                if let Some(b) = batch.iter().position(|&x| x == t) {
-                    by_tile[b].push((k, p));
-                }
-                Ok(())
-            })?;
-            for (b, &id) in tiles[start..end].iter().enumerate() {
-                write(out, id, &by_tile[b])?;
-            }
-            start = end;
-        }
-        Ok(serde_json::json!({ "points": n }))
-    }
-
-    /// The core points of a campaign: the tiling `deps[0]` of unit `unit` thinned on the
-    /// core-point grid, tile by tile, keyed by their cells (the keys a pair's M3C2 unit gives
-    /// its own thinning: pair 0 of a campaign is a `compare` of its two surveys).
-    pub fn thinned(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<serde_json::Value> {
-        let plan = ctx.plan;
-        let tiling = plan.units[unit].deps[0];
-        let grid = plan.layout.grid()?;
-        let mut n = 0u64;
-        for id in grid.tiles() {
-            let path = ctx.input(tiling, &super::super::tiling::tile_file(id))?;
-            let count = talus_tiling::read_tile_header(&path)
-                .map_err(|e| super::super::damaged(&path, e))?
-                .point_count;
-            // The tile as read (25 bytes a point), its file's bytes, the thinning's cells.
-            let _held = ctx.reserve(
-                count * 64 + (4 << 20),
-                &format!("thinning tile {} ({count} points)", id.name()),
-            )?;
-            let t = read_tile(ctx, tiling, id)?;
-            let pts: Vec<(u64, Point3)> = crate::m3c2::core_points::thin(
-                t.len(),
-                |i| t.point(i),
-                &plan.layout.anchor,
-                plan.layout.core_spacing,
-                |i| t.owned[i],
-            )
-            .into_iter()
-            .map(|(k, i)| (k, t.point(i)))
-            .collect();
-            n += pts.len() as u64;
-            write(out, id, &pts)?;
-            (ctx.progress)(t.owned.iter().filter(|&&o| o).count() as u64);
-        }
-        Ok(serde_json::json!({ "points": n }))
-    }
-
-    /// Write tile `id`'s core points.
-    fn write(out: &mut UnitWriter, id: TileId, pts: &[(u64, Point3)]) -> Result<()> {
-        let col = |k: usize| pts.iter().map(|(_, p)| p[k]).collect::<Vec<f64>>();
-        let cols = TileColumns {
-            x: col(0),
-            y: col(1),
-            z: col(2),
-            extra: vec![
-                u32col(
-                    "key_hi",
-                    pts.iter().map(|(k, _)| (k >> 32) as u32).collect(),
-                ),
-                u32col("key_lo", pts.iter().map(|(k, _)| *k as u32).collect()),
-            ],
-        };
-        super::super::write_columns(out, &file(id), &cols)
-    }
-
-    /// Tile `id`'s core points from the core-point unit `unit`.
-    pub fn read(ctx: &Ctx, unit: usize, id: TileId) -> Result<Vec<(u64, Point3)>> {
-        let c = super::super::read_columns(ctx, unit, &file(id))?;
-        let (Some(ColumnData::U32(hi)), Some(ColumnData::U32(lo))) =
-            (c.column("key_hi"), c.column("key_lo"))
-        else {
-            return Err(Error::Damaged {
-                path: ctx.input(unit, &file(id))?,
-                problem: "no key columns".into(),
-            });
-        };
-        Ok((0..c.len())
-            .map(|i| {
-                (
-                    (hi[i] as u64) << 32 | lo[i] as u64,
-                    [c.x[i], c.y[i], c.z[i]],
-                )
-            })
-            .collect())
     }
 }

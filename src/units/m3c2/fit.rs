@@ -1,19 +1,19 @@
 //! Whether the memory budget can hold a pair's densest tile, the one need the tile layout cannot
-//! shrink (a tile is at least four halos wide, so a neighbourhood is never cut), and the merge of
-//! all its tiles' results: refused with exit 2 and the smallest budget that works, as early as it
-//! is certain.
+//! shrink (a tile is at least four halos wide, so a neighbourhood is never cut): refused with
+//! exit 2 and the smallest budget that works, as early as it is certain.
 //!
 //! Before anything runs, from the plan alone: every point is owned by exactly one tile, so some
 //! tile's halo box holds at least a pair's points over the number of tiles (a bound that holds
 //! whatever the points' layout; with one tile, the whole pair). Right after the pair's tilings,
 //! from their records' per-tile counts: the densest tile exactly, before any M3C2 unit holds
-//! anything (`units::m3c2::run`), so a dense patch late in the tile order does not cost the
+//! anything (`super::run`), so a dense patch late in the tile order does not cost the
 //! stage's other tiles first.
 
-use crate::error::Result;
+use super::need;
+use crate::error::{Error, Result};
 use crate::memory::refuse_unless_fits;
 use crate::plan::Plan;
-use crate::units::m3c2::need;
+use crate::units::tiling::TilingMeta;
 
 /// Refuse the plan when pair `pair`'s densest tile certainly does not fit the budget.
 pub fn check_planned(plan: &Plan, pair: usize) -> Result<()> {
@@ -36,37 +36,26 @@ pub fn check_planned(plan: &Plan, pair: usize) -> Result<()> {
             plan.layout.tile_size
         )
     };
-    refuse_unless_fits(need(least), plan.params.memory_bytes.value, &what)?;
-    // The largest need that grows with the tile count: the outputs unit's merge holds a chunk of
-    // every tile's results at once (a larger budget has fewer, larger tiles).
-    refuse_unless_fits(
-        crate::units::outputs::need(tiles as usize),
-        plan.params.memory_bytes.value,
-        &format!("writing {whose} outputs, merging the results of its {tiles} tiles"),
-    )
+    refuse_unless_fits(need(least), plan.params.memory_bytes.value, &what)
 }
 
 /// Points per tile of a pair (both surveys, halos included, in grid order) from its two tilings'
-/// records (`tile_points`); `None` for records written before they kept the counts.
-pub fn pair_tile_points(
-    plan: &Plan,
-    before: &serde_json::Value,
-    after: &serde_json::Value,
-) -> Result<Option<Vec<u64>>> {
-    let counts = |m: &serde_json::Value| -> Option<Vec<u64>> {
-        m.get("tile_points")?
-            .as_array()?
-            .iter()
-            .map(|v| v.as_u64())
-            .collect()
-    };
+/// records.
+pub fn pair_tile_points(plan: &Plan, before: &TilingMeta, after: &TilingMeta) -> Result<Vec<u64>> {
     let tiles = plan.layout.len();
-    Ok(match (counts(before), counts(after)) {
-        (Some(b), Some(a)) if b.len() == tiles && a.len() == tiles => {
-            Some(b.iter().zip(&a).map(|(b, a)| b + a).collect())
-        }
-        _ => None,
-    })
+    if before.tile_points.len() != tiles || after.tile_points.len() != tiles {
+        return Err(Error::Internal(format!(
+            "tilings of {} and {} tiles for a layout of {tiles}",
+            before.tile_points.len(),
+            after.tile_points.len()
+        )));
+    }
+    Ok(before
+        .tile_points
+        .iter()
+        .zip(&after.tile_points)
+        .map(|(b, a)| b + a)
+        .collect())
 }
 
 /// Refuse the budget when the densest of a pair's tiles (`points` per tile, in grid order, see

@@ -1,0 +1,345 @@
+//! A stage of the pipeline, described once: its kind, how many units it has (one per survey,
+//! pair, tile or run), which progress line it counts on, how it adds its units to a plan (its
+//! key parts, its dependencies found by what they are, the memory it can refuse early), how one
+//! of its units runs, and the typed meta its units record. The planner, the local executor,
+//! `talus worker`, the Slurm executor, progress, `plan-stats` and the outputs all read stages
+//! from the [`registry`]; none of them names a kind.
+//!
+//! Adding a stage is writing one module with a type that implements [`Stage`] and registering
+//! it: in [`DEFAULT`] (the pipeline's own stages, in pipeline order), or with [`register`] before
+//! anything reads the registry (`examples/survey_stage.rs` does so in its own `main`).
+
+use std::sync::OnceLock;
+
+use serde::de::DeserializeOwned;
+use serde::Serialize;
+
+use super::Ctx;
+use crate::error::{Error, Result};
+use crate::plan::{Plan, Spec};
+use crate::store::UnitWriter;
+
+/// How many units a stage has.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Scope {
+    /// One per survey (tiling).
+    Survey,
+    /// One per run (the user's core points, a campaign's outputs).
+    Run,
+    /// One per pair (stable ground, events, outputs).
+    Pair,
+    /// One per pair and tile (M3C2, volumes): a Slurm task runs several of them.
+    Tile,
+}
+
+/// The progress line a stage's units count on (stages may share one), and what it counts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Line {
+    pub name: &'static str,
+    pub counts: &'static str,
+    /// What the line's bar counts up to.
+    pub total: Total,
+}
+
+/// What a progress line counts up to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Total {
+    /// No known total (a spinner).
+    Unknown,
+    /// The surveys' points.
+    SurveyPoints,
+    /// The points of each pair's two surveys, over the pairs.
+    PairPoints,
+}
+
+impl Total {
+    /// The total for `plan`.
+    pub fn of(&self, plan: &Plan) -> Option<u64> {
+        match self {
+            Total::Unknown => None,
+            Total::SurveyPoints => Some(plan.surveys.iter().map(|s| s.points).sum()),
+            Total::PairPoints => Some(
+                plan.pairs
+                    .iter()
+                    .map(|p| plan.surveys[p.before].points + plan.surveys[p.after].points)
+                    .sum(),
+            ),
+        }
+    }
+}
+
+/// One kind of unit.
+pub trait Stage: Send + Sync + 'static {
+    /// Its kind: the plan's `spec.kind` and the store's folder (`units/<kind>/`).
+    const KIND: &'static str;
+    /// How many units it has.
+    const SCOPE: Scope;
+    /// The progress line (and summary.json stage) its units count on.
+    const LINE: Line;
+    /// What its units record (their record's meta, beside the executor's [`Timing`]). A field
+    /// missing from a record is an error naming the unit, never a default.
+    type Meta: Serialize + DeserializeOwned;
+
+    /// Add its units to the plan (after every stage before it in the registry has added its
+    /// own): their key parts (the parameters they use, the input files' keys) and dependencies
+    /// (found by what they are: [`Planner::find`]). A need that certainly does not fit the memory
+    /// budget is refused here, before anything runs.
+    fn plan(p: &mut Planner) -> Result<()>;
+
+    /// Run unit `unit` of the plan, writing its files into `out`.
+    fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<Self::Meta>;
+
+    /// For a stage whose units publish DIR's outputs: which names in DIR are its outputs (so
+    /// that publishing replaces them and nothing else), and the list its meta holds.
+    fn publishes() -> Option<Publishes<Self::Meta>> {
+        None
+    }
+}
+
+/// What a publishing stage gives the executor.
+pub struct Publishes<M> {
+    /// Whether a name in DIR is one of this stage's outputs.
+    pub is_output: fn(&str) -> bool,
+    /// The files to publish, from a unit's meta.
+    pub list: fn(&M) -> &[super::outputs::Publish],
+}
+
+/// What the executor adds to every unit's record: how long it ran and its peak resident memory.
+#[derive(Debug, Clone, Copy, Default, Serialize, serde::Deserialize)]
+pub struct Timing {
+    pub seconds: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub peak_rss_bytes: Option<u64>,
+}
+
+/// A stage as the drivers see it: [`Stage`] without its types.
+pub trait Registered: Send + Sync {
+    fn kind(&self) -> &'static str;
+    fn scope(&self) -> Scope;
+    fn line(&self) -> Line;
+    fn plan(&self, p: &mut Planner) -> Result<()>;
+    fn run(&self, ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<serde_json::Value>;
+    fn is_output(&self) -> Option<fn(&str) -> bool>;
+    fn publish_list(
+        &self,
+        unit: &str,
+        meta: &serde_json::Value,
+    ) -> Result<Option<Vec<super::outputs::Publish>>>;
+}
+
+struct Entry<S>(std::marker::PhantomData<S>);
+
+impl<S: Stage> Registered for Entry<S> {
+    fn kind(&self) -> &'static str {
+        S::KIND
+    }
+    fn scope(&self) -> Scope {
+        S::SCOPE
+    }
+    fn line(&self) -> Line {
+        S::LINE
+    }
+    fn plan(&self, p: &mut Planner) -> Result<()> {
+        S::plan(p)
+    }
+    fn run(&self, ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<serde_json::Value> {
+        let meta = S::run(ctx, unit, out)?;
+        serde_json::to_value(&meta)
+            .map_err(|e| Error::Internal(format!("unit {}: meta: {e}", ctx.plan.units[unit].name)))
+    }
+    fn is_output(&self) -> Option<fn(&str) -> bool> {
+        S::publishes().map(|p| p.is_output)
+    }
+    fn publish_list(
+        &self,
+        unit: &str,
+        meta: &serde_json::Value,
+    ) -> Result<Option<Vec<super::outputs::Publish>>> {
+        let Some(p) = S::publishes() else {
+            return Ok(None);
+        };
+        let m: S::Meta = typed_meta(unit, meta)?;
+        Ok(Some((p.list)(&m).to_vec()))
+    }
+}
+
+/// `meta` (unit `unit`'s record) as `M`; an error naming the unit when a field is missing.
+pub fn typed_meta<M: DeserializeOwned>(unit: &str, meta: &serde_json::Value) -> Result<M> {
+    M::deserialize(meta)
+        .map_err(|e| Error::Internal(format!("unit {unit}: its record's meta: {e}")))
+}
+
+/// The stage `S` as the registry holds it.
+pub fn entry<S: Stage>() -> &'static dyn Registered {
+    // A zero-sized entry per stage type: leaking it costs nothing.
+    Box::leak(Box::new(Entry::<S>(std::marker::PhantomData)))
+}
+
+/// The pipeline's stages, in pipeline order: a stage's units depend only on units of stages
+/// before it (the Slurm executor runs one job array per stage in this order).
+pub fn default_stages() -> Vec<&'static dyn Registered> {
+    use super::*;
+    vec![
+        entry::<tiling::TilingStage>(),
+        entry::<cores::UserCoresStage>(),
+        entry::<cores::ThinnedStage>(),
+        entry::<m3c2::M3c2Stage>(),
+        entry::<stable::StableStage>(),
+        entry::<events::EventsStage>(),
+        entry::<volumes::VolumesStage>(),
+        entry::<outputs::OutputsStage>(),
+        entry::<campaign::CampaignStage>(),
+    ]
+}
+
+/// The stages of this program.
+pub struct Registry {
+    stages: Vec<&'static dyn Registered>,
+}
+
+static REGISTRY: OnceLock<Registry> = OnceLock::new();
+static EXTRA: std::sync::Mutex<Vec<(&'static str, &'static dyn Registered)>> =
+    std::sync::Mutex::new(Vec::new());
+
+/// Register stage `S` after the stage of kind `after` (a program's own stage: call it first thing
+/// in `main`, before anything reads the [`registry`]). Every process that runs the plan
+/// (`talus worker`, a Slurm task) must be the same program: the registry is not in the plan.
+pub fn register<S: Stage>(after: &'static str) -> Result<()> {
+    if REGISTRY.get().is_some() {
+        return Err(Error::Internal(format!(
+            "stage {} registered after the registry was read",
+            S::KIND
+        )));
+    }
+    EXTRA
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .push((after, entry::<S>()));
+    Ok(())
+}
+
+/// The registry: the default stages, with the registered ones in their places.
+pub fn registry() -> &'static Registry {
+    REGISTRY.get_or_init(|| {
+        let mut stages = default_stages();
+        for (after, s) in EXTRA.lock().unwrap_or_else(|e| e.into_inner()).iter() {
+            let at = stages
+                .iter()
+                .position(|x| x.kind() == *after)
+                .map_or(stages.len(), |i| i + 1);
+            stages.insert(at, *s);
+        }
+        Registry { stages }
+    })
+}
+
+impl Registry {
+    /// The stages in pipeline order.
+    pub fn stages(&self) -> &[&'static dyn Registered] {
+        &self.stages
+    }
+
+    /// The stage of `kind`.
+    pub fn get(&self, kind: &str) -> Result<&'static dyn Registered> {
+        self.stages
+            .iter()
+            .copied()
+            .find(|s| s.kind() == kind)
+            .ok_or_else(|| {
+                Error::Internal(format!(
+                    "a unit of kind {kind}, which this program has no stage for (a plan of \
+                     another program?)"
+                ))
+            })
+    }
+
+    /// The rank of `kind` in pipeline order.
+    pub fn rank(&self, kind: &str) -> Option<usize> {
+        self.stages.iter().position(|s| s.kind() == kind)
+    }
+
+    /// The progress lines in pipeline order, each once.
+    pub fn lines(&self) -> Vec<Line> {
+        let mut out: Vec<Line> = Vec::new();
+        for s in &self.stages {
+            if !out.iter().any(|l| l.name == s.line().name) {
+                out.push(s.line());
+            }
+        }
+        out
+    }
+}
+
+/// Where the run's core points come from, as planned.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CoreSource {
+    /// Each pair's before survey, thinned tile by tile inside its M3C2 units.
+    PerPair,
+    /// The user's core-point file (the plan's `core_points`).
+    UserFile,
+    /// A campaign: the first survey thinned once, for every pair.
+    Campaign,
+}
+
+/// What the stages add their units through.
+pub struct Planner<'a> {
+    pub plan: &'a mut Plan,
+    pub cores: CoreSource,
+    /// A campaign's title (None: a comparison).
+    pub campaign: Option<String>,
+}
+
+impl Planner<'_> {
+    /// The unit of `spec`, if planned.
+    pub fn find(&self, spec: &Spec) -> Option<usize> {
+        self.plan.find(spec)
+    }
+
+    /// The unit of `spec`, which an earlier stage must have planned.
+    pub fn the(&self, spec: &Spec) -> Result<usize> {
+        self.find(spec)
+            .ok_or_else(|| Error::Internal(format!("no unit {spec:?} planned before")))
+    }
+
+    /// Add a unit (see [`Plan::push`]); the unit of `spec` if it is planned already (a survey
+    /// tiled once serves every pair it is in).
+    pub fn add(&mut self, spec: Spec, label: &str, key_parts: &[&str], deps: Vec<usize>) -> usize {
+        match self.find(&spec) {
+            Some(i) => i,
+            None => self.plan.push(spec, label, key_parts, deps),
+        }
+    }
+
+    /// The units of `kind` for pair `pair`, in plan order.
+    pub fn of_pair(&self, kind: &str, pair: usize) -> Vec<usize> {
+        self.plan.of_pair(kind, pair).collect()
+    }
+}
+
+/// Plan the units of every pair of `plan` (and of the campaign, when `campaign` names one):
+/// each stage in pipeline order adds its own. The final unit's key becomes the run's id.
+pub fn plan_units(plan: &mut Plan, cores: CoreSource, campaign: Option<&str>) -> Result<()> {
+    let mut p = Planner {
+        plan,
+        cores,
+        campaign: campaign.map(str::to_string),
+    };
+    for s in registry().stages() {
+        s.plan(&mut p)?;
+    }
+    let last = final_unit(p.plan)?;
+    p.plan.run = p.plan.units[last].key.clone();
+    Ok(())
+}
+
+/// The plan's final unit: the last unit of a stage that publishes DIR's outputs.
+pub fn final_unit(plan: &Plan) -> Result<usize> {
+    let reg = registry();
+    (0..plan.units.len())
+        .rev()
+        .find(|&i| {
+            reg.get(plan.units[i].kind())
+                .is_ok_and(|s| s.is_output().is_some())
+        })
+        .ok_or_else(|| Error::Internal("a plan without an outputs unit".into()))
+}
