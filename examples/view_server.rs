@@ -12,12 +12,18 @@ fn main() {
         eprintln!("usage: view_server DIR");
         std::process::exit(2);
     };
-    let viewer = talus::view::Viewer::from_env();
-    let result = talus::view::serve(&dir, talus::view::DEFAULT_BIND, 0, &viewer, |addr| {
-        let mut out = std::io::stdout().lock();
-        let _ = writeln!(out, "talus viewer: http://{addr}/");
-        let _ = out.flush();
-    });
+    let viewer = talus::commands::view::Viewer::from_env();
+    let result = talus::commands::view::serve(
+        &dir,
+        talus::commands::view::DEFAULT_BIND,
+        0,
+        &viewer,
+        |addr| {
+            let mut out = std::io::stdout().lock();
+            let _ = writeln!(out, "talus viewer: http://{addr}/");
+            let _ = out.flush();
+        },
+    );
     if let Err(e) = result {
         eprintln!("view_server: {e}");
         std::process::exit(e.exit_code());

@@ -12,12 +12,12 @@
 //! [`synth`] writes synthetic pairs with exact ground truth; [`view`] serves the viewer.
 
 pub mod campaign;
+pub mod cli;
 pub mod commands;
-pub mod compare;
 pub mod error;
 pub mod events;
 pub mod exec;
-pub mod info;
+pub mod geom;
 pub mod interrupt;
 pub mod io;
 pub mod m3c2;
@@ -30,7 +30,6 @@ pub mod spatial;
 pub mod store;
 pub mod synth;
 pub mod units;
-pub mod view;
 pub mod volume;
 
 pub use error::{Error, Result};

@@ -19,8 +19,9 @@ mod common;
 use std::path::Path;
 
 use serde_json::Value;
+use talus::io::mesh_ply::read_ply_mesh;
 use talus::synth::Truth;
-use talus::volume::{check_watertight, read_ply_mesh};
+use talus::volume::check_watertight;
 
 /// Relative volume tolerance of the issue: 2 % of the true volume.
 const REL_TOL: f64 = 0.02;

@@ -5,9 +5,10 @@
 
 use talus::events::dbscan::dbscan;
 use talus::events::{describe, filter, smooth::smooth, Event, Kind};
+use talus::io::mesh_ply::{read_ply_mesh, write_ply};
 use talus::volume::{
-    check_watertight, event_volume, event_volume_from_surfaces, read_ply_mesh, write_ply,
-    EventVolume, Footprint, Frame, Mesh, UserMesh,
+    check_watertight, event_volume, event_volume_from_surfaces, EventVolume, Footprint, Frame,
+    Mesh, UserMesh,
 };
 
 // ---------------------------------------------------------------- random numbers

@@ -75,9 +75,9 @@ fn start() -> Fixture {
     }
 
     let (tx, rx) = mpsc::channel();
-    let viewer_root = talus::view::Viewer::Dir(viewer.clone());
+    let viewer_root = talus::commands::view::Viewer::Dir(viewer.clone());
     std::thread::spawn(move || {
-        let result = talus::view::serve(
+        let result = talus::commands::view::serve(
             &dir,
             IpAddr::V4(Ipv4Addr::LOCALHOST),
             0,
@@ -303,12 +303,13 @@ fn serve_reports_missing_viewer_files_and_non_result_dirs() {
     let viewer = tmp.path().join("viewer");
     write(&viewer.join("index.html"), b"x");
     std::fs::create_dir_all(viewer.join("src")).unwrap();
-    let viewer = talus::view::Viewer::Dir(viewer);
+    let viewer = talus::commands::view::Viewer::Dir(viewer);
     let dir = tmp.path().join("result");
     write(&dir.join("view.json"), b"{}");
     let lo = IpAddr::V4(Ipv4Addr::LOCALHOST);
 
-    let err = talus::view::serve(&dir, lo, 0, &viewer, |_| panic!("must not start")).unwrap_err();
+    let err = talus::commands::view::serve(&dir, lo, 0, &viewer, |_| panic!("must not start"))
+        .unwrap_err();
     assert!(
         err.to_string()
             .contains("vendor/three/build/three.module.js is missing"),
@@ -319,7 +320,8 @@ fn serve_reports_missing_viewer_files_and_non_result_dirs() {
     let not_result = tmp.path().join("empty");
     std::fs::create_dir_all(&not_result).unwrap();
     let err =
-        talus::view::serve(&not_result, lo, 0, &viewer, |_| panic!("must not start")).unwrap_err();
+        talus::commands::view::serve(&not_result, lo, 0, &viewer, |_| panic!("must not start"))
+            .unwrap_err();
     assert!(err.to_string().contains("view.json"), "{err}");
     assert!(matches!(err, talus::Error::Input { .. }));
 }
@@ -397,7 +399,7 @@ fn trickling_clients_cannot_lock_others_out() {
             .expect("the server closed the slow client");
         let after = closed - t0;
         assert!(
-            after < talus::view::HEAD_DEADLINE + Duration::from_secs(3),
+            after < talus::commands::view::HEAD_DEADLINE + Duration::from_secs(3),
             "closed after {after:?}"
         );
     }

@@ -1,7 +1,8 @@
 //! Campaigns: many surveys of one site (SPEC.md §5). [`epochs`] dates and orders the surveys and
-//! makes the pairs; [`tracks`] follows events from pair to pair.
+//! makes the pairs; [`tracks`] follows events from pair to pair; [`powerlaw`] fits the
+//! magnitude–frequency law; [`report`] draws report.html. The command is
+//! `crate::commands::campaign`.
 
-pub mod command;
 pub mod epochs;
 pub mod tracks;
 

@@ -6,7 +6,7 @@
 //! groups of such links, numbered from 1 in the order of their first event (by pair, then id).
 
 use crate::events::Obb;
-use crate::io::Point3;
+use crate::geom::Point3;
 use crate::volume::boundary;
 
 /// An event as tracking sees it.

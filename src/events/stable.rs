@@ -25,7 +25,7 @@
 //! Everything is deterministic: pairs are drawn with a fixed-seed generator from the points in
 //! the order given (the callers give them in core-point key order).
 
-use crate::io::Point3;
+use crate::geom::Point3;
 use rayon::prelude::*;
 
 use crate::spatial::Index;

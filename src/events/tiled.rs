@@ -14,7 +14,7 @@ use talus_tiling::TileGrid;
 
 use super::dbscan;
 use crate::error::Result;
-use crate::io::Point3;
+use crate::geom::Point3;
 
 /// DBSCAN labels (0 = noise, clusters numbered by the merge) of `pts`, whose global keys are
 /// `keys`, computed tile by tile over `grid`.

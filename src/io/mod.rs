@@ -10,57 +10,12 @@ use crate::error::{Error, Result};
 
 pub mod las;
 pub mod las_out;
+pub mod mesh_ply;
 pub mod ply;
 pub mod result_table;
 pub mod text;
 
-/// One point in global coordinates.
-pub type Point3 = [f64; 3];
-
-/// Axis-aligned bounds of a cloud.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Bounds {
-    pub min: Point3,
-    pub max: Point3,
-}
-
-impl Bounds {
-    /// The bounds of all of `bounds`.
-    pub fn union(bounds: &[Bounds]) -> Bounds {
-        let mut u = Bounds::empty();
-        for b in bounds {
-            u.grow(&b.min);
-            u.grow(&b.max);
-        }
-        u
-    }
-
-    /// Empty bounds (min = +inf, max = -inf), ready to [`Bounds::grow`].
-    pub fn empty() -> Self {
-        Bounds {
-            min: [f64::INFINITY; 3],
-            max: [f64::NEG_INFINITY; 3],
-        }
-    }
-    /// Extend to contain `p`.
-    pub fn grow(&mut self, p: &Point3) {
-        for ((lo, hi), &v) in self.min.iter_mut().zip(&mut self.max).zip(p) {
-            *lo = lo.min(v);
-            *hi = hi.max(v);
-        }
-    }
-    /// True when no point was added.
-    pub fn is_empty(&self) -> bool {
-        self.min[0] > self.max[0]
-    }
-    /// Do the XY footprints of the two bounds intersect?
-    pub fn overlaps_xy(&self, other: &Bounds) -> bool {
-        self.min[0] <= other.max[0]
-            && other.min[0] <= self.max[0]
-            && self.min[1] <= other.max[1]
-            && other.min[1] <= self.max[1]
-    }
-}
+pub use crate::geom::{Bounds, Point3};
 
 /// The file format of a point cloud.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]

@@ -137,7 +137,7 @@ struct Header {
 }
 
 /// Read a PLY header up to `end_header`: the encoding and the elements with their properties.
-/// Shared by the point reader and the mesh reader ([`crate::volume::read_ply_mesh`]).
+/// Shared by the point reader and the mesh reader ([`super::mesh_ply::read_ply_mesh`]).
 pub(crate) fn parse_elements(
     path: &Path,
     r: &mut BufReader<File>,

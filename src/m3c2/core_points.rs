@@ -7,7 +7,7 @@
 
 use rustc_hash::FxHashMap as HashMap;
 
-use crate::io::Point3;
+use crate::geom::Point3;
 
 /// A cell of the core-point grid.
 pub type Cell = [i64; 3];

@@ -26,7 +26,7 @@
 use std::ops::Range;
 
 use super::moments::Moments1;
-use crate::io::Point3;
+use crate::geom::Point3;
 use crate::spatial::{in_cylinder, Columns};
 
 /// Projections of one epoch's points inside one cylinder.

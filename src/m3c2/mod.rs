@@ -12,7 +12,7 @@ pub mod tile;
 
 use rayon::prelude::*;
 
-use crate::io::Point3;
+use crate::geom::Point3;
 use crate::spatial::Columns;
 pub use orientation::Orientation;
 pub use reach::{Extent, Reach, Walk};

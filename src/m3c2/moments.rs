@@ -16,7 +16,7 @@
 //! value only when `keep`, without a branch: about half the candidates of a neighbourhood are
 //! rejected, in no predictable pattern.
 
-use crate::io::Point3;
+use crate::geom::Point3;
 
 /// Bits of a quantised value's magnitude (relative to the extent).
 const BITS: i32 = 26;

@@ -9,7 +9,7 @@
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 
 use super::moments::Moments3;
-use crate::io::Point3;
+use crate::geom::Point3;
 use crate::spatial::Columns;
 
 /// Fewer neighbours than this leave the normal undefined (a plane needs three points).

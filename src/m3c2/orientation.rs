@@ -24,7 +24,7 @@ use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 use std::str::FromStr;
 
-use crate::io::Point3;
+use crate::geom::Point3;
 use crate::spatial::{Columns, Index};
 
 /// How normals are oriented (`--orientation`).

@@ -38,7 +38,7 @@
 
 use super::cylinder::CylinderStats;
 use super::moments::Moments1;
-use crate::io::Point3;
+use crate::geom::Point3;
 use crate::spatial::{in_cylinder, Columns};
 
 /// The largest spread (standard deviation along the axis, in cylinder radii) of a surface the

@@ -8,7 +8,7 @@
 //! whole-cloud run.
 
 use super::{core_points, CoreResult, Extent, M3c2Params};
-use crate::io::Point3;
+use crate::geom::Point3;
 use crate::spatial::Columns;
 
 /// One epoch's points in a tile (as the tile file holds them: a column per coordinate), with

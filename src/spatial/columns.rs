@@ -11,7 +11,7 @@
 //! scan is short; on a cliff the height bound skips the rest of the face. The final test is exact,
 //! so the grid only decides which points are tested, never which are accepted.
 
-use crate::io::Point3;
+use crate::geom::Point3;
 
 /// At most this many columns per point: a sparse cloud over a wide extent gets wider columns
 /// rather than a mostly empty table.

@@ -5,7 +5,7 @@
 //! (a rotated strip, a cliff line) has a mean far below its density, so a tile sized from the
 //! mean would not fit the budget where the points are.
 
-use crate::io::{Bounds, Point3};
+use crate::geom::{Bounds, Point3};
 
 /// Cells along the bounds' longer side: a square's count is bounded within about 1/CELLS of the
 /// bounds' extent per side, with 1 MiB of counts.

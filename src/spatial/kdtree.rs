@@ -4,7 +4,7 @@ use std::num::NonZeroUsize;
 
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 
-use crate::io::Point3;
+use crate::geom::Point3;
 
 /// An indexed point set. Points are stored relative to `origin`; query points must be given in
 /// the same local frame (see [`Index::to_local`]).

@@ -11,7 +11,7 @@
 
 use rustc_hash::FxHashMap as HashMap;
 
-use crate::io::Point3;
+use crate::geom::Point3;
 
 /// The most cells registered over all tubes: the cells grow when the tubes are long.
 const MAX_ENTRIES: f64 = 4e6;

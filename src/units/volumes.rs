@@ -380,8 +380,8 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
         let ownership = ownership(&relevant, &members, params);
         let user = match &plan.meshes {
             Some([b, a]) => Some((
-                volume::read_ply_mesh(&b.path)?,
-                volume::read_ply_mesh(&a.path)?,
+                crate::io::mesh_ply::read_ply_mesh(&b.path)?,
+                crate::io::mesh_ply::read_ply_mesh(&a.path)?,
             )),
             None => None,
         };
@@ -510,7 +510,8 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
                 // Written plainly, the digest computed on the way: the unit's commit makes them
                 // durable (a sync and a read-back per file cost 2 × 1028 of each at 120M).
                 for (name, solid) in names.iter().zip([&v.before_solid, &v.after_solid]) {
-                    let (crc, size) = volume::write_ply_digest(&out.path(name)?, solid)?;
+                    let (crc, size) =
+                        crate::io::mesh_ply::write_ply_digest(&out.path(name)?, solid)?;
                     out.add(name, crc, size);
                 }
             }

@@ -27,7 +27,6 @@
 pub mod axis;
 pub mod boundary;
 pub mod frame;
-pub mod mesh_ply;
 pub mod ownership;
 pub mod region;
 pub mod solid;
@@ -36,9 +35,9 @@ pub mod uncertainty;
 pub mod user_mesh;
 
 pub use frame::{Footprint, Frame};
-pub use mesh_ply::{check_watertight, read_ply_mesh, write_ply, write_ply_digest};
 pub use ownership::{Claim, Ownership};
 pub use region::{Cells, OpenRim, Polygon, Region};
+pub use solid::check_watertight;
 pub use solid::Mesh;
 pub use surface::{Surface, Tin};
 pub use user_mesh::UserMesh;

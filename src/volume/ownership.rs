@@ -11,7 +11,7 @@
 //! exactly what the others include.
 
 use super::frame::{Footprint, Frame};
-use crate::io::Point3;
+use crate::geom::Point3;
 use crate::spatial::{BoxIndex, Index};
 
 /// One event's claim.

@@ -455,6 +455,40 @@ pub fn close(top: Mesh, base: f64, r: &Footprint) -> Mesh {
     solid
 }
 
+/// Is `mesh` a closed, consistently oriented, outward-facing solid? Every undirected edge
+/// must be used by exactly two faces, once in each direction, and the signed volume must be
+/// positive. The message names the first problem found.
+pub fn check_watertight(mesh: &Mesh) -> std::result::Result<(), String> {
+    use rustc_hash::FxHashMap as HashMap;
+    let mut directed: HashMap<(u32, u32), u32> = HashMap::default();
+    for (k, f) in mesh.faces.iter().enumerate() {
+        if f.iter().any(|&i| i as usize >= mesh.vertices.len()) {
+            return Err(format!("face {k} refers to a missing vertex"));
+        }
+        if f[0] == f[1] || f[1] == f[2] || f[0] == f[2] {
+            return Err(format!("face {k} repeats a vertex"));
+        }
+        for e in 0..3 {
+            *directed.entry((f[e], f[(e + 1) % 3])).or_insert(0) += 1;
+        }
+    }
+    for (&(a, b), &n) in &directed {
+        if n != 1 {
+            return Err(format!(
+                "edge {a}->{b} used {n} times in the same direction"
+            ));
+        }
+        if !directed.contains_key(&(b, a)) {
+            return Err(format!("edge {a}-{b} has one face only (open)"));
+        }
+    }
+    let v = signed_volume(mesh);
+    if v.is_nan() || v <= 0.0 {
+        return Err(format!("signed volume {v} is not positive"));
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -506,7 +540,7 @@ mod tests {
         let region = Region::new(cells, all.clone(), &all);
         let top = clipped_top(&v, &fc, &region);
         let solid = close(top.clone(), 0.0, &r);
-        crate::volume::check_watertight(&solid).unwrap();
+        check_watertight(&solid).unwrap();
         assert!((projected_area(&top) - r.area()).abs() < 1e-9);
         assert!((signed_volume(&solid) - 0.5 * r.area()).abs() < 1e-9);
     }
@@ -536,13 +570,13 @@ mod tests {
         let region = Region::new(cells, vec![true; cells.len()], &owned);
         let top = clipped_top(&v, &fc, &region);
         let solid = close(top.clone(), -1.0, &r);
-        crate::volume::check_watertight(&solid).unwrap();
+        check_watertight(&solid).unwrap();
         assert!((projected_area(&top) - region.area()).abs() < 1e-9);
         assert!((signed_volume(&solid) - 1.25 * region.area()).abs() < 1e-9);
         // The grid top over the same region closes the same way.
         let grid = grid_top(&tin, &region, 2).unwrap();
         let solid = close(grid.clone(), -1.0, &r);
-        crate::volume::check_watertight(&solid).unwrap();
+        check_watertight(&solid).unwrap();
         assert!((signed_volume(&solid) - 1.25 * region.area()).abs() < 1e-9);
     }
 }

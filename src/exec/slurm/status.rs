@@ -448,12 +448,3 @@ impl Report {
         s
     }
 }
-
-/// `talus status DIR`.
-pub fn print(dir: &std::path::Path) -> Result<()> {
-    let store = Store::open(dir, false)?;
-    store.finish_interrupted_publish("talus status")?;
-    let report = Report::gather(&store)?;
-    print!("{}", report.render());
-    Ok(())
-}

@@ -1,5 +1,5 @@
 //! Triangle meshes in PLY (Turk 1994, "The PLY polygon file format"): writing the event
-//! solids, reading the user's surfaces, and checking that a solid is closed.
+//! solids, reading the user's surfaces.
 //!
 //! Written: `binary_little_endian 1.0`, `element vertex` with `double x, y, z`,
 //! `element face` with `list uchar int vertex_indices`; to a temporary name, then renamed, so
@@ -12,9 +12,9 @@
 use std::io::{BufReader, Read, Write};
 use std::path::Path;
 
-pub use super::solid::Mesh;
 use crate::error::{Error, Result};
 use crate::io::ply::{self, Encoding, Property, Scalar};
+use crate::volume::Mesh;
 
 /// Write a mesh to `w` as binary little-endian PLY.
 pub fn write_ply_to(w: &mut impl Write, mesh: &Mesh) -> std::io::Result<()> {
@@ -180,38 +180,4 @@ pub fn read_ply_mesh(path: &Path) -> Result<Mesh> {
         return Err(bad("PLY has no faces (a surface mesh is required)".into()));
     }
     Ok(mesh)
-}
-
-/// Is `mesh` a closed, consistently oriented, outward-facing solid? Every undirected edge
-/// must be used by exactly two faces, once in each direction, and the signed volume must be
-/// positive. The message names the first problem found.
-pub fn check_watertight(mesh: &Mesh) -> std::result::Result<(), String> {
-    use rustc_hash::FxHashMap as HashMap;
-    let mut directed: HashMap<(u32, u32), u32> = HashMap::default();
-    for (k, f) in mesh.faces.iter().enumerate() {
-        if f.iter().any(|&i| i as usize >= mesh.vertices.len()) {
-            return Err(format!("face {k} refers to a missing vertex"));
-        }
-        if f[0] == f[1] || f[1] == f[2] || f[0] == f[2] {
-            return Err(format!("face {k} repeats a vertex"));
-        }
-        for e in 0..3 {
-            *directed.entry((f[e], f[(e + 1) % 3])).or_insert(0) += 1;
-        }
-    }
-    for (&(a, b), &n) in &directed {
-        if n != 1 {
-            return Err(format!(
-                "edge {a}->{b} used {n} times in the same direction"
-            ));
-        }
-        if !directed.contains_key(&(b, a)) {
-            return Err(format!("edge {a}-{b} has one face only (open)"));
-        }
-    }
-    let v = super::solid::signed_volume(mesh);
-    if v.is_nan() || v <= 0.0 {
-        return Err(format!("signed volume {v} is not positive"));
-    }
-    Ok(())
 }

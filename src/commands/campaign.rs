@@ -8,8 +8,10 @@
 
 use std::path::{Path, PathBuf};
 
-use super::epochs::{self, EpochEntry};
-use crate::compare::{check_out_dir, forget_if_input_error, open_store, run_planned, survey};
+use crate::campaign::epochs::{self, EpochEntry};
+use crate::commands::compare::{
+    check_out_dir, forget_if_input_error, open_store, run_planned, survey,
+};
 use crate::error::{Error, Result};
 use crate::params::{Params, UserParams};
 use crate::plan::inputs::SurveyFiles;

@@ -732,6 +732,17 @@ fn respond_error(
     Ok(())
 }
 
+/// `talus view DIR`.
+pub fn command(dir: &Path, bind: IpAddr, port: u16) -> Result<()> {
+    // Serving has nothing to resume: Ctrl-C or SIGTERM end it at once.
+    crate::interrupt::uninstall();
+    serve(dir, bind, port, &Viewer::from_env(), |addr| {
+        println!("talus viewer: http://{addr}/");
+        use std::io::Write;
+        let _ = std::io::stdout().flush();
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

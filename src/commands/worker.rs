@@ -1,0 +1,35 @@
+//! `talus worker DIR`: one more executor of a run's plan.
+
+use std::path::Path;
+
+use crate::error::{Error, Result};
+
+/// `talus worker DIR`: execute units of the run in DIR until every unit is done (the process
+/// that holds DIR's lock publishes).
+pub fn worker(dir: &Path, slots: usize, threads: Option<usize>) -> Result<()> {
+    if slots == 0 {
+        return Err(Error::Usage(
+            "--slots: must be at least 1 (units the worker runs at a time)".into(),
+        ));
+    }
+    let store = crate::store::Store::open(dir, false)?;
+    let plan = crate::plan::Plan::load(&crate::commands::compare::plan_path(&store))?;
+    let threads = match threads {
+        Some(0) => return Err(Error::Usage("--threads: must be at least 1".into())),
+        Some(t) => t.min(1024),
+        None => std::thread::available_parallelism().map_or(1, |n| n.get()),
+    };
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| Error::Internal(format!("thread pool: {e}")))?;
+    let label = format!("worker {}", std::process::id());
+    let report = pool.install(|| crate::exec::run(&store, &plan, slots, &label))?;
+    eprintln!(
+        "talus worker: {} unit(s) computed, {} found done, in {}",
+        report.computed,
+        report.reused,
+        dir.display()
+    );
+    Ok(())
+}

@@ -1,0 +1,168 @@
+//! The layers of the library, checked: every top-level module of `src/` has a place in
+//! [`LAYERS`], and a module names (`crate::X`) only modules placed before it, so the imports
+//! have no cycle and none goes upward (ARCHITECTURE.md "Layers"). Doc comments and test modules
+//! are not imports and are left out.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// From the bottom up: the shared base; the pure algorithms; the formats; the parameters; the
+/// store; the plan and the stages' units; the executors; the commands.
+const LAYERS: &[&str] = &[
+    // base
+    "error",
+    "interrupt",
+    "progress",
+    "memory",
+    "geom",
+    // algorithms
+    "spatial",
+    "m3c2",
+    "events",
+    "volume",
+    "campaign",
+    "synth",
+    // formats
+    "io",
+    // parameters: the spacing measured on the input, the resolved parameters
+    "sampling",
+    "params",
+    // store
+    "store",
+    // plan, then the units that do it
+    "plan",
+    "units",
+    // executors
+    "exec",
+    // commands, and the command line over them
+    "commands",
+    "cli",
+];
+
+/// The top-level module a file of `src/` belongs to.
+fn top_module(rel: &Path) -> String {
+    let first = rel
+        .components()
+        .next()
+        .unwrap()
+        .as_os_str()
+        .to_string_lossy();
+    first.trim_end_matches(".rs").to_string()
+}
+
+/// The code of a file as imports see it: no test module, no comments.
+fn code(text: &str) -> String {
+    let text = text.split("#[cfg(test)]").next().unwrap_or("");
+    text.lines()
+        .map(|l| l.split("//").next().unwrap_or(""))
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// The modules `crate::X` (or `crate::{X, Y::..}`) names in `code`.
+fn named(code: &str) -> Vec<String> {
+    let ident = |s: &str| -> String {
+        s.trim_start()
+            .chars()
+            .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+            .collect()
+    };
+    let mut out = Vec::new();
+    for (i, _) in code.match_indices("crate::") {
+        let rest = &code[i + "crate::".len()..];
+        if let Some(group) = rest.strip_prefix('{') {
+            // Top-level names of the group: split at commas outside nested braces.
+            let (mut depth, mut start) = (0, 0);
+            for (k, c) in group.char_indices() {
+                match c {
+                    '{' => depth += 1,
+                    '}' if depth == 0 => {
+                        out.push(ident(&group[start..k]));
+                        break;
+                    }
+                    '}' => depth -= 1,
+                    ',' if depth == 0 => {
+                        out.push(ident(&group[start..k]));
+                        start = k + 1;
+                    }
+                    _ => {}
+                }
+            }
+        } else {
+            out.push(ident(rest));
+        }
+    }
+    out.retain(|m| !m.is_empty());
+    out
+}
+
+fn files(dir: &Path, out: &mut Vec<std::path::PathBuf>) {
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            files(&p, out);
+        } else if p.extension().is_some_and(|x| x == "rs") {
+            out.push(p);
+        }
+    }
+}
+
+#[test]
+fn every_import_goes_to_a_lower_layer() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut all = Vec::new();
+    files(&src, &mut all);
+    let rank = |m: &str| LAYERS.iter().position(|l| *l == m);
+    let mut upward: BTreeMap<String, Vec<String>> = BTreeMap::new();
+    let mut unplaced = Vec::new();
+    for f in &all {
+        let rel = f.strip_prefix(&src).unwrap();
+        let me = top_module(rel);
+        if me == "main" || me == "lib" {
+            continue; // the binary and the crate root sit above everything
+        }
+        let Some(mine) = rank(&me) else {
+            unplaced.push(me);
+            continue;
+        };
+        let text = std::fs::read_to_string(f).unwrap();
+        for m in named(&code(&text)) {
+            // `crate::Error`, `crate::Result`: the crate root's re-exports of `error`.
+            let m = if m.starts_with(char::is_uppercase) {
+                "error".to_string()
+            } else {
+                m
+            };
+            if m == me {
+                continue;
+            }
+            match rank(&m) {
+                Some(r) if r < mine => {}
+                Some(_) => upward
+                    .entry(format!("{} -> {m}", rel.display()))
+                    .or_default()
+                    .push(m.clone()),
+                None => unplaced.push(m),
+            }
+        }
+    }
+    unplaced.sort();
+    unplaced.dedup();
+    assert!(
+        unplaced.is_empty(),
+        "modules with no place in LAYERS: {unplaced:?}"
+    );
+    assert!(
+        upward.is_empty(),
+        "imports of a module at the same or a higher layer: {:#?}",
+        upward.keys().collect::<Vec<_>>()
+    );
+}
+
+#[test]
+fn the_check_sees_an_upward_import() {
+    // The parser the test relies on: a name in code counts, one in a comment does not.
+    let text = "use crate::units::Ctx; // crate::commands\n/// [`crate::exec`]\n\
+                use crate::{io::{self, Bounds}, plan};\n";
+    assert_eq!(named(&code(text)), vec!["units", "io", "plan"]);
+}

@@ -1,0 +1,165 @@
+//! A stage added by writing one module and registering it (`examples/survey_stage.rs`: each
+//! survey's point count and heights) runs in every driver without a change to any of them: in
+//! the command's own executor, in `worker`, and as a Slurm job array of its own. Its numbers are
+//! checked against the surveys read directly, and the comparison's outputs are the same bytes
+//! as plain talus's.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// The example program (`cargo test` builds the examples; built here when this test runs alone).
+fn survey_stage() -> PathBuf {
+    let talus = PathBuf::from(env!("CARGO_BIN_EXE_talus"));
+    let dir = talus.parent().unwrap();
+    let exe = dir.join("examples").join("survey_stage");
+    if !exe.is_file() {
+        let mut c = Command::new(env!("CARGO"));
+        c.args(["build", "--example", "survey_stage"]);
+        if dir.ends_with("release") {
+            c.arg("--release");
+        }
+        let o = c.output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    exe
+}
+
+fn run(exe: &Path, args: &[&str]) -> Output {
+    let o = Command::new(exe).args(args).output().unwrap();
+    assert!(
+        o.status.success(),
+        "{} {args:?}: {}",
+        exe.display(),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    o
+}
+
+/// The heights of each survey as the stage recorded them, by survey label.
+fn heights(out: &Path) -> Vec<serde_json::Value> {
+    let dir = out.join(".talus/units/survey_heights");
+    let mut units: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
+        .map(|e| e.unwrap().path())
+        .collect();
+    units.sort();
+    units
+        .iter()
+        .map(|u| serde_json::from_slice(&std::fs::read(u.join("heights.json")).unwrap()).unwrap())
+        .collect()
+}
+
+/// Count, min, max and mean height of a cloud, read directly.
+fn direct(path: &Path) -> (u64, f64, f64, f64) {
+    let mut r = talus::io::open(path).unwrap();
+    let mut buf = Vec::new();
+    let (mut n, mut sum, mut lo, mut hi) = (0u64, 0.0, f64::INFINITY, f64::NEG_INFINITY);
+    while r.fill(&mut buf, 1 << 16).unwrap() > 0 {
+        for p in &buf {
+            n += 1;
+            sum += p[2];
+            lo = lo.min(p[2]);
+            hi = hi.max(p[2]);
+        }
+    }
+    (n, lo, hi, sum / n as f64)
+}
+
+#[test]
+fn a_registered_stage_runs_locally_in_a_worker_and_in_a_slurm_plan() {
+    let exe = survey_stage();
+    let tmp = common::tempdir();
+    let scene = tmp.path().join("scene");
+    let s = scene.to_str().unwrap();
+    let o = common::run(&["synth", "hill", "--points", "20000", "--out", s]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (a, b) = (scene.join("before.laz"), scene.join("after.laz"));
+    let (a_s, b_s) = (a.to_str().unwrap(), b.to_str().unwrap());
+    let small = ["--tile-size", "12"];
+
+    // Locally: the stage is planned, run and counted on its own progress line.
+    let local = tmp.path().join("local");
+    let mut args = vec!["compare", a_s, b_s, "--out", local.to_str().unwrap()];
+    args.extend(small);
+    let o = run(&exe, &args);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(stderr.contains("survey heights"), "{stderr}");
+    let got = heights(&local);
+    assert_eq!(got.len(), 2, "{got:?}");
+    for h in &got {
+        let file = if h["survey"] == "before" { &a } else { &b };
+        let (n, lo, hi, mean) = direct(file);
+        assert_eq!(h["points"].as_u64(), Some(n), "{h}");
+        assert_eq!(h["min_z"].as_f64(), Some(lo), "{h}");
+        assert_eq!(h["max_z"].as_f64(), Some(hi), "{h}");
+        let m = h["mean_z"].as_f64().unwrap();
+        assert!(
+            (m - mean).abs() <= 1e-9 * mean.abs().max(1.0),
+            "{m} vs {mean}"
+        );
+    }
+    // The comparison itself is plain talus's, byte for byte.
+    let plain = tmp.path().join("plain");
+    common::run_compare(&a, &b, &plain, &small);
+    for f in [
+        "events.csv",
+        "events.geojson",
+        "m3c2.laz",
+        "event_regions.geojson",
+    ] {
+        assert_eq!(
+            std::fs::read(local.join(f)).unwrap(),
+            std::fs::read(plain.join(f)).unwrap(),
+            "{f} differs with the extra stage"
+        );
+    }
+
+    // In a Slurm plan: a job array of its own, right after the tilings it reads.
+    let slurm = tmp.path().join("slurm");
+    let mut args = vec![
+        "compare",
+        a_s,
+        b_s,
+        "--out",
+        slurm.to_str().unwrap(),
+        "--executor",
+        "slurm",
+        "--plan-only",
+    ];
+    args.extend(small);
+    let o = run(&exe, &args);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let stages: Vec<&str> = stdout
+        .lines()
+        .filter_map(|l| l.split_whitespace().next())
+        .collect();
+    assert_eq!(
+        stages,
+        [
+            "tiling",
+            "survey_heights",
+            "m3c2",
+            "stable",
+            "events",
+            "volumes",
+            "outputs",
+            "publish"
+        ],
+        "{stdout}"
+    );
+    let script = std::fs::read_to_string(slurm.join(".talus/slurm/1/02-survey_heights.sh"))
+        .expect("a script for the stage");
+    assert!(script.contains("--stage survey_heights"), "{script}");
+
+    // A talus without the stage refuses that plan, naming the kind.
+    let o = common::run(&["worker", slurm.to_str().unwrap()]);
+    assert!(!o.status.success());
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(stderr.contains("survey_heights"), "{stderr}");
+
+    // In a worker: the same plan's units, the stage's the same bytes as the local run's.
+    run(&exe, &["worker", slurm.to_str().unwrap()]);
+    assert_eq!(heights(&slurm), got);
+}
