@@ -12,6 +12,10 @@ use serde_json::{json, Value};
 
 use super::cores::ThinnedStage;
 use super::m3c2::M3c2Stage;
+use super::outputs::tables::{
+    EventFeature, EventProperties, Feature, FeatureCollection, PointGeometry, RegionFeature,
+    RegionGeometry,
+};
 use super::outputs::{OutputsStage, Publish, Summary};
 use super::stage::{Line, Planner, Publishes, Scope, Stage};
 use super::{read_json, Ctx};
@@ -19,7 +23,7 @@ use crate::campaign::powerlaw::{self, PowerLawFit};
 use crate::campaign::report::{self, EventRow, PairRow, Report};
 use crate::campaign::tracks::{self, Placed};
 use crate::error::{Error, Result};
-use crate::events::Obb;
+use crate::events::Kind;
 use crate::io::las_out::{CoordinateGrid, ExtraDim, ExtraType, ResultWriter};
 use crate::io::{self, Point3};
 use crate::plan::Spec;
@@ -55,64 +59,69 @@ pub fn is_output(name: &str) -> bool {
     }
 }
 
-/// An event as the campaign reads it back from its pair's files.
+/// An event as the campaign reads it back from its pair's files (through the types the pair's
+/// outputs wrote them with).
 struct PairEvent {
     pair: usize,
-    properties: serde_json::Map<String, Value>,
+    properties: EventProperties,
     centroid: Point3,
     region: Vec<Vec<Vec<Point3>>>,
 }
 
-fn point(v: &Value) -> Option<Point3> {
-    Some([v[0].as_f64()?, v[1].as_f64()?, v[2].as_f64()?])
-}
-
-fn polygons(g: &Value) -> Vec<Vec<Vec<Point3>>> {
-    let ring = |r: &Value| -> Vec<Point3> {
-        r.as_array()
-            .map(|a| a.iter().filter_map(point).collect())
-            .unwrap_or_default()
-    };
-    let poly = |p: &Value| -> Vec<Vec<Point3>> {
-        p.as_array()
-            .map(|a| a.iter().map(ring).collect())
-            .unwrap_or_default()
-    };
-    match g["type"].as_str() {
-        Some("Polygon") => vec![poly(&g["coordinates"])],
-        Some("MultiPolygon") => g["coordinates"]
-            .as_array()
-            .map(|a| a.iter().map(poly).collect())
-            .unwrap_or_default(),
-        _ => Vec::new(),
-    }
-}
-
 /// The events of pair `pair` from its outputs unit `unit`.
 fn pair_events(ctx: &Ctx, pair: usize, unit: usize) -> Result<Vec<PairEvent>> {
-    let events: Value = read_json(ctx, unit, "events.geojson")?;
-    let regions: Value = read_json(ctx, unit, "event_regions.geojson")?;
-    let mut by_id: HashMap<u64, Vec<Vec<Vec<Point3>>>> = HashMap::default();
-    for f in regions["features"].as_array().into_iter().flatten() {
-        if let Some(id) = f["properties"]["id"].as_u64() {
-            by_id.insert(id, polygons(&f["geometry"]));
-        }
+    let events: FeatureCollection<EventFeature> = read_json(ctx, unit, "events.geojson")?;
+    let regions: FeatureCollection<RegionFeature> = read_json(ctx, unit, "event_regions.geojson")?;
+    let mut by_id: HashMap<u32, Vec<Vec<Vec<Point3>>>> = HashMap::default();
+    for f in regions.features {
+        by_id.insert(
+            f.properties.id,
+            f.geometry.map(RegionGeometry::polygons).unwrap_or_default(),
+        );
     }
-    Ok(events["features"]
-        .as_array()
+    Ok(events
+        .features
         .into_iter()
-        .flatten()
-        .filter_map(|f| {
-            let properties = f["properties"].as_object()?.clone();
-            let id = properties.get("id")?.as_u64()?;
-            Some(PairEvent {
+        .map(|f| {
+            let PointGeometry::Point(centroid) = f.geometry;
+            PairEvent {
                 pair,
-                centroid: point(&f["geometry"]["coordinates"])?,
-                region: by_id.remove(&id).unwrap_or_default(),
-                properties,
-            })
+                centroid,
+                region: by_id.remove(&f.properties.id).unwrap_or_default(),
+                properties: f.properties,
+            }
         })
         .collect())
+}
+
+/// An event of the campaign's events.geojson: its pair's properties, and where it is in the
+/// campaign.
+#[derive(Serialize)]
+struct CampaignEvent<'a> {
+    #[serde(flatten)]
+    event: &'a EventProperties,
+    pair: &'a str,
+    before_date: String,
+    after_date: String,
+    track_id: u32,
+}
+
+/// A feature of the campaign's events.geojson.
+#[derive(Serialize)]
+struct CampaignFeature<'a> {
+    #[serde(rename = "type")]
+    kind: Feature,
+    geometry: PointGeometry,
+    properties: CampaignEvent<'a>,
+}
+
+/// A CSV cell of a property: as its JSON value, text quoted, null empty.
+fn cell<T: Serialize>(v: &T) -> String {
+    match serde_json::to_value(v) {
+        Ok(Value::Null) | Err(_) => String::new(),
+        Ok(Value::String(s)) => super::outputs::tables::csv_text(&s),
+        Ok(v) => v.to_string(),
+    }
 }
 
 /// One row of campaign.csv / campaign.json.
@@ -192,7 +201,7 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<CampaignMeta> {
         let mine = pair_events(ctx, k, o)?;
         let volumes: Vec<f64> = mine
             .iter()
-            .filter_map(|e| e.properties.get("volume_uncertainty_m3")?.as_f64())
+            .filter_map(|e| e.properties.volume_uncertainty_m3)
             .collect();
         rows.push(Row {
             row: PairRow {
@@ -233,19 +242,11 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<CampaignMeta> {
     let placed: Vec<Placed> = events
         .iter()
         .map(|e| {
-            let obb: Obb = e
-                .properties
-                .get("obb")
-                .and_then(|o| serde_json::from_value(o.clone()).ok())
-                .unwrap_or(Obb {
-                    center: e.centroid,
-                    axes: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
-                    half_extents: [0.0; 3],
-                });
+            let obb = e.properties.obb;
             Placed {
                 pair: e.pair,
-                id: e.properties.get("id").and_then(Value::as_u64).unwrap_or(0) as u32,
-                gain: e.properties.get("kind").and_then(Value::as_str) == Some("gain"),
+                id: e.properties.id,
+                gain: e.properties.kind == Kind::Gain,
                 centroid: e.centroid,
                 depth: obb.half_extents[2] + depth,
                 obb,
@@ -261,12 +262,8 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<CampaignMeta> {
         events
             .iter()
             .zip(&placed)
-            .filter(|(e, p)| {
-                p.gain == gain
-                    && consecutive(e.pair)
-                    && e.properties.get("significant").and_then(Value::as_bool) == Some(true)
-            })
-            .filter_map(|(e, _)| e.properties.get("volume_m3")?.as_f64())
+            .filter(|(e, p)| p.gain == gain && consecutive(e.pair) && e.properties.significant)
+            .filter_map(|(e, _)| e.properties.volume_m3)
             .map(f64::abs)
             .collect()
     };
@@ -306,13 +303,10 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<CampaignMeta> {
                 pair: e.pair,
                 id: p.id,
                 kind: if p.gain { "gain" } else { "loss" }.into(),
-                volume_m3: e.properties.get("volume_m3").and_then(Value::as_f64),
-                uncertainty_m3: e
-                    .properties
-                    .get("volume_uncertainty_m3")
-                    .and_then(Value::as_f64),
-                significant: e.properties.get("significant").and_then(Value::as_bool) == Some(true),
-                complete: e.properties.get("complete").and_then(Value::as_bool) != Some(false),
+                volume_m3: e.properties.volume_m3,
+                uncertainty_m3: e.properties.volume_uncertainty_m3,
+                significant: e.properties.significant,
+                complete: e.properties.complete,
                 track_id: t,
                 centroid: e.centroid,
                 region: e.region.clone(),
@@ -367,60 +361,52 @@ fn write_events(
     crs: &str,
 ) -> Result<()> {
     let mut features = Vec::with_capacity(events.len());
-    let mut csv = String::from("pair,before_date,after_date,track_id");
-    let columns = [
-        "id",
-        "kind",
-        "volume_m3",
-        "volume_uncertainty_m3",
-        "significant",
-        "gain_m3",
-        "loss_m3",
-        "coverage",
-        "region_area_m2",
-        "n_points",
-        "area_m2",
-        "mean_distance_m",
-        "max_abs_distance_m",
-        "mean_lod95_m",
-        "complete",
-        "volume_note",
-    ];
-    for c in &columns {
-        csv.push(',');
-        csv.push_str(c);
-    }
-    csv.push_str(",x,y,z\n");
+    let mut csv = String::from(
+        "pair,before_date,after_date,track_id,id,kind,volume_m3,volume_uncertainty_m3,\
+         significant,gain_m3,loss_m3,coverage,region_area_m2,n_points,area_m2,mean_distance_m,\
+         max_abs_distance_m,mean_lod95_m,complete,volume_note,x,y,z\n",
+    );
     for (e, &t) in events.iter().zip(track) {
         let p = &plan.pairs[e.pair];
-        let mut props = e.properties.clone();
-        props.insert("pair".into(), json!(p.label));
-        props.insert("before_date".into(), json!(date(p.before)));
-        props.insert("after_date".into(), json!(date(p.after)));
-        props.insert("track_id".into(), json!(t));
-        features.push(json!({
-            "type": "Feature",
-            "geometry": { "type": "Point", "coordinates": e.centroid },
-            "properties": props,
-        }));
+        let q = &e.properties;
+        features.push(CampaignFeature {
+            kind: Feature::Feature,
+            geometry: PointGeometry::Point(e.centroid),
+            properties: CampaignEvent {
+                event: q,
+                pair: &p.label,
+                before_date: date(p.before),
+                after_date: date(p.after),
+                track_id: t,
+            },
+        });
         let mut row = vec![
             p.label.clone(),
             date(p.before),
             date(p.after),
             t.to_string(),
+            cell(&q.id),
+            cell(&q.kind),
+            cell(&q.volume_m3),
+            cell(&q.volume_uncertainty_m3),
+            cell(&q.significant),
+            cell(&q.gain_m3),
+            cell(&q.loss_m3),
+            cell(&q.coverage),
+            cell(&q.region_area_m2),
+            cell(&q.n_points),
+            cell(&q.area_m2),
+            cell(&q.mean_distance_m),
+            cell(&q.max_abs_distance_m),
+            cell(&q.mean_lod95_m),
+            cell(&q.complete),
+            cell(&q.volume_note),
         ];
-        for c in &columns {
-            row.push(match e.properties.get(*c) {
-                Some(Value::Null) | None => String::new(),
-                Some(Value::String(s)) => super::outputs::tables::csv_text(s),
-                Some(v) => v.to_string(),
-            });
-        }
         row.extend(e.centroid.iter().map(|v| format!("{v:.4}")));
         csv.push_str(&row.join(","));
         csv.push('\n');
     }
-    let fc = json!({ "type": "FeatureCollection", "crs_name": crs, "features": features });
+    let fc = FeatureCollection::new(crs.to_string(), features).to_value()?;
     let text = serde_json::to_vec_pretty(&fc).map_err(|e| Error::Internal(e.to_string()))?;
     super::write_bytes(out, "events.geojson", &text)?;
     super::write_bytes(out, "events.csv", csv.as_bytes())

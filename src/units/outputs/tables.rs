@@ -1,53 +1,195 @@
 //! events.geojson, event_regions.geojson and events.csv (SPEC.md §2).
 
-use serde_json::{json, Value};
+use serde::{Deserialize, Deserializer, Serialize};
+use serde_json::Value;
 
 use super::EventRecord;
 use crate::error::{Error, Result};
+use crate::events::{Kind, Obb};
+use crate::geom::Point3;
 use crate::io::Crs;
 use crate::store::UnitWriter;
 use crate::units::write_bytes;
 
-fn opt(v: Option<f64>) -> Value {
-    match v {
-        Some(x) if x.is_finite() => json!(x),
-        _ => Value::Null,
+/// A finite value, or none (written `null`).
+fn finite(v: Option<f64>) -> Option<f64> {
+    v.filter(|x| x.is_finite())
+}
+
+/// A number written as `null` when it is not finite (serde_json writes NaN so), read back as
+/// NaN.
+fn nan_if_null<'de, D: Deserializer<'de>>(d: D) -> std::result::Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
+}
+
+/// The parts of an event's 95 % volume interval (SPEC.md §1).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct UncertaintyParts {
+    #[serde(deserialize_with = "nan_if_null")]
+    pub random: f64,
+    #[serde(deserialize_with = "nan_if_null")]
+    pub correlated: f64,
+    #[serde(deserialize_with = "nan_if_null")]
+    pub systematic: f64,
+    #[serde(deserialize_with = "nan_if_null")]
+    pub sampling: f64,
+}
+
+/// The properties of one event: what events.geojson holds (events.csv the same, flattened), and
+/// what a campaign reads back from its pairs. Written through a JSON value, so the keys come
+/// out in name order whatever the order here.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EventProperties {
+    pub id: u32,
+    pub kind: Kind,
+    pub volume_m3: Option<f64>,
+    pub volume_uncertainty_m3: Option<f64>,
+    /// |V| exceeds its 95 % half-width.
+    pub significant: bool,
+    pub uncertainty_parts_m3: Option<UncertaintyParts>,
+    pub gain_m3: Option<f64>,
+    pub loss_m3: Option<f64>,
+    pub n_points: usize,
+    #[serde(deserialize_with = "nan_if_null")]
+    pub area_m2: f64,
+    pub footprint_area_m2: Option<f64>,
+    pub region_area_m2: Option<f64>,
+    pub coverage: Option<f64>,
+    #[serde(deserialize_with = "nan_if_null")]
+    pub mean_distance_m: f64,
+    #[serde(deserialize_with = "nan_if_null")]
+    pub max_abs_distance_m: f64,
+    #[serde(deserialize_with = "nan_if_null")]
+    pub mean_lod95_m: f64,
+    pub obb: Obb,
+    /// False where a limit cut the event's measurement short (`volume_note` says which).
+    pub complete: bool,
+    pub volume_note: Option<String>,
+}
+
+impl EventProperties {
+    /// The properties of event `r`.
+    pub fn of(r: &EventRecord) -> EventProperties {
+        let e = &r.event;
+        EventProperties {
+            id: e.id,
+            kind: e.kind,
+            volume_m3: finite(r.volume_m3),
+            volume_uncertainty_m3: finite(r.volume_uncertainty_m3),
+            significant: r.significant,
+            uncertainty_parts_m3: r.uncertainty.map(|u| UncertaintyParts {
+                random: u.random_m3,
+                correlated: u.correlated_m3,
+                systematic: u.systematic_m3,
+                sampling: u.sampling_m3,
+            }),
+            gain_m3: finite(r.gain_m3),
+            loss_m3: finite(r.loss_m3),
+            n_points: e.n_points,
+            area_m2: e.area_m2,
+            footprint_area_m2: finite(r.footprint_area_m2),
+            region_area_m2: finite(r.region_area_m2),
+            coverage: finite(r.coverage),
+            mean_distance_m: e.mean_distance,
+            max_abs_distance_m: e.max_abs_distance,
+            mean_lod95_m: e.mean_lod95,
+            obb: e.obb,
+            complete: r.complete,
+            volume_note: r.volume_note.clone(),
+        }
     }
 }
 
-/// The properties of one event (GeoJSON and CSV share them).
-fn properties(r: &EventRecord) -> Value {
-    let e = &r.event;
-    json!({
-        "id": e.id,
-        "kind": e.kind.as_str(),
-        "volume_m3": opt(r.volume_m3),
-        "volume_uncertainty_m3": opt(r.volume_uncertainty_m3),
-        "significant": r.significant,
-        "uncertainty_parts_m3": r.uncertainty.map(|u| json!({
-            "random": u.random_m3,
-            "correlated": u.correlated_m3,
-            "systematic": u.systematic_m3,
-            "sampling": u.sampling_m3,
-        })),
-        "gain_m3": opt(r.gain_m3),
-        "loss_m3": opt(r.loss_m3),
-        "n_points": e.n_points,
-        "area_m2": e.area_m2,
-        "footprint_area_m2": opt(r.footprint_area_m2),
-        "region_area_m2": opt(r.region_area_m2),
-        "coverage": opt(r.coverage),
-        "mean_distance_m": e.mean_distance,
-        "max_abs_distance_m": e.max_abs_distance,
-        "mean_lod95_m": e.mean_lod95,
-        "obb": {
-            "center": e.obb.center,
-            "axes": e.obb.axes,
-            "half_extents": e.obb.half_extents,
-        },
-        "complete": r.complete,
-        "volume_note": r.volume_note,
-    })
+/// A point's geometry.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "type", content = "coordinates")]
+pub enum PointGeometry {
+    Point(Point3),
+}
+
+/// GeoJSON's `"type": "Feature"` of a feature.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub enum Feature {
+    #[default]
+    Feature,
+}
+
+/// GeoJSON's `"type": "FeatureCollection"` of a collection.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub enum Collection {
+    #[default]
+    FeatureCollection,
+}
+
+/// An event of events.geojson.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EventFeature {
+    #[serde(rename = "type")]
+    pub kind: Feature,
+    pub geometry: PointGeometry,
+    pub properties: EventProperties,
+}
+
+/// An event's region outline: one polygon, or several.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "type", content = "coordinates")]
+pub enum RegionGeometry {
+    Polygon(Vec<Vec<Point3>>),
+    MultiPolygon(Vec<Vec<Vec<Point3>>>),
+}
+
+impl RegionGeometry {
+    /// Its polygons.
+    pub fn polygons(self) -> Vec<Vec<Vec<Point3>>> {
+        match self {
+            RegionGeometry::Polygon(p) => vec![p],
+            RegionGeometry::MultiPolygon(ps) => ps,
+        }
+    }
+}
+
+/// What event_regions.geojson says of an event beside its outline.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RegionProperties {
+    pub id: u32,
+    pub kind: Kind,
+    pub volume_m3: Option<f64>,
+    pub region_area_m2: Option<f64>,
+    pub coverage: Option<f64>,
+}
+
+/// An event's region (no geometry for an event without a volume).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RegionFeature {
+    #[serde(rename = "type")]
+    pub kind: Feature,
+    pub geometry: Option<RegionGeometry>,
+    pub properties: RegionProperties,
+}
+
+/// A GeoJSON FeatureCollection of features `F`, with the CRS's name.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FeatureCollection<F> {
+    #[serde(rename = "type")]
+    pub kind: Collection,
+    pub crs_name: String,
+    pub features: Vec<F>,
+}
+
+impl<F: Serialize> FeatureCollection<F> {
+    /// The collection of `features`.
+    pub fn new(crs_name: String, features: Vec<F>) -> FeatureCollection<F> {
+        FeatureCollection {
+            kind: Collection::FeatureCollection,
+            crs_name,
+            features,
+        }
+    }
+
+    /// As a JSON value: keys in name order, as every talus JSON file writes them.
+    pub fn to_value(&self) -> Result<Value> {
+        serde_json::to_value(self).map_err(|e| Error::Internal(e.to_string()))
+    }
 }
 
 /// Is `name` a mesh file talus writes (`event_NNNN_before.ply` / `event_NNNN_after.ply`)?
@@ -65,53 +207,40 @@ pub fn is_event_mesh(name: &str) -> bool {
 /// over (Polygon or MultiPolygon, 3-D coordinates in the footprint plane; null geometry for an
 /// event without a volume).
 pub fn write_regions(out: &mut UnitWriter, events: &[EventRecord], crs: &Crs) -> Result<()> {
-    let features: Vec<Value> = events
+    let features: Vec<RegionFeature> = events
         .iter()
-        .map(|r| {
-            let geometry = match r.region.len() {
-                0 => Value::Null,
-                1 => json!({ "type": "Polygon", "coordinates": r.region[0] }),
-                _ => json!({ "type": "MultiPolygon", "coordinates": r.region }),
-            };
-            json!({
-                "type": "Feature",
-                "geometry": geometry,
-                "properties": {
-                    "id": r.event.id,
-                    "kind": r.event.kind.as_str(),
-                    "volume_m3": opt(r.volume_m3),
-                    "region_area_m2": opt(r.region_area_m2),
-                    "coverage": opt(r.coverage),
-                },
-            })
+        .map(|r| RegionFeature {
+            kind: Feature::Feature,
+            geometry: match r.region.len() {
+                0 => None,
+                1 => Some(RegionGeometry::Polygon(r.region[0].clone())),
+                _ => Some(RegionGeometry::MultiPolygon(r.region.clone())),
+            },
+            properties: RegionProperties {
+                id: r.event.id,
+                kind: r.event.kind,
+                volume_m3: finite(r.volume_m3),
+                region_area_m2: finite(r.region_area_m2),
+                coverage: finite(r.coverage),
+            },
         })
         .collect();
-    let fc = json!({
-        "type": "FeatureCollection",
-        "crs_name": crs.describe(),
-        "features": features,
-    });
+    let fc = FeatureCollection::new(crs.describe(), features).to_value()?;
     let text = serde_json::to_string(&fc).map_err(|e| Error::Internal(e.to_string()))?;
     write_bytes(out, "event_regions.geojson", text.as_bytes())
 }
 
 /// Write events.geojson and events.csv.
 pub fn write_tables(out: &mut UnitWriter, events: &[EventRecord], crs: &Crs) -> Result<()> {
-    let features: Vec<Value> = events
+    let features: Vec<EventFeature> = events
         .iter()
-        .map(|r| {
-            json!({
-                "type": "Feature",
-                "geometry": { "type": "Point", "coordinates": r.event.centroid },
-                "properties": properties(r),
-            })
+        .map(|r| EventFeature {
+            kind: Feature::Feature,
+            geometry: PointGeometry::Point(r.event.centroid),
+            properties: EventProperties::of(r),
         })
         .collect();
-    let fc = json!({
-        "type": "FeatureCollection",
-        "crs_name": crs.describe(),
-        "features": features,
-    });
+    let fc = FeatureCollection::new(crs.describe(), features).to_value()?;
     let text = serde_json::to_string_pretty(&fc).map_err(|e| Error::Internal(e.to_string()))?;
     write_bytes(out, "events.geojson", text.as_bytes())?;
 
