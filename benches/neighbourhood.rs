@@ -11,20 +11,9 @@ use talus::io::Point3;
 use talus::m3c2::{self, cylinder, M3c2Params, Orientation};
 use talus::spatial::{Columns, Index};
 
-struct Rng(u64);
-impl Rng {
-    fn uniform(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E3779B97F4A7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58476D1CE4E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D049BB133111EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
-
 /// A rough surface over 100 m × 100 m: a few octaves of waves plus 5 mm noise.
 fn surface(n: usize, seed: u64) -> Vec<Point3> {
-    let mut r = Rng(seed);
+    let mut r = talus::rng::SplitMix64::new(seed);
     (0..n)
         .map(|_| {
             let (x, y) = (r.uniform() * 100.0, r.uniform() * 100.0);

@@ -16,14 +16,8 @@ use talus::spatial::Columns;
 
 /// `n` points of a rough surface over `side` × `side` metres.
 fn surface(n: usize, side: f64, seed: u64) -> Vec<Point3> {
-    let mut s = seed;
-    let mut u = move || {
-        s = s.wrapping_add(0x9E3779B97F4A7C15);
-        let mut z = s;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58476D1CE4E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D049BB133111EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut r = talus::rng::SplitMix64::new(seed);
+    let mut u = move || r.uniform();
     (0..n)
         .map(|_| {
             let (x, y) = (u() * side, u() * side);

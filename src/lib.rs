@@ -25,6 +25,7 @@ pub mod memory;
 pub mod params;
 pub mod plan;
 pub mod progress;
+pub mod rng;
 pub mod sampling;
 pub mod spatial;
 pub mod store;

@@ -13,28 +13,19 @@ use talus::volume::{
 
 // ---------------------------------------------------------------- random numbers
 
-/// SplitMix64 (Steele et al. 2014): small, seeded, reproducible.
-struct Rng(u64);
+/// The library's seeded generator (SplitMix64).
+type Rng = talus::rng::SplitMix64;
 
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in [0, 1).
-    fn f(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn range(&mut self, a: f64, b: f64) -> f64 {
-        a + (b - a) * self.f()
-    }
-    /// Standard normal (Box–Muller).
-    fn normal(&mut self) -> f64 {
-        let u = 1.0 - self.f();
-        let v = self.f();
+/// Draws of this file's scenes: a standard normal by Box–Muller on 1 − u (the scenes and their
+/// tolerances were made with it).
+trait Draw {
+    fn gauss(&mut self) -> f64;
+}
+
+impl Draw for Rng {
+    fn gauss(&mut self) -> f64 {
+        let u = 1.0 - self.uniform();
+        let v = self.uniform();
         (-2.0 * u.ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos()
     }
 }
@@ -89,7 +80,7 @@ fn sample(
         let n = (p.area * density).round() as usize;
         for _ in 0..n {
             let g = place.apply((p.sample)(rng));
-            out.push(g.map(|x| x + sigma * rng.normal()));
+            out.push(g.map(|x| x + sigma * rng.gauss()));
         }
     }
     out
@@ -162,7 +153,7 @@ fn cap(rs: f64, h: f64, sign: f64) -> Patch {
             }
             let z = (rs * rs - rho2).sqrt();
             // Acceptance ∝ area element, normalised by its maximum rs/(rs−h) at the rim.
-            if r.f() <= (rs - h) / z {
+            if r.uniform() <= (rs - h) / z {
                 return [x, y, sign * (z - (rs - h))];
             }
         }),
@@ -190,7 +181,7 @@ fn event_from_core_points(
             let (a, b) = (-half + i as f64 * step, -half + j as f64 * step);
             if let Some(dist) = inside(a, b) {
                 let g = place.apply([a, b, 0.0]);
-                pts.push(g.map(|x| x + 0.005 * rng.normal()));
+                pts.push(g.map(|x| x + 0.005 * rng.gauss()));
                 d.push(dist);
                 lod.push(0.02);
                 nrm.push(place.normal());
@@ -227,7 +218,7 @@ const SPACING: f64 = 0.1;
 const NOISE: f64 = 0.005;
 
 fn box_case(after_density_factor: f64, seed: u64) -> (f64, EventVolume) {
-    let mut rng = Rng(seed);
+    let mut rng = Rng::new(seed);
     let place = Place::identity();
     let density = 1.0 / (SPACING * SPACING);
     let before = sample(&[rect(5.0, 5.0, 0.0)], density, NOISE, &place, &mut rng);
@@ -279,7 +270,7 @@ fn raised_box_after_epoch_at_half_density() {
 }
 
 fn cap_case(rs: f64, h: f64, sign: f64, place: Place, seed: u64, name: &str) {
-    let mut rng = Rng(seed);
+    let mut rng = Rng::new(seed);
     let density = 1.0 / (SPACING * SPACING);
     let a = (h * (2.0 * rs - h)).sqrt();
     let before = sample(&[rect(6.0, 6.0, 0.0)], density, NOISE, &place, &mut rng);
@@ -362,7 +353,7 @@ fn vertical_face_with_box_hollow() {
         origin: [100.0, 200.0, 30.0],
         e: [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0]],
     };
-    let mut rng = Rng(6);
+    let mut rng = Rng::new(6);
     let density = 1.0 / (SPACING * SPACING);
     let before = sample(&[rect(5.0, 5.0, 0.0)], density, NOISE, &place, &mut rng);
     let mut patches = vec![plane_minus_rect(5.0, 1.5, 1.0), rect(1.5, 1.0, -1.0)];
@@ -409,7 +400,7 @@ fn stable_pair_gives_no_volume() {
         sample: Box::new(move |r: &mut Rng| loop {
             let (a, b) = (r.range(-d, d), r.range(-d, d));
             let (ga, gb) = grad(a, b);
-            if r.f() * gmax <= (1.0 + ga * ga + gb * gb).sqrt() {
+            if r.uniform() * gmax <= (1.0 + ga * ga + gb * gb).sqrt() {
                 return [a, b, z(a, b)];
             }
         }),
@@ -420,7 +411,7 @@ fn stable_pair_gives_no_volume() {
     // Expected scatter of V: √2 · area · σ / √N ≈ 1.5e-4 m³ for N ≈ 250 k points in the
     // footprint (seeds 7, 21–24 gave −1.2, 2.2, −1.3, −2.7, 1.7 × 10⁻⁴ against a bound of
     // 4.1 × 10⁻⁴).
-    let mut rng = Rng(7);
+    let mut rng = Rng::new(7);
     let before = sample(&[mk()], density, 0.01, &place, &mut rng);
     let after = sample(&[mk()], density, 0.01, &place, &mut rng);
     // A 2 × 1.2 m patch of core points (not square, so the PCA axes are determinate); the
@@ -474,7 +465,7 @@ fn box_case_event() -> Event {
         0.2,
         |a, b| (a.abs() < 2.0 && b.abs() < 1.5).then_some(1.5),
         Kind::Gain,
-        &mut Rng(9),
+        &mut Rng::new(9),
     )
 }
 
@@ -625,7 +616,7 @@ fn random_cloud(n: usize, rng: &mut Rng) -> Vec<[f64; 3]> {
 
 #[test]
 fn smoothing_keeps_a_constant_field_constant() {
-    let mut rng = Rng(10);
+    let mut rng = Rng::new(10);
     let pts = random_cloud(2000, &mut rng);
     let d = vec![0.37; pts.len()];
     for s in smooth(&pts, &d, 30, 1.0).unwrap() {
@@ -656,7 +647,7 @@ fn brute_smooth(pts: &[[f64; 3]], d: &[f64], k: usize, sigma: f64) -> Vec<f64> {
 
 #[test]
 fn smoothing_matches_brute_force_including_ties() {
-    let mut rng = Rng(11);
+    let mut rng = Rng::new(11);
     // A regular grid: many equal distances, so the k-th neighbour is often a tie.
     let mut pts = Vec::new();
     for i in 0..15 {
@@ -665,7 +656,7 @@ fn smoothing_matches_brute_force_including_ties() {
         }
     }
     pts.extend(random_cloud(300, &mut rng));
-    let d: Vec<f64> = (0..pts.len()).map(|_| rng.normal()).collect();
+    let d: Vec<f64> = (0..pts.len()).map(|_| rng.gauss()).collect();
     let fast = smooth(&pts, &d, 12, 0.7).unwrap();
     let slow = brute_smooth(&pts, &d, 12, 0.7);
     for (a, b) in fast.iter().zip(&slow) {
@@ -676,13 +667,13 @@ fn smoothing_matches_brute_force_including_ties() {
 #[test]
 fn describe_gives_the_pca_box_of_a_tilted_rectangle() {
     let place = tilted(1.1, 0.4, [1000.0, 2000.0, 50.0]);
-    let mut rng = Rng(12);
+    let mut rng = Rng::new(12);
     let (mut pts, mut d, mut lod, mut nrm) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     // A 4 × 2 rectangle centred at local (1, −0.5), grid step 0.1 (41 × 21 points).
     for i in 0..=40 {
         for j in 0..=20 {
             pts.push(place.apply([1.0 - 2.0 + 0.1 * i as f64, -0.5 - 1.0 + 0.1 * j as f64, 0.0]));
-            d.push(-0.2 - 0.1 * rng.f());
+            d.push(-0.2 - 0.1 * rng.uniform());
             lod.push(0.05);
             nrm.push(place.normal());
         }
@@ -805,20 +796,16 @@ fn clustered(rng: &mut Rng) -> Vec<[f64; 3]> {
     for c in centres {
         for _ in 0..150 {
             pts.push([
-                c[0] + 0.9 * rng.normal(),
-                c[1] + 0.9 * rng.normal(),
-                c[2] + 0.3 * rng.normal(),
+                c[0] + 0.9 * rng.gauss(),
+                c[1] + 0.9 * rng.gauss(),
+                c[2] + 0.3 * rng.gauss(),
             ]);
         }
     }
     // A chain along y = 5 crossing the tile borders x = 10, 15, 20, away from the blobs.
     for k in 0..100 {
         let t = k as f64 * 0.2;
-        pts.push([
-            2.0 + t + 0.05 * rng.normal(),
-            5.0 + 0.05 * rng.normal(),
-            1.0,
-        ]);
+        pts.push([2.0 + t + 0.05 * rng.gauss(), 5.0 + 0.05 * rng.gauss(), 1.0]);
     }
     for _ in 0..500 {
         pts.push([
@@ -840,7 +827,7 @@ fn tiled_dbscan(pts: &[[f64; 3]], k: usize, eps: f64, min_pts: usize) -> Vec<u32
 
 #[test]
 fn dbscan_matches_brute_force() {
-    let mut rng = Rng(13);
+    let mut rng = Rng::new(13);
     let pts = clustered(&mut rng);
     let (eps, min_pts) = (1.0, 8);
     let whole = dbscan(&pts, eps, min_pts).unwrap();
@@ -854,7 +841,7 @@ fn dbscan_matches_brute_force() {
 
 #[test]
 fn tiled_dbscan_equals_whole_cloud() {
-    let mut rng = Rng(14);
+    let mut rng = Rng::new(14);
     let pts = clustered(&mut rng);
     let (eps, min_pts) = (1.0, 8);
     let whole = dbscan(&pts, eps, min_pts).unwrap();
@@ -923,7 +910,7 @@ fn a_hole_in_one_epoch_is_left_out_not_extrapolated() {
     // The before epoch covers only the part u < 0.3 of the footprint; the after epoch is 0.5 m
     // higher everywhere. Nothing is invented over the hole: the volume is 0.5 m × the covered
     // area, and the coverage says how much of the footprint that is.
-    let mut rng = Rng(15);
+    let mut rng = Rng::new(15);
     let place = Place::identity();
     let density = 1.0 / (SPACING * SPACING);
     let before: Vec<[f64; 3]> = sample(&[rect(5.0, 5.0, 0.0)], density, 0.0, &place, &mut rng)

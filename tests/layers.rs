@@ -15,6 +15,7 @@ const LAYERS: &[&str] = &[
     "progress",
     "memory",
     "geom",
+    "rng",
     // algorithms
     "spatial",
     "m3c2",

@@ -264,22 +264,6 @@ fn mode_near_zero(d: &[f64], h: f64) -> f64 {
     c
 }
 
-/// A small deterministic generator (SplitMix64) for drawing pairs.
-struct SplitMix(u64);
-
-impl SplitMix {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n as u64) as usize
-    }
-}
-
 /// The empirical semivariogram of the residuals of the stable points in log-spaced lag bins,
 /// fitted with a spherical model.
 fn fit_variogram(samples: &[Sample], keep: &[usize], t: &Point3, spacing: f64) -> Variogram {
@@ -295,7 +279,7 @@ fn fit_variogram(samples: &[Sample], keep: &[usize], t: &Point3, spacing: f64) -
     };
     let dist = |a: usize, b: usize| dist2(a, b).sqrt();
     // Lag bins from one core spacing to the largest distance, 4 per octave.
-    let mut rng = SplitMix(0x5EED_7A15);
+    let mut rng = crate::rng::SplitMix64::new(0x5EED_7A15);
     let mut max_d: f64 = 0.0;
     for _ in 0..2000 {
         max_d = max_d.max(dist(rng.below(n), rng.below(n)));

@@ -293,7 +293,8 @@ impl Sink {
 /// A streaming LAS/LAZ writer of result points; see the module doc.
 pub struct ResultWriter {
     path: PathBuf,
-    tmp: PathBuf,
+    /// Written under its temporary name; removed if never finished.
+    file: Option<talus_tiling::AtomicFile>,
     sink: Option<Sink>,
     batch: las::PointData,
     buffered: usize,
@@ -353,9 +354,8 @@ impl ResultWriter {
         let compress = path
             .extension()
             .is_some_and(|e| e.eq_ignore_ascii_case("laz"));
-        let mut tmp_name = path.as_os_str().to_owned();
-        tmp_name.push(".tmp");
-        let tmp = PathBuf::from(tmp_name);
+        let atomic = talus_tiling::AtomicFile::new(path);
+        let tmp = atomic.tmp().to_path_buf();
 
         let has_wkt = crs.vlrs.iter().any(|v| v.record_id == 2112) || crs.wkt.is_some();
         let has_geotiff = crs
@@ -466,14 +466,11 @@ impl ResultWriter {
         };
         let sink = match sink {
             Ok(s) => s,
-            Err(e) => {
-                let _ = std::fs::remove_file(&tmp);
-                return Err(Error::output(path, e));
-            }
+            Err(e) => return Err(Error::output(path, e)),
         };
         Ok(ResultWriter {
             path: path.to_path_buf(),
-            tmp,
+            file: Some(atomic),
             sink: Some(sink),
             batch,
             buffered: 0,
@@ -588,7 +585,9 @@ impl ResultWriter {
         let file = w.close().map_err(|e| Error::output(&self.path, e))?;
         file.sync_all().map_err(|e| Error::output(&self.path, e))?;
         drop(file);
-        std::fs::rename(&self.tmp, &self.path).map_err(|e| Error::output(&self.path, e))?;
+        if let Some(f) = self.file.take() {
+            f.commit()?;
+        }
         Ok(self.count)
     }
 }
@@ -600,8 +599,8 @@ impl Drop for ResultWriter {
             // A `las::Writer` that fails to close is leaked by `close` (its Drop would retry and
             // panic); the file is about to be deleted anyway.
             let _ = w.close();
-            let _ = std::fs::remove_file(&self.tmp);
         }
+        // The temporary itself goes with `file` (not committed), dropped after this.
     }
 }
 

@@ -75,23 +75,11 @@ pub fn write_ply_digest(path: &Path, mesh: &Mesh) -> Result<(u32, u64)> {
 
 /// Write a mesh as binary little-endian PLY (atomic: temporary file + rename).
 pub fn write_ply(path: &Path, mesh: &Mesh) -> Result<()> {
-    let tmp = path.with_file_name(format!(
-        ".{}.tmp",
-        path.file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "mesh.ply".into())
-    ));
-    let write = || -> std::io::Result<()> {
-        let mut w = std::io::BufWriter::new(std::fs::File::create(&tmp)?);
+    Ok(talus_tiling::atomic_write_with(path, |f| {
+        let mut w = std::io::BufWriter::new(f);
         write_ply_to(&mut w, mesh)?;
-        let f = w.into_inner().map_err(|e| e.into_error())?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
-    };
-    write().map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        Error::output(path, e)
-    })
+        w.flush()
+    })?)
 }
 
 /// Read a triangle mesh (global coordinates) from a PLY file.

@@ -65,12 +65,12 @@ pub fn replace_file(tmp: &Path, path: &Path, bytes: &[u8]) -> Result<()> {
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    let t = write_tmp(tmp, &what, bytes)?;
-    if let Err(e) = fs::rename(&t, path) {
-        let _ = fs::remove_file(&t);
-        return Err(Error::output(path, e));
-    }
-    sync_dir(parent(path))
+    talus_tiling::AtomicFile::at(tmp_name(tmp, &what), path)
+        .write_with(|f| f.write_all(bytes))
+        .map_err(|e| match e {
+            talus_tiling::Error::Io { source, .. } => Error::output(path, source),
+            other => Error::from(other),
+        })
 }
 
 /// The directory holding `path`.

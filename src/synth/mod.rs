@@ -366,14 +366,9 @@ fn truth_events(events: &[ModelEvent], place: &Placement) -> Vec<TruthEvent> {
         .collect()
 }
 
-/// Write `truth` as pretty JSON to `path`, through `path`.json.tmp renamed at the end.
+/// Write `truth` as pretty JSON to `path` (atomically).
 fn write_json(path: &Path, truth: &impl serde::Serialize) -> Result<()> {
     let json = serde_json::to_vec_pretty(truth)
         .map_err(|e| Error::Internal(format!("truth.json: {e}")))?;
-    let tmp = path.with_extension("json.tmp");
-    std::fs::write(&tmp, json).map_err(|e| Error::output(path, e))?;
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        Error::output(path, e)
-    })
+    Ok(talus_tiling::atomic_write(path, &json)?)
 }

@@ -41,23 +41,10 @@ pub(crate) fn write_epoch(
     epoch: u16,
     laz: bool,
 ) -> Result<u64> {
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(".tmp");
-    let tmp = std::path::PathBuf::from(tmp);
-    let result = write_to(&tmp, chunks, origin, epoch, laz);
-    match result {
-        Ok(n) => match std::fs::rename(&tmp, path) {
-            Ok(()) => Ok(n),
-            Err(e) => {
-                let _ = std::fs::remove_file(&tmp);
-                Err(Error::output(path, e))
-            }
-        },
-        Err(e) => {
-            let _ = std::fs::remove_file(&tmp);
-            Err(e)
-        }
-    }
+    let file = talus_tiling::AtomicFile::new(path);
+    let n = write_to(file.tmp(), chunks, origin, epoch, laz)?;
+    file.commit()?;
+    Ok(n)
 }
 
 fn write_to(

@@ -1,19 +1,11 @@
 //! A small deterministic random number generator: xoshiro256** (Blackman & Vigna 2018) seeded
-//! through splitmix64, with Box–Muller normals.
+//! through [`crate::rng::SplitMix64`], with Box–Muller normals.
 //!
 //! Why not the `rand` crate: the whole need is "uniform f64 and a Gaussian, reproducible across
 //! platforms and crate versions"; thirty lines keep the build lean and make the byte-for-byte
 //! determinism of `talus synth` independent of another crate's stream guarantees.
 
-/// splitmix64 step (Steele, Lea & Flood 2014): used to expand a seed into xoshiro state and to
-/// derive independent streams.
-fn splitmix64(state: &mut u64) -> u64 {
-    *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    let mut z = *state;
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
+use crate::rng::SplitMix64;
 
 /// xoshiro256** generator.
 #[derive(Debug, Clone)]
@@ -28,12 +20,11 @@ impl Rng {
     /// hashing (seed, stream) through splitmix64 before filling the state, so per-epoch and
     /// per-chunk streams never share a sequence in practice.
     pub(crate) fn new(seed: u64, stream: u64) -> Self {
-        let mut sm = seed;
-        let a = splitmix64(&mut sm);
-        let mut sm = a ^ stream.wrapping_mul(0xD1B5_4A32_D192_ED03);
+        let a = SplitMix64::new(seed).next_u64();
+        let mut sm = SplitMix64::new(a ^ stream.wrapping_mul(0xD1B5_4A32_D192_ED03));
         let mut s = [0u64; 4];
         for v in s.iter_mut() {
-            *v = splitmix64(&mut sm);
+            *v = sm.next_u64();
         }
         // An all-zero state is the one fixed point of xoshiro; splitmix64 cannot give four zeros
         // in a row, but be explicit.

@@ -113,15 +113,9 @@ fn mean_covariance(region: &Region, v: &Variogram) -> f64 {
         (c.r.u1 - c.r.u0) / c.nu as f64,
         (c.r.v1 - c.r.v0) / c.nv as f64,
     );
-    // SplitMix64 (Steele et al. 2014), fixed seed.
-    let mut state = 0x9E37_79B9_7F4A_7C15u64 ^ cells.len() as u64;
-    let mut next = || {
-        state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = state;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    };
+    // A fixed seed: the same event gets the same locations in every run.
+    let mut rng = crate::rng::SplitMix64::new(0x9E37_79B9_7F4A_7C15u64 ^ cells.len() as u64);
+    let mut next = || rng.next_u64();
     let mut location = || {
         let (i, j) = cells[(next() % cells.len() as u64) as usize];
         let f = |x: u64| (x >> 11) as f64 / (1u64 << 53) as f64;

@@ -8,31 +8,8 @@ use std::process::{Command, Output};
 use talus::io::las_out::ResultWriter;
 use talus::io::{Crs, Point3};
 
-/// splitmix64: a tiny deterministic generator for test surfaces.
-pub struct Rng(u64);
-
-impl Rng {
-    pub fn new(seed: u64) -> Self {
-        Rng(seed)
-    }
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E3779B97F4A7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58476D1CE4E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D049BB133111EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in [0, 1).
-    pub fn uniform(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-    /// Standard normal (Box–Muller).
-    pub fn normal(&mut self) -> f64 {
-        let u1 = self.uniform().max(1e-300);
-        let u2 = self.uniform();
-        (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
-    }
-}
+/// The library's seeded generator (SplitMix64), for test surfaces.
+pub type Rng = talus::rng::SplitMix64;
 
 /// UTM-like offset so that the tests exercise large coordinates.
 pub const OFFSET: Point3 = [500_000.0, 5_000_000.0, 100.0];

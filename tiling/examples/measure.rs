@@ -8,24 +8,9 @@
 
 use std::time::Instant;
 use talus_tiling::{
-    read_tile, write_tile_with, BoundsXY, Quantisation, TileColumns, TileGrid, TileSplitter,
-    WriteOptions,
+    read_tile, write_tile_with, BoundsXY, Quantisation, SplitMix64, TileColumns, TileGrid,
+    TileSplitter, WriteOptions,
 };
-
-struct Rng(u64);
-impl Rng {
-    fn unit(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn gauss(&mut self) -> f64 {
-        let (u, v) = (self.unit().max(1e-300), self.unit());
-        (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
-    }
-}
 
 const SCALE: [f64; 3] = [0.001, 0.001, 0.001];
 const OFFSET: [f64; 3] = [500_000.0, 5_100_000.0, 0.0];
@@ -36,17 +21,17 @@ fn las(v: f64, axis: usize) -> f64 {
 }
 
 /// Terrain points `start..start + n` in scan order: lines of `per_line` points.
-fn terrain(start: usize, n: usize, per_line: usize, rng: &mut Rng) -> Vec<[f64; 3]> {
+fn terrain(start: usize, n: usize, per_line: usize, rng: &mut SplitMix64) -> Vec<[f64; 3]> {
     (start..start + n)
         .map(|i| {
             let (line, j) = ((i / per_line) as f64, (i % per_line) as f64);
-            let x = 512_000.0 + j * 0.2 + 0.05 * rng.gauss();
-            let y = 5_123_000.0 + line * 0.25 + 0.05 * rng.gauss();
+            let x = 512_000.0 + j * 0.2 + 0.05 * rng.normal();
+            let y = 5_123_000.0 + line * 0.25 + 0.05 * rng.normal();
             let (u, v) = (x - 512_000.0, y - 5_123_000.0);
             let mut z =
-                300.0 + 8.0 * (u / 37.0).sin() * (v / 23.0).cos() + 0.05 * u + 0.03 * rng.gauss();
-            if rng.unit() < 0.05 {
-                z += 2.0 + 10.0 * rng.unit(); // vegetation return
+                300.0 + 8.0 * (u / 37.0).sin() * (v / 23.0).cos() + 0.05 * u + 0.03 * rng.normal();
+            if rng.uniform() < 0.05 {
+                z += 2.0 + 10.0 * rng.uniform(); // vegetation return
             }
             [las(x, 0), las(y, 1), las(z, 2)]
         })
@@ -69,7 +54,7 @@ fn main() {
         .unwrap_or(10_000_000);
     let dir = std::env::temp_dir().join(format!("talus-tiling-measure-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
-    let mut rng = Rng(1);
+    let mut rng = SplitMix64::new(1);
 
     let n = 1_000_000;
     let pts = terrain(0, n, 1000, &mut rng);
@@ -146,7 +131,7 @@ fn main() {
         let mut s = TileSplitter::new(&split_dir, grid, 2.0, budget)
             .expect("splitter")
             .with_options(opts);
-        let mut rng = Rng(2);
+        let mut rng = SplitMix64::new(2);
         let t0 = Instant::now();
         let c0 = cpu_s();
         let mut gen = 0.0;

@@ -20,6 +20,74 @@ pub fn tmp_path(path: &Path) -> PathBuf {
     path.with_file_name(name)
 }
 
+/// A file written under a temporary name and given its final name by [`AtomicFile::commit`]
+/// (fsync, rename, fsync of the directory); dropped before that, the temporary is removed. The
+/// one write-then-rename of talus: whole files ([`atomic_write`]), streamed ones (a LAS writer
+/// writing to [`AtomicFile::tmp`]), and the store's, whose temporaries have unique names in its
+/// own folder so that two processes replacing one file leave one whole version.
+#[derive(Debug)]
+pub struct AtomicFile {
+    tmp: PathBuf,
+    path: PathBuf,
+    committed: bool,
+}
+
+impl AtomicFile {
+    /// `path`, written as its sibling `<file name>.tmp` ([`tmp_path`]).
+    pub fn new(path: &Path) -> AtomicFile {
+        AtomicFile::at(tmp_path(path), path)
+    }
+
+    /// `path`, written as `tmp` (on the same file system).
+    pub fn at(tmp: PathBuf, path: &Path) -> AtomicFile {
+        AtomicFile {
+            tmp,
+            path: path.to_path_buf(),
+            committed: false,
+        }
+    }
+
+    /// Where to write the content.
+    pub fn tmp(&self) -> &Path {
+        &self.tmp
+    }
+
+    /// The final name.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Write the temporary with `fill` (created anew; fsynced) and commit it.
+    pub fn write_with(self, fill: impl FnOnce(&mut File) -> std::io::Result<()>) -> Result<()> {
+        let written = (|| {
+            let mut f = File::create(&self.tmp)?;
+            fill(&mut f)?;
+            f.sync_all()
+        })();
+        written.map_err(|e| Error::io(&self.tmp, e))?;
+        self.commit()
+    }
+
+    /// The temporary (written) made durable and given its final name, durably.
+    pub fn commit(mut self) -> Result<()> {
+        File::open(&self.tmp)
+            .and_then(|f| f.sync_all())
+            .map_err(|e| Error::io(&self.tmp, e))?;
+        publish(&self.tmp, &self.path)?;
+        self.committed = true;
+        Ok(())
+    }
+}
+
+impl Drop for AtomicFile {
+    /// Not committed: the temporary goes.
+    fn drop(&mut self) {
+        if !self.committed {
+            let _ = fs::remove_file(&self.tmp);
+        }
+    }
+}
+
 /// Replace `path` with `bytes` atomically (tmp + fsync + rename + fsync directory).
 pub fn atomic_write(path: &Path, bytes: &[u8]) -> Result<()> {
     atomic_write_with(path, |f| f.write_all(bytes))
@@ -30,17 +98,7 @@ pub fn atomic_write_with(
     path: &Path,
     fill: impl FnOnce(&mut File) -> std::io::Result<()>,
 ) -> Result<()> {
-    let tmp = tmp_path(path);
-    let written = (|| {
-        let mut f = File::create(&tmp)?;
-        fill(&mut f)?;
-        f.sync_all()
-    })();
-    if let Err(e) = written {
-        let _ = fs::remove_file(&tmp);
-        return Err(Error::io(&tmp, e));
-    }
-    publish(&tmp, path)
+    AtomicFile::new(path).write_with(fill)
 }
 
 /// Give the durable temporary file `tmp` its name `path`, durably.

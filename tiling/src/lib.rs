@@ -18,15 +18,15 @@ pub mod error;
 pub mod framed;
 pub mod grid;
 pub mod hash;
-pub mod manifest;
+pub mod rng;
 pub mod splitter;
 pub mod tile_file;
 
-pub use atomic::{atomic_write, atomic_write_with};
+pub use atomic::{atomic_write, atomic_write_with, AtomicFile};
 pub use error::{Error, Result};
 pub use grid::{BoundsXY, TileGrid, TileId};
 pub use hash::{hash64, Fnv64};
-pub use manifest::{file_checksum, Manifest, UnitEntry};
+pub use rng::SplitMix64;
 pub use splitter::{empty_columns, tile_path, TileSplitter, OWNED_COLUMN};
 pub use tile_file::{
     encode_tile, read_tile, read_tile_frames, read_tile_header, write_tile, write_tile_with,

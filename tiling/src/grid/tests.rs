@@ -1,17 +1,10 @@
 use super::*;
 
-/// Small deterministic generator (SplitMix64) so tests need no extra crate.
-struct Rng(u64);
+/// The crate's seeded generator, as the tests draw from it.
+struct Rng(crate::SplitMix64);
 impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
     fn unit(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+        self.0.uniform()
     }
 }
 
@@ -86,7 +79,7 @@ fn grids() -> Vec<TileGrid> {
 
 #[test]
 fn ownership_partitions_points_exactly() {
-    let mut rng = Rng(7);
+    let mut rng = Rng(crate::SplitMix64::new(7));
     for grid in grids() {
         for [x, y] in probe_points(&grid, 0.0, &mut rng) {
             let owners: Vec<TileId> = grid
@@ -121,7 +114,7 @@ fn ownership_partitions_points_exactly() {
 
 #[test]
 fn halo_membership_is_exactly_the_halo_box_set() {
-    let mut rng = Rng(11);
+    let mut rng = Rng(crate::SplitMix64::new(11));
     for grid in grids() {
         for halo in [0.0, grid.tile_size() * 0.3, grid.tile_size() * 1.7] {
             for [x, y] in probe_points(&grid, halo, &mut rng) {
