@@ -1,15 +1,18 @@
 //! talus: change events and volumes between terrain surveys.
 //!
-//! Three layers (ARCHITECTURE.md):
-//! - pure algorithms, functions of their inputs: [`m3c2`] (normals and distances at core points),
-//!   [`events`] (stable ground, filter, smoothing, signed DBSCAN, description), [`volume`]
-//!   (regions, clipped watertight solids, uncertainty), over [`spatial`] indexes and [`io`];
-//! - the [`store`] of immutable units in DIR/.talus, and the [`plan`] of a run's units with
-//!   their dependencies, whose work [`units`] does (one module per kind of unit);
-//! - drivers that execute a plan: [`exec`] (this process; `talus worker`), behind the commands
-//!   [`compare`].
-//!
-//! [`synth`] writes synthetic pairs with exact ground truth; [`view`] serves the viewer.
+//! The layers, from the bottom (ARCHITECTURE.md; `tests/layers.rs` checks that imports only go
+//! down):
+//! - base: [`error`], [`interrupt`], [`progress`], [`memory`], [`geom`], [`rng`];
+//! - pure algorithms, functions of their inputs: [`spatial`] indexes, [`m3c2`] (normals and
+//!   distances at core points), [`events`] (stable ground, filter, smoothing, signed DBSCAN,
+//!   description), [`volume`] (regions, clipped watertight solids, uncertainty), [`campaign`]
+//!   (pairs, tracks, magnitude–frequency, the report), [`synth`] (scenes with exact truth);
+//! - formats: [`io`] (and the `talus_tiling` crate's tile files);
+//! - parameters: [`sampling`], [`params`];
+//! - the [`store`] of immutable units in DIR/.talus;
+//! - the [`plan`] of a run's units, and the stages that plan and do them: [`units`];
+//! - drivers that execute a plan: [`exec`] (this process, `talus worker`, Slurm);
+//! - the [`commands`] and the command line over them, [`cli`].
 
 pub mod campaign;
 pub mod cli;
