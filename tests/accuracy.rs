@@ -663,3 +663,101 @@ fn dense_cliff_within_2_percent_and_a_short_user_halflen_flags_deep_events() {
     assert_eq!(summary["reach"]["incomplete_events"], 5);
     assert!(line.contains("5 event(s) incomplete"), "{line}");
 }
+
+// ---------------------------------------------------------------- misregistered surveys
+
+/// The cliff with its after survey off by `shift` (m) and `turn` (degrees about x, y, z through
+/// the scene's centre): after the alignment on the stable ground every planted event is within
+/// 2 % (and inside its interval: [`judge`]), the alignment is applied, and the fitted transform
+/// maps the after survey back onto the before within its own uncertainty, checked at every
+/// planted event's centre: |M·x' − x| ≤ 4 standard errors of the mapped point (translation and
+/// rotation errors at that distance from the fit's origin, added) + the 1 mm coordinate quantum.
+fn misregistered_cliff(shift: [f64; 3], turn: [f64; 3]) -> Value {
+    let s = format!("{},{},{}", shift[0], shift[1], shift[2]);
+    let t = format!("{},{},{}", turn[0], turn[1], turn[2]);
+    let dir = common::tempdir();
+    let data = dir.path().join("data");
+    let truth = synth("cliff", &["--shift", &s, "--turn", &t], &data);
+    let res = dir.path().join("res");
+    let found = compare(&data.join("before.laz"), &data.join("after.laz"), &res);
+    let label = format!("cliff --shift {s} --turn {t}");
+    judge(&label, &planted(&truth), &found);
+    let summary: Value =
+        serde_json::from_slice(&std::fs::read(res.join("summary.json")).unwrap()).unwrap();
+    let a = summary["alignment"].clone();
+    assert_eq!(a["applied"], true, "{label}: {a}");
+    // The planted misregistration: x' = R (x − C) + C + shift, R = Rz Ry Rx, C the scene's
+    // centre at height 0.
+    let c = [truth.rotation_centre[0], truth.rotation_centre[1], 0.0];
+    let [rx, ry, rz] = turn.map(f64::to_radians);
+    let rot = |p: [f64; 3]| -> [f64; 3] {
+        let (sx, cx) = rx.sin_cos();
+        let (sy, cy) = ry.sin_cos();
+        let (sz, cz) = rz.sin_cos();
+        let p = [p[0], cx * p[1] - sx * p[2], sx * p[1] + cx * p[2]];
+        let p = [cy * p[0] + sy * p[2], p[1], -sy * p[0] + cy * p[2]];
+        [cz * p[0] - sz * p[1], sz * p[0] + cz * p[1], p[2]]
+    };
+    let m: Vec<Vec<f64>> = serde_json::from_value(a["matrix"].clone()).unwrap();
+    let sd = |k: &str| -> [f64; 3] { vec3(&a[k]) };
+    let (t_sd, w_sd, o) = (sd("translation_sd"), sd("rotation_sd"), sd("origin"));
+    for e in &truth.events {
+        let x = e.centre;
+        let r = rot([x[0] - c[0], x[1] - c[1], x[2] - c[2]]);
+        let moved: [f64; 3] = std::array::from_fn(|k| r[k] + c[k] + shift[k]);
+        let back: [f64; 3] = std::array::from_fn(|i| {
+            m[i][0] * moved[0] + m[i][1] * moved[1] + m[i][2] * moved[2] + m[i][3]
+        });
+        let off = dist(back, x);
+        let arm = dist(x, o);
+        let w = (w_sd[0].powi(2) + w_sd[1].powi(2) + w_sd[2].powi(2)).sqrt();
+        let tsd = (t_sd[0].powi(2) + t_sd[1].powi(2) + t_sd[2].powi(2)).sqrt();
+        let allowed = 4.0 * (tsd + w * arm) + 0.001;
+        eprintln!(
+            "{label}: at {} the fitted transform maps the after survey {:.4} m from the before \
+             (allowed {allowed:.4})",
+            e.description, off
+        );
+        assert!(off <= allowed, "{label}: {} off by {off:.4} m > {allowed:.4}: {a}", e.description);
+    }
+    summary
+}
+
+#[test]
+fn misregistered_cliff_shift_and_vertical_turn_within_2_percent() {
+    // The issue's case: (+6, −4, +8) cm and 0.1° about the vertical.
+    misregistered_cliff([0.06, -0.04, 0.08], [0.0, 0.0, 0.1]);
+}
+
+#[test]
+fn misregistered_cliff_20_cm_and_turns_about_the_horizontal_axes() {
+    misregistered_cliff([0.2, 0.0, -0.01], [0.0, 0.0, 0.0]);
+    misregistered_cliff([0.0, 0.0, 0.0], [0.3, 0.0, 0.0]);
+    misregistered_cliff([0.01, 0.0, 0.0], [0.0, 0.3, 0.0]);
+}
+
+#[test]
+fn a_registered_cliff_is_not_aligned_and_its_results_are_those_of_align_off() {
+    let dir = common::tempdir();
+    let data = dir.path().join("data");
+    synth("cliff", &[], &data);
+    let (b, a) = (data.join("before.laz"), data.join("after.laz"));
+    let auto = dir.path().join("auto");
+    let off = dir.path().join("off");
+    assert!(common::run_compare(&b, &a, &auto, &[]).status.success());
+    assert!(common::run_compare(&b, &a, &off, &["--align", "off"]).status.success());
+    let summary: Value =
+        serde_json::from_slice(&std::fs::read(auto.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["alignment"]["applied"], false, "{}", summary["alignment"]);
+    let reason = summary["alignment"]["reason"].as_str().unwrap();
+    assert!(reason.starts_with("not applied"), "{reason}");
+    for f in ["m3c2.laz", "events.geojson", "events.csv", "event_regions.geojson"] {
+        assert!(
+            std::fs::read(auto.join(f)).unwrap() == std::fs::read(off.join(f)).unwrap(),
+            "{f} differs between --align auto (not applied) and --align off"
+        );
+    }
+    let off_summary: Value =
+        serde_json::from_slice(&std::fs::read(off.join("summary.json")).unwrap()).unwrap();
+    assert!(off_summary.get("alignment").is_none());
+}

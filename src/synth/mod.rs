@@ -149,6 +149,9 @@ pub struct SynthOptions {
     /// Rigid translation (m, global axes) of every epoch-2 point after sampling and rotation: a
     /// registration error between the surveys, not a change (the truth volumes ignore it).
     pub shift_m: [f64; 3],
+    /// Rigid turn (degrees about x, y, z through the scene's centre) of every epoch-2 point: a
+    /// registration error with `shift_m`, not a change.
+    pub turn_deg: [f64; 3],
     /// Write LAZ (true) or LAS.
     pub laz: bool,
 }
@@ -162,6 +165,7 @@ impl Default for SynthOptions {
             rotate_deg: 0.0,
             density2: 1.0,
             shift_m: [0.0; 3],
+            turn_deg: [0.0; 3],
             laz: true,
         }
     }
@@ -175,9 +179,22 @@ const MIN_POINTS: u64 = 100;
 /// Largest accepted |component| of `--shift` (m): a registration error, not a relocation.
 const MAX_SHIFT: f64 = 1000.0;
 
+/// Largest accepted |angle| of `--turn` (degrees): a registration error, not a relocation.
+const MAX_TURN: f64 = 10.0;
+
 /// Parse `--shift DX,DY,DZ` (metres).
 pub fn parse_shift(s: &str) -> Result<[f64; 3]> {
-    let bad = || Error::Usage(format!("expected DX,DY,DZ in metres, got '{s}'"));
+    parse_triple(s, "DX,DY,DZ in metres")
+}
+
+/// Parse `--turn RX,RY,RZ` (degrees).
+pub fn parse_turn(s: &str) -> Result<[f64; 3]> {
+    parse_triple(s, "RX,RY,RZ in degrees")
+}
+
+/// Three comma-separated numbers (`what` says which, for the message).
+fn parse_triple(s: &str, what: &str) -> Result<[f64; 3]> {
+    let bad = || Error::Usage(format!("expected {what}, got '{s}'"));
     let v: Vec<f64> = s
         .split(',')
         .map(|t| t.trim().parse::<f64>().map_err(|_| bad()))
@@ -230,6 +247,16 @@ fn resolve(kind: SceneKind, opts: &SynthOptions) -> Result<Resolved> {
             opts.shift_m
         )));
     }
+    if !opts
+        .turn_deg
+        .iter()
+        .all(|d| d.is_finite() && d.abs() <= MAX_TURN)
+    {
+        return Err(Error::Usage(format!(
+            "synth: --turn angles must be finite and at most {MAX_TURN}°, got {:?}",
+            opts.turn_deg
+        )));
+    }
     if !opts.rotate_deg.is_finite() {
         return Err(Error::Usage(
             "synth: --rotate must be a finite angle".into(),
@@ -277,7 +304,12 @@ pub fn epoch_chunks(kind: SceneKind, opts: &SynthOptions, epoch: usize) -> Resul
 fn placement(model: &SceneModel, opts: &SynthOptions, epoch: usize) -> Placement {
     let shift = if epoch == 1 { opts.shift_m } else { [0.0; 3] };
     let origin = [0, 1, 2].map(|k| ORIGIN[k] + shift[k]);
-    Placement::new(model.centre, opts.rotate_deg, origin)
+    let placement = Placement::new(model.centre, opts.rotate_deg, origin);
+    if epoch == 1 {
+        placement.turned(opts.turn_deg)
+    } else {
+        placement
+    }
 }
 
 /// Points of epoch `epoch`: the requested count times the share of its surface that is observed
@@ -339,6 +371,7 @@ pub fn synth(kind: SceneKind, opts: &SynthOptions, out_dir: &Path) -> Result<Tru
         rotation_centre: [ORIGIN[0] + model.centre[0], ORIGIN[1] + model.centre[1]],
         density2: opts.density2,
         shift_m: opts.shift_m,
+        turn_deg: opts.turn_deg,
         crs_epsg: CRS_EPSG,
         crs_wkt: UTM33N_WKT.into(),
         total_gain_m3: events.iter().map(|e| e.volume_m3.max(0.0)).sum(),

@@ -51,6 +51,11 @@ pub struct Truth {
     /// error, not a change (the volumes are the real changes). Absent in older files: zero.
     #[serde(default)]
     pub shift_m: [f64; 3],
+    /// Rigid turn (degrees about x, y, z through the scene's centre at height 0, global x, y of
+    /// `rotation_centre`) of every epoch-2 point, after the rotation and before the shift: a
+    /// registration error. Absent: zero.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub turn_deg: [f64; 3],
     /// EPSG code of the CRS written in both files.
     pub crs_epsg: u32,
     /// The OGC WKT (version 1) written in both files' WKT CRS VLR.
@@ -60,4 +65,8 @@ pub struct Truth {
     pub total_gain_m3: f64,
     /// Sum of the negative volumes, m³ (≤ 0).
     pub total_loss_m3: f64,
+}
+
+fn is_zero(v: &[f64; 3]) -> bool {
+    *v == [0.0; 3]
 }

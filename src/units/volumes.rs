@@ -320,12 +320,12 @@ impl Stage for VolumesStage {
         );
         for pair in 0..p.plan.pairs.len() {
             let (b, a) = (p.plan.pairs[pair].before, p.plan.pairs[pair].after);
-            let deps = vec![
+            let mut deps = vec![
                 p.the(&Spec::pair(EventsStage::KIND, pair))?,
                 p.the(&Spec::pair(StableStage::KIND, pair))?,
-                p.the(&Spec::survey(TilingStage::KIND, b))?,
-                p.the(&Spec::survey(TilingStage::KIND, a))?,
             ];
+            deps.extend(p.survey_tiles(b)?);
+            deps.extend(p.survey_tiles(a)?);
             let label = p.plan.pairs[pair].label.clone();
             for t in grid.tiles() {
                 p.add(
