@@ -12,9 +12,9 @@
 //! ground's RMS radius L, so that every unknown is a displacement in metres at that radius and
 //! the normal matrix's eigenvalues compare.
 //!
-//! What the stable ground can see. A direction of the six whose eigenvalue is small beside the
-//! largest (a flat beach sees no horizontal shift and no turn about the vertical) is not
-//! constrained: the fit is the truncated pseudo-inverse (Golub & Van Loan §5.5.4), which
+//! What the stable ground can see. A direction of the six whose eigenvalue is small (a flat
+//! beach sees no horizontal shift and no turn about the vertical: its standard error would be
+//! more than half the noise of one distance) is not constrained: the fit is the truncated pseudo-inverse (Golub & Van Loan §5.5.4), which
 //! leaves such a direction at zero. It is **applied** only when (1) enough stable points, (2) the
 //! vertical and both tilts at least are constrained, (3) the fitted motion is larger than its
 //! own uncertainty (χ² of p over its covariance above the 99.9 % quantile of its degrees of
@@ -29,9 +29,10 @@ use crate::geom::Point3;
 
 /// Fewest stable points a fit is tried on.
 pub const MIN_POINTS: usize = 200;
-/// An eigenvalue of the scaled normal matrix below this share of the largest is a direction
-/// the stable ground does not constrain.
-pub const CONSTRAINED: f64 = 1e-3;
+/// A direction of the scaled normal matrix whose eigenvalue is below this is not constrained:
+/// its standard error, σ/√λ at the stable ground's radius, would be more than half the noise of
+/// one distance (λ is the information of that many points entirely along it).
+pub const CONSTRAINED: f64 = 4.0;
 /// χ² of the fitted motion that makes it significant: the 99.9 % quantile, by degrees of
 /// freedom (1 to 6).
 const CHI2_999: [f64; 6] = [10.83, 13.82, 16.27, 18.47, 20.52, 22.46];
@@ -46,9 +47,10 @@ pub struct Alignment {
     pub rotation: Point3,
     pub translation: Point3,
     pub origin: Point3,
-    /// Standard errors of ω (radians) and t (metres).
-    pub rotation_sd: Point3,
-    pub translation_sd: Point3,
+    /// Standard errors of ω (radians) and t (metres); none for a component the stable ground
+    /// does not constrain (the fit leaves it at zero: the survey is not moved that way).
+    pub rotation_sd: [Option<f64>; 3],
+    pub translation_sd: [Option<f64>; 3],
     /// Degrees of freedom the stable ground constrains (of 6).
     pub constrained: usize,
     /// RMS over the stable points of the displacement along their normals the fit explains.
@@ -69,8 +71,8 @@ impl Alignment {
             rotation: [0.0; 3],
             translation: [0.0; 3],
             origin: [0.0; 3],
-            rotation_sd: [0.0; 3],
-            translation_sd: [0.0; 3],
+            rotation_sd: [None; 3],
+            translation_sd: [None; 3],
             constrained: 0,
             effect_m: 0.0,
             residual_m: 0.0,
@@ -162,8 +164,9 @@ fn solve(
     }
     let eig = SymmetricEigen::new(n);
     let top = eig.eigenvalues.iter().cloned().fold(0.0, f64::max);
+    // Also far above the rounding of the largest (a direction exactly unseen is 0 ± that).
     let kept: Vec<usize> = (0..6)
-        .filter(|&k| top > 0.0 && eig.eigenvalues[k] > CONSTRAINED * top)
+        .filter(|&k| eig.eigenvalues[k] >= CONSTRAINED.max(1e-9 * top))
         .collect();
     let mut p = Vector6::zeros();
     for &k in &kept {
@@ -173,11 +176,13 @@ fn solve(
     (p, eig, kept)
 }
 
-/// Fit the misregistration on `stable` (indices into `samples`, their M3C2 distances finite),
-/// re-selecting the stable points whose residual lies within `keep_sigmas` robust standard
-/// deviations; `sigma_d` is the noise of one distance on stable ground (the stable-ground
-/// measurement's).
-pub fn fit(samples: &[Sample], stable: &[usize], sigma_d: f64) -> Alignment {
+/// Fit the misregistration starting from `stable` (indices into `samples`, their M3C2 distances
+/// finite), then re-selecting the stable ground among `pool` by the rigid model's residuals:
+/// within [`super::stable::KEEP_SIGMAS`] robust standard deviations. (The stable set a
+/// translation alone finds leaves out what a turn moves more than the noise — the far ends of a
+/// wall turned 0.1° about the vertical — and a fit on what is left would be biased toward no
+/// turn.) `sigma_d` is the noise of one distance on stable ground.
+pub fn fit(samples: &[Sample], stable: &[usize], pool: &[usize], sigma_d: f64) -> Alignment {
     let mut keep: Vec<usize> = stable.to_vec();
     let centroid = |idx: &[usize]| -> Vector3<f64> {
         let mut s = Vector3::zeros();
@@ -194,21 +199,35 @@ pub fn fit(samples: &[Sample], stable: &[usize], sigma_d: f64) -> Alignment {
         / keep.len().max(1) as f64)
         .sqrt()
         .max(1e-9);
-    let residual = |p: &Vector6<f64>, i: usize| samples[i].distance - row(&samples[i], &o, scale).dot(p);
+    let residual =
+        |p: &Vector6<f64>, i: usize| samples[i].distance - row(&samples[i], &o, scale).dot(p);
     let mut fitted = solve(samples, &keep, &o, scale);
+    // Graduated re-selection (the shrinking distance threshold of ICP): the pool's points join
+    // within a radius that starts at twice their median residual after the first fit — so a
+    // part of the stable ground the first set left out (a beach tilted by a turn the wall it
+    // started from cannot see) is taken in — and halves each round down to KEEP_SIGMAS robust
+    // standard deviations, which leaves the changed ground out again.
+    let mut all: Vec<f64> = pool.iter().map(|&i| residual(&fitted.0, i).abs()).collect();
+    let mut radius = 2.0 * median(&mut all);
     let mut sigma = f64::NAN;
-    for _ in 0..6 {
+    for _ in 0..24 {
         if keep.len() < MIN_POINTS {
             break;
         }
         let mut dev: Vec<f64> = keep.iter().map(|&i| residual(&fitted.0, i).abs()).collect();
         sigma = 1.4826 * median(&mut dev);
-        let next: Vec<usize> = stable
+        let floor = super::stable::KEEP_SIGMAS * sigma;
+        let within = radius.max(floor);
+        let next: Vec<usize> = pool
             .iter()
             .copied()
-            .filter(|&i| residual(&fitted.0, i).abs() <= super::stable::KEEP_SIGMAS * sigma)
+            .filter(|&i| residual(&fitted.0, i).abs() <= within)
             .collect();
-        if next == keep || next.len() < MIN_POINTS {
+        radius /= 2.0;
+        if next.len() < MIN_POINTS {
+            break;
+        }
+        if next == keep && within <= floor {
             break;
         }
         keep = next;
@@ -235,7 +254,14 @@ pub fn fit(samples: &[Sample], stable: &[usize], sigma_d: f64) -> Alignment {
         .sum::<f64>()
         / keep.len().max(1) as f64)
         .sqrt();
-    let sd = |k: usize| cov[(k, k)].max(0.0).sqrt();
+    // A parameter with a part in an unconstrained direction has no standard error.
+    let free = |k: usize| -> f64 {
+        (0..6)
+            .filter(|j| !kept.contains(j))
+            .map(|j| eig.eigenvectors[(k, j)].powi(2))
+            .sum()
+    };
+    let sd = |k: usize, unit: f64| (free(k) < 1e-3).then(|| cov[(k, k)].max(0.0).sqrt() / unit);
     // Vertical and both tilts: the unit vertical translation and the horizontal rotations.
     let sees = |dir: Vector6<f64>| -> bool {
         let dir = dir.normalize();
@@ -265,7 +291,7 @@ pub fn fit(samples: &[Sample], stable: &[usize], sigma_d: f64) -> Alignment {
              directions, 99.9 % quantile {:.1})",
             CHI2_999[dof.clamp(1, 6) - 1]
         )
-    } else if !(effect >= MIN_EFFECT * sigma_d) {
+    } else if effect.is_nan() || sigma_d.is_nan() || effect < MIN_EFFECT * sigma_d {
         format!(
             "not applied: it moves the stable surface by {:.4} (RMS along the normals), less \
              than {MIN_EFFECT} × σ_d ({:.4})",
@@ -282,8 +308,8 @@ pub fn fit(samples: &[Sample], stable: &[usize], sigma_d: f64) -> Alignment {
         rotation: [p[0] / scale, p[1] / scale, p[2] / scale],
         translation: [p[3], p[4], p[5]],
         origin: [o[0], o[1], o[2]],
-        rotation_sd: [sd(0) / scale, sd(1) / scale, sd(2) / scale],
-        translation_sd: [sd(3), sd(4), sd(5)],
+        rotation_sd: [sd(0, scale), sd(1, scale), sd(2, scale)],
+        translation_sd: [sd(3, 1.0), sd(4, 1.0), sd(5, 1.0)],
         constrained: dof,
         effect_m: effect,
         residual_m: sigma,
@@ -342,34 +368,33 @@ mod tests {
         let w = [0.0005, -0.0003, 0.002]; // 0.03°, 0.02°, 0.11°
         let t = [0.06, -0.04, 0.08];
         let s = scene(w, t, [10.0, 5.0, 3.0], 0.01, false, 1);
-        let a = fit(&s, &all(&s), 0.01);
+        let a = fit(&s, &all(&s), &all(&s), 0.01);
         assert!(a.applied, "{}", a.reason);
         assert_eq!(a.constrained, 6);
         // The fit's own origin: ω is the same, t moves by ω × (o − o_fit).
-        let shift = Vector3::from(w).cross(&(Vector3::from(a.origin) - Vector3::from([10.0, 5.0, 3.0])));
+        let shift =
+            Vector3::from(w).cross(&(Vector3::from(a.origin) - Vector3::from([10.0, 5.0, 3.0])));
         for k in 0..3 {
             let want_t = t[k] + shift[k];
+            let (ws, ts) = (a.rotation_sd[k].unwrap(), a.translation_sd[k].unwrap());
             assert!(
-                (a.rotation[k] - w[k]).abs() <= 4.0 * a.rotation_sd[k] + 1e-12,
-                "ω{k} {} vs {} ± {}",
+                (a.rotation[k] - w[k]).abs() <= 4.0 * ws + 1e-12,
+                "ω{k} {} vs {} ± {ws}",
                 a.rotation[k],
                 w[k],
-                a.rotation_sd[k]
             );
             assert!(
-                (a.translation[k] - want_t).abs() <= 4.0 * a.translation_sd[k] + 1e-12,
-                "t{k} {} vs {want_t} ± {}",
+                (a.translation[k] - want_t).abs() <= 4.0 * ts + 1e-12,
+                "t{k} {} vs {want_t} ± {ts}",
                 a.translation[k],
-                a.translation_sd[k]
             );
         }
         assert!((a.residual_m - 0.01).abs() < 0.002, "{}", a.residual_m);
         // Mapping a moved point back lands on the original.
         let p = [20.0, 7.0, 4.0];
         let c = Vector3::from(p) - Vector3::from(a.origin);
-        let moved = Vector3::from(p)
-            + Vector3::from(a.rotation).cross(&c)
-            + Vector3::from(a.translation);
+        let moved =
+            Vector3::from(p) + Vector3::from(a.rotation).cross(&c) + Vector3::from(a.translation);
         let back = a.apply(&[moved[0], moved[1], moved[2]]);
         for k in 0..3 {
             assert!((back[k] - p[k]).abs() < 1e-3, "{back:?} vs {p:?}");
@@ -379,7 +404,7 @@ mod tests {
     #[test]
     fn registered_surveys_are_not_aligned() {
         let s = scene([0.0; 3], [0.0; 3], [0.0; 3], 0.01, false, 2);
-        let a = fit(&s, &all(&s), 0.01);
+        let a = fit(&s, &all(&s), &all(&s), 0.01);
         assert!(!a.applied, "{}", a.reason);
         assert!(a.reason.contains("uncertainty"), "{}", a.reason);
     }
@@ -387,10 +412,13 @@ mod tests {
     #[test]
     fn flat_ground_constrains_only_the_vertical_and_the_tilts() {
         let s = scene([0.001, 0.0, 0.0], [0.3, 0.0, 0.05], [0.0; 3], 0.01, true, 3);
-        let a = fit(&s, &all(&s), 0.01);
+        let a = fit(&s, &all(&s), &all(&s), 0.01);
         assert_eq!(a.constrained, 3, "{a:?}");
-        // The horizontal shift is invisible: left at zero, not guessed.
+        // The horizontal shift is invisible: left at zero, not guessed, and said so.
         assert!(a.translation[0].abs() < 1e-6, "{a:?}");
+        assert_eq!(a.translation_sd[0], None);
+        assert_eq!(a.rotation_sd[2], None);
+        assert!(a.translation_sd[2].is_some() && a.rotation_sd[0].is_some());
         assert!(a.applied, "{}", a.reason);
     }
 
@@ -399,7 +427,7 @@ mod tests {
         let mut s = scene([0.0; 3], [0.05, 0.0, 0.0], [0.0; 3], 0.01, false, 4);
         // Keep the wall facing −x only.
         s.retain(|p| p.normal[0] != 0.0);
-        let a = fit(&s, &all(&s), 0.01);
+        let a = fit(&s, &all(&s), &all(&s), 0.01);
         assert!(!a.applied);
         assert!(a.reason.contains("directions"), "{}", a.reason);
     }
@@ -413,7 +441,7 @@ mod tests {
         for p in s.iter_mut().step_by(10) {
             p.distance += 1.0;
         }
-        let a = fit(&s, &all(&s), 0.01);
+        let a = fit(&s, &all(&s), &all(&s), 0.01);
         assert!(a.applied, "{}", a.reason);
         assert!(a.stable_points < 2800, "{}", a.stable_points);
         assert!((a.residual_m - 0.01).abs() < 0.003, "{}", a.residual_m);

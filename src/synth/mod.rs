@@ -296,17 +296,38 @@ pub fn epoch_chunks(kind: SceneKind, opts: &SynthOptions, epoch: usize) -> Resul
     }
     let r = resolve(kind, opts)?;
     let model = SceneModel::new(kind, r.points[0], opts.seed);
-    Ok(chunks_of(&model, &r, opts, epoch))
+    Ok(chunks_of(
+        &model,
+        &r,
+        opts,
+        epoch,
+        turn_height(&model, &r, opts),
+    ))
+}
+
+/// The height (local) of the axis `--turn` turns about: the before survey's mean height, so that
+/// the turn moves the scene by its angle times the scene's size, as a misregistered survey is
+/// turned about its own centre (not about a datum far below it). Zero without a turn.
+fn turn_height(model: &SceneModel, r: &Resolved, opts: &SynthOptions) -> f64 {
+    if opts.turn_deg == [0.0; 3] {
+        return 0.0;
+    }
+    let (mut n, mut sum) = (0u64, 0.0);
+    for chunk in chunks_of(model, r, opts, 0, 0.0) {
+        n += chunk.len() as u64;
+        sum += chunk.iter().map(|p| p[2] - ORIGIN[2]).sum::<f64>();
+    }
+    sum / n.max(1) as f64
 }
 
 /// Where epoch `epoch`'s local points go: rotated about the scene's centre, moved to the global
 /// origin, and for epoch 2 shifted by `--shift`.
-fn placement(model: &SceneModel, opts: &SynthOptions, epoch: usize) -> Placement {
+fn placement(model: &SceneModel, opts: &SynthOptions, epoch: usize, turn_z: f64) -> Placement {
     let shift = if epoch == 1 { opts.shift_m } else { [0.0; 3] };
     let origin = [0, 1, 2].map(|k| ORIGIN[k] + shift[k]);
     let placement = Placement::new(model.centre, opts.rotate_deg, origin);
     if epoch == 1 {
-        placement.turned(opts.turn_deg)
+        placement.turned(opts.turn_deg, turn_z)
     } else {
         placement
     }
@@ -318,14 +339,20 @@ fn epoch_points(model: &SceneModel, r: &Resolved, epoch: usize) -> u64 {
     (r.points[epoch] as f64 * model.observed[epoch]).round() as u64
 }
 
-fn chunks_of(model: &SceneModel, r: &Resolved, opts: &SynthOptions, epoch: usize) -> Chunks {
+fn chunks_of(
+    model: &SceneModel,
+    r: &Resolved,
+    opts: &SynthOptions,
+    epoch: usize,
+    turn_z: f64,
+) -> Chunks {
     Chunks::new(
         model.patches[epoch].clone(),
         epoch_points(model, r, epoch),
         opts.seed,
         epoch as u64,
         r.noise,
-        placement(model, opts, epoch),
+        placement(model, opts, epoch, turn_z),
     )
 }
 
@@ -341,8 +368,9 @@ pub fn synth(kind: SceneKind, opts: &SynthOptions, out_dir: &Path) -> Result<Tru
         PathBuf::from(format!("after.{ext}")),
     ];
     let mut written = [0u64; 2];
+    let turn_z = turn_height(&model, &r, opts);
     for epoch in 0..2 {
-        let chunks = chunks_of(&model, &r, opts, epoch);
+        let chunks = chunks_of(&model, &r, opts, epoch, turn_z);
         written[epoch] = output::write_epoch(
             &out_dir.join(&names[epoch]),
             chunks,
@@ -358,7 +386,7 @@ pub fn synth(kind: SceneKind, opts: &SynthOptions, out_dir: &Path) -> Result<Tru
             )));
         }
     }
-    let events = truth_events(&model.events, &placement(&model, opts, 0));
+    let events = truth_events(&model.events, &placement(&model, opts, 0, 0.0));
     let truth = Truth {
         scene: kind.name().into(),
         summary: model.summary.clone(),
@@ -372,6 +400,13 @@ pub fn synth(kind: SceneKind, opts: &SynthOptions, out_dir: &Path) -> Result<Tru
         density2: opts.density2,
         shift_m: opts.shift_m,
         turn_deg: opts.turn_deg,
+        turn_centre: (opts.turn_deg != [0.0; 3]).then(|| {
+            [
+                ORIGIN[0] + model.centre[0],
+                ORIGIN[1] + model.centre[1],
+                ORIGIN[2] + turn_z,
+            ]
+        }),
         crs_epsg: CRS_EPSG,
         crs_wkt: UTM33N_WKT.into(),
         total_gain_m3: events.iter().map(|e| e.volume_m3.max(0.0)).sum(),

@@ -40,8 +40,10 @@ pub(crate) struct Placement {
     pub sin: f64,
     pub origin: V3,
     /// A misregistration's turn (rows of a rotation matrix) about the scene's centre at height
-    /// 0, applied after the scene's own rotation: identity but for `--turn`'s epoch.
+    /// `turn_z`, applied after the scene's own rotation: identity but for `--turn`'s epoch.
     pub turn: [[f64; 3]; 3],
+    /// The local height of the turn's centre.
+    pub turn_z: f64,
 }
 
 impl Placement {
@@ -53,12 +55,14 @@ impl Placement {
             sin,
             origin,
             turn: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            turn_z: 0.0,
         }
     }
 
     /// The same placement, turned by `deg` about x, then y, then z (degrees) through the scene's
-    /// centre at height 0.
-    pub(crate) fn turned(mut self, deg: [f64; 3]) -> Self {
+    /// centre at (local) height `z`.
+    pub(crate) fn turned(mut self, deg: [f64; 3], z: f64) -> Self {
+        self.turn_z = z;
         let [a, b, c] = deg.map(f64::to_radians);
         let (sa, ca) = a.sin_cos();
         let (sb, cb) = b.sin_cos();
@@ -67,17 +71,25 @@ impl Placement {
         let ry = [[cb, 0.0, sb], [0.0, 1.0, 0.0], [-sb, 0.0, cb]];
         let rz = [[cc, -sc, 0.0], [sc, cc, 0.0], [0.0, 0.0, 1.0]];
         let mul = |p: [[f64; 3]; 3], q: [[f64; 3]; 3]| -> [[f64; 3]; 3] {
-            std::array::from_fn(|i| std::array::from_fn(|j| (0..3).map(|k| p[i][k] * q[k][j]).sum()))
+            std::array::from_fn(|i| {
+                std::array::from_fn(|j| (0..3).map(|k| p[i][k] * q[k][j]).sum())
+            })
         };
         self.turn = mul(rz, mul(ry, rx));
         self
     }
     pub(crate) fn apply(&self, p: V3) -> V3 {
         let (dx, dy) = (p[0] - self.centre[0], p[1] - self.centre[1]);
-        let mut q = [self.cos * dx - self.sin * dy, self.sin * dx + self.cos * dy, p[2]];
+        let mut q = [
+            self.cos * dx - self.sin * dy,
+            self.sin * dx + self.cos * dy,
+            p[2],
+        ];
         if self.turn != [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]] {
             let t = &self.turn;
-            q = std::array::from_fn(|i| t[i][0] * q[0] + t[i][1] * q[1] + t[i][2] * q[2]);
+            let d = [q[0], q[1], q[2] - self.turn_z];
+            q = std::array::from_fn(|i| t[i][0] * d[0] + t[i][1] * d[1] + t[i][2] * d[2]);
+            q[2] += self.turn_z;
         }
         [
             self.origin[0] + self.centre[0] + q[0],

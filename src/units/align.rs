@@ -109,7 +109,7 @@ pub fn align(samples: &[Sample], spacing: f64) -> Alignment {
         ));
     };
     let sigma_d = measure(samples, spacing).map_or(f64::NAN, |m| m.sigma_d);
-    fit(samples, &sel.keep, sigma_d)
+    fit(samples, &sel.keep, &sel.finite, sigma_d)
 }
 
 /// The tiles sampled: every k-th of the grid's, k = ⌈tiles / SAMPLE_TILES⌉.
@@ -149,12 +149,14 @@ fn sample(ctx: &Ctx, s: usize) -> Result<(Vec<Sample>, usize)> {
         )?;
         let before = read_tile(ctx, t0, tile)?;
         let after = read_tile(ctx, ts, tile)?;
-        let epoch = |t: &TilePoints| EpochPoints {
-            x: &t.x,
-            y: &t.y,
-            z: &t.z,
-            owned: &t.owned,
-        };
+        fn epoch(t: &TilePoints) -> EpochPoints<'_> {
+            EpochPoints {
+                x: &t.x,
+                y: &t.y,
+                z: &t.z,
+                owned: &t.owned,
+            }
+        }
         let extent = Extent {
             data_min: std::array::from_fn(|k| b.min[k].min(a.min[k])),
             data_max: std::array::from_fn(|k| b.max[k].max(a.max[k])),

@@ -43,7 +43,12 @@ impl Stage for AlignedStage {
             };
             let tiling = p.the(&Spec::survey(TilingStage::KIND, s))?;
             let label = p.plan.surveys[s].label.clone();
-            p.add(Spec::survey(Self::KIND, s), &label, &[], vec![align, tiling]);
+            p.add(
+                Spec::survey(Self::KIND, s),
+                &label,
+                &[],
+                vec![align, tiling],
+            );
         }
         Ok(())
     }
@@ -71,8 +76,9 @@ impl Stage for AlignedStage {
             .and_then(|r| r.info().transform);
         let map = move |pts: &mut [crate::geom::Point3]| {
             for p in pts.iter_mut() {
-                let q: [f64; 3] =
-                    std::array::from_fn(|i| m[i][0] * p[0] + m[i][1] * p[1] + m[i][2] * p[2] + m[i][3]);
+                let q: [f64; 3] = std::array::from_fn(|i| {
+                    m[i][0] * p[0] + m[i][1] * p[1] + m[i][2] * p[2] + m[i][3]
+                });
                 *p = match quantum {
                     // The decoder's own expression: scale · record + offset.
                     Some(t) => std::array::from_fn(|i| {

@@ -110,12 +110,14 @@ impl Stage for TilingStage {
     }
 }
 
-/// Cut survey `survey` into `out`, each chunk of points passed through `transform` first (an
-/// alignment: `super::aligned`).
+/// A change of every chunk of points before it is tiled (an alignment: `super::aligned`).
+pub type Transform<'a> = &'a dyn Fn(&mut [crate::geom::Point3]);
+
+/// Cut survey `survey` into `out`, each chunk of points passed through `transform` first.
 pub fn split(
     ctx: &Ctx,
     survey: usize,
-    transform: Option<&dyn Fn(&mut [crate::geom::Point3])>,
+    transform: Option<Transform>,
     out: &mut UnitWriter,
 ) -> Result<TilingMeta> {
     let plan = ctx.plan;

@@ -16,7 +16,6 @@ use talus_tiling::TileId;
 use super::events::{Draft, EventsStage, Kept};
 use super::stable::StableStage;
 use super::stage::{Line, Planner, Scope, Stage, Total};
-use super::tiling::TilingStage;
 use super::{read_tile, Ctx};
 use crate::error::Result;
 use crate::events::stable::Stable;

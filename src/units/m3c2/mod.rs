@@ -14,7 +14,6 @@ pub mod fit;
 
 use super::cores::{ThinnedStage, UserCoresStage};
 use super::stage::{Line, Planner, Scope, Stage, Total};
-use super::tiling::TilingStage;
 use super::{read_tile, Ctx, TilePoints};
 use crate::error::{Error, Result};
 use crate::io::Point3;

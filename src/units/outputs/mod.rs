@@ -160,9 +160,10 @@ pub struct AlignmentSummary {
     /// The later survey's misregistration: translation (m) and rotation vector (rad) about
     /// `origin`, with their standard errors.
     pub translation: [f64; 3],
-    pub translation_sd: [f64; 3],
+    /// Null for a component the stable ground does not constrain (left at zero).
+    pub translation_sd: [Option<f64>; 3],
     pub rotation: [f64; 3],
-    pub rotation_sd: [f64; 3],
+    pub rotation_sd: [Option<f64>; 3],
     pub rotation_deg: f64,
     pub origin: [f64; 3],
     /// Directions (of 6) the stable ground constrains.
