@@ -18,8 +18,11 @@
 //! leaves such a direction at zero. It is **applied** only when (1) enough stable points, (2) the
 //! vertical and both tilts at least are constrained, (3) the fitted motion is larger than its
 //! own uncertainty (χ² of p over its covariance above the 99.9 % quantile of its degrees of
-//! freedom) and (4) it moves the stable surface by at least a fifth of the noise of one M3C2
-//! distance (a millimetre shift on a centimetre-noise survey changes nothing worth the risk).
+//! freedom), (4) the stable ground, the fit removed, holds still to within [`RIGID`] times its
+//! measurement noise (a beach whose sand moved, or a slope creeping as a whole, does not: its
+//! "fit" would be a tilt of the ground, not of the survey) and (5) it moves the stable surface
+//! by at least a fifth of the noise of one M3C2 distance (a millimetre shift on a
+//! centimetre-noise survey changes nothing worth the risk).
 //! Otherwise it is reported with the reason, and not applied.
 
 use nalgebra::{Matrix6, SymmetricEigen, Vector3, Vector6};
@@ -38,6 +41,11 @@ pub const CONSTRAINED: f64 = 4.0;
 const CHI2_999: [f64; 6] = [10.83, 13.82, 16.27, 18.47, 20.52, 22.46];
 /// A motion moving the stable surface by less than this share of σ_d is not applied.
 pub const MIN_EFFECT: f64 = 0.2;
+/// After a fit, the stable ground must hold still to within this many times its measurement
+/// noise (LoD95 / 1.96 of its distances): a misregistration is rigid, and removing it leaves the
+/// surveys' noise; ground that moves (a beach, a creeping slope) leaves far more, and a "fit" to
+/// it would be a tilt of the sand, not of the survey.
+pub const RIGID: f64 = 3.0;
 
 /// The fitted transform of the later epoch, and what was decided.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -57,6 +65,10 @@ pub struct Alignment {
     pub effect_m: f64,
     /// Robust standard deviation of the residuals after the fit.
     pub residual_m: f64,
+    /// What the residual would be from the surveys' noise alone: the median over the stable
+    /// points of LoD95 / 1.96, the standard error of one M3C2 distance from its cylinders'
+    /// spreads and counts.
+    pub noise_m: f64,
     pub chi2: f64,
     pub stable_points: usize,
     pub applied: bool,
@@ -76,6 +88,7 @@ impl Alignment {
             constrained: 0,
             effect_m: 0.0,
             residual_m: 0.0,
+            noise_m: 0.0,
             chi2: 0.0,
             stable_points: 0,
             applied: false,
@@ -238,6 +251,12 @@ pub fn fit(samples: &[Sample], stable: &[usize], pool: &[usize], sigma_d: f64) -
     if !dev.is_empty() {
         sigma = 1.4826 * median(&mut dev);
     }
+    let mut lods: Vec<f64> = keep
+        .iter()
+        .map(|&i| samples[i].lod / 1.96)
+        .filter(|l| l.is_finite())
+        .collect();
+    let noise = median(&mut lods);
     // Covariance of the kept directions: σ² Σ v vᵀ / λ.
     let var = sigma * sigma;
     let mut cov = Matrix6::zeros();
@@ -291,6 +310,14 @@ pub fn fit(samples: &[Sample], stable: &[usize], pool: &[usize], sigma_d: f64) -
              directions, 99.9 % quantile {:.1})",
             CHI2_999[dof.clamp(1, 6) - 1]
         )
+    } else if !(sigma <= RIGID * noise) {
+        format!(
+            "not applied: the stable ground does not hold still as one rigid body: after the \
+             fit its distances spread by {sigma:.4} (robust standard deviation), {:.1} × the \
+             noise of one distance ({noise:.4}); ground that moves (sand, a slow landslide) is not \
+             a misregistration",
+            sigma / noise
+        )
     } else if effect.is_nan() || sigma_d.is_nan() || effect < MIN_EFFECT * sigma_d {
         format!(
             "not applied: it moves the stable surface by {:.4} (RMS along the normals), less \
@@ -313,6 +340,7 @@ pub fn fit(samples: &[Sample], stable: &[usize], pool: &[usize], sigma_d: f64) -
         constrained: dof,
         effect_m: effect,
         residual_m: sigma,
+        noise_m: noise,
         chi2,
         stable_points: keep.len(),
         applied: reason.starts_with("applied"),
