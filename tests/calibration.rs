@@ -25,7 +25,7 @@ fn run(scene: &str, extra: &[&str], dir: &Path) -> (Truth, Value, Value) {
 }
 
 /// [`run`], the comparison given `args`.
-fn run_with(scene: &str, extra: &[&str], dir: &Path, args: &[&str]) -> (Truth, Value, Value) {
+fn run_with(scene: &str, extra: &[&str], dir: &Path, compare: &[&str]) -> (Truth, Value, Value) {
     let data = dir.join("data");
     let mut args = vec!["synth", scene, "--out", data.to_str().unwrap()];
     args.extend_from_slice(extra);
@@ -36,7 +36,7 @@ fn run_with(scene: &str, extra: &[&str], dir: &Path, args: &[&str]) -> (Truth, V
         &data.join("before.laz"),
         &data.join("after.laz"),
         &res,
-        args,
+        compare,
     );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let truth: Truth =

@@ -1,8 +1,7 @@
 //! The alignment of a later survey onto the first (SPEC.md §1 "Registration: removed, not only
-//! measured"), fitted on a sample of the two surveys' tiles: M3C2 at about [`SAMPLE_CORES`] core
-//! points of up to [`SAMPLE_TILES`] tiles spread over the grid (all of them when there are
-//! fewer), their stable
-//! ground found as the stable-ground unit finds it (`events::stable::select`), and a rigid
+//! measured"), fitted on a sample: M3C2 at the core points (about [`SAMPLE_CORES`]) in a lattice
+//! of [`WINDOWS`] × [`WINDOWS`] windows over the first survey's footprint — the same whatever
+//! the tile layout — their stable ground found as the stable-ground unit finds it (`events::stable::select`), and a rigid
 //! point-to-plane fit over it (`events::align::fit`), applied only when it is significant and
 //! well constrained. The sample costs a few tiles' M3C2, not a second pass over all of them;
 //! the survey is then tiled again with the transform ([`super::aligned`]) only when it applies.
@@ -20,8 +19,9 @@ use crate::m3c2::{Extent, Reach};
 use crate::plan::Spec;
 use crate::store::UnitWriter;
 
-/// Tiles the fit samples, at most (spread over the grid in its order).
-pub const SAMPLE_TILES: usize = 16;
+/// Windows across and along the first survey's footprint the fit samples (see [`windows`]):
+/// 64 patches of about 25 × 25 core points, spread so that the turn about every axis is seen.
+pub const WINDOWS: usize = 8;
 /// Core points the fit computes, about: every k-th core point of the sampled tiles. Enough for a
 /// six-parameter fit whose uncertainty is far below the noise (σ/√n), few enough that the
 /// sample costs a fraction of one tile's M3C2.
@@ -60,7 +60,7 @@ impl Stage for AlignStage {
             return Ok(());
         }
         let key = format!(
-            "{:?}|{}|{SAMPLE_TILES}",
+            "{:?}|{}|{WINDOWS}",
             p.plan.params.m3c2(),
             p.plan.params.core_spacing.value
         );
@@ -112,35 +112,61 @@ pub fn align(samples: &[Sample], spacing: f64) -> Alignment {
     fit(samples, &sel.keep, &sel.finite, sigma_d)
 }
 
-/// The tiles sampled: every k-th of the grid's, k = ⌈tiles / SAMPLE_TILES⌉.
-fn sample_tiles(grid: &talus_tiling::TileGrid) -> Vec<talus_tiling::TileId> {
-    let all: Vec<_> = grid.tiles().collect();
-    let k = all.len().div_ceil(SAMPLE_TILES).max(1);
-    all.into_iter().step_by(k).collect()
+/// The windows the fit samples, [x0, y0, x1, y1]: a [`WINDOWS`] × [`WINDOWS`] lattice over the
+/// first survey's footprint, each a square centred in its cell, sized to hold about
+/// [`SAMPLE_CORES`] core points in all (never more than its cell). They depend on the first
+/// survey and the core spacing only, not on the tiles, so the sample — and the fit — is the same
+/// whatever the tile layout.
+fn windows(plan: &crate::plan::Plan) -> Vec<[f64; 4]> {
+    let b = &plan.surveys[0].bounds;
+    let c = plan.params.core_spacing.value;
+    let n = WINDOWS as f64;
+    let (cw, ch) = ((b.max[0] - b.min[0]) / n, (b.max[1] - b.min[1]) / n);
+    let side = c * (SAMPLE_CORES as f64).sqrt() / n;
+    let (hw, hh) = (0.5 * side.min(cw), 0.5 * side.min(ch));
+    let mut out = Vec::with_capacity(WINDOWS * WINDOWS);
+    for j in 0..WINDOWS {
+        for i in 0..WINDOWS {
+            let cx = b.min[0] + (i as f64 + 0.5) * cw;
+            let cy = b.min[1] + (j as f64 + 0.5) * ch;
+            out.push([cx - hw, cy - hh, cx + hw, cy + hh]);
+        }
+    }
+    out
 }
 
-/// M3C2 between survey 0 and survey `s` at the core points of the sampled tiles (raw tilings):
-/// the samples with a distance, and how many core points were computed.
+/// M3C2 between survey 0 and survey `s` (their own tilings) at the core points in the sample's
+/// [`windows`]: the samples measured within the cylinder (a walked distance may be finished in
+/// another tile, so it is left out), in core-point key order; and how many were computed.
 fn sample(ctx: &Ctx, s: usize) -> Result<(Vec<Sample>, usize)> {
     let plan = ctx.plan;
     let (t0, ts) = (
         ctx.unit(&Spec::survey(TilingStage::KIND, 0))?,
         ctx.unit(&Spec::survey(TilingStage::KIND, s))?,
     );
-    let counts = [
-        ctx.meta::<TilingStage>(t0)?.tile_points,
-        ctx.meta::<TilingStage>(ts)?.tile_points,
-    ];
+    let (m0, ms) = (ctx.meta::<TilingStage>(t0)?, ctx.meta::<TilingStage>(ts)?);
+    // The densest tile of the two surveys first, as the M3C2 units check it: a budget that
+    // cannot hold it is refused with the same words, whichever unit meets it first.
+    let pair_points = super::m3c2::fit::pair_tile_points(plan, &m0, &ms)?;
+    super::m3c2::fit::check_tiled(plan, &pair_points)?;
+    let counts = [m0.tile_points, ms.tile_points];
     let grid = plan.layout.grid()?;
     let params = plan.params.m3c2();
     let (b, a) = (&plan.surveys[0].bounds, &plan.surveys[s].bounds);
-    let mut samples = Vec::new();
+    let wins = windows(plan);
+    let inside = |p: &crate::geom::Point3| {
+        wins.iter()
+            .any(|w| p[0] >= w[0] && p[0] < w[2] && p[1] >= w[1] && p[1] < w[3])
+    };
+    let mut keyed: Vec<(u64, Sample)> = Vec::new();
     let mut computed = 0;
-    let tiles = sample_tiles(&grid);
-    let per_tile = (SAMPLE_CORES / tiles.len().max(1)).max(1000);
-    for tile in tiles {
+    for tile in grid.tiles() {
+        let sq = grid.square(tile);
+        let meets = wins.iter().any(|w| {
+            w[0] <= sq.max[0] && sq.min[0] <= w[2] && w[1] <= sq.max[1] && sq.min[1] <= w[3]
+        });
         let n = counts[0][grid.index(tile)] + counts[1][grid.index(tile)];
-        if n == 0 {
+        if !meets || n == 0 {
             continue;
         }
         let _held = ctx.reserve(
@@ -173,34 +199,43 @@ fn sample(ctx: &Ctx, s: usize) -> Result<(Vec<Sample>, usize)> {
         )
         .into_iter()
         .map(|(k, i)| (k, before.point(i)))
+        .filter(|(_, p)| inside(p))
         .collect();
-        let stride = cores.len().div_ceil(per_tile).max(1);
-        let picked: Vec<(u64, crate::geom::Point3)> = cores.into_iter().step_by(stride).collect();
+        if cores.is_empty() {
+            continue;
+        }
         let results = compute(
             &epoch(&before),
             &epoch(&after),
             plan.layout.anchor,
             plan.layout.core_spacing,
-            Some(&picked),
+            Some(&cores),
             &params,
             &extent,
         );
         computed += results.len();
-        samples.extend(
+        keyed.extend(
             results
                 .iter()
-                .filter(|k| k.r.reach != Reach::Pending && k.r.measured().is_finite())
-                .map(|k| Sample {
-                    xyz: k.xyz,
-                    normal: k.r.normal,
-                    distance: k.r.measured(),
-                    std_dev: [k.r.std_dev1, k.r.std_dev2],
-                    lod: k.r.uncertainty,
+                .filter(|k| k.r.reach == Reach::Window && k.r.measured().is_finite())
+                .map(|k| {
+                    (
+                        k.key,
+                        Sample {
+                            xyz: k.xyz,
+                            normal: k.r.normal,
+                            distance: k.r.measured(),
+                            std_dev: [k.r.std_dev1, k.r.std_dev2],
+                            lod: k.r.uncertainty,
+                        },
+                    )
                 }),
         );
         crate::interrupt::check()?;
     }
-    Ok((samples, computed))
+    // Key order: the same whatever order the tiles came in.
+    keyed.sort_by_key(|(k, _)| *k);
+    Ok((keyed.into_iter().map(|(_, s)| s).collect(), computed))
 }
 
 /// The alignment of survey `s` (its align unit must be done), if it has one.
