@@ -58,7 +58,8 @@ impl Stage for SurveyHeights {
     /// grid order, so every process gets the same bytes.
     fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> talus::Result<Heights> {
         let survey = ctx.survey(unit)?;
-        let tiling = ctx.tiling(survey)?;
+        // The survey as delivered: its own tiling (not an aligned one).
+        let tiling = ctx.unit(&Spec::survey(TilingStage::KIND, survey))?;
         let (mut n, mut sum) = (0u64, 0.0f64);
         let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
         for id in ctx.plan.layout.grid()?.tiles() {

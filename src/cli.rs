@@ -140,6 +140,11 @@ struct ParamArgs {
     /// steep, toward the lower terrain on steep faces).
     #[arg(long)]
     orientation: Option<String>,
+    /// Align the later survey onto the earlier (a campaign's onto its first) by a rigid
+    /// transform fitted on the stable ground: auto (applied when significant and well
+    /// constrained, else reported) | off (default: auto).
+    #[arg(long, value_name = "auto|off")]
+    align: Option<String>,
     /// Significance threshold τ on |distance|, in the input's units (default: 3 σ_d + 1.96
     /// reg_error from the stable ground).
     #[arg(long, value_name = "M")]
@@ -316,6 +321,11 @@ struct SynthArgs {
     #[arg(long, value_name = "DX,DY,DZ", default_value = "0,0,0", allow_hyphen_values = true,
           value_parser = |s: &str| crate::synth::parse_shift(s).map_err(|e| e.to_string()))]
     shift: [f64; 3],
+    /// Turn every epoch-2 point by RX,RY,RZ degrees about x, y and z through the scene's centre
+    /// (a registration error, not a change).
+    #[arg(long, value_name = "RX,RY,RZ", default_value = "0,0,0", allow_hyphen_values = true,
+          value_parser = |s: &str| crate::synth::parse_turn(s).map_err(|e| e.to_string()))]
+    turn: [f64; 3],
     /// Write uncompressed LAS instead of LAZ.
     #[arg(long)]
     las: bool,
@@ -332,6 +342,7 @@ impl ParamArgs {
             reg_error: self.reg_error,
             min_points: self.min_points,
             orientation: self.orientation.clone(),
+            align: self.align.clone(),
             threshold: self.threshold,
             smooth_k: self.smooth_k,
             smooth_sigma: self.smooth_sigma,
@@ -401,8 +412,19 @@ fn run(cli: Cli) -> crate::Result<()> {
         }
         Command::Info { files, json } => crate::commands::info::print(&files, json),
         Command::Synth(s) => crate::commands::synth::synth(
-            &s.scene, &s.out, s.points, s.epochs, s.seed, s.noise, s.rotate, s.density2, s.shift,
-            !s.las,
+            &s.scene,
+            &s.out,
+            s.epochs,
+            crate::synth::SynthOptions {
+                points: s.points,
+                seed: s.seed,
+                noise: s.noise,
+                rotate_deg: s.rotate,
+                density2: s.density2,
+                shift_m: s.shift,
+                turn_deg: s.turn,
+                laz: !s.las,
+            },
         ),
         Command::View { dir, port, bind } => crate::commands::view::command(&dir, bind, port),
         Command::Worker {

@@ -40,6 +40,8 @@ pub struct UserParams {
     pub reg_error: Option<f64>,
     pub min_points: Option<u32>,
     pub orientation: Option<String>,
+    /// `auto` (align the later survey on the stable ground when it helps) or `off`.
+    pub align: Option<String>,
     pub threshold: Option<f64>,
     pub smooth_k: Option<u32>,
     pub smooth_sigma: Option<f64>,
@@ -206,6 +208,7 @@ impl UserParams {
             reg_error: self.reg_error.or(base.reg_error),
             min_points: self.min_points.or(base.min_points),
             orientation: self.orientation.or(base.orientation),
+            align: self.align.or(base.align),
             threshold: self.threshold.or(base.threshold),
             smooth_k: self.smooth_k.or(base.smooth_k),
             smooth_sigma: self.smooth_sigma.or(base.smooth_sigma),
@@ -238,6 +241,10 @@ pub struct Params {
     pub reg_error: Resolved<f64>,
     pub min_points: Resolved<u32>,
     pub orientation: Resolved<String>,
+    /// `auto` or `off` (SPEC.md §1 "Registration: removed, not only measured"). Absent from a
+    /// plan written before it existed: off.
+    #[serde(default = "align_off")]
+    pub align: Resolved<String>,
     pub threshold: Resolved<f64>,
     pub smooth_k: Resolved<u32>,
     pub smooth_sigma: Resolved<f64>,
@@ -249,6 +256,13 @@ pub struct Params {
 
 /// The source of a parameter the user gave (a flag or the config file).
 pub const USER: &str = "user";
+
+fn align_off() -> Resolved<String> {
+    Resolved {
+        value: "off".into(),
+        source: "default of an older plan".into(),
+    }
+}
 
 impl<T> Resolved<T> {
     /// A value the user gave.
@@ -394,6 +408,16 @@ impl Params {
             }
             _ => {}
         }
+        let align = match user.align.as_deref() {
+            None => Resolved {
+                value: "auto".to_string(),
+                source: "default: auto".into(),
+            },
+            Some(a @ ("auto" | "off")) => Resolved::user(a.to_string()),
+            Some(other) => {
+                return Err(user.bad_value("align", format!("auto or off, not '{other}'")));
+            }
+        };
         let orientation = user.orientation.clone().unwrap_or_else(|| "auto".into());
         orientation.parse::<Orientation>().map_err(|m| {
             let problem = m.strip_prefix("--orientation: ").unwrap_or(&m);
@@ -453,6 +477,7 @@ impl Params {
                 },
                 value: orientation,
             },
+            align,
             threshold: pick(
                 user.threshold,
                 0.5 * s,
@@ -525,6 +550,11 @@ impl Params {
                 .expect("validated in resolve"),
             walk: self.walk(),
         }
+    }
+
+    /// Whether later surveys are aligned onto the first on the stable ground (`--align auto`).
+    pub fn align_enabled(&self) -> bool {
+        self.align.value == "auto"
     }
 
     /// How M3C2 treats a cylinder that holds only one epoch ([`crate::m3c2::reach`]): a derived

@@ -124,10 +124,12 @@ fn three_processes_one_killed_give_the_one_process_bytes() {
         serde_json::from_str(&std::fs::read_to_string(dir.join(".talus/plan.json")).unwrap())
             .unwrap();
     let planned = plan["units"].as_array().unwrap().len();
-    let finished: usize = ["tiling", "m3c2", "stable", "events", "volumes", "outputs"]
-        .iter()
-        .map(|k| unit_times(&dir, k).len())
-        .sum();
+    let finished: usize = [
+        "tiling", "align", "aligned", "m3c2", "stable", "events", "volumes", "outputs",
+    ]
+    .iter()
+    .map(|k| unit_times(&dir, k).len())
+    .sum();
     assert_eq!(finished, planned);
 }
 

@@ -59,7 +59,10 @@ fn plan_only_writes_the_scripts_and_submits_nothing() {
         .collect();
     assert_eq!(
         stages,
-        ["tiling", "m3c2", "stable", "events", "volumes", "outputs", "publish"],
+        [
+            "tiling", "align", "aligned", "m3c2", "stable", "events", "volumes", "outputs",
+            "publish"
+        ],
         "{stdout}"
     );
     assert!(
@@ -94,7 +97,7 @@ fn plan_only_writes_the_scripts_and_submits_nothing() {
     .unwrap();
     assert_eq!(m3c2["tasks"].as_array().unwrap().len(), tiles.div_ceil(2));
 
-    let script = std::fs::read_to_string(sub.join("02-m3c2.sh")).unwrap();
+    let script = std::fs::read_to_string(sub.join("04-m3c2.sh")).unwrap();
     for line in [
         "#!/bin/bash",
         &format!("#SBATCH --array=0-{}", tiles.div_ceil(2) - 1),
@@ -108,7 +111,7 @@ fn plan_only_writes_the_scripts_and_submits_nothing() {
     let submit = std::fs::read_to_string(sub.join("submit.sh")).unwrap();
     assert!(
         submit.contains(
-            r#"sbatch --parsable "--dependency=afterok:$j1" -p long '--comment=a b' 02-m3c2.sh"#
+            r#"sbatch --parsable "--dependency=afterok:$j3" -p long '--comment=a b' 04-m3c2.sh"#
         ),
         "{submit}"
     );

@@ -140,6 +140,8 @@ fn a_registered_stage_runs_locally_in_a_worker_and_in_a_slurm_plan() {
         [
             "tiling",
             "survey_heights",
+            "align",
+            "aligned",
             "m3c2",
             "stable",
             "events",

@@ -6,33 +6,29 @@ use crate::error::{Error, Result};
 use crate::synth::campaign::{self, CampaignOptions};
 use crate::synth::{SceneKind, SynthOptions};
 
-/// `talus synth SCENE --out DIR` (SCENE `campaign`: `--epochs` surveys, no `--rotate`,
-/// `--density2` or `--shift`).
-#[allow(clippy::too_many_arguments)]
-pub fn synth(
-    scene: &str,
-    out: &Path,
-    points: Option<u64>,
-    epochs: Option<usize>,
-    seed: u64,
-    noise: Option<f64>,
-    rotate: f64,
-    density2: f64,
-    shift: [f64; 3],
-    laz: bool,
-) -> Result<()> {
+/// `talus synth SCENE --out DIR` with the pair scenes' `opts` (SCENE `campaign`: `--epochs`
+/// surveys, no `--rotate`, `--density2`, `--shift` or `--turn`).
+pub fn synth(scene: &str, out: &Path, epochs: Option<usize>, opts: SynthOptions) -> Result<()> {
     if scene.trim().eq_ignore_ascii_case("campaign") {
-        if rotate != 0.0 || density2 != 1.0 || shift != [0.0; 3] {
+        let plain = SynthOptions {
+            points: opts.points,
+            seed: opts.seed,
+            noise: opts.noise,
+            laz: opts.laz,
+            ..SynthOptions::default()
+        };
+        if opts != plain {
             return Err(Error::Usage(
-                "synth campaign: --rotate, --density2 and --shift are for the pair scenes".into(),
+                "synth campaign: --rotate, --density2, --shift and --turn are for the pair scenes"
+                    .into(),
             ));
         }
         let opts = CampaignOptions {
             epochs: epochs.unwrap_or(campaign::DEFAULT_EPOCHS),
-            seed,
-            points,
-            noise,
-            laz,
+            seed: opts.seed,
+            points: opts.points,
+            noise: opts.noise,
+            laz: opts.laz,
         };
         let truth = campaign::write(out, &opts)?;
         let events: usize = truth.pairs.iter().map(|p| p.events.len()).sum();
@@ -55,15 +51,6 @@ pub fn synth(
         ));
     }
     let kind: SceneKind = scene.parse()?;
-    let opts = SynthOptions {
-        points,
-        seed,
-        noise,
-        rotate_deg: rotate,
-        density2,
-        shift_m: shift,
-        laz,
-    };
     let truth = crate::synth::synth(kind, &opts, out)?;
     println!(
         "{}: {} + {} points, {} planted event(s), truth in {}",

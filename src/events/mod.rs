@@ -7,6 +7,7 @@
 //! distances over the k nearest kept neighbours) → [`dbscan`] (signed DBSCAN, tile-mergeable
 //! through the global [`union_find`]) → [`describe`] (centroid, statistics, PCA box).
 
+pub mod align;
 pub mod dbscan;
 pub mod describe;
 pub mod filter;

@@ -144,6 +144,54 @@ fn fit_translation(samples: &[Sample], idx: &[usize]) -> Point3 {
 /// normals). `spacing` is the core spacing (the variogram's shortest lag). None when fewer than
 /// [`MIN_STABLE`] points are stable.
 pub fn measure(samples: &[Sample], spacing: f64) -> Option<Stable> {
+    let Selected { finite, keep, t } = select(samples)?;
+    let residual = |t: &Point3, i: usize| samples[i].distance - dot(&samples[i].normal, t);
+    let mut r: Vec<f64> = keep.iter().map(|&i| residual(&t, i)).collect();
+    let centre = median(&mut r);
+    let mut dev: Vec<f64> = r.iter().map(|x| (x - centre).abs()).collect();
+    let sigma_d = 1.4826 * median(&mut dev);
+    let reg_error = (keep
+        .iter()
+        .map(|&i| dot(&samples[i].normal, &t).powi(2))
+        .sum::<f64>()
+        / keep.len() as f64)
+        .sqrt();
+    let variogram = fit_variogram(samples, &keep, &t, spacing);
+    let point_variance = std::array::from_fn(|k| {
+        let v: Vec<f64> = keep
+            .iter()
+            .map(|&i| samples[i].std_dev[k].powi(2))
+            .filter(|v| v.is_finite())
+            .collect();
+        v.iter().sum::<f64>() / v.len().max(1) as f64
+    });
+    Some(Stable {
+        translation: t,
+        reg_error,
+        sigma_d,
+        point_variance,
+        variogram,
+        stable_points: keep.len(),
+        sampled_points: samples.len(),
+        method: format!(
+            "robust fit d = n·t on core points within {KEEP_SIGMAS} robust standard deviations \
+             ({} of {} computed core points), spherical variogram of the residuals",
+            keep.len(),
+            finite.len()
+        ),
+    })
+}
+
+/// The stable ground found among `samples`: the samples with a finite distance, the stable ones
+/// (indices into `samples`), and the translation fitted on them.
+pub struct Selected {
+    pub finite: Vec<usize>,
+    pub keep: Vec<usize>,
+    pub t: Point3,
+}
+
+/// Find the stable ground (see the module doc): None with fewer than [`MIN_STABLE`] points.
+pub fn select(samples: &[Sample]) -> Option<Selected> {
     let finite: Vec<usize> = (0..samples.len())
         .filter(|&i| {
             let s = &samples[i];
@@ -202,41 +250,8 @@ pub fn measure(samples: &[Sample], spacing: f64) -> Option<Stable> {
     if keep.len() < MIN_STABLE {
         return None;
     }
-    let mut r: Vec<f64> = keep.iter().map(|&i| residual(&t, i)).collect();
-    let centre = median(&mut r);
-    let mut dev: Vec<f64> = r.iter().map(|x| (x - centre).abs()).collect();
-    let sigma_d = 1.4826 * median(&mut dev);
-    let reg_error = (keep
-        .iter()
-        .map(|&i| dot(&samples[i].normal, &t).powi(2))
-        .sum::<f64>()
-        / keep.len() as f64)
-        .sqrt();
-    let variogram = fit_variogram(samples, &keep, &t, spacing);
-    let point_variance = std::array::from_fn(|k| {
-        let v: Vec<f64> = keep
-            .iter()
-            .map(|&i| samples[i].std_dev[k].powi(2))
-            .filter(|v| v.is_finite())
-            .collect();
-        v.iter().sum::<f64>() / v.len().max(1) as f64
-    });
     let _ = sigma;
-    Some(Stable {
-        translation: t,
-        reg_error,
-        sigma_d,
-        point_variance,
-        variogram,
-        stable_points: keep.len(),
-        sampled_points: samples.len(),
-        method: format!(
-            "robust fit d = n·t on core points within {KEEP_SIGMAS} robust standard deviations \
-             ({} of {} computed core points), spherical variogram of the residuals",
-            keep.len(),
-            finite.len()
-        ),
-    })
+    Some(Selected { finite, keep, t })
 }
 
 /// The mode of `d`'s kernel density (Gaussian kernel, bandwidth `h`) that a mean shift started

@@ -149,6 +149,9 @@ pub struct SynthOptions {
     /// Rigid translation (m, global axes) of every epoch-2 point after sampling and rotation: a
     /// registration error between the surveys, not a change (the truth volumes ignore it).
     pub shift_m: [f64; 3],
+    /// Rigid turn (degrees about x, y, z through the scene's centre) of every epoch-2 point: a
+    /// registration error with `shift_m`, not a change.
+    pub turn_deg: [f64; 3],
     /// Write LAZ (true) or LAS.
     pub laz: bool,
 }
@@ -162,6 +165,7 @@ impl Default for SynthOptions {
             rotate_deg: 0.0,
             density2: 1.0,
             shift_m: [0.0; 3],
+            turn_deg: [0.0; 3],
             laz: true,
         }
     }
@@ -175,9 +179,22 @@ const MIN_POINTS: u64 = 100;
 /// Largest accepted |component| of `--shift` (m): a registration error, not a relocation.
 const MAX_SHIFT: f64 = 1000.0;
 
+/// Largest accepted |angle| of `--turn` (degrees): a registration error, not a relocation.
+const MAX_TURN: f64 = 10.0;
+
 /// Parse `--shift DX,DY,DZ` (metres).
 pub fn parse_shift(s: &str) -> Result<[f64; 3]> {
-    let bad = || Error::Usage(format!("expected DX,DY,DZ in metres, got '{s}'"));
+    parse_triple(s, "DX,DY,DZ in metres")
+}
+
+/// Parse `--turn RX,RY,RZ` (degrees).
+pub fn parse_turn(s: &str) -> Result<[f64; 3]> {
+    parse_triple(s, "RX,RY,RZ in degrees")
+}
+
+/// Three comma-separated numbers (`what` says which, for the message).
+fn parse_triple(s: &str, what: &str) -> Result<[f64; 3]> {
+    let bad = || Error::Usage(format!("expected {what}, got '{s}'"));
     let v: Vec<f64> = s
         .split(',')
         .map(|t| t.trim().parse::<f64>().map_err(|_| bad()))
@@ -230,6 +247,16 @@ fn resolve(kind: SceneKind, opts: &SynthOptions) -> Result<Resolved> {
             opts.shift_m
         )));
     }
+    if !opts
+        .turn_deg
+        .iter()
+        .all(|d| d.is_finite() && d.abs() <= MAX_TURN)
+    {
+        return Err(Error::Usage(format!(
+            "synth: --turn angles must be finite and at most {MAX_TURN}°, got {:?}",
+            opts.turn_deg
+        )));
+    }
     if !opts.rotate_deg.is_finite() {
         return Err(Error::Usage(
             "synth: --rotate must be a finite angle".into(),
@@ -269,15 +296,41 @@ pub fn epoch_chunks(kind: SceneKind, opts: &SynthOptions, epoch: usize) -> Resul
     }
     let r = resolve(kind, opts)?;
     let model = SceneModel::new(kind, r.points[0], opts.seed);
-    Ok(chunks_of(&model, &r, opts, epoch))
+    Ok(chunks_of(
+        &model,
+        &r,
+        opts,
+        epoch,
+        turn_height(&model, &r, opts),
+    ))
+}
+
+/// The height (local) of the axis `--turn` turns about: the before survey's mean height, so that
+/// the turn moves the scene by its angle times the scene's size, as a misregistered survey is
+/// turned about its own centre (not about a datum far below it). Zero without a turn.
+fn turn_height(model: &SceneModel, r: &Resolved, opts: &SynthOptions) -> f64 {
+    if opts.turn_deg == [0.0; 3] {
+        return 0.0;
+    }
+    let (mut n, mut sum) = (0u64, 0.0);
+    for chunk in chunks_of(model, r, opts, 0, 0.0) {
+        n += chunk.len() as u64;
+        sum += chunk.iter().map(|p| p[2] - ORIGIN[2]).sum::<f64>();
+    }
+    sum / n.max(1) as f64
 }
 
 /// Where epoch `epoch`'s local points go: rotated about the scene's centre, moved to the global
 /// origin, and for epoch 2 shifted by `--shift`.
-fn placement(model: &SceneModel, opts: &SynthOptions, epoch: usize) -> Placement {
+fn placement(model: &SceneModel, opts: &SynthOptions, epoch: usize, turn_z: f64) -> Placement {
     let shift = if epoch == 1 { opts.shift_m } else { [0.0; 3] };
     let origin = [0, 1, 2].map(|k| ORIGIN[k] + shift[k]);
-    Placement::new(model.centre, opts.rotate_deg, origin)
+    let placement = Placement::new(model.centre, opts.rotate_deg, origin);
+    if epoch == 1 {
+        placement.turned(opts.turn_deg, turn_z)
+    } else {
+        placement
+    }
 }
 
 /// Points of epoch `epoch`: the requested count times the share of its surface that is observed
@@ -286,14 +339,20 @@ fn epoch_points(model: &SceneModel, r: &Resolved, epoch: usize) -> u64 {
     (r.points[epoch] as f64 * model.observed[epoch]).round() as u64
 }
 
-fn chunks_of(model: &SceneModel, r: &Resolved, opts: &SynthOptions, epoch: usize) -> Chunks {
+fn chunks_of(
+    model: &SceneModel,
+    r: &Resolved,
+    opts: &SynthOptions,
+    epoch: usize,
+    turn_z: f64,
+) -> Chunks {
     Chunks::new(
         model.patches[epoch].clone(),
         epoch_points(model, r, epoch),
         opts.seed,
         epoch as u64,
         r.noise,
-        placement(model, opts, epoch),
+        placement(model, opts, epoch, turn_z),
     )
 }
 
@@ -309,8 +368,9 @@ pub fn synth(kind: SceneKind, opts: &SynthOptions, out_dir: &Path) -> Result<Tru
         PathBuf::from(format!("after.{ext}")),
     ];
     let mut written = [0u64; 2];
+    let turn_z = turn_height(&model, &r, opts);
     for epoch in 0..2 {
-        let chunks = chunks_of(&model, &r, opts, epoch);
+        let chunks = chunks_of(&model, &r, opts, epoch, turn_z);
         written[epoch] = output::write_epoch(
             &out_dir.join(&names[epoch]),
             chunks,
@@ -326,7 +386,7 @@ pub fn synth(kind: SceneKind, opts: &SynthOptions, out_dir: &Path) -> Result<Tru
             )));
         }
     }
-    let events = truth_events(&model.events, &placement(&model, opts, 0));
+    let events = truth_events(&model.events, &placement(&model, opts, 0, 0.0));
     let truth = Truth {
         scene: kind.name().into(),
         summary: model.summary.clone(),
@@ -339,6 +399,14 @@ pub fn synth(kind: SceneKind, opts: &SynthOptions, out_dir: &Path) -> Result<Tru
         rotation_centre: [ORIGIN[0] + model.centre[0], ORIGIN[1] + model.centre[1]],
         density2: opts.density2,
         shift_m: opts.shift_m,
+        turn_deg: opts.turn_deg,
+        turn_centre: (opts.turn_deg != [0.0; 3]).then(|| {
+            [
+                ORIGIN[0] + model.centre[0],
+                ORIGIN[1] + model.centre[1],
+                ORIGIN[2] + turn_z,
+            ]
+        }),
         crs_epsg: CRS_EPSG,
         crs_wkt: UTM33N_WKT.into(),
         total_gain_m3: events.iter().map(|e| e.volume_m3.max(0.0)).sum(),

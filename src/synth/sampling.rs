@@ -39,6 +39,11 @@ pub(crate) struct Placement {
     pub cos: f64,
     pub sin: f64,
     pub origin: V3,
+    /// A misregistration's turn (rows of a rotation matrix) about the scene's centre at height
+    /// `turn_z`, applied after the scene's own rotation: identity but for `--turn`'s epoch.
+    pub turn: [[f64; 3]; 3],
+    /// The local height of the turn's centre.
+    pub turn_z: f64,
 }
 
 impl Placement {
@@ -49,14 +54,47 @@ impl Placement {
             cos,
             sin,
             origin,
+            turn: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            turn_z: 0.0,
         }
+    }
+
+    /// The same placement, turned by `deg` about x, then y, then z (degrees) through the scene's
+    /// centre at (local) height `z`.
+    pub(crate) fn turned(mut self, deg: [f64; 3], z: f64) -> Self {
+        self.turn_z = z;
+        let [a, b, c] = deg.map(f64::to_radians);
+        let (sa, ca) = a.sin_cos();
+        let (sb, cb) = b.sin_cos();
+        let (sc, cc) = c.sin_cos();
+        let rx = [[1.0, 0.0, 0.0], [0.0, ca, -sa], [0.0, sa, ca]];
+        let ry = [[cb, 0.0, sb], [0.0, 1.0, 0.0], [-sb, 0.0, cb]];
+        let rz = [[cc, -sc, 0.0], [sc, cc, 0.0], [0.0, 0.0, 1.0]];
+        let mul = |p: [[f64; 3]; 3], q: [[f64; 3]; 3]| -> [[f64; 3]; 3] {
+            std::array::from_fn(|i| {
+                std::array::from_fn(|j| (0..3).map(|k| p[i][k] * q[k][j]).sum())
+            })
+        };
+        self.turn = mul(rz, mul(ry, rx));
+        self
     }
     pub(crate) fn apply(&self, p: V3) -> V3 {
         let (dx, dy) = (p[0] - self.centre[0], p[1] - self.centre[1]);
+        let mut q = [
+            self.cos * dx - self.sin * dy,
+            self.sin * dx + self.cos * dy,
+            p[2],
+        ];
+        if self.turn != [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]] {
+            let t = &self.turn;
+            let d = [q[0], q[1], q[2] - self.turn_z];
+            q = std::array::from_fn(|i| t[i][0] * d[0] + t[i][1] * d[1] + t[i][2] * d[2]);
+            q[2] += self.turn_z;
+        }
         [
-            self.origin[0] + self.centre[0] + self.cos * dx - self.sin * dy,
-            self.origin[1] + self.centre[1] + self.sin * dx + self.cos * dy,
-            self.origin[2] + p[2],
+            self.origin[0] + self.centre[0] + q[0],
+            self.origin[1] + self.centre[1] + q[1],
+            self.origin[2] + q[2],
         ]
     }
 }

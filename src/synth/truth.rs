@@ -51,6 +51,15 @@ pub struct Truth {
     /// error, not a change (the volumes are the real changes). Absent in older files: zero.
     #[serde(default)]
     pub shift_m: [f64; 3],
+    /// Rigid turn (degrees about x, then y, then z through `turn_centre`) of every epoch-2
+    /// point, after the rotation and with the shift: a registration error, not a change. Absent:
+    /// zero.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub turn_deg: [f64; 3],
+    /// Global coordinates of the point `turn_deg` turns about: the scene's centre at the before
+    /// survey's mean height. Absent without a turn.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub turn_centre: Option<[f64; 3]>,
     /// EPSG code of the CRS written in both files.
     pub crs_epsg: u32,
     /// The OGC WKT (version 1) written in both files' WKT CRS VLR.
@@ -60,4 +69,8 @@ pub struct Truth {
     pub total_gain_m3: f64,
     /// Sum of the negative volumes, m³ (≤ 0).
     pub total_loss_m3: f64,
+}
+
+fn is_zero(v: &[f64; 3]) -> bool {
+    *v == [0.0; 3]
 }

@@ -12,6 +12,8 @@
 //! process, machine or run executes it, and in whatever order the units run, its files are the
 //! same bytes.
 
+pub mod align;
+pub mod aligned;
 pub mod campaign;
 pub mod cores;
 pub mod events;
@@ -120,9 +122,29 @@ impl Ctx<'_> {
             .ok_or_else(|| Error::Internal(format!("unit {} without a tile", u.name)))
     }
 
-    /// The tiling unit of survey `survey`.
+    /// The unit whose tile files hold survey `survey` in the run's frame: its aligned tiling
+    /// when its alignment applied ([`aligned`]), else its own tiling.
     pub fn tiling(&self, survey: usize) -> Result<usize> {
+        if let Some(a) = self
+            .plan
+            .find(&Spec::survey(aligned::AlignedStage::KIND, survey))
+        {
+            if self.meta::<aligned::AlignedStage>(a)?.applied {
+                return Ok(a);
+            }
+        }
         self.unit(&Spec::survey(tiling::TilingStage::KIND, survey))
+    }
+
+    /// The tiling record of survey `survey` in the run's frame (see [`Ctx::tiling`]).
+    pub fn tiling_meta(&self, survey: usize) -> Result<tiling::TilingMeta> {
+        let u = self.tiling(survey)?;
+        if self.plan.units[u].kind() == aligned::AlignedStage::KIND {
+            if let Some(t) = self.meta::<aligned::AlignedStage>(u)?.tiling {
+                return Ok(t);
+            }
+        }
+        self.meta::<tiling::TilingStage>(u)
     }
 
     /// The dependency of unit `i` of stage `S`, if it has one.

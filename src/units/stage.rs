@@ -181,6 +181,8 @@ pub fn default_stages() -> Vec<&'static dyn Registered> {
     use super::*;
     vec![
         entry::<tiling::TilingStage>(),
+        entry::<align::AlignStage>(),
+        entry::<aligned::AlignedStage>(),
         entry::<cores::UserCoresStage>(),
         entry::<cores::ThinnedStage>(),
         entry::<m3c2::M3c2Stage>(),
@@ -313,6 +315,14 @@ impl Planner<'_> {
     /// The units of `kind` for pair `pair`, in plan order.
     pub fn of_pair(&self, kind: &str, pair: usize) -> Vec<usize> {
         self.plan.of_pair(kind, pair).collect()
+    }
+
+    /// The units holding survey `s`'s tiles: its tiling, and its aligned tiling when it has one
+    /// (which of the two holds them is known once the alignment ran: `Ctx::tiling`).
+    pub fn survey_tiles(&self, s: usize) -> Result<Vec<usize>> {
+        let mut out = vec![self.the(&Spec::survey(super::tiling::TilingStage::KIND, s))?];
+        out.extend(self.find(&Spec::survey(super::aligned::AlignedStage::KIND, s)));
+        Ok(out)
     }
 }
 

@@ -106,12 +106,20 @@ impl Stage for TilingStage {
     }
 
     fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<TilingMeta> {
-        run(ctx, ctx.survey(unit)?, out)
+        split(ctx, ctx.survey(unit)?, None, out)
     }
 }
 
-/// Cut survey `survey` into `out`.
-fn run(ctx: &Ctx, survey: usize, out: &mut UnitWriter) -> Result<TilingMeta> {
+/// A change of every chunk of points before it is tiled (an alignment: `super::aligned`).
+pub type Transform<'a> = &'a dyn Fn(&mut [crate::geom::Point3]);
+
+/// Cut survey `survey` into `out`, each chunk of points passed through `transform` first.
+pub fn split(
+    ctx: &Ctx,
+    survey: usize,
+    transform: Option<Transform>,
+    out: &mut UnitWriter,
+) -> Result<TilingMeta> {
     let plan = ctx.plan;
     let layout = &plan.layout;
     let grid = layout.grid()?;
@@ -137,6 +145,9 @@ fn run(ctx: &Ctx, survey: usize, out: &mut UnitWriter) -> Result<TilingMeta> {
             splitter.set_options(write_options(reader.info().transform));
         }
         while reader.fill(&mut buf, 1 << 16)? > 0 {
+            if let Some(f) = transform {
+                f(&mut buf);
+            }
             splitter.push(&buf)?;
             points += buf.len() as u64;
             (ctx.progress)(buf.len() as u64);

@@ -16,7 +16,6 @@ use talus_tiling::TileId;
 use super::events::{Draft, EventsStage, Kept};
 use super::stable::StableStage;
 use super::stage::{Line, Planner, Scope, Stage, Total};
-use super::tiling::TilingStage;
 use super::{read_tile, Ctx};
 use crate::error::Result;
 use crate::events::stable::Stable;
@@ -320,12 +319,12 @@ impl Stage for VolumesStage {
         );
         for pair in 0..p.plan.pairs.len() {
             let (b, a) = (p.plan.pairs[pair].before, p.plan.pairs[pair].after);
-            let deps = vec![
+            let mut deps = vec![
                 p.the(&Spec::pair(EventsStage::KIND, pair))?,
                 p.the(&Spec::pair(StableStage::KIND, pair))?,
-                p.the(&Spec::survey(TilingStage::KIND, b))?,
-                p.the(&Spec::survey(TilingStage::KIND, a))?,
             ];
+            deps.extend(p.survey_tiles(b)?);
+            deps.extend(p.survey_tiles(a)?);
             let label = p.plan.pairs[pair].label.clone();
             for t in grid.tiles() {
                 p.add(

@@ -14,7 +14,6 @@ pub mod fit;
 
 use super::cores::{ThinnedStage, UserCoresStage};
 use super::stage::{Line, Planner, Scope, Stage, Total};
-use super::tiling::TilingStage;
 use super::{read_tile, Ctx, TilePoints};
 use crate::error::{Error, Result};
 use crate::io::Point3;
@@ -90,15 +89,16 @@ impl Stage for M3c2Stage {
         for pair in 0..p.plan.pairs.len() {
             fit::check_planned(p.plan, pair)?;
             let (b, a) = (p.plan.pairs[pair].before, p.plan.pairs[pair].after);
-            let tb = p.the(&Spec::survey(TilingStage::KIND, b))?;
-            let ta = p.the(&Spec::survey(TilingStage::KIND, a))?;
+            let mut deps = p.survey_tiles(b)?;
+            deps.extend(p.survey_tiles(a)?);
+            deps.extend(core_unit);
             let label = p.plan.pairs[pair].label.clone();
             for t in grid.tiles() {
                 p.add(
                     Spec::tile(Self::KIND, pair, t),
                     &format!("{label}-{}", t.name()),
                     &[&m3c2, cores],
-                    [tb, ta].into_iter().chain(core_unit).collect(),
+                    deps.clone(),
                 );
             }
         }
@@ -129,8 +129,8 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<M3c2Meta> {
     // unit runs first, not after the tiles before it.
     let points = fit::pair_tile_points(
         plan,
-        &ctx.meta::<TilingStage>(tb)?,
-        &ctx.meta::<TilingStage>(ta)?,
+        &ctx.tiling_meta(p.before)?,
+        &ctx.tiling_meta(p.after)?,
     )?;
     fit::check_tiled(plan, &points)?;
     let halo_points = points[plan.layout.grid()?.index(tile)];
@@ -232,7 +232,7 @@ fn tile_extent(plan: &crate::plan::Plan, pair: usize, tile: TileId) -> Result<Ex
 
 /// Tile `id`'s square grown by `grow`, [x0, y0, x1, y1], open at the grid's edges: a tile file
 /// holds its halo box, and an edge tile every point beyond the grid (they are clamped onto it).
-fn open_box(grid: &talus_tiling::TileGrid, id: TileId, grow: f64) -> [f64; 4] {
+pub(super) fn open_box(grid: &talus_tiling::TileGrid, id: TileId, grow: f64) -> [f64; 4] {
     let h = grid.halo_box(id, grow);
     let open = |edge: bool, v: f64, inf: f64| if edge { inf } else { v };
     [

@@ -144,7 +144,53 @@ pub struct Summary {
     /// How far M3C2 looked for the other epoch (SPEC.md §1 "Change of any depth").
     #[serde(default)]
     pub reach: ReachSummary,
+    /// The later survey's alignment onto the first (absent with `--align off`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alignment: Option<AlignmentSummary>,
     pub stages: Vec<StageTime>,
+}
+
+/// summary.json `alignment` (SPEC.md §1): the rigid transform fitted on the stable ground, and
+/// whether (and why) it was applied.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct AlignmentSummary {
+    pub applied: bool,
+    /// 4×4, row-major: maps the later survey's coordinates onto the earlier's.
+    pub matrix: [[f64; 4]; 4],
+    /// The later survey's misregistration: translation (m) and rotation vector (rad) about
+    /// `origin`, with their standard errors.
+    pub translation: [f64; 3],
+    /// Null for a component the stable ground does not constrain (left at zero).
+    pub translation_sd: [Option<f64>; 3],
+    pub rotation: [f64; 3],
+    pub rotation_sd: [Option<f64>; 3],
+    pub rotation_deg: f64,
+    pub origin: [f64; 3],
+    /// Directions (of 6) the stable ground constrains.
+    pub constrained: usize,
+    pub stable_points: usize,
+    /// Robust standard deviation of the stable ground's distances after the fit.
+    pub residual_m: f64,
+    pub reason: String,
+}
+
+impl AlignmentSummary {
+    pub fn of(a: &crate::events::align::Alignment) -> AlignmentSummary {
+        AlignmentSummary {
+            applied: a.applied,
+            matrix: a.matrix(),
+            translation: a.translation,
+            translation_sd: a.translation_sd,
+            rotation: a.rotation,
+            rotation_sd: a.rotation_sd,
+            rotation_deg: a.rotation_deg(),
+            origin: a.origin,
+            constrained: a.constrained,
+            stable_points: a.stable_points,
+            residual_m: a.residual_m,
+            reason: a.reason.clone(),
+        }
+    }
 }
 
 /// summary.json `reach`: the rule M3C2 followed where a cylinder held one epoch only, and what it
@@ -209,6 +255,28 @@ impl Summary {
             self.total_loss_m3,
             self.tiles,
         ) + &self.reach_line()
+            + &self.alignment_line()
+    }
+
+    /// What the one line says of the alignment: applied (by how much), or not (why), when the
+    /// fit found a motion worth a word.
+    fn alignment_line(&self) -> String {
+        match &self.alignment {
+            Some(a) if a.applied => format!(
+                "; the after survey aligned on {} stable core points: shift ({:+.3}, {:+.3}, \
+                 {:+.3}) m, turn {:.3}°, residual {:.3} m",
+                a.stable_points,
+                a.translation[0],
+                a.translation[1],
+                a.translation[2],
+                a.rotation_deg,
+                a.residual_m
+            ),
+            Some(a) if a.reason.contains("directions") || a.reason.contains("stable") => {
+                format!("; alignment {}", a.reason)
+            }
+            _ => String::new(),
+        }
     }
 
     /// What the one line adds about reach: incomplete events (their intervals are not confident
@@ -550,6 +618,7 @@ fn summarize(
         .collect();
     let significant = || records.iter().filter(|e| e.significant);
     let reach = ReachSummary::new(&params, written, records);
+    let alignment = super::align::read(ctx, p.after)?.map(|a| AlignmentSummary::of(&a));
     Ok(Summary {
         tool: "talus".into(),
         version: env!("CARGO_PKG_VERSION").into(),
@@ -583,6 +652,7 @@ fn summarize(
             .filter(|v| *v < 0.0)
             .sum(),
         reach,
+        alignment,
         stages,
     })
 }

@@ -1,0 +1,247 @@
+//! The alignment of a later survey onto the first (SPEC.md §1 "Registration: removed, not only
+//! measured"), fitted on a sample: M3C2 at the core points (about [`SAMPLE_CORES`]) in a lattice
+//! of [`WINDOWS`] × [`WINDOWS`] windows over the first survey's footprint — the same whatever
+//! the tile layout — their stable ground found as the stable-ground unit finds it (`events::stable::select`), and a rigid
+//! point-to-plane fit over it (`events::align::fit`), applied only when it is significant and
+//! well constrained. The sample costs a few tiles' M3C2, not a second pass over all of them;
+//! the survey is then tiled again with the transform ([`super::aligned`]) only when it applies.
+
+use serde::{Deserialize, Serialize};
+
+use super::stage::{Line, Planner, Scope, Stage, Total};
+use super::tiling::TilingStage;
+use super::{read_tile, Ctx, TilePoints};
+use crate::error::Result;
+use crate::events::align::{fit, Alignment};
+use crate::events::stable::{measure, select, Sample};
+use crate::m3c2::tile::{compute, EpochPoints};
+use crate::m3c2::{Extent, Reach};
+use crate::plan::Spec;
+use crate::store::UnitWriter;
+
+/// Windows across and along the first survey's footprint the fit samples (see [`windows`]):
+/// 64 patches of about 25 × 25 core points, spread so that the turn about every axis is seen.
+pub const WINDOWS: usize = 8;
+/// Core points the fit computes, about: every k-th core point of the sampled tiles. Enough for a
+/// six-parameter fit whose uncertainty is far below the noise (σ/√n), few enough that the
+/// sample costs a fraction of one tile's M3C2.
+pub const SAMPLE_CORES: usize = 40_000;
+
+/// The file of an align unit: its [`Alignment`].
+pub const FILE: &str = "align.json";
+
+/// A later survey aligned onto the first on their stable ground.
+pub struct AlignStage;
+
+/// What an align unit records.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct AlignMeta {
+    /// The transform is applied (the survey is tiled again with it).
+    pub applied: bool,
+    /// Core points computed for the fit, and those on stable ground.
+    pub sampled: usize,
+    pub stable_points: usize,
+}
+
+impl Stage for AlignStage {
+    const KIND: &'static str = "align";
+    const SCOPE: Scope = Scope::Survey;
+    const LINE: Line = Line {
+        name: "alignment",
+        counts: "core points sampled",
+        total: Total::Unknown,
+    };
+    type Meta = AlignMeta;
+
+    /// With `--align auto`: one per survey compared that is not the first, onto the first (a
+    /// campaign's surveys all onto its first, so that every pair is in one frame).
+    fn plan(p: &mut Planner) -> Result<()> {
+        if !p.plan.params.align_enabled() {
+            return Ok(());
+        }
+        let key = format!(
+            "{:?}|{}|{WINDOWS}",
+            p.plan.params.m3c2(),
+            p.plan.params.core_spacing.value
+        );
+        let first = p.the(&Spec::survey(TilingStage::KIND, 0))?;
+        for s in later_surveys(p.plan) {
+            let t = p.the(&Spec::survey(TilingStage::KIND, s))?;
+            let label = p.plan.surveys[s].label.clone();
+            p.add(Spec::survey(Self::KIND, s), &label, &[&key], vec![first, t]);
+        }
+        Ok(())
+    }
+
+    fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<AlignMeta> {
+        let s = ctx.survey(unit)?;
+        let (samples, sampled) = sample(ctx, s)?;
+        let alignment = align(&samples, ctx.plan.params.core_spacing.value);
+        (ctx.progress)(sampled as u64);
+        super::write_json(out, FILE, &alignment)?;
+        Ok(AlignMeta {
+            applied: alignment.applied,
+            sampled,
+            stable_points: alignment.stable_points,
+        })
+    }
+}
+
+/// The surveys of the plan's pairs other than the first, in order, each once.
+pub fn later_surveys(plan: &crate::plan::Plan) -> Vec<usize> {
+    let mut s: Vec<usize> = plan
+        .pairs
+        .iter()
+        .flat_map(|p| [p.before, p.after])
+        .filter(|&s| s != 0)
+        .collect();
+    s.sort_unstable();
+    s.dedup();
+    s
+}
+
+/// The fit over `samples`: their stable ground, its noise, the rigid transform.
+pub fn align(samples: &[Sample], spacing: f64) -> Alignment {
+    let Some(sel) = select(samples) else {
+        return Alignment::none(format!(
+            "not applied: no stable ground among the {} core points sampled",
+            samples.len()
+        ));
+    };
+    let sigma_d = measure(samples, spacing).map_or(f64::NAN, |m| m.sigma_d);
+    fit(samples, &sel.keep, &sel.finite, sigma_d)
+}
+
+/// The windows the fit samples, [x0, y0, x1, y1]: a [`WINDOWS`] × [`WINDOWS`] lattice over the
+/// first survey's footprint, each a square centred in its cell, sized to hold about
+/// [`SAMPLE_CORES`] core points in all (never more than its cell). They depend on the first
+/// survey and the core spacing only, not on the tiles, so the sample — and the fit — is the same
+/// whatever the tile layout.
+fn windows(plan: &crate::plan::Plan) -> Vec<[f64; 4]> {
+    let b = &plan.surveys[0].bounds;
+    let c = plan.params.core_spacing.value;
+    let n = WINDOWS as f64;
+    let (cw, ch) = ((b.max[0] - b.min[0]) / n, (b.max[1] - b.min[1]) / n);
+    let side = c * (SAMPLE_CORES as f64).sqrt() / n;
+    let (hw, hh) = (0.5 * side.min(cw), 0.5 * side.min(ch));
+    let mut out = Vec::with_capacity(WINDOWS * WINDOWS);
+    for j in 0..WINDOWS {
+        for i in 0..WINDOWS {
+            let cx = b.min[0] + (i as f64 + 0.5) * cw;
+            let cy = b.min[1] + (j as f64 + 0.5) * ch;
+            out.push([cx - hw, cy - hh, cx + hw, cy + hh]);
+        }
+    }
+    out
+}
+
+/// M3C2 between survey 0 and survey `s` (their own tilings) at the core points in the sample's
+/// [`windows`]: the samples measured within the cylinder (a walked distance may be finished in
+/// another tile, so it is left out), in core-point key order; and how many were computed.
+fn sample(ctx: &Ctx, s: usize) -> Result<(Vec<Sample>, usize)> {
+    let plan = ctx.plan;
+    let (t0, ts) = (
+        ctx.unit(&Spec::survey(TilingStage::KIND, 0))?,
+        ctx.unit(&Spec::survey(TilingStage::KIND, s))?,
+    );
+    let (m0, ms) = (ctx.meta::<TilingStage>(t0)?, ctx.meta::<TilingStage>(ts)?);
+    // The densest tile of the two surveys first, as the M3C2 units check it: a budget that
+    // cannot hold it is refused with the same words, whichever unit meets it first.
+    let pair_points = super::m3c2::fit::pair_tile_points(plan, &m0, &ms)?;
+    super::m3c2::fit::check_tiled(plan, &pair_points)?;
+    let counts = [m0.tile_points, ms.tile_points];
+    let grid = plan.layout.grid()?;
+    let params = plan.params.m3c2();
+    let (b, a) = (&plan.surveys[0].bounds, &plan.surveys[s].bounds);
+    let wins = windows(plan);
+    let inside = |p: &crate::geom::Point3| {
+        wins.iter()
+            .any(|w| p[0] >= w[0] && p[0] < w[2] && p[1] >= w[1] && p[1] < w[3])
+    };
+    let mut keyed: Vec<(u64, Sample)> = Vec::new();
+    let mut computed = 0;
+    for tile in grid.tiles() {
+        let sq = grid.square(tile);
+        let meets = wins.iter().any(|w| {
+            w[0] <= sq.max[0] && sq.min[0] <= w[2] && w[1] <= sq.max[1] && sq.min[1] <= w[3]
+        });
+        let n = counts[0][grid.index(tile)] + counts[1][grid.index(tile)];
+        if !meets || n == 0 {
+            continue;
+        }
+        let _held = ctx.reserve(
+            super::m3c2::need(n),
+            &format!("aligning: tile {} ({n} points with its halo)", tile.name()),
+        )?;
+        let before = read_tile(ctx, t0, tile)?;
+        let after = read_tile(ctx, ts, tile)?;
+        fn epoch(t: &TilePoints) -> EpochPoints<'_> {
+            EpochPoints {
+                x: &t.x,
+                y: &t.y,
+                z: &t.z,
+                owned: &t.owned,
+            }
+        }
+        let extent = Extent {
+            data_min: std::array::from_fn(|k| b.min[k].min(a.min[k])),
+            data_max: std::array::from_fn(|k| b.max[k].max(a.max[k])),
+            held: super::m3c2::open_box(&grid, tile, plan.layout.halo),
+        };
+        // Every k-th of the tile's core points (C1 thinned on the run's grid, keyed as the M3C2
+        // units key them).
+        let cores: Vec<(u64, crate::geom::Point3)> = crate::m3c2::core_points::thin(
+            before.len(),
+            |i| before.point(i),
+            &plan.layout.anchor,
+            plan.layout.core_spacing,
+            |i| before.owned[i],
+        )
+        .into_iter()
+        .map(|(k, i)| (k, before.point(i)))
+        .filter(|(_, p)| inside(p))
+        .collect();
+        if cores.is_empty() {
+            continue;
+        }
+        let results = compute(
+            &epoch(&before),
+            &epoch(&after),
+            plan.layout.anchor,
+            plan.layout.core_spacing,
+            Some(&cores),
+            &params,
+            &extent,
+        );
+        computed += results.len();
+        keyed.extend(
+            results
+                .iter()
+                .filter(|k| k.r.reach == Reach::Window && k.r.measured().is_finite())
+                .map(|k| {
+                    (
+                        k.key,
+                        Sample {
+                            xyz: k.xyz,
+                            normal: k.r.normal,
+                            distance: k.r.measured(),
+                            std_dev: [k.r.std_dev1, k.r.std_dev2],
+                            lod: k.r.uncertainty,
+                        },
+                    )
+                }),
+        );
+        crate::interrupt::check()?;
+    }
+    // Key order: the same whatever order the tiles came in.
+    keyed.sort_by_key(|(k, _)| *k);
+    Ok((keyed.into_iter().map(|(_, s)| s).collect(), computed))
+}
+
+/// The alignment of survey `s` (its align unit must be done), if it has one.
+pub fn read(ctx: &Ctx, s: usize) -> Result<Option<Alignment>> {
+    match ctx.plan.find(&Spec::survey(AlignStage::KIND, s)) {
+        Some(u) => Ok(Some(super::read_json(ctx, u, FILE)?)),
+        None => Ok(None),
+    }
+}

@@ -1,0 +1,98 @@
+//! A later survey tiled again in the first survey's frame, when its alignment applies
+//! ([`super::align`]): every point mapped by the alignment's matrix and rounded to its file's
+//! coordinate quantum (so that the tiles keep their exact integer encoding), cut into the same
+//! layout. When the alignment does not apply, the unit writes no tile and the survey's own
+//! tiling is read in its place ([`super::Ctx::tiles_of`]): everything after it is then the same
+//! bytes as with `--align off`.
+
+use serde::{Deserialize, Serialize};
+
+use super::align::AlignStage;
+use super::stage::{Line, Planner, Scope, Stage, Total};
+use super::tiling::{split, TilingMeta, TilingStage};
+use super::Ctx;
+use crate::error::Result;
+use crate::plan::Spec;
+use crate::store::UnitWriter;
+
+/// A survey in the first survey's frame.
+pub struct AlignedStage;
+
+/// What an aligned-tiling unit records: the tiling's, when the alignment applied.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct AlignedMeta {
+    pub applied: bool,
+    pub tiling: Option<TilingMeta>,
+}
+
+impl Stage for AlignedStage {
+    const KIND: &'static str = "aligned";
+    const SCOPE: Scope = Scope::Survey;
+    const LINE: Line = Line {
+        name: "alignment",
+        counts: "core points sampled",
+        total: Total::Unknown,
+    };
+    type Meta = AlignedMeta;
+
+    /// One per survey with an align unit, over it and the survey's own tiling.
+    fn plan(p: &mut Planner) -> Result<()> {
+        for s in 0..p.plan.surveys.len() {
+            let Some(align) = p.find(&Spec::survey(AlignStage::KIND, s)) else {
+                continue;
+            };
+            let tiling = p.the(&Spec::survey(TilingStage::KIND, s))?;
+            let label = p.plan.surveys[s].label.clone();
+            p.add(
+                Spec::survey(Self::KIND, s),
+                &label,
+                &[],
+                vec![align, tiling],
+            );
+        }
+        Ok(())
+    }
+
+    fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<AlignedMeta> {
+        let s = ctx.survey(unit)?;
+        let Some(a) = super::align::read(ctx, s)? else {
+            return Ok(AlignedMeta {
+                applied: false,
+                tiling: None,
+            });
+        };
+        if !a.applied {
+            return Ok(AlignedMeta {
+                applied: false,
+                tiling: None,
+            });
+        }
+        let m = a.matrix();
+        let quantum = ctx.plan.surveys[s]
+            .files
+            .first()
+            .map(|f| crate::io::open(&f.path))
+            .transpose()?
+            .and_then(|r| r.info().transform);
+        let map = move |pts: &mut [crate::geom::Point3]| {
+            for p in pts.iter_mut() {
+                let q: [f64; 3] = std::array::from_fn(|i| {
+                    m[i][0] * p[0] + m[i][1] * p[1] + m[i][2] * p[2] + m[i][3]
+                });
+                *p = match quantum {
+                    // The decoder's own expression: scale · record + offset.
+                    Some(t) => std::array::from_fn(|i| {
+                        let [scale, offset] = t[i];
+                        scale * ((q[i] - offset) / scale).round() + offset
+                    }),
+                    None => q,
+                };
+            }
+        };
+        let tiling = split(ctx, s, Some(&map), out)?;
+        Ok(AlignedMeta {
+            applied: true,
+            tiling: Some(tiling),
+        })
+    }
+}
