@@ -10,7 +10,8 @@
 # Environment: ROUNDS (3), BENCH_WORK (bench-work/), THREADS (nproc), WARMUP (1 = one untimed
 # run of each tool first), QUIET_LOAD (unset; if set, wait before each timed run until the
 # 1-min load average is below it, at most 10 min), PY4DGEO_SPEC (py4dgeo==1.2.0),
-# REFERENCE_SAMPLE (2000 core points for the brute-force check; 0 = skip).
+# REFERENCE_SAMPLE (2000 core points for the brute-force check; 0 = skip), ALIGN (off: talus's
+# --align, auto to time its alignment too).
 set -euo pipefail
 
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
@@ -82,9 +83,12 @@ LOGS=$WORK/logs
 rm -rf "$TIMES" "$LOGS"
 mkdir -p "$TIMES" "$LOGS"
 
+# --align off: py4dgeo's M3C2 takes the epochs as given, so talus does too here (its alignment on
+# the stable ground, a sample's M3C2 and a rigid fit, is measured apart: ALIGN=auto).
 talus_cmd=("$TALUS" compare "$BEFORE" "$AFTER" --out "$TALUS_OUT" --force
     --core-points "$CORES" --normal-radius "$NORMAL_RADIUS" --cyl-radius "$CYL_RADIUS"
-    --cyl-halflen "$CYL_HALFLEN" --orientation up --threads "$THREADS" --m3c2-only)
+    --cyl-halflen "$CYL_HALFLEN" --orientation up --threads "$THREADS" --m3c2-only
+    --align "${ALIGN:-off}")
 py_cmd=(env OMP_NUM_THREADS="$THREADS" OMP_PROC_BIND=false "$PY" "$HELPERS/run_py4dgeo.py"
     "$BEFORE" "$AFTER" "$CORES" "$PY_OUT" --normal-radius "$NORMAL_RADIUS"
     --cyl-radius "$CYL_RADIUS" --cyl-halflen "$CYL_HALFLEN")

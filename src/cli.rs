@@ -326,6 +326,19 @@ struct SynthArgs {
     #[arg(long, value_name = "RX,RY,RZ", default_value = "0,0,0", allow_hyphen_values = true,
           value_parser = |s: &str| crate::synth::parse_turn(s).map_err(|e| e.to_string()))]
     turn: [f64; 3],
+    /// A slow landslide under the whole scene: every epoch-2 point settles by up to this many
+    /// metres, by amounts varying smoothly over the scene (not rigid, not a planted change).
+    #[arg(
+        long,
+        value_name = "M",
+        default_value_t = 0.0,
+        allow_hyphen_values = true
+    )]
+    creep: f64,
+    /// `synth campaign`: every survey after the first misregistered by a few centimetres and a
+    /// fraction of a degree (recorded in truth.json), a registration error, not a change.
+    #[arg(long)]
+    misregister: bool,
     /// Write uncompressed LAS instead of LAZ.
     #[arg(long)]
     las: bool,
@@ -415,6 +428,7 @@ fn run(cli: Cli) -> crate::Result<()> {
             &s.scene,
             &s.out,
             s.epochs,
+            s.misregister,
             crate::synth::SynthOptions {
                 points: s.points,
                 seed: s.seed,
@@ -423,6 +437,7 @@ fn run(cli: Cli) -> crate::Result<()> {
                 density2: s.density2,
                 shift_m: s.shift,
                 turn_deg: s.turn,
+                creep_m: s.creep,
                 laz: !s.las,
             },
         ),

@@ -324,9 +324,9 @@ const REL_TOL: f64 = 0.02;
 const STRAY_MAX: f64 = 0.2;
 
 /// `talus synth campaign --epochs N --points P` into `dir`; its truth.
-fn synth_campaign(dir: &Path, epochs: usize, points: u64) -> CampaignTruth {
+fn synth_campaign(dir: &Path, epochs: usize, points: u64, extra: &[&str]) -> CampaignTruth {
     let (e, p) = (epochs.to_string(), points.to_string());
-    let o = common::run(&[
+    let mut args = vec![
         "synth",
         "campaign",
         "--out",
@@ -335,21 +335,25 @@ fn synth_campaign(dir: &Path, epochs: usize, points: u64) -> CampaignTruth {
         &e,
         "--points",
         &p,
-    ]);
+    ];
+    args.extend_from_slice(extra);
+    let o = common::run(&args);
     ok(&o);
     serde_json::from_slice(&std::fs::read(dir.join("truth.json")).unwrap()).unwrap()
 }
 
-/// A synthetic campaign of 4 surveys of `points` points in `tmp`/data, then `talus campaign` of
-/// them with `--baseline` and `extra` into `tmp`/campaign: the truth, the surveys, their labels
-/// in the campaign (YYYYMMDD) and the campaign's DIR.
+/// A synthetic campaign of 4 surveys of `points` points in `tmp`/data (`synth` more arguments
+/// of `synth campaign`), then `talus campaign` of them with `--baseline` and `extra` into
+/// `tmp`/campaign: the truth, the surveys, their labels in the campaign (YYYYMMDD) and the
+/// campaign's DIR.
 fn synth_and_campaign(
     tmp: &Path,
     points: u64,
+    synth: &[&str],
     extra: &[&str],
 ) -> (CampaignTruth, Vec<PathBuf>, Vec<String>, PathBuf) {
     let data = tmp.join("data");
-    let truth = synth_campaign(&data, 4, points);
+    let truth = synth_campaign(&data, 4, points, synth);
     let (surveys, labels): (Vec<PathBuf>, Vec<String>) = truth
         .epochs
         .iter()
@@ -443,8 +447,46 @@ fn campaign_events(dir: &Path) -> Vec<Found> {
 #[test]
 fn synthetic_campaign_finds_every_planted_change_in_its_pair_and_tracks_the_recurring_scar() {
     let tmp = common::tempdir();
-    let (truth, _, labels, dir) = synth_and_campaign(tmp.path(), 300_000, &[]);
-    let found = campaign_events(&dir);
+    let (truth, _, labels, dir) = synth_and_campaign(tmp.path(), 300_000, &[], &[]);
+    judge_campaign(&truth, &labels, &dir);
+}
+
+/// The same campaign with every survey after the first misregistered (`synth campaign
+/// --misregister`: shifts of 1 to 8 cm, turns of 0.02 to 0.3°, about every axis): each survey is
+/// aligned onto the first (campaign.json lists the transforms, every one applied) and every pair
+/// passes the same judge — every planted change within 2 %, no stray event, one track a place.
+#[test]
+fn misregistered_campaign_is_aligned_and_every_pair_is_within_2_percent() {
+    let tmp = common::tempdir();
+    let (truth, _, labels, dir) = synth_and_campaign(tmp.path(), 300_000, &["--misregister"], &[]);
+    let table = json(&dir.join("campaign.json"));
+    let epochs = table["epochs"].as_array().unwrap();
+    assert_eq!(epochs.len(), truth.epochs.len());
+    assert!(epochs[0]["alignment"].is_null(), "{}", epochs[0]);
+    for (e, planted) in epochs.iter().zip(&truth.epochs).skip(1) {
+        let a = &e["alignment"];
+        assert_eq!(a["applied"], true, "{}: {a}", e["label"]);
+        // The turn's angle: the fit leaves what the stable ground does not see (the shift along
+        // the coast), never a turn, so every turn component is fitted.
+        let planted_deg = planted.turn_deg.iter().map(|d| d * d).sum::<f64>().sqrt();
+        let fitted = a["rotation_deg"].as_f64().unwrap();
+        eprintln!(
+            "{}: turn planted {planted_deg:.4}°, fitted {fitted:.4}°",
+            e["label"]
+        );
+        assert!(
+            (fitted - planted_deg).abs() < 0.01 * planted_deg + 0.002,
+            "{}: turn {fitted}° vs planted {planted_deg}°",
+            e["label"]
+        );
+    }
+    judge_campaign(&truth, &labels, &dir);
+}
+
+/// Every planted change of `truth` found in its pair of the campaign in `dir`, as the first test
+/// above says.
+fn judge_campaign(truth: &CampaignTruth, labels: &[String], dir: &Path) {
+    let found = campaign_events(dir);
     let mut fails = Vec::new();
     let mut table = String::new();
     // Found track ids per truth track.
@@ -575,7 +617,7 @@ fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
 fn synthetic_campaign_pairs_are_compares_with_its_parameters_and_core_points() {
     let tmp = common::tempdir();
     let (truth, surveys, labels, dir) =
-        synth_and_campaign(tmp.path(), 60_000, &["--tile-size", "12"]);
+        synth_and_campaign(tmp.path(), 60_000, &[], &["--tile-size", "12"]);
     let summary = json(&dir.join("summary.json"));
     assert!(summary["tiles"].as_u64().unwrap() > 1, "one tile");
     let cores = dir.join("timeseries.laz");
@@ -742,7 +784,7 @@ fn bad_campaign_input_is_refused_naming_the_file() {
 fn forty_one_surveys_every_planted_event_within_5_percent() {
     let tmp = common::tempdir();
     let data = tmp.path().join("data");
-    let truth = synth_campaign(&data, 41, 500_000);
+    let truth = synth_campaign(&data, 41, 500_000, &[]);
     let surveys: Vec<PathBuf> = truth.epochs.iter().map(|e| data.join(&e.file)).collect();
     let labels: Vec<String> = truth
         .epochs

@@ -7,8 +7,14 @@ use crate::synth::campaign::{self, CampaignOptions};
 use crate::synth::{SceneKind, SynthOptions};
 
 /// `talus synth SCENE --out DIR` with the pair scenes' `opts` (SCENE `campaign`: `--epochs`
-/// surveys, no `--rotate`, `--density2`, `--shift` or `--turn`).
-pub fn synth(scene: &str, out: &Path, epochs: Option<usize>, opts: SynthOptions) -> Result<()> {
+/// surveys, `--misregister`, no `--rotate`, `--density2`, `--shift`, `--turn` or `--creep`).
+pub fn synth(
+    scene: &str,
+    out: &Path,
+    epochs: Option<usize>,
+    misregister: bool,
+    opts: SynthOptions,
+) -> Result<()> {
     if scene.trim().eq_ignore_ascii_case("campaign") {
         let plain = SynthOptions {
             points: opts.points,
@@ -19,7 +25,8 @@ pub fn synth(scene: &str, out: &Path, epochs: Option<usize>, opts: SynthOptions)
         };
         if opts != plain {
             return Err(Error::Usage(
-                "synth campaign: --rotate, --density2, --shift and --turn are for the pair scenes"
+                "synth campaign: --rotate, --density2, --shift, --turn and --creep are for the \
+                 pair scenes"
                     .into(),
             ));
         }
@@ -29,6 +36,7 @@ pub fn synth(scene: &str, out: &Path, epochs: Option<usize>, opts: SynthOptions)
             points: opts.points,
             noise: opts.noise,
             laz: opts.laz,
+            misregister,
         };
         let truth = campaign::write(out, &opts)?;
         let events: usize = truth.pairs.iter().map(|p| p.events.len()).sum();
@@ -45,9 +53,9 @@ pub fn synth(scene: &str, out: &Path, epochs: Option<usize>, opts: SynthOptions)
         );
         return Ok(());
     }
-    if epochs.is_some() {
+    if epochs.is_some() || misregister {
         return Err(Error::Usage(
-            "synth: --epochs is for `synth campaign`".into(),
+            "synth: --epochs and --misregister are for `synth campaign`".into(),
         ));
     }
     let kind: SceneKind = scene.parse()?;

@@ -46,6 +46,11 @@ pub const MIN_EFFECT: f64 = 0.2;
 /// surveys' noise; ground that moves (a beach, a creeping slope) leaves far more, and a "fit" to
 /// it would be a tilt of the sand, not of the survey.
 pub const RIGID: f64 = 3.0;
+/// After a fit, at least this share of what the core points tell of every direction it
+/// constrains must come from ground at rest ([`Alignment::at_rest_share`]): ground that moves
+/// is then a minority, and the stable ground the fit chose is the site's, not a self-selected
+/// part of a moving slope.
+pub const AT_REST: f64 = 0.5;
 
 /// The fitted transform of the later epoch, and what was decided.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -71,6 +76,11 @@ pub struct Alignment {
     pub noise_m: f64,
     pub chi2: f64,
     pub stable_points: usize,
+    /// The least, over the directions the fit constrains, share of what the core points tell of
+    /// that direction (Σ (a·v)² over the pool) that comes from core points the fit leaves at
+    /// rest: near 1 when a misregistration was removed, small when the fit holds still only a
+    /// self-selected part of ground that moves.
+    pub at_rest_share: f64,
     pub applied: bool,
     /// Why it was, or was not, applied.
     pub reason: String,
@@ -91,6 +101,7 @@ impl Alignment {
             noise_m: 0.0,
             chi2: 0.0,
             stable_points: 0,
+            at_rest_share: 0.0,
             applied: false,
             reason,
         }
@@ -140,6 +151,36 @@ fn rotation(w: &Point3) -> nalgebra::Matrix3<f64> {
         return nalgebra::Matrix3::identity();
     }
     nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(w), angle).into_inner()
+}
+
+/// The least, over the kept eigen-directions `kept` of `eig`, share of the pool's information
+/// about that direction (Σ (a·v)², a the model's rows) carried by the core points `rests` says are
+/// at rest. The rows are those of the fit (same origin and scale as the eigen-decomposition);
+/// NaN with no kept direction.
+fn at_rest_share(
+    pool: &[usize],
+    kept: &[usize],
+    eig: &SymmetricEigen<f64, nalgebra::U6>,
+    rows: impl Fn(usize) -> Vector6<f64>,
+    rests: impl Fn(usize) -> bool,
+) -> f64 {
+    let mut least = f64::NAN;
+    for &k in kept {
+        let v = eig.eigenvectors.column(k);
+        let (mut all, mut still) = (0.0, 0.0);
+        for &i in pool {
+            let w = rows(i).dot(&v).powi(2);
+            all += w;
+            if rests(i) {
+                still += w;
+            }
+        }
+        let share = still / all;
+        if least.is_nan() || share < least {
+            least = share;
+        }
+    }
+    least
 }
 
 /// The model's row of sample `s` about `o`, rotation columns scaled by `scale`.
@@ -294,43 +335,24 @@ pub fn fit(samples: &[Sample], stable: &[usize], pool: &[usize], sigma_d: f64) -
         && sees(Vector6::new(1.0, 0.0, 0.0, 0.0, 0.0, 0.0))
         && sees(Vector6::new(0.0, 1.0, 0.0, 0.0, 0.0, 0.0));
     let dof = kept.len();
-    let reason = if keep.len() < MIN_POINTS {
-        format!(
-            "not applied: {} stable core points, fewer than {MIN_POINTS}",
-            keep.len()
-        )
-    } else if !vertical {
-        format!(
-            "not applied: the stable ground constrains {dof} of 6 directions, not the vertical \
-             and both tilts"
-        )
-    } else if chi2 <= CHI2_999[dof.clamp(1, 6) - 1] {
-        format!(
-            "not applied: the motion is within its own uncertainty (χ² {chi2:.1} over {dof} \
-             directions, 99.9 % quantile {:.1})",
-            CHI2_999[dof.clamp(1, 6) - 1]
-        )
-    } else if !(sigma <= RIGID * noise) {
-        format!(
-            "not applied: the stable ground does not hold still as one rigid body: after the \
-             fit its distances spread by {sigma:.4} (robust standard deviation), {:.1} × the \
-             noise of one distance ({noise:.4}); ground that moves (sand, a slow landslide) is not \
-             a misregistration",
-            sigma / noise
-        )
-    } else if effect.is_nan() || sigma_d.is_nan() || effect < MIN_EFFECT * sigma_d {
-        format!(
-            "not applied: it moves the stable surface by {:.4} (RMS along the normals), less \
-             than {MIN_EFFECT} × σ_d ({:.4})",
-            effect, sigma_d
-        )
-    } else {
-        format!(
-            "applied: {dof} of 6 directions constrained by {} stable core points; it moves \
-             them by {effect:.4} (RMS along the normals), χ² {chi2:.0}",
-            keep.len()
-        )
-    };
+    let at_rest = at_rest_share(
+        pool,
+        &kept,
+        &eig,
+        |i| row(&samples[i], &o, scale),
+        |i| residual(&p, i).abs() <= super::stable::KEEP_SIGMAS * sigma.max(noise),
+    );
+    let reason = decide(&Figures {
+        stable: keep.len(),
+        vertical,
+        dof,
+        chi2,
+        sigma,
+        noise,
+        at_rest,
+        effect,
+        sigma_d,
+    });
     Alignment {
         rotation: [p[0] / scale, p[1] / scale, p[2] / scale],
         translation: [p[3], p[4], p[5]],
@@ -343,8 +365,83 @@ pub fn fit(samples: &[Sample], stable: &[usize], pool: &[usize], sigma_d: f64) -
         noise_m: noise,
         chi2,
         stable_points: keep.len(),
+        at_rest_share: at_rest,
         applied: reason.starts_with("applied"),
         reason,
+    }
+}
+
+/// What [`fit`] measured, for [`decide`].
+struct Figures {
+    stable: usize,
+    vertical: bool,
+    dof: usize,
+    chi2: f64,
+    sigma: f64,
+    noise: f64,
+    at_rest: f64,
+    effect: f64,
+    sigma_d: f64,
+}
+
+/// Whether a fit is applied, and why (or why not): the rules of the module's header, in order.
+fn decide(f: &Figures) -> String {
+    let Figures {
+        vertical,
+        dof,
+        chi2,
+        sigma,
+        noise,
+        at_rest,
+        effect,
+        sigma_d,
+        ..
+    } = *f;
+    if f.stable < MIN_POINTS {
+        format!(
+            "not applied: {} stable core points, fewer than {MIN_POINTS}",
+            f.stable
+        )
+    } else if !vertical {
+        format!(
+            "not applied: the stable ground constrains {dof} of 6 directions, not the vertical \
+             and both tilts"
+        )
+    } else if chi2 <= CHI2_999[dof.clamp(1, 6) - 1] {
+        format!(
+            "not applied: the motion is within its own uncertainty (χ² {chi2:.1} over {dof} \
+             directions, 99.9 % quantile {:.1})",
+            CHI2_999[dof.clamp(1, 6) - 1]
+        )
+    } else if sigma.is_nan() || noise.is_nan() || sigma > RIGID * noise {
+        format!(
+            "not applied: the stable ground does not hold still as one rigid body: after the \
+             fit its distances spread by {sigma:.4} (robust standard deviation), {:.1} × the \
+             noise of one distance ({noise:.4}); ground that moves (sand, a slow landslide) is not \
+             a misregistration",
+            sigma / noise
+        )
+    } else if at_rest.is_nan() || at_rest < AT_REST {
+        format!(
+            "not applied: after the fit only {:.0} % of the ground that fixes its least-seen \
+             direction is at rest (a misregistration removed leaves all stable ground at rest \
+             but for a few changes): the ground moves, by different amounts in different places \
+             (a settling slope, sand), and the fit held still only the places that happen to \
+             agree",
+            100.0 * at_rest
+        )
+    } else if effect.is_nan() || sigma_d.is_nan() || effect < MIN_EFFECT * sigma_d {
+        format!(
+            "not applied: it moves the stable surface by {:.4} (RMS along the normals), less \
+             than {MIN_EFFECT} × σ_d ({:.4})",
+            effect, sigma_d
+        )
+    } else {
+        format!(
+            "applied: {dof} of 6 directions constrained by {} stable core points; it moves \
+             them by {effect:.4} (RMS along the normals), χ² {chi2:.0}",
+            f.stable
+        )
     }
 }
 

@@ -90,6 +90,9 @@ pub struct CampaignOptions {
     pub noise: Option<f64>,
     /// Write LAZ (true) or LAS.
     pub laz: bool,
+    /// Every survey after the first misregistered ([`misregistration`]): a registration error,
+    /// not a change (the truth volumes ignore it).
+    pub misregister: bool,
 }
 
 impl Default for CampaignOptions {
@@ -100,8 +103,28 @@ impl Default for CampaignOptions {
             points: None,
             noise: None,
             laz: true,
+            misregister: false,
         }
     }
+}
+
+/// The misregistration of survey `k` ≥ 1 with `--misregister`: a shift (m) of 1 to 8 cm and a turn
+/// (degrees) of 0.02 to 0.1° about x and y and 0.02 to 0.3° about z, each component's size drawn
+/// from a low-discrepancy sequence of (k, axis) and its sign alternating — fixed, not drawn from
+/// the seed, so that a test knows its range. Survey 0 is the reference: none.
+pub fn misregistration(k: usize) -> ([f64; 3], [f64; 3]) {
+    if k == 0 {
+        return ([0.0; 3], [0.0; 3]);
+    }
+    let phi = (1.0 + 5f64.sqrt()) / 2.0;
+    let u = |j: usize| ((3 * k + j) as f64 / phi + 0.5).fract();
+    let sign = |j: usize| if (k + j).is_multiple_of(2) { 1.0 } else { -1.0 };
+    let shift = std::array::from_fn(|j| sign(j) * (0.01 + 0.07 * u(j)));
+    let turn = std::array::from_fn(|j| {
+        let top = if j == 2 { 0.3 } else { 0.1 };
+        -sign(j) * (0.02 + (top - 0.02) * u(j + 7))
+    });
+    (shift, turn)
 }
 
 /// One survey in `truth.json`.
@@ -113,6 +136,19 @@ pub struct CampaignEpoch {
     pub date: String,
     /// Points written.
     pub points: u64,
+    /// The survey's misregistration (`--misregister`): every point shifted by `shift_m` (m) and
+    /// turned by `turn_deg` (degrees about x, then y, then z through `turn_centre`). Absent:
+    /// none.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub shift_m: [f64; 3],
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub turn_deg: [f64; 3],
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub turn_centre: Option<[f64; 3]>,
+}
+
+fn is_zero(v: &[f64; 3]) -> bool {
+    *v == [0.0; 3]
 }
 
 /// A true event of a pair of surveys, with the track of its place.
@@ -521,11 +557,31 @@ impl CampaignModel {
     /// Where the local coordinates go: moved to the global origin, about the site's centre (no
     /// rotation).
     fn placement(&self) -> Placement {
-        let centre = [
+        Placement::new(self.centre(), 0.0, ORIGIN)
+    }
+
+    /// The site's centre (local x, y).
+    fn centre(&self) -> [f64; 2] {
+        [
             self.frame.width / 2.0,
             (self.frame.plateau - self.frame.beach) / 2.0,
-        ];
-        Placement::new(centre, 0.0, ORIGIN)
+        ]
+    }
+
+    /// The local height misregistered surveys turn about: half-way up the face.
+    fn turn_height(&self) -> f64 {
+        self.frame.z0 + self.frame.height / 2.0
+    }
+
+    /// Survey `k`'s placement: [`Self::placement`], misregistered by [`misregistration`] when
+    /// `misregister`.
+    fn survey_placement(&self, k: usize, misregister: bool) -> Placement {
+        if !misregister || k == 0 {
+            return self.placement();
+        }
+        let (shift, turn) = misregistration(k);
+        let origin = [0, 1, 2].map(|j| ORIGIN[j] + shift[j]);
+        Placement::new(self.centre(), 0.0, origin).turned(turn, self.turn_height())
     }
 }
 
@@ -572,14 +628,14 @@ pub fn model(opts: &CampaignOptions) -> Result<CampaignModel> {
     Ok(resolve(opts)?.model)
 }
 
-fn chunks_of(r: &Resolved, seed: u64, k: usize) -> Chunks {
+fn chunks_of(r: &Resolved, opts: &CampaignOptions, k: usize) -> Chunks {
     Chunks::new(
         r.model.survey(k).0,
         r.points,
-        seed,
+        opts.seed,
         k as u64,
         r.noise,
-        r.model.placement(),
+        r.model.survey_placement(k, opts.misregister),
     )
 }
 
@@ -593,7 +649,7 @@ pub fn survey_chunks(opts: &CampaignOptions, k: usize) -> Result<Chunks> {
             r.model.epochs
         )));
     }
-    Ok(chunks_of(&r, opts.seed, k))
+    Ok(chunks_of(&r, opts, k))
 }
 
 fn truth_pair(model: &CampaignModel, before: usize, after: usize) -> Result<CampaignPair> {
@@ -624,7 +680,7 @@ pub fn write(out_dir: &Path, opts: &CampaignOptions) -> Result<CampaignTruth> {
         let file = PathBuf::from(file_name(k, opts.laz));
         let points = output::write_epoch(
             &out_dir.join(&file),
-            chunks_of(&r, opts.seed, k),
+            chunks_of(&r, opts, k),
             ORIGIN,
             k as u16 + 1,
             opts.laz,
@@ -635,10 +691,25 @@ pub fn write(out_dir: &Path, opts: &CampaignOptions) -> Result<CampaignTruth> {
                 r.points
             )));
         }
+        let (shift_m, turn_deg) = if opts.misregister {
+            misregistration(k)
+        } else {
+            ([0.0; 3], [0.0; 3])
+        };
+        let c = r.model.centre();
         epochs.push(CampaignEpoch {
             file,
             date: date(k),
             points,
+            shift_m,
+            turn_deg,
+            turn_centre: (turn_deg != [0.0; 3]).then(|| {
+                [
+                    ORIGIN[0] + c[0],
+                    ORIGIN[1] + c[1],
+                    ORIGIN[2] + r.model.turn_height(),
+                ]
+            }),
         });
     }
     let truth = CampaignTruth {

@@ -152,6 +152,10 @@ pub struct SynthOptions {
     /// Rigid turn (degrees about x, y, z through the scene's centre) of every epoch-2 point: a
     /// registration error with `shift_m`, not a change.
     pub turn_deg: [f64; 3],
+    /// A slow landslide under the whole scene between the surveys (m): every epoch-2 point
+    /// settles by this times a smooth field between 0.25 and 1 ([`sampling::creep_share`]); not
+    /// a change of the planted events (the truth volumes ignore it), nor rigid.
+    pub creep_m: f64,
     /// Write LAZ (true) or LAS.
     pub laz: bool,
 }
@@ -166,6 +170,7 @@ impl Default for SynthOptions {
             density2: 1.0,
             shift_m: [0.0; 3],
             turn_deg: [0.0; 3],
+            creep_m: 0.0,
             laz: true,
         }
     }
@@ -257,6 +262,12 @@ fn resolve(kind: SceneKind, opts: &SynthOptions) -> Result<Resolved> {
             opts.turn_deg
         )));
     }
+    if !opts.creep_m.is_finite() || opts.creep_m.abs() > MAX_SHIFT {
+        return Err(Error::Usage(format!(
+            "synth: --creep must be finite and at most {MAX_SHIFT} m, got {}",
+            opts.creep_m
+        )));
+    }
     if !opts.rotate_deg.is_finite() {
         return Err(Error::Usage(
             "synth: --rotate must be a finite angle".into(),
@@ -327,7 +338,9 @@ fn placement(model: &SceneModel, opts: &SynthOptions, epoch: usize, turn_z: f64)
     let origin = [0, 1, 2].map(|k| ORIGIN[k] + shift[k]);
     let placement = Placement::new(model.centre, opts.rotate_deg, origin);
     if epoch == 1 {
-        placement.turned(opts.turn_deg, turn_z)
+        placement
+            .turned(opts.turn_deg, turn_z)
+            .creeping(opts.creep_m)
     } else {
         placement
     }
@@ -407,6 +420,7 @@ pub fn synth(kind: SceneKind, opts: &SynthOptions, out_dir: &Path) -> Result<Tru
                 ORIGIN[2] + turn_z,
             ]
         }),
+        creep_m: opts.creep_m,
         crs_epsg: CRS_EPSG,
         crs_wkt: UTM33N_WKT.into(),
         total_gain_m3: events.iter().map(|e| e.volume_m3.max(0.0)).sum(),

@@ -44,6 +44,9 @@ pub(crate) struct Placement {
     pub turn: [[f64; 3]; 3],
     /// The local height of the turn's centre.
     pub turn_z: f64,
+    /// A slow landslide's settling (m): the point sinks by `creep` × [`creep_share`] of its
+    /// place (local, unrotated coordinates): zero but for `--creep`'s epoch.
+    pub creep: f64,
 }
 
 impl Placement {
@@ -56,7 +59,14 @@ impl Placement {
             origin,
             turn: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
             turn_z: 0.0,
+            creep: 0.0,
         }
+    }
+
+    /// The same placement, its points sinking by `creep` × [`creep_share`] (m).
+    pub(crate) fn creeping(mut self, creep: f64) -> Self {
+        self.creep = creep;
+        self
     }
 
     /// The same placement, turned by `deg` about x, then y, then z (degrees) through the scene's
@@ -80,10 +90,11 @@ impl Placement {
     }
     pub(crate) fn apply(&self, p: V3) -> V3 {
         let (dx, dy) = (p[0] - self.centre[0], p[1] - self.centre[1]);
+        let z = p[2] - self.creep * creep_share(p[0], p[1]);
         let mut q = [
             self.cos * dx - self.sin * dy,
             self.sin * dx + self.cos * dy,
-            p[2],
+            z,
         ];
         if self.turn != [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]] {
             let t = &self.turn;
@@ -97,6 +108,17 @@ impl Placement {
             self.origin[2] + q[2],
         ]
     }
+}
+
+/// Wavelength (m) of the settling of `--creep`.
+pub(crate) const CREEP_WAVELENGTH: f64 = 24.0;
+
+/// The share of `--creep` by which the ground at local (x, y) settles: a smooth field between
+/// 0.25 and 1 (a landslide's mass does not move as one rigid body: its parts settle by different
+/// amounts, here in cells of [`CREEP_WAVELENGTH`]), never zero, so no part of it holds still.
+pub(crate) fn creep_share(x: f64, y: f64) -> f64 {
+    let k = 2.0 * std::f64::consts::PI / CREEP_WAVELENGTH;
+    0.625 + 0.375 * (k * x).sin() * (k * y).cos()
 }
 
 /// Share `total` among weights by largest remainder: floor of each exact share, then one more to

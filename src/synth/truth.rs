@@ -60,6 +60,10 @@ pub struct Truth {
     /// survey's mean height. Absent without a turn.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub turn_centre: Option<[f64; 3]>,
+    /// A slow landslide's settling (m) of every epoch-2 point, times a smooth field between 0.25
+    /// and 1 of its place: not a change of the planted events, nor rigid. Absent: none.
+    #[serde(default, skip_serializing_if = "is_zero_f64")]
+    pub creep_m: f64,
     /// EPSG code of the CRS written in both files.
     pub crs_epsg: u32,
     /// The OGC WKT (version 1) written in both files' WKT CRS VLR.
@@ -69,6 +73,10 @@ pub struct Truth {
     pub total_gain_m3: f64,
     /// Sum of the negative volumes, m³ (≤ 0).
     pub total_loss_m3: f64,
+}
+
+fn is_zero_f64(v: &f64) -> bool {
+    *v == 0.0
 }
 
 fn is_zero(v: &[f64; 3]) -> bool {

@@ -16,7 +16,7 @@ use super::outputs::tables::{
     EventFeature, EventProperties, Feature, FeatureCollection, PointGeometry, RegionFeature,
     RegionGeometry,
 };
-use super::outputs::{OutputsStage, Publish, Summary};
+use super::outputs::{AlignmentSummary, OutputsStage, Publish, Summary};
 use super::stage::{Line, Planner, Publishes, Scope, Stage};
 use super::{read_json, Ctx};
 use crate::campaign::powerlaw::{self, PowerLawFit};
@@ -273,7 +273,18 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<CampaignMeta> {
     // events.geojson / events.csv.
     write_events(out, &events, &track, plan, &date, &crs_info.crs.describe())?;
     // campaign.csv / campaign.json.
-    write_table(out, &rows, gain_fit.as_ref(), loss_fit.as_ref(), plan)?;
+    // Each survey's alignment onto the first (none for the first, nor with `--align off`).
+    let alignments = (0..plan.surveys.len())
+        .map(|s| Ok(super::align::read(ctx, s)?.map(|a| AlignmentSummary::of(&a))))
+        .collect::<Result<Vec<_>>>()?;
+    write_table(
+        out,
+        &rows,
+        gain_fit.as_ref(),
+        loss_fit.as_ref(),
+        plan,
+        &alignments,
+    )?;
     // magnitude_frequency.csv.
     let mut mf = String::from("kind,volume_m3,events_at_least,exceedance\n");
     for (kind, values) in [("gain", &gains), ("loss", &losses)] {
@@ -418,6 +429,7 @@ fn write_table(
     gain: Option<&PowerLawFit>,
     loss: Option<&PowerLawFit>,
     plan: &crate::plan::Plan,
+    alignments: &[Option<AlignmentSummary>],
 ) -> Result<()> {
     let mut sorted: Vec<&Row> = rows.iter().collect();
     sorted.sort_by(|a, b| {
@@ -459,7 +471,11 @@ fn write_table(
             "gain": gain,
             "loss": loss,
         },
-        "epochs": plan.surveys.iter().map(|s| json!({ "label": s.label, "date": s.date })).collect::<Vec<_>>(),
+        "epochs": plan.surveys.iter().zip(alignments).map(|(s, a)| json!({
+            "label": s.label,
+            "date": s.date,
+            "alignment": a,
+        })).collect::<Vec<_>>(),
     });
     let text = serde_json::to_vec_pretty(&table).map_err(|e| Error::Internal(e.to_string()))?;
     super::write_bytes(out, "campaign.json", &text)

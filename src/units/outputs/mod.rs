@@ -171,6 +171,9 @@ pub struct AlignmentSummary {
     pub stable_points: usize,
     /// Robust standard deviation of the stable ground's distances after the fit.
     pub residual_m: f64,
+    /// The least share, over the directions fitted, of what the core points tell of that
+    /// direction that comes from ground the fit leaves at rest (applied only from 0.5).
+    pub at_rest_share: f64,
     pub reason: String,
 }
 
@@ -188,6 +191,7 @@ impl AlignmentSummary {
             constrained: a.constrained,
             stable_points: a.stable_points,
             residual_m: a.residual_m,
+            at_rest_share: a.at_rest_share,
             reason: a.reason.clone(),
         }
     }
