@@ -86,7 +86,9 @@ echo "job arrays submitted (stage, job id, tasks):"
 sed 's/^/  /' "$work/slurm.jobs"
 sed 's/^/  /' "$work/slurm.err"
 [[ $rc == 0 ]] || fail "the Slurm run exited $rc"
-[[ "$(wc -l <"$work/slurm.jobs")" == 9 ]] || fail "expected 9 arrays (8 stages and the publishing job)"
+# One array per registered stage that has units here (tiling, align, aligned, thinned, m3c2,
+# stable, events, volumes, outputs, campaign) and the publishing job.
+[[ "$(wc -l <"$work/slurm.jobs")" == 11 ]] || fail "expected 11 arrays (10 stages and the publishing job)"
 echo "Slurm run: $((SECONDS - t0)) s"
 same_as_local slurm
 
@@ -162,8 +164,9 @@ after="$(squeue -h -t all -o %i | wc -l)"
 [[ ! -e "$work/planonly/.talus/slurm/1/jobs.json" ]] || fail "--plan-only wrote jobs.json"
 echo "submit.sh:"
 sed 's/^/  /' "$work/planonly/.talus/slurm/1/submit.sh"
-echo "03-m3c2.sh:"
-sed 's/^/  /' "$work/planonly/.talus/slurm/1/03-m3c2.sh"
+m3c2_script="$(ls "$work/planonly/.talus/slurm/1/"*-m3c2.sh)"
+echo "$(basename "$m3c2_script"):"
+sed 's/^/  /' "$m3c2_script"
 
 echo
 echo "slurm campaign test: passed (identical outputs after a Slurm run and after cancel + --resume)"
