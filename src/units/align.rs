@@ -204,6 +204,22 @@ fn sample(ctx: &Ctx, s: usize) -> Result<(Vec<Sample>, usize)> {
         if cores.is_empty() {
             continue;
         }
+        // Only the points within reach of the windows are indexed: every point a window's core
+        // point uses for its normal (and its orientation's look-ups of the top surface, up to
+        // 4 normal radii away in cells of half a radius) and its cylinder lies within `reach`,
+        // so its Window result is the one the whole tile gives, at a fraction of the indexing.
+        let reach = (params.cyl_radius.powi(2) + params.cyl_halflen.powi(2))
+            .sqrt()
+            .max(5.0 * params.normal_radius)
+            + plan.layout.core_spacing;
+        let near: Vec<[f64; 4]> = wins
+            .iter()
+            .filter(|w| {
+                w[0] <= sq.max[0] && sq.min[0] <= w[2] && w[1] <= sq.max[1] && sq.min[1] <= w[3]
+            })
+            .map(|w| [w[0] - reach, w[1] - reach, w[2] + reach, w[3] + reach])
+            .collect();
+        let (before, after) = (within(&before, &near), within(&after, &near));
         let results = compute(
             &epoch(&before),
             &epoch(&after),
@@ -236,6 +252,24 @@ fn sample(ctx: &Ctx, s: usize) -> Result<(Vec<Sample>, usize)> {
     // Key order: the same whatever order the tiles came in.
     keyed.sort_by_key(|(k, _)| *k);
     Ok((keyed.into_iter().map(|(_, s)| s).collect(), computed))
+}
+
+/// The points of `t` inside any of `boxes` ([x0, y0, x1, y1]), in their order.
+fn within(t: &TilePoints, boxes: &[[f64; 4]]) -> TilePoints {
+    let keep: Vec<usize> = (0..t.len())
+        .filter(|&i| {
+            let (x, y) = (t.x[i], t.y[i]);
+            boxes
+                .iter()
+                .any(|b| x >= b[0] && x <= b[2] && y >= b[1] && y <= b[3])
+        })
+        .collect();
+    TilePoints {
+        x: keep.iter().map(|&i| t.x[i]).collect(),
+        y: keep.iter().map(|&i| t.y[i]).collect(),
+        z: keep.iter().map(|&i| t.z[i]).collect(),
+        owned: keep.iter().map(|&i| t.owned[i]).collect(),
+    }
 }
 
 /// The alignment of survey `s` (its align unit must be done), if it has one.
