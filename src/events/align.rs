@@ -164,23 +164,30 @@ fn at_rest_share(
     rows: impl Fn(usize) -> Vector6<f64>,
     rests: impl Fn(usize) -> bool,
 ) -> f64 {
-    let mut least = f64::NAN;
-    for &k in kept {
-        let v = eig.eigenvectors.column(k);
-        let (mut all, mut still) = (0.0, 0.0);
-        for &i in pool {
-            let w = rows(i).dot(&v).powi(2);
-            all += w;
-            if rests(i) {
-                still += w;
+    // One pass over the pool: each row and its rest computed once, its weight along every kept
+    // direction summed.
+    let (mut all, mut still) = (vec![0.0; kept.len()], vec![0.0; kept.len()]);
+    for &i in pool {
+        let (a, at_rest) = (rows(i), rests(i));
+        for (j, &k) in kept.iter().enumerate() {
+            let w = a.dot(&eig.eigenvectors.column(k)).powi(2);
+            all[j] += w;
+            if at_rest {
+                still[j] += w;
             }
         }
-        let share = still / all;
-        if least.is_nan() || share < least {
-            least = share;
-        }
     }
-    least
+    still
+        .iter()
+        .zip(&all)
+        .map(|(s, a)| s / a)
+        .fold(f64::NAN, |least, share| {
+            if least.is_nan() || share < least {
+                share
+            } else {
+                least
+            }
+        })
 }
 
 /// The model's row of sample `s` about `o`, rotation columns scaled by `scale`.
@@ -342,7 +349,7 @@ pub fn fit(samples: &[Sample], stable: &[usize], pool: &[usize], sigma_d: f64) -
         |i| row(&samples[i], &o, scale),
         |i| residual(&p, i).abs() <= super::stable::KEEP_SIGMAS * sigma.max(noise),
     );
-    let reason = decide(&Figures {
+    let (applied, reason) = decide(&Figures {
         stable: keep.len(),
         vertical,
         dof,
@@ -366,7 +373,7 @@ pub fn fit(samples: &[Sample], stable: &[usize], pool: &[usize], sigma_d: f64) -
         chi2,
         stable_points: keep.len(),
         at_rest_share: at_rest,
-        applied: reason.starts_with("applied"),
+        applied,
         reason,
     }
 }
@@ -385,8 +392,9 @@ struct Figures {
 }
 
 /// Whether a fit is applied, and why (or why not): the rules of the module's header, in order.
-fn decide(f: &Figures) -> String {
-    let Figures {
+fn decide(f: &Figures) -> (bool, String) {
+    let &Figures {
+        stable,
         vertical,
         dof,
         chi2,
@@ -395,12 +403,11 @@ fn decide(f: &Figures) -> String {
         at_rest,
         effect,
         sigma_d,
-        ..
-    } = *f;
-    if f.stable < MIN_POINTS {
+    } = f;
+    let not = if stable < MIN_POINTS {
         format!(
             "not applied: {} stable core points, fewer than {MIN_POINTS}",
-            f.stable
+            stable
         )
     } else if !vertical {
         format!(
@@ -437,12 +444,15 @@ fn decide(f: &Figures) -> String {
             effect, sigma_d
         )
     } else {
-        format!(
-            "applied: {dof} of 6 directions constrained by {} stable core points; it moves \
-             them by {effect:.4} (RMS along the normals), χ² {chi2:.0}",
-            f.stable
-        )
-    }
+        return (
+            true,
+            format!(
+                "applied: {dof} of 6 directions constrained by {stable} stable core points; it \
+                 moves them by {effect:.4} (RMS along the normals), χ² {chi2:.0}"
+            ),
+        );
+    };
+    (false, not)
 }
 
 #[cfg(test)]

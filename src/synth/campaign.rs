@@ -139,16 +139,12 @@ pub struct CampaignEpoch {
     /// The survey's misregistration (`--misregister`): every point shifted by `shift_m` (m) and
     /// turned by `turn_deg` (degrees about x, then y, then z through `turn_centre`). Absent:
     /// none.
-    #[serde(default, skip_serializing_if = "is_zero")]
+    #[serde(default, skip_serializing_if = "super::truth::is_zero")]
     pub shift_m: [f64; 3],
-    #[serde(default, skip_serializing_if = "is_zero")]
+    #[serde(default, skip_serializing_if = "super::truth::is_zero")]
     pub turn_deg: [f64; 3],
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub turn_centre: Option<[f64; 3]>,
-}
-
-fn is_zero(v: &[f64; 3]) -> bool {
-    *v == [0.0; 3]
 }
 
 /// A true event of a pair of surveys, with the track of its place.
@@ -573,15 +569,31 @@ impl CampaignModel {
         self.frame.z0 + self.frame.height / 2.0
     }
 
-    /// Survey `k`'s placement: [`Self::placement`], misregistered by [`misregistration`] when
-    /// `misregister`.
-    fn survey_placement(&self, k: usize, misregister: bool) -> Placement {
+    /// Survey `k`'s misregistration when `misregister` ([`misregistration`]): its shift, its
+    /// turn and the global point it turns about; none for the first survey or without it.
+    fn misregistered(&self, k: usize, misregister: bool) -> Option<([f64; 3], [f64; 3], [f64; 3])> {
         if !misregister || k == 0 {
-            return self.placement();
+            return None;
         }
         let (shift, turn) = misregistration(k);
-        let origin = [0, 1, 2].map(|j| ORIGIN[j] + shift[j]);
-        Placement::new(self.centre(), 0.0, origin).turned(turn, self.turn_height())
+        let c = self.centre();
+        let about = [
+            ORIGIN[0] + c[0],
+            ORIGIN[1] + c[1],
+            ORIGIN[2] + self.turn_height(),
+        ];
+        Some((shift, turn, about))
+    }
+
+    /// Survey `k`'s placement: [`Self::placement`], misregistered by [`Self::misregistered`].
+    fn survey_placement(&self, k: usize, misregister: bool) -> Placement {
+        match self.misregistered(k, misregister) {
+            None => self.placement(),
+            Some((shift, turn, _)) => {
+                let origin = [0, 1, 2].map(|j| ORIGIN[j] + shift[j]);
+                Placement::new(self.centre(), 0.0, origin).turned(turn, self.turn_height())
+            }
+        }
     }
 }
 
@@ -691,25 +703,17 @@ pub fn write(out_dir: &Path, opts: &CampaignOptions) -> Result<CampaignTruth> {
                 r.points
             )));
         }
-        let (shift_m, turn_deg) = if opts.misregister {
-            misregistration(k)
-        } else {
-            ([0.0; 3], [0.0; 3])
+        let (shift_m, turn_deg, turn_centre) = match r.model.misregistered(k, opts.misregister) {
+            Some((shift, turn, about)) => (shift, turn, Some(about)),
+            None => ([0.0; 3], [0.0; 3], None),
         };
-        let c = r.model.centre();
         epochs.push(CampaignEpoch {
             file,
             date: date(k),
             points,
             shift_m,
             turn_deg,
-            turn_centre: (turn_deg != [0.0; 3]).then(|| {
-                [
-                    ORIGIN[0] + c[0],
-                    ORIGIN[1] + c[1],
-                    ORIGIN[2] + r.model.turn_height(),
-                ]
-            }),
+            turn_centre,
         });
     }
     let truth = CampaignTruth {

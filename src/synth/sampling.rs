@@ -90,7 +90,12 @@ impl Placement {
     }
     pub(crate) fn apply(&self, p: V3) -> V3 {
         let (dx, dy) = (p[0] - self.centre[0], p[1] - self.centre[1]);
-        let z = p[2] - self.creep * creep_share(p[0], p[1]);
+        // The settling's field only where there is one: this runs for every point written.
+        let z = if self.creep == 0.0 {
+            p[2]
+        } else {
+            p[2] - self.creep * creep_share(p[0], p[1])
+        };
         let mut q = [
             self.cos * dx - self.sin * dy,
             self.sin * dx + self.cos * dy,

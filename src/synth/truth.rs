@@ -79,6 +79,7 @@ fn is_zero_f64(v: &f64) -> bool {
     *v == 0.0
 }
 
-fn is_zero(v: &[f64; 3]) -> bool {
+/// No shift or turn (serde's `skip_serializing_if` of truth files).
+pub(super) fn is_zero(v: &[f64; 3]) -> bool {
     *v == [0.0; 3]
 }

@@ -158,15 +158,28 @@ fn sample(ctx: &Ctx, s: usize) -> Result<(Vec<Sample>, usize)> {
         wins.iter()
             .any(|w| p[0] >= w[0] && p[0] < w[2] && p[1] >= w[1] && p[1] < w[3])
     };
+    // Every point a window's core point uses for its normal (and its orientation's look-ups of
+    // the top surface, up to 4 normal radii away in cells of half a radius) and its cylinder lies
+    // within `reach` of the window: only those points are indexed, and each Window result is the
+    // one the whole tile gives, at a fraction of the indexing.
+    let reach = (params.cyl_radius.powi(2) + params.cyl_halflen.powi(2))
+        .sqrt()
+        .max(5.0 * params.normal_radius)
+        + plan.layout.core_spacing;
     let mut keyed: Vec<(u64, Sample)> = Vec::new();
     let mut computed = 0;
     for tile in grid.tiles() {
         let sq = grid.square(tile);
-        let meets = wins.iter().any(|w| {
-            w[0] <= sq.max[0] && sq.min[0] <= w[2] && w[1] <= sq.max[1] && sq.min[1] <= w[3]
-        });
+        // The windows meeting the tile, grown by `reach`.
+        let near: Vec<[f64; 4]> = wins
+            .iter()
+            .filter(|w| {
+                w[0] <= sq.max[0] && sq.min[0] <= w[2] && w[1] <= sq.max[1] && sq.min[1] <= w[3]
+            })
+            .map(|w| [w[0] - reach, w[1] - reach, w[2] + reach, w[3] + reach])
+            .collect();
         let n = counts[0][grid.index(tile)] + counts[1][grid.index(tile)];
-        if !meets || n == 0 {
+        if near.is_empty() || n == 0 {
             continue;
         }
         let _held = ctx.reserve(
@@ -204,21 +217,6 @@ fn sample(ctx: &Ctx, s: usize) -> Result<(Vec<Sample>, usize)> {
         if cores.is_empty() {
             continue;
         }
-        // Only the points within reach of the windows are indexed: every point a window's core
-        // point uses for its normal (and its orientation's look-ups of the top surface, up to
-        // 4 normal radii away in cells of half a radius) and its cylinder lies within `reach`,
-        // so its Window result is the one the whole tile gives, at a fraction of the indexing.
-        let reach = (params.cyl_radius.powi(2) + params.cyl_halflen.powi(2))
-            .sqrt()
-            .max(5.0 * params.normal_radius)
-            + plan.layout.core_spacing;
-        let near: Vec<[f64; 4]> = wins
-            .iter()
-            .filter(|w| {
-                w[0] <= sq.max[0] && sq.min[0] <= w[2] && w[1] <= sq.max[1] && sq.min[1] <= w[3]
-            })
-            .map(|w| [w[0] - reach, w[1] - reach, w[2] + reach, w[3] + reach])
-            .collect();
         let (before, after) = (within(&before, &near), within(&after, &near));
         let results = compute(
             &epoch(&before),
