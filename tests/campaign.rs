@@ -453,8 +453,10 @@ fn synthetic_campaign_finds_every_planted_change_in_its_pair_and_tracks_the_recu
 
 /// The same campaign with every survey after the first misregistered (`synth campaign
 /// --misregister`: shifts of 1 to 8 cm, turns of 0.02 to 0.3°, about every axis): each survey is
-/// aligned onto the first (campaign.json lists the transforms, every one applied) and every pair
-/// passes the same judge — every planted change within 2 %, no stray event, one track a place.
+/// aligned onto the first — the second directly, the later ones chained through their
+/// predecessors, with whom they share more stable ground (campaign.json lists the transforms and
+/// their routes, every one applied, each turn the planted one) — and every pair passes the same
+/// judge: every planted change within 2 %, no stray event, one track a place.
 #[test]
 fn misregistered_campaign_is_aligned_and_every_pair_is_within_2_percent() {
     let tmp = common::tempdir();
@@ -463,16 +465,33 @@ fn misregistered_campaign_is_aligned_and_every_pair_is_within_2_percent() {
     let epochs = table["epochs"].as_array().unwrap();
     assert_eq!(epochs.len(), truth.epochs.len());
     assert!(epochs[0]["alignment"].is_null(), "{}", epochs[0]);
-    for (e, planted) in epochs.iter().zip(&truth.epochs).skip(1) {
+    for (k, (e, planted)) in epochs.iter().zip(&truth.epochs).enumerate().skip(1) {
         let a = &e["alignment"];
         assert_eq!(a["applied"], true, "{}: {a}", e["label"]);
+        // Changes accumulate: survey k shares with the first the ground none of intervals 1..k
+        // changed, with its predecessor all but interval k's. So from the third survey on, the
+        // route through the predecessors shares more stable ground at its weakest link (the
+        // second survey's fit onto the first) and is taken: k → k − 1 → … → 0.
+        let route: Vec<u64> = a["route"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_u64().unwrap())
+            .collect();
+        let expect: Vec<u64> = if k == 1 {
+            vec![1, 0]
+        } else {
+            (0..=k as u64).rev().collect()
+        };
+        assert_eq!(route, expect, "{}: {a}", e["label"]);
         // The turn's angle: the fit leaves what the stable ground does not see (the shift along
         // the coast), never a turn, so every turn component is fitted.
         let planted_deg = planted.turn_deg.iter().map(|d| d * d).sum::<f64>().sqrt();
         let fitted = a["rotation_deg"].as_f64().unwrap();
         eprintln!(
-            "{}: turn planted {planted_deg:.4}°, fitted {fitted:.4}°",
-            e["label"]
+            "{}: turn planted {planted_deg:.4}°, fitted {fitted:.4}°, route {}, {} stable core \
+             points",
+            e["label"], a["route"], a["stable_points"]
         );
         assert!(
             (fitted - planted_deg).abs() < 0.01 * planted_deg + 0.002,

@@ -47,10 +47,16 @@ pub const MIN_EFFECT: f64 = 0.2;
 /// it would be a tilt of the sand, not of the survey.
 pub const RIGID: f64 = 3.0;
 /// After a fit, at least this share of what the core points tell of every direction it
-/// constrains must come from ground at rest ([`Alignment::at_rest_share`]): ground that moves
+/// constrains well ([`WELL_SEEN`]) must come from ground at rest ([`Alignment::at_rest_share`]): ground that moves
 /// is then a minority, and the stable ground the fit chose is the site's, not a self-selected
 /// part of a moving slope.
 pub const AT_REST: f64 = 0.5;
+/// The at-rest share is judged on the directions the stable ground sees with at least this
+/// share of the information of its best-seen one: a direction seen a thousand times less (a
+/// shift along a straight coast, seen only through the side walls of an old scar) is fixed by a
+/// few features, not by the ground at large, and what tells most of it is the walls of new
+/// changes — a share there measures the changes, not whether the ground holds still.
+pub const WELL_SEEN: f64 = 0.01;
 
 /// The fitted transform of the later epoch, and what was decided.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -76,12 +82,17 @@ pub struct Alignment {
     pub noise_m: f64,
     pub chi2: f64,
     pub stable_points: usize,
-    /// The least, over the directions the fit constrains, share of what the core points tell of
-    /// that direction (Σ (a·v)² over the pool) that comes from core points the fit leaves at
+    /// The least, over the directions the fit constrains well ([`WELL_SEEN`]), share of what
+    /// the core points tell of that direction (Σ (a·v)² over the pool) that comes from core points the fit leaves at
     /// rest: near 1 when a misregistration was removed, small when the fit holds still only a
     /// self-selected part of ground that moves.
     pub at_rest_share: f64,
     pub applied: bool,
+    /// The transform is known: enough stable ground, seeing the vertical and both tilts, that
+    /// holds still as one rigid body once it is removed (rules 1, 2 and 4 of the module's header).
+    /// A known transform that is not applied is known to be too small to matter: a chain of
+    /// alignments may pass through it as the identity ([`super::chain`]); an unknown one it may not.
+    pub determined: bool,
     /// Why it was, or was not, applied.
     pub reason: String,
 }
@@ -103,6 +114,7 @@ impl Alignment {
             stable_points: 0,
             at_rest_share: 0.0,
             applied: false,
+            determined: false,
             reason,
         }
     }
@@ -155,8 +167,9 @@ fn rotation(w: &Point3) -> nalgebra::Matrix3<f64> {
 
 /// The least, over the kept eigen-directions `kept` of `eig`, share of the pool's information
 /// about that direction (Σ (a·v)², a the model's rows) carried by the core points `rests` says are
-/// at rest. The rows are those of the fit (same origin and scale as the eigen-decomposition);
-/// NaN with no kept direction.
+/// at rest, over the kept directions seen with at least [`WELL_SEEN`] of the best-seen one's
+/// information. The rows are those of the fit (same origin and scale as the
+/// eigen-decomposition); NaN with no kept direction.
 fn at_rest_share(
     pool: &[usize],
     kept: &[usize],
@@ -164,6 +177,12 @@ fn at_rest_share(
     rows: impl Fn(usize) -> Vector6<f64>,
     rests: impl Fn(usize) -> bool,
 ) -> f64 {
+    let top = kept.iter().map(|&k| eig.eigenvalues[k]).fold(0.0, f64::max);
+    let kept: Vec<usize> = kept
+        .iter()
+        .copied()
+        .filter(|&k| eig.eigenvalues[k] >= WELL_SEEN * top)
+        .collect();
     // One pass over the pool: each row and its rest computed once, its weight along every kept
     // direction summed.
     let (mut all, mut still) = (vec![0.0; kept.len()], vec![0.0; kept.len()]);
@@ -349,7 +368,7 @@ pub fn fit(samples: &[Sample], stable: &[usize], pool: &[usize], sigma_d: f64) -
         |i| row(&samples[i], &o, scale),
         |i| residual(&p, i).abs() <= super::stable::KEEP_SIGMAS * sigma.max(noise),
     );
-    let (applied, reason) = decide(&Figures {
+    let (applied, determined, reason) = decide(&Figures {
         stable: keep.len(),
         vertical,
         dof,
@@ -374,6 +393,7 @@ pub fn fit(samples: &[Sample], stable: &[usize], pool: &[usize], sigma_d: f64) -
         stable_points: keep.len(),
         at_rest_share: at_rest,
         applied,
+        determined,
         reason,
     }
 }
@@ -391,8 +411,9 @@ struct Figures {
     sigma_d: f64,
 }
 
-/// Whether a fit is applied, and why (or why not): the rules of the module's header, in order.
-fn decide(f: &Figures) -> (bool, String) {
+/// Whether a fit is applied, whether it is determined ([`Alignment::determined`]), and why (or
+/// why not): the rules of the module's header, in order.
+fn decide(f: &Figures) -> (bool, bool, String) {
     let &Figures {
         stable,
         vertical,
@@ -404,6 +425,9 @@ fn decide(f: &Figures) -> (bool, String) {
         effect,
         sigma_d,
     } = f;
+    let rigid = !(sigma.is_nan() || noise.is_nan() || sigma > RIGID * noise);
+    let at_rest_ok = !(at_rest.is_nan() || at_rest < AT_REST);
+    let determined = stable >= MIN_POINTS && vertical && rigid && at_rest_ok;
     let not = if stable < MIN_POINTS {
         format!(
             "not applied: {} stable core points, fewer than {MIN_POINTS}",
@@ -420,7 +444,7 @@ fn decide(f: &Figures) -> (bool, String) {
              directions, 99.9 % quantile {:.1})",
             CHI2_999[dof.clamp(1, 6) - 1]
         )
-    } else if sigma.is_nan() || noise.is_nan() || sigma > RIGID * noise {
+    } else if !rigid {
         format!(
             "not applied: the stable ground does not hold still as one rigid body: after the \
              fit its distances spread by {sigma:.4} (robust standard deviation), {:.1} × the \
@@ -428,7 +452,7 @@ fn decide(f: &Figures) -> (bool, String) {
              a misregistration",
             sigma / noise
         )
-    } else if at_rest.is_nan() || at_rest < AT_REST {
+    } else if !at_rest_ok {
         format!(
             "not applied: after the fit only {:.0} % of the ground that fixes its least-seen \
              direction is at rest (a misregistration removed leaves all stable ground at rest \
@@ -446,13 +470,14 @@ fn decide(f: &Figures) -> (bool, String) {
     } else {
         return (
             true,
+            true,
             format!(
                 "applied: {dof} of 6 directions constrained by {stable} stable core points; it \
                  moves them by {effect:.4} (RMS along the normals), χ² {chi2:.0}"
             ),
         );
     };
-    (false, not)
+    (false, determined, not)
 }
 
 #[cfg(test)]

@@ -8,6 +8,7 @@
 //! through the global [`union_find`]) → [`describe`] (centroid, statistics, PCA box).
 
 pub mod align;
+pub mod chain;
 pub mod dbscan;
 pub mod describe;
 pub mod filter;

@@ -13,6 +13,7 @@ use super::tiling::TilingStage;
 use super::{read_tile, Ctx, TilePoints};
 use crate::error::Result;
 use crate::events::align::{fit, Alignment};
+use crate::events::chain::Fits;
 use crate::events::stable::{measure, select, Sample};
 use crate::m3c2::tile::{compute, EpochPoints};
 use crate::m3c2::{Extent, Reach};
@@ -27,7 +28,7 @@ pub const WINDOWS: usize = 8;
 /// sample costs a fraction of one tile's M3C2.
 pub const SAMPLE_CORES: usize = 40_000;
 
-/// The file of an align unit: its [`Alignment`].
+/// The file of an align unit: its [`Fits`].
 pub const FILE: &str = "align.json";
 
 /// A later survey aligned onto the first on their stable ground.
@@ -36,9 +37,10 @@ pub struct AlignStage;
 /// What an align unit records.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct AlignMeta {
-    /// The transform is applied (the survey is tiled again with it).
+    /// The fit onto the first survey applies.
     pub applied: bool,
-    /// Core points computed for the fit, and those on stable ground.
+    /// Core points computed for the fits, and those on the stable ground of the fit onto the
+    /// first.
     pub sampled: usize,
     pub stable_points: usize,
 }
@@ -54,37 +56,63 @@ impl Stage for AlignStage {
     type Meta = AlignMeta;
 
     /// With `--align auto`: one per survey compared that is not the first, onto the first (a
-    /// campaign's surveys all onto its first, so that every pair is in one frame).
+    /// campaign's surveys all onto its first, so that every pair is in one frame) and, when its
+    /// predecessor is aligned too, onto its predecessor (the chain of [`crate::events::chain`]).
     fn plan(p: &mut Planner) -> Result<()> {
         if !p.plan.params.align_enabled() {
             return Ok(());
         }
         let key = format!(
-            "{:?}|{}|{WINDOWS}",
+            "{:?}|{}|{WINDOWS}|chained",
             p.plan.params.m3c2(),
             p.plan.params.core_spacing.value
         );
         let first = p.the(&Spec::survey(TilingStage::KIND, 0))?;
-        for s in later_surveys(p.plan) {
-            let t = p.the(&Spec::survey(TilingStage::KIND, s))?;
+        let later = later_surveys(p.plan);
+        for &s in &later {
+            let mut deps = vec![first, p.the(&Spec::survey(TilingStage::KIND, s))?];
+            if let Some(prev) = predecessor(&later, s) {
+                deps.push(p.the(&Spec::survey(TilingStage::KIND, prev))?);
+            }
             let label = p.plan.surveys[s].label.clone();
-            p.add(Spec::survey(Self::KIND, s), &label, &[&key], vec![first, t]);
+            p.add(Spec::survey(Self::KIND, s), &label, &[&key], deps);
         }
         Ok(())
     }
 
     fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<AlignMeta> {
         let s = ctx.survey(unit)?;
-        let (samples, sampled) = sample(ctx, s)?;
-        let alignment = align(&samples, ctx.plan.params.core_spacing.value);
+        let spacing = ctx.plan.params.core_spacing.value;
+        let (samples, mut sampled) = sample(ctx, 0, s)?;
+        let onto_first = align(&samples, spacing);
+        let onto_previous = match predecessor(&later_surveys(ctx.plan), s) {
+            Some(prev) => {
+                let (samples, n) = sample(ctx, prev, s)?;
+                sampled += n;
+                Some(align(&samples, spacing))
+            }
+            None => None,
+        };
         (ctx.progress)(sampled as u64);
-        super::write_json(out, FILE, &alignment)?;
-        Ok(AlignMeta {
-            applied: alignment.applied,
+        let meta = AlignMeta {
+            applied: onto_first.applied,
             sampled,
-            stable_points: alignment.stable_points,
-        })
+            stable_points: onto_first.stable_points,
+        };
+        let fits = Fits {
+            onto_first,
+            onto_previous,
+        };
+        super::write_json(out, FILE, &fits)?;
+        Ok(meta)
     }
+}
+
+/// The survey before `s` when it is aligned too (so that `s` may reach the first through it):
+/// none for the second survey, whose predecessor is the first.
+fn predecessor(later: &[usize], s: usize) -> Option<usize> {
+    let prev = s.checked_sub(1)?;
+    (prev >= 1 && later.contains(&prev)).then_some(prev)
 }
 
 /// The surveys of the plan's pairs other than the first, in order, each once.
@@ -135,13 +163,14 @@ fn windows(plan: &crate::plan::Plan) -> Vec<[f64; 4]> {
     out
 }
 
-/// M3C2 between survey 0 and survey `s` (their own tilings) at the core points in the sample's
-/// [`windows`]: the samples measured within the cylinder (a walked distance may be finished in
-/// another tile, so it is left out), in core-point key order; and how many were computed.
-fn sample(ctx: &Ctx, s: usize) -> Result<(Vec<Sample>, usize)> {
+/// M3C2 between survey `onto` and survey `s` (their own tilings) at the core points in the
+/// sample's [`windows`]: the samples measured within the cylinder (a walked distance may be
+/// finished in another tile, so it is left out), in core-point key order; and how many were
+/// computed.
+fn sample(ctx: &Ctx, onto: usize, s: usize) -> Result<(Vec<Sample>, usize)> {
     let plan = ctx.plan;
     let (t0, ts) = (
-        ctx.unit(&Spec::survey(TilingStage::KIND, 0))?,
+        ctx.unit(&Spec::survey(TilingStage::KIND, onto))?,
         ctx.unit(&Spec::survey(TilingStage::KIND, s))?,
     );
     let (m0, ms) = (ctx.meta::<TilingStage>(t0)?, ctx.meta::<TilingStage>(ts)?);
@@ -152,7 +181,7 @@ fn sample(ctx: &Ctx, s: usize) -> Result<(Vec<Sample>, usize)> {
     let counts = [m0.tile_points, ms.tile_points];
     let grid = plan.layout.grid()?;
     let params = plan.params.m3c2();
-    let (b, a) = (&plan.surveys[0].bounds, &plan.surveys[s].bounds);
+    let (b, a) = (&plan.surveys[onto].bounds, &plan.surveys[s].bounds);
     let wins = windows(plan);
     let inside = |p: &crate::geom::Point3| {
         wins.iter()
@@ -270,8 +299,8 @@ fn within(t: &TilePoints, boxes: &[[f64; 4]]) -> TilePoints {
     }
 }
 
-/// The alignment of survey `s` (its align unit must be done), if it has one.
-pub fn read(ctx: &Ctx, s: usize) -> Result<Option<Alignment>> {
+/// The fits of survey `s` (its align unit must be done), if it has them.
+pub fn read(ctx: &Ctx, s: usize) -> Result<Option<Fits>> {
     match ctx.plan.find(&Spec::survey(AlignStage::KIND, s)) {
         Some(u) => Ok(Some(super::read_json(ctx, u, FILE)?)),
         None => Ok(None),

@@ -1,5 +1,7 @@
-//! A later survey tiled again in the first survey's frame, when its alignment applies
-//! ([`super::align`]): every point mapped by the alignment's matrix and rounded to its file's
+//! A later survey tiled again in the first survey's frame, when its alignment applies: its route
+//! onto the first survey — its own fit, or a chain through its predecessors
+//! ([`crate::events::chain`]) — chosen from the align units ([`super::align`]) of every survey up
+//! to it, and recorded (`route.json`); every point mapped by the route's matrix and rounded to its file's
 //! coordinate quantum (so that the tiles keep their exact integer encoding), cut into the same
 //! layout. When the alignment does not apply, the unit writes no tile and the survey's own
 //! tiling is read in its place ([`super::Ctx::tiles_of`]): everything after it is then the same
@@ -12,8 +14,12 @@ use super::stage::{Line, Planner, Scope, Stage, Total};
 use super::tiling::{split, TilingMeta, TilingStage};
 use super::Ctx;
 use crate::error::Result;
+use crate::events::chain::{routes, Route};
 use crate::plan::Spec;
 use crate::store::UnitWriter;
+
+/// The file of an aligned unit: its [`Route`].
+pub const FILE: &str = "route.json";
 
 /// A survey in the first survey's frame.
 pub struct AlignedStage;
@@ -35,32 +41,36 @@ impl Stage for AlignedStage {
     };
     type Meta = AlignedMeta;
 
-    /// One per survey with an align unit, over it and the survey's own tiling.
+    /// One per survey with an align unit, over the align units of every survey up to it (its
+    /// route may pass through them) and the survey's own tiling.
     fn plan(p: &mut Planner) -> Result<()> {
+        let mut aligns = Vec::new();
         for s in 0..p.plan.surveys.len() {
             let Some(align) = p.find(&Spec::survey(AlignStage::KIND, s)) else {
                 continue;
             };
-            let tiling = p.the(&Spec::survey(TilingStage::KIND, s))?;
+            aligns.push(align);
+            let mut deps = aligns.clone();
+            deps.push(p.the(&Spec::survey(TilingStage::KIND, s))?);
             let label = p.plan.surveys[s].label.clone();
-            p.add(
-                Spec::survey(Self::KIND, s),
-                &label,
-                &[],
-                vec![align, tiling],
-            );
+            p.add(Spec::survey(Self::KIND, s), &label, &[], deps);
         }
         Ok(())
     }
 
     fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<AlignedMeta> {
         let s = ctx.survey(unit)?;
-        let Some(a) = super::align::read(ctx, s)? else {
+        let fits = (0..=s)
+            .map(|k| super::align::read(ctx, k))
+            .collect::<Result<Vec<_>>>()?;
+        let Some(route) = routes(&fits).pop().flatten() else {
             return Ok(AlignedMeta {
                 applied: false,
                 tiling: None,
             });
         };
+        super::write_json(out, FILE, &route)?;
+        let a = &route.alignment;
         if !a.applied {
             return Ok(AlignedMeta {
                 applied: false,
@@ -94,5 +104,13 @@ impl Stage for AlignedStage {
             applied: true,
             tiling: Some(tiling),
         })
+    }
+}
+
+/// The route of survey `s` onto the first (its aligned unit must be done), if it has one.
+pub fn route(ctx: &Ctx, s: usize) -> Result<Option<Route>> {
+    match ctx.plan.find(&Spec::survey(AlignedStage::KIND, s)) {
+        Some(u) => Ok(Some(super::read_json(ctx, u, FILE)?)),
+        None => Ok(None),
     }
 }

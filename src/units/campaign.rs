@@ -275,7 +275,7 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<CampaignMeta> {
     // campaign.csv / campaign.json.
     // Each survey's alignment onto the first (none for the first, nor with `--align off`).
     let alignments = (0..plan.surveys.len())
-        .map(|s| Ok(super::align::read(ctx, s)?.map(|a| AlignmentSummary::of(&a))))
+        .map(|s| Ok(super::aligned::route(ctx, s)?.map(|r| AlignmentSummary::of(&r))))
         .collect::<Result<Vec<_>>>()?;
     write_table(
         out,

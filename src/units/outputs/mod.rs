@@ -174,11 +174,15 @@ pub struct AlignmentSummary {
     /// The least share, over the directions fitted, of what the core points tell of that
     /// direction that comes from ground the fit leaves at rest (applied only from 0.5).
     pub at_rest_share: f64,
+    /// The surveys the transform passes through, from this one to the first (0): `[k, 0]` for
+    /// a fit onto the first, longer for a chain through predecessors.
+    pub route: Vec<usize>,
     pub reason: String,
 }
 
 impl AlignmentSummary {
-    pub fn of(a: &crate::events::align::Alignment) -> AlignmentSummary {
+    pub fn of(r: &crate::events::chain::Route) -> AlignmentSummary {
+        let a = &r.alignment;
         AlignmentSummary {
             applied: a.applied,
             matrix: a.matrix(),
@@ -192,6 +196,7 @@ impl AlignmentSummary {
             stable_points: a.stable_points,
             residual_m: a.residual_m,
             at_rest_share: a.at_rest_share,
+            route: r.surveys.clone(),
             reason: a.reason.clone(),
         }
     }
@@ -622,7 +627,7 @@ fn summarize(
         .collect();
     let significant = || records.iter().filter(|e| e.significant);
     let reach = ReachSummary::new(&params, written, records);
-    let alignment = super::align::read(ctx, p.after)?.map(|a| AlignmentSummary::of(&a));
+    let alignment = super::aligned::route(ctx, p.after)?.map(|r| AlignmentSummary::of(&r));
     Ok(Summary {
         tool: "talus".into(),
         version: env!("CARGO_PKG_VERSION").into(),
