@@ -136,6 +136,10 @@ struct ParamArgs {
     /// Fewer points than this in either cylinder → no distance (default: 1).
     #[arg(long, value_name = "N")]
     min_points: Option<u32>,
+    /// LAS classes compared: all, or a list of class numbers to keep, e.g. 2,6,9 (default:
+    /// every class but vegetation 3, 4, 5 and noise 7, 18).
+    #[arg(long, value_name = "LIST|all")]
+    classes: Option<String>,
     /// Normal orientation: auto | up | X,Y,Z | toward:X,Y,Z (default: auto: up where not
     /// steep, toward the lower terrain on steep faces).
     #[arg(long)]
@@ -354,6 +358,7 @@ impl ParamArgs {
             cyl_halflen: self.cyl_halflen,
             reg_error: self.reg_error,
             min_points: self.min_points,
+            classes: self.classes.clone(),
             orientation: self.orientation.clone(),
             align: self.align.clone(),
             threshold: self.threshold,

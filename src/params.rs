@@ -24,6 +24,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
+use crate::io::classes::Classes;
 use crate::io::Bounds;
 use crate::m3c2::{M3c2Params, Orientation};
 
@@ -39,6 +40,9 @@ pub struct UserParams {
     pub cyl_halflen: Option<f64>,
     pub reg_error: Option<f64>,
     pub min_points: Option<u32>,
+    /// The LAS classes compared: `all` or a list (default: all but vegetation 3, 4, 5 and
+    /// noise 7, 18).
+    pub classes: Option<String>,
     pub orientation: Option<String>,
     /// `auto` (align the later survey on the stable ground when it helps) or `off`.
     pub align: Option<String>,
@@ -149,6 +153,15 @@ impl UserParams {
         }
     }
 
+    /// The LAS classes the user asked for (the default when none): known before the
+    /// parameters are resolved, since the spacing they start from is measured on those points.
+    pub fn classes(&self) -> Result<Classes> {
+        match self.classes.as_deref() {
+            None => Ok(Classes::default()),
+            Some(c) => Classes::parse(c).map_err(|p| self.bad_value("classes", p)),
+        }
+    }
+
     /// Refuse lengths far beyond the data: more than [`MAX_EXTENT_FACTOR`] times the diagonal of
     /// the epochs' bounds. A neighbourhood that wide holds every point (no use), and the work
     /// that grows with it (the volume grid over a footprint grown by `cyl_radius`, neighbour
@@ -207,6 +220,7 @@ impl UserParams {
             cyl_halflen: self.cyl_halflen.or(base.cyl_halflen),
             reg_error: self.reg_error.or(base.reg_error),
             min_points: self.min_points.or(base.min_points),
+            classes: self.classes.or(base.classes),
             orientation: self.orientation.or(base.orientation),
             align: self.align.or(base.align),
             threshold: self.threshold.or(base.threshold),
@@ -240,6 +254,10 @@ pub struct Params {
     pub cyl_halflen: Resolved<f64>,
     pub reg_error: Resolved<f64>,
     pub min_points: Resolved<u32>,
+    /// The LAS classes compared ([`crate::io::classes::Classes`]'s words). Absent from a plan
+    /// written before it existed: all.
+    #[serde(default = "classes_all")]
+    pub classes: Resolved<String>,
     pub orientation: Resolved<String>,
     /// `auto` or `off` (SPEC.md §1 "Registration: removed, not only measured"). Absent from a
     /// plan written before it existed: off.
@@ -256,6 +274,13 @@ pub struct Params {
 
 /// The source of a parameter the user gave (a flag or the config file).
 pub const USER: &str = "user";
+
+fn classes_all() -> Resolved<String> {
+    Resolved {
+        value: "all".into(),
+        source: "default of an older plan".into(),
+    }
+}
 
 fn align_off() -> Resolved<String> {
     Resolved {
@@ -418,6 +443,14 @@ impl Params {
                 return Err(user.bad_value("align", format!("auto or off, not '{other}'")));
             }
         };
+        let classes = match user.classes {
+            None => Resolved {
+                value: Classes::default().to_string(),
+                source: "default: vegetation (3, 4, 5) and noise (7, 18) left out (SPEC.md §4)"
+                    .into(),
+            },
+            Some(_) => Resolved::user(user.classes()?.to_string()),
+        };
         let orientation = user.orientation.clone().unwrap_or_else(|| "auto".into());
         orientation.parse::<Orientation>().map_err(|m| {
             let problem = m.strip_prefix("--orientation: ").unwrap_or(&m);
@@ -469,6 +502,7 @@ impl Params {
                 "measured by a comparison on its stable ground",
             ),
             min_points: pick(user.min_points, 1, "default: 1 (SPEC.md §1)"),
+            classes,
             orientation: Resolved {
                 source: if user.orientation.is_some() {
                     USER.into()
@@ -550,6 +584,12 @@ impl Params {
                 .expect("validated in resolve"),
             walk: self.walk(),
         }
+    }
+
+    /// The LAS classes compared.
+    pub fn classes(&self) -> Classes {
+        // Written by `resolve` from a parsed value (or "all" for an older plan).
+        Classes::parse(&self.classes.value).unwrap_or_default()
     }
 
     /// Whether later surveys are aligned onto the first on the stable ground (`--align auto`).

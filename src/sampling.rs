@@ -11,6 +11,7 @@
 use std::path::Path;
 
 use crate::error::{Error, Result};
+use crate::io::classes::Classes;
 use crate::io::{self, Bounds, Point3};
 use crate::spatial::{DensityGrid, Index};
 
@@ -39,13 +40,16 @@ pub struct Spacing {
 
 /// Measure the point spacing of the cloud at `path`.
 pub fn measure(path: &Path) -> Result<Spacing> {
-    measure_with_density(path).map(|(s, _)| s)
+    measure_with_density(path, None).map(|(s, _)| s)
 }
 
 /// [`measure`], and the cloud's [`DensityGrid`] counted on the way (one of the passes reads every
-/// point anyway).
-pub fn measure_with_density(path: &Path) -> Result<(Spacing, DensityGrid)> {
-    let mut reader = io::open(path)?;
+/// point anyway), over the points of the classes `classes` keeps (those a comparison uses).
+pub fn measure_with_density(
+    path: &Path,
+    classes: Option<&Classes>,
+) -> Result<(Spacing, DensityGrid)> {
+    let mut reader = io::open_with(path, classes)?;
     let info = reader.info().clone();
     let no_spacing = || {
         Error::input(
@@ -88,6 +92,7 @@ pub fn measure_with_density(path: &Path) -> Result<(Spacing, DensityGrid)> {
     for _ in 0..12 {
         let pts = window(
             path,
+            classes,
             cx,
             cy,
             half,
@@ -176,13 +181,14 @@ fn footprint_area(b: &Bounds) -> f64 {
 /// the file counted into `grid` when given (then the whole file is read).
 fn window(
     path: &Path,
+    classes: Option<&Classes>,
     cx: f64,
     cy: f64,
     half: f64,
     cap: usize,
     mut grid: Option<&mut DensityGrid>,
 ) -> Result<Option<Vec<Point3>>> {
-    let mut reader = io::open(path)?;
+    let mut reader = io::open_with(path, classes)?;
     let mut buf = Vec::new();
     let mut out = Vec::new();
     let mut over = false;

@@ -121,7 +121,8 @@ pub fn survey(store: &Store, label: &str, files: &SurveyFiles) -> Result<Survey>
 
 /// Plan the comparison of `opts` in `store`.
 fn plan(store: &Store, opts: &CompareOptions, user: &UserParams, inputs: &Inputs) -> Result<Plan> {
-    let (spacing, density_grid) = sampling::measure_with_density(&inputs.before.first().path)?;
+    let (spacing, density_grid) =
+        sampling::measure_with_density(&inputs.before.first().path, Some(&user.classes()?))?;
     crate::progress::trace(|| "spacing measured".into());
     let params = Params::resolve(user, spacing.effective_spacing)?;
     let surveys = vec![

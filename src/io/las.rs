@@ -35,6 +35,9 @@ use std::sync::Once;
 
 use crossbeam_channel::{bounded, Receiver, Sender};
 
+use std::sync::{Arc, Mutex};
+
+use super::classes::{ClassCounts, Classes};
 use super::{
     check_finite, open_file, Bounds, CloudFormat, CloudInfo, Crs, Point3, PointReader, RawVlr,
 };
@@ -63,11 +66,24 @@ pub struct LasReader {
     pos: usize,
     delivered: u64,
     finished: bool,
+    /// With a class filter: points read and left out per class so far (the decoding thread
+    /// adds each chunk's before sending it).
+    counts: Option<Arc<Mutex<Tally>>>,
 }
+
+/// Points read and left out per class.
+type Tally = ([u64; 256], [u64; 256]);
 
 impl LasReader {
     /// Open `path` (which starts with `LASF`), check its header and start the decoding thread.
     pub fn open(path: &Path) -> Result<Self> {
+        Self::open_with(path, None)
+    }
+
+    /// [`LasReader::open`], delivering only the points of the classes `classes` keeps (None or
+    /// all classes: every point, the classification not even decoded).
+    pub fn open_with(path: &Path, classes: Option<&Classes>) -> Result<Self> {
+        let classes = classes.filter(|c| !c.keeps_all()).cloned();
         let file = open_file(path)?;
         let file_len = file
             .metadata()
@@ -198,11 +214,15 @@ impl LasReader {
         let (tx, rx) = bounded(2);
         let (recycle, recycle_rx) = bounded(4);
         let (ready_tx, ready_rx) = bounded(1);
+        let counts = classes
+            .as_ref()
+            .map(|_| Arc::new(Mutex::new(([0u64; 256], [0u64; 256]))));
         let source = Source {
             path: path.to_path_buf(),
             kind,
             total: point_count,
             accepted,
+            filter: classes.zip(counts.clone()),
             // Point formats 6 to 10 are compressed in layers: only the coordinates' are decoded.
             layered: (header.point_format().is_compressed && header.point_format().is_extended)
                 .then(|| (header.clone(), u64::from(raw.offset_to_point_data))),
@@ -224,6 +244,16 @@ impl LasReader {
             pos: 0,
             delivered: 0,
             finished: false,
+            counts,
+        })
+    }
+
+    /// Points left out by the class filter so far.
+    fn left_out(&self) -> u64 {
+        self.counts.as_ref().map_or(0, |c| {
+            c.lock()
+                .map(|t| t.1.iter().sum::<u64>())
+                .unwrap_or_default()
         })
     }
 }
@@ -410,6 +440,8 @@ struct Source {
     accepted: BoundsCheck,
     /// A LAZ file of a layered point format: its header and where its points start.
     layered: Option<(las::Header, u64)>,
+    /// The classes to keep, and where to count what is read and left out.
+    filter: Option<(Classes, Arc<Mutex<Tally>>)>,
 }
 
 /// The decoding thread: open the file, report readiness, then stream chunks until the end, an
@@ -426,11 +458,12 @@ fn decode(
         total,
         accepted,
         layered,
+        filter,
     } = source;
+    let classified = filter.is_some();
     let opened = match &layered {
-        Some((header, start)) => {
-            coordinates_only(&path, header, *start).map(|l| Decoder::Layers(Box::new(l)))
-        }
+        Some((header, start)) => coordinates_only(&path, header, *start, classified)
+            .map(|l| Decoder::Layers(Box::new(l))),
         None => File::open(&path)
             .map_err(|e| Error::input(&path, format!("cannot open: {e}")))
             .and_then(|f| {
@@ -462,20 +495,24 @@ fn decode(
         }
     };
     let mut index = 0u64;
+    let mut classes: Vec<u8> = Vec::new();
     loop {
         let mut chunk = recycle.try_recv().unwrap_or_default();
         chunk.clear();
         let what = format!("{kind} data after {index} of {total} points");
+        let wanted = classified.then_some(&mut classes);
         let filled = guarded(&path, &what, || {
-            decoder.fill(&mut chunk, total - index).map_err(|e| {
-                Error::input(
-                    &path,
-                    format!(
+            decoder
+                .fill(&mut chunk, wanted, total - index)
+                .map_err(|e| {
+                    Error::input(
+                        &path,
+                        format!(
                         "truncated or corrupt {kind} data: read failed after {index} of {total} \
                          points: {e}"
                     ),
-                )
-            })
+                    )
+                })
         });
         let n = match filled {
             Ok(n) => n,
@@ -498,6 +535,26 @@ fn decode(
             return;
         }
         index += n;
+        if let Some((keep, tally)) = &filter {
+            // Count every point's class, keep those of the kept classes (in their order).
+            let (mut read, mut out) = ([0u64; 256], [0u64; 256]);
+            let mut c = classes.iter();
+            chunk.retain(|_| {
+                let k = *c.next().unwrap_or(&0);
+                read[k as usize] += 1;
+                let kept = keep.keeps(k);
+                if !kept {
+                    out[k as usize] += 1;
+                }
+                kept
+            });
+            if let Ok(mut t) = tally.lock() {
+                for k in 0..256 {
+                    t.0[k] += read[k];
+                    t.1[k] += out[k];
+                }
+            }
+        }
         if tx.send(Ok(chunk)).is_err() {
             return; // the consumer dropped the reader
         }
@@ -524,7 +581,13 @@ struct Layers {
 
 impl Decoder {
     /// Decode up to one chunk of points (at most `left`) into `out`; how many (0: the end).
-    fn fill(&mut self, out: &mut Vec<Point3>, left: u64) -> std::result::Result<u64, String> {
+    /// With `classes`: each point's class too (cleared first).
+    fn fill(
+        &mut self,
+        out: &mut Vec<Point3>,
+        classes: Option<&mut Vec<u8>>,
+        left: u64,
+    ) -> std::result::Result<u64, String> {
         match self {
             Decoder::Las(las) => {
                 let (reader, pd) = &mut **las;
@@ -536,6 +599,10 @@ impl Decoder {
                 let n = reader.fill_points(chunk, pd).map_err(|e| e.to_string())?;
                 out.reserve(pd.len());
                 out.extend(pd.x().zip(pd.y()).zip(pd.z()).map(|((x, y), z)| [x, y, z]));
+                if let Some(c) = classes {
+                    c.clear();
+                    c.extend(pd.classification());
+                }
                 Ok(n)
             }
             Decoder::Layers(l) => {
@@ -560,6 +627,11 @@ impl Decoder {
                         t.z.direct(at(b, 8)),
                     ]
                 }));
+                if let Some(c) = classes {
+                    // The classification byte of formats 6 to 10 (LAS 1.4 R15 Table 7).
+                    c.clear();
+                    c.extend(l.bytes.chunks_exact(l.record).map(|b| b[16]));
+                }
                 Ok(n as u64)
             }
         }
@@ -567,8 +639,13 @@ impl Decoder {
 }
 
 /// Open the points of the layered LAZ file `path` (its `header`, points from byte `start`) for
-/// their coordinates alone.
-fn coordinates_only(path: &Path, header: &las::Header, start: u64) -> Result<Layers> {
+/// their coordinates alone (and their classification when `classified`).
+fn coordinates_only(
+    path: &Path,
+    header: &las::Header,
+    start: u64,
+    classified: bool,
+) -> Result<Layers> {
     laz_items_match(path, header)?;
     let corrupt = |e: String| Error::input(path, format!("truncated or corrupt LAZ file: {e}"));
     let mut f = BufReader::with_capacity(
@@ -579,7 +656,10 @@ fn coordinates_only(path: &Path, header: &las::Header, start: u64) -> Result<Lay
         .map_err(|e| corrupt(e.to_string()))?;
     let vlr = header.laz_vlr().map_err(|e| corrupt(e.to_string()))?;
     let record = vlr.items_size() as usize;
-    let selection = laz::DecompressionSelection::base().decompress_z();
+    let mut selection = laz::DecompressionSelection::base().decompress_z();
+    if classified {
+        selection = selection.decompress_classification();
+    }
     let decompressor = guarded(path, "LAZ file", || {
         laz::ParLasZipDecompressor::selective(f, vlr, selection).map_err(|e| corrupt(e.to_string()))
     })?;
@@ -594,6 +674,12 @@ fn coordinates_only(path: &Path, header: &las::Header, start: u64) -> Result<Lay
 impl PointReader for LasReader {
     fn info(&self) -> &CloudInfo {
         &self.info
+    }
+
+    fn class_counts(&self) -> Option<ClassCounts> {
+        let c = self.counts.as_ref()?;
+        let t = c.lock().ok()?;
+        Some(ClassCounts::from_tables(&t.0, &t.1))
     }
 
     fn fill(&mut self, buf: &mut Vec<Point3>, max: usize) -> Result<usize> {
@@ -616,12 +702,13 @@ impl PointReader for LasReader {
                     }
                     Err(_) => {
                         self.finished = true;
-                        if self.delivered != self.info.point_count {
+                        if self.delivered + self.left_out() != self.info.point_count {
                             return Err(Error::input(
                                 &self.info.path,
                                 format!(
                                     "truncated: read {} of the {} points the header promises",
-                                    self.delivered, self.info.point_count
+                                    self.delivered + self.left_out(),
+                                    self.info.point_count
                                 ),
                             ));
                         }

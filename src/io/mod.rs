@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
 
+pub mod classes;
 pub mod las;
 pub mod las_out;
 pub mod mesh_ply;
@@ -91,6 +92,11 @@ pub trait PointReader: Send {
     /// Clear `buf` and fill it with up to `max` points; returns how many were read (0 = end).
     /// A NaN or infinite coordinate, a truncated or corrupt file is an `Error::Input`.
     fn fill(&mut self, buf: &mut Vec<Point3>, max: usize) -> Result<usize>;
+    /// Opened with a class filter ([`open_with`]) on a format that has classes: the points read
+    /// so far per class, and those left out. None otherwise (text, PLY, no filter).
+    fn class_counts(&self) -> Option<classes::ClassCounts> {
+        None
+    }
 }
 
 /// [`PointReader::fill`] for readers that decode one point at a time: clear `buf`, then push
@@ -115,12 +121,18 @@ fn fill_from(
 /// missing file, a file that is not a point cloud and a cloud with zero points are errors naming
 /// the file.
 pub fn open(path: &Path) -> Result<Box<dyn PointReader>> {
+    open_with(path, None)
+}
+
+/// [`open`], delivering from a LAS/LAZ file only the points of the classes `classes` keeps
+/// (text and PLY have no classes: every point).
+pub fn open_with(path: &Path, classes: Option<&classes::Classes>) -> Result<Box<dyn PointReader>> {
     let mut prefix = [0u8; 7];
     let n = read_prefix(path, &mut prefix)?;
     let prefix = &prefix[..n];
     let text = prefix.strip_prefix(BOM.as_bytes()).unwrap_or(prefix);
     if prefix.starts_with(b"LASF") {
-        Ok(Box::new(las::LasReader::open(path)?))
+        Ok(Box::new(las::LasReader::open_with(path, classes)?))
     } else if text.starts_with(b"ply") && matches!(text.get(3), Some(b'\n' | b'\r')) {
         Ok(Box::new(ply::PlyReader::open(path)?))
     } else {

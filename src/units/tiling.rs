@@ -9,6 +9,7 @@ use super::stage::{Line, Planner, Scope, Stage, Total};
 use super::Ctx;
 use crate::error::Result;
 use crate::io;
+use crate::io::classes::ClassCounts;
 use crate::plan::Spec;
 use crate::store::UnitWriter;
 
@@ -65,6 +66,9 @@ pub struct TilingMeta {
     /// Points per tile (halo included), in grid order: what the pair's M3C2 units check the
     /// budget against before the first of them holds anything (`units::m3c2::fit`).
     pub tile_points: Vec<u64>,
+    /// Points read and left out per LAS class (`--classes`); None when no class was read (text
+    /// or PLY input, or every class kept).
+    pub classes: Option<ClassCounts>,
 }
 
 impl Stage for TilingStage {
@@ -94,10 +98,11 @@ impl Stage for TilingStage {
                     Ok(g) => format!("frame {}", frame_points(p.plan, g.len())),
                     Err(_) => String::new(),
                 };
+                let classes = format!("classes {}", p.plan.params.classes.value);
                 p.add(
                     Spec::survey(Self::KIND, s),
                     &label,
-                    &[&key, &layout, &frames],
+                    &[&key, &layout, &frames, &classes],
                     Vec::new(),
                 );
             }
@@ -138,20 +143,30 @@ pub fn split(
     let mut splitter = TileSplitter::new(&dir, grid, layout.halo, budget)?;
     let mut buf = Vec::new();
     let mut points = 0u64;
+    let keep = plan.params.classes();
+    let mut classes: Option<ClassCounts> = None;
     // A survey delivered as tiles: its files one after the other, in name order.
     for (k, f) in files.iter().enumerate() {
-        let mut reader = io::open(&f.path)?;
+        let mut reader = io::open_with(&f.path, Some(&keep))?;
         if k == 0 {
             splitter.set_options(write_options(reader.info().transform));
         }
+        let mut left_out = 0;
         while reader.fill(&mut buf, 1 << 16)? > 0 {
             if let Some(f) = transform {
                 f(&mut buf);
             }
             splitter.push(&buf)?;
             points += buf.len() as u64;
-            (ctx.progress)(buf.len() as u64);
+            // The points read, those left out by class included: the line counts up to the
+            // survey's points.
+            let out = reader.class_counts().map_or(0, |c| c.left_out());
+            (ctx.progress)(buf.len() as u64 + out - left_out);
+            left_out = out;
             crate::interrupt::check()?;
+        }
+        if let Some(c) = reader.class_counts() {
+            classes = Some(classes.map_or(c.clone(), |all| all.merge(&c)));
         }
     }
     // Points per tile (halo included), in grid order. A tile without points has no file from
@@ -172,5 +187,6 @@ pub fn split(
     Ok(TilingMeta {
         points,
         tile_points,
+        classes,
     })
 }

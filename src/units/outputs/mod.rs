@@ -147,7 +147,57 @@ pub struct Summary {
     /// The later survey's alignment onto the first (absent with `--align off`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub alignment: Option<AlignmentSummary>,
+    /// The LAS classes compared and the points each survey left out by class.
+    #[serde(default)]
+    pub classes: ClassesSummary,
     pub stages: Vec<StageTime>,
+}
+
+/// summary.json `classes` (SPEC.md §4 "classification first").
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct ClassesSummary {
+    /// The classes compared: `all`, `all but 3,4,5,7,18` (the default), or the kept list.
+    pub used: String,
+    /// Per survey, before then after: its classes as read (null when none was read: text or
+    /// PLY input, or `--classes all`).
+    pub surveys: Vec<Option<SurveyClasses>>,
+}
+
+/// One survey's classes.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct SurveyClasses {
+    /// The points carry a classification (some class other than 0 and 1).
+    pub classified: bool,
+    /// Points left out, in all.
+    pub left_out: u64,
+    /// Every class that occurred: its points, and how many were left out.
+    pub per_class: Vec<ClassRow>,
+}
+
+/// One class of a survey.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ClassRow {
+    pub class: u8,
+    pub points: u64,
+    pub left_out: u64,
+}
+
+impl SurveyClasses {
+    fn of(c: &crate::io::classes::ClassCounts) -> SurveyClasses {
+        SurveyClasses {
+            classified: c.classified(),
+            left_out: c.left_out(),
+            per_class: c
+                .classes
+                .iter()
+                .map(|&(class, points, left_out)| ClassRow {
+                    class,
+                    points,
+                    left_out,
+                })
+                .collect(),
+        }
+    }
 }
 
 /// summary.json `alignment` (SPEC.md §1): the rigid transform fitted on the stable ground, and
@@ -265,6 +315,38 @@ impl Summary {
             self.tiles,
         ) + &self.reach_line()
             + &self.alignment_line()
+            + &self.classes_line()
+    }
+
+    /// What the one line says of the classes: the points left out, when any were.
+    fn classes_line(&self) -> String {
+        let out: Vec<String> = ["before", "after"]
+            .iter()
+            .zip(&self.classes.surveys)
+            .filter_map(|(name, s)| {
+                let s = s.as_ref().filter(|s| s.left_out > 0)?;
+                let which: Vec<String> = s
+                    .per_class
+                    .iter()
+                    .filter(|c| c.left_out > 0)
+                    .map(|c| c.class.to_string())
+                    .collect();
+                Some(format!(
+                    "{name} {} (class {})",
+                    s.left_out,
+                    which.join(", ")
+                ))
+            })
+            .collect();
+        if out.is_empty() {
+            String::new()
+        } else {
+            format!(
+                "; points of classes not compared ({}) left out: {}",
+                self.classes.used,
+                out.join(", ")
+            )
+        }
     }
 
     /// What the one line says of the alignment: applied (by how much), or not (why), when the
@@ -628,6 +710,13 @@ fn summarize(
     let significant = || records.iter().filter(|e| e.significant);
     let reach = ReachSummary::new(&params, written, records);
     let alignment = super::aligned::route(ctx, p.after)?.map(|r| AlignmentSummary::of(&r));
+    let classes = ClassesSummary {
+        used: params.classes.value.clone(),
+        surveys: [p.before, p.after]
+            .iter()
+            .map(|&s| Ok(ctx.tiling_meta(s)?.classes.as_ref().map(SurveyClasses::of)))
+            .collect::<Result<_>>()?,
+    };
     Ok(Summary {
         tool: "talus".into(),
         version: env!("CARGO_PKG_VERSION").into(),
@@ -662,6 +751,7 @@ fn summarize(
             .sum(),
         reach,
         alignment,
+        classes,
         stages,
     })
 }
