@@ -140,6 +140,11 @@ struct ParamArgs {
     /// every class but vegetation 3, 4, 5 and noise 7, 18).
     #[arg(long, value_name = "LIST|all")]
     classes: Option<String>,
+    /// Stable areas you know, as GeoJSON polygons in the surveys' CRS: the stable ground (σ_d,
+    /// reg_error, τ and the alignment) is the core points inside them (default: found in the
+    /// distances).
+    #[arg(long, value_name = "AREAS.geojson")]
+    stable: Option<PathBuf>,
     /// Normal orientation: auto | up | X,Y,Z | toward:X,Y,Z (default: auto: up where not
     /// steep, toward the lower terrain on steep faces).
     #[arg(long)]
@@ -359,6 +364,7 @@ impl ParamArgs {
             reg_error: self.reg_error,
             min_points: self.min_points,
             classes: self.classes.clone(),
+            stable: self.stable.clone(),
             orientation: self.orientation.clone(),
             align: self.align.clone(),
             threshold: self.threshold,

@@ -43,6 +43,9 @@ pub struct UserParams {
     /// The LAS classes compared: `all` or a list (default: all but vegetation 3, 4, 5 and
     /// noise 7, 18).
     pub classes: Option<String>,
+    /// Stable areas the user knows (`--stable AREAS.geojson`): the stable ground is the core
+    /// points inside their polygons (default: found in the distances).
+    pub stable: Option<PathBuf>,
     pub orientation: Option<String>,
     /// `auto` (align the later survey on the stable ground when it helps) or `off`.
     pub align: Option<String>,
@@ -221,6 +224,7 @@ impl UserParams {
             reg_error: self.reg_error.or(base.reg_error),
             min_points: self.min_points.or(base.min_points),
             classes: self.classes.or(base.classes),
+            stable: self.stable.or(base.stable),
             orientation: self.orientation.or(base.orientation),
             align: self.align.or(base.align),
             threshold: self.threshold.or(base.threshold),

@@ -146,20 +146,7 @@ fn every_point_format_leaves_out_vegetation_and_noise_by_default() {
 fn classified_shrubs_are_left_out_and_the_results_are_those_without_them() {
     let dir = common::tempdir();
     let d = dir.path();
-    let scene = d.join("scene");
-    let out = common::run(&[
-        "synth",
-        "cliff",
-        "--out",
-        scene.to_str().unwrap(),
-        "--points",
-        "120000",
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let (scene_before, scene_after) = common::synth_cliff(d, 120_000);
     // Both surveys as ground (class 2), plus shrubs: on the plateau and on the beach, a cloud of
     // points scattered through a 2 × 2 × 1.5 m box above the ground; the after survey's grown by
     // 20 % and one more on the beach.
@@ -181,11 +168,11 @@ fn classified_shrubs_are_left_out_and_the_results_are_those_without_them() {
         }
         v
     };
-    let ground_of = |name: &str| -> Vec<(Point3, u8)> {
-        let (pts, _) = read(&scene.join(name), None);
+    let ground_of = |path: &Path| -> Vec<(Point3, u8)> {
+        let (pts, _) = read(path, None);
         pts.into_iter().map(|p| (p, 2u8)).collect()
     };
-    let (before, after) = (ground_of("before.laz"), ground_of("after.laz"));
+    let (before, after) = (ground_of(&scene_before), ground_of(&scene_after));
     // Shrub places: over the middle of the plateau and of the beach, from the points' bounds.
     let b = bounds(&before);
     let mid_x = 0.5 * (b.0[0] + b.1[0]);

@@ -35,7 +35,11 @@ fn read_json(p: &Path) -> Value {
 }
 
 fn pair(before: &Path, after: &Path, out: &Path) -> PairResult {
-    let o = common::run_compare(before, after, out, &[]);
+    pair_with(before, after, out, &[])
+}
+
+fn pair_with(before: &Path, after: &Path, out: &Path, extra: &[&str]) -> PairResult {
+    let o = common::run_compare(before, after, out, extra);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let summary = read_json(&out.join("summary.json"));
     let spacing = summary["parameters"]["point_spacing"]["value"]
@@ -93,15 +97,10 @@ fn pair(before: &Path, after: &Path, out: &Path) -> PairResult {
     }
 }
 
-fn quantile(sorted: &[f64], q: f64) -> f64 {
-    sorted[((sorted.len() - 1) as f64 * q).round() as usize]
-}
-
-#[test]
-fn event_volumes_agree_with_a_dem_of_difference_on_the_st_leonards_campaign() {
-    let Some(dir) = common::shared_data("st-leonards") else {
-        return;
-    };
+/// The shared St Leonards folder and its six surveys in date order (None: not beside the
+/// checkout).
+fn campaign() -> Option<(std::path::PathBuf, Vec<std::path::PathBuf>)> {
+    let dir = common::shared_data("st-leonards")?;
     let mut surveys: Vec<_> = std::fs::read_dir(&dir)
         .unwrap()
         .map(|e| e.unwrap().path())
@@ -109,6 +108,18 @@ fn event_volumes_agree_with_a_dem_of_difference_on_the_st_leonards_campaign() {
         .collect();
     surveys.sort();
     assert_eq!(surveys.len(), 6, "six surveys in {}", dir.display());
+    Some((dir, surveys))
+}
+
+fn quantile(sorted: &[f64], q: f64) -> f64 {
+    sorted[((sorted.len() - 1) as f64 * q).round() as usize]
+}
+
+#[test]
+fn event_volumes_agree_with_a_dem_of_difference_on_the_st_leonards_campaign() {
+    let Some((_, surveys)) = campaign() else {
+        return;
+    };
     let tmp = common::tempdir();
     let results: Vec<PairResult> = surveys
         .windows(2)
@@ -161,14 +172,151 @@ fn event_volumes_agree_with_a_dem_of_difference_on_the_st_leonards_campaign() {
         );
         all.extend_from_slice(&r.rel);
     }
-    all.sort_by(|a, b| a.total_cmp(b));
-    let (median, p90) = (quantile(&all, 0.5), quantile(&all, 0.9));
+    judge_events("all pairs", all);
+}
+
+/// Issue "Stable ground the user knows", item 3: the five pairs with the data owners' stable
+/// transects (`--stable stable_transects.geojson`) beside the automatic stable ground. Per pair:
+/// σ_d and τ (automatic / with the transects), the robust spread of the DoD over the transects
+/// (1.4826 × MAD of the covered 1 m cells inside them, written here, independent of talus), and
+/// the share of the DoD change above τ (Σ|Δz| over the 1 m cells where |Δz| > τ) that lies inside
+/// the event regions (printed). With the transects: σ_d within 2 × their spread, and the per-event
+/// DoD agreement as for the defaults (median ≤ 5 %, 90th percentile ≤ 20 %).
+#[test]
+fn the_owners_stable_transects_give_a_level_of_detection_their_spread_supports() {
+    let Some((dir, surveys)) = campaign() else {
+        return;
+    };
+    let transects = dir.join("stable_transects.geojson");
+    // The transects as DoD polygons (an id per feature for `regions`).
+    let mut t = read_json(&transects);
+    for (i, f) in t["features"].as_array_mut().unwrap().iter_mut().enumerate() {
+        f["properties"] = serde_json::json!({ "id": i });
+    }
+    let transect_polys: Vec<common::dod::Polygon> = common::dod::regions(&t)
+        .into_iter()
+        .flat_map(|(_, p)| p)
+        .collect();
+    let tmp = common::tempdir();
+    let value = |s: &Value, k: &str| s["parameters"][k]["value"].as_f64().unwrap();
     eprintln!(
-        "all pairs: {} events over 10 m³, median |V − DoD|/|DoD| {:.2} %, 90th percentile {:.2} %",
-        all.len(),
+        "{:<20} {:>14} {:>14} {:>10} {:>9} {:>9} {:>8} {:>8}",
+        "pair",
+        "σ_d auto/areas",
+        "τ auto/areas",
+        "transects",
+        "captured",
+        "(auto τ)",
+        "median %",
+        "p90 %"
+    );
+    let mut all = Vec::new();
+    for (k, w) in surveys.windows(2).enumerate() {
+        let auto_dir = tmp.path().join(format!("auto{k}"));
+        let areas_dir = tmp.path().join(format!("areas{k}"));
+        let o = common::run_compare(&w[0], &w[1], &auto_dir, &["--m3c2-only"]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let r = pair_with(
+            &w[0],
+            &w[1],
+            &areas_dir,
+            &["--stable", transects.to_str().unwrap()],
+        );
+        let (auto, areas) = (
+            read_json(&auto_dir.join("summary.json")),
+            read_json(&areas_dir.join("summary.json")),
+        );
+        assert_eq!(areas["stable"]["source"], "areas", "{}", r.name);
+        let sigma = |s: &Value| s["stable"]["sigma_d"].as_f64().unwrap();
+        // The DoD on the survey's own 1 m grid over the pair's footprint, and over the transects.
+        let (_, p1) = talus::io::read_all(&w[0]).unwrap();
+        let (_, p2) = talus::io::read_all(&w[1]).unwrap();
+        let origin = [p1[0][0], p1[0][1]];
+        let spacing = value(&areas, "point_spacing");
+        let e1 = common::dod::Epoch::new(&p1, origin, 2.0 * spacing);
+        let e2 = common::dod::Epoch::new(&p2, origin, 2.0 * spacing);
+        let mut on_transects: Vec<f64> = common::dod::cells(&e1, &e2, &transect_polys, 1.0)
+            .into_iter()
+            .map(|c| c.1)
+            .collect();
+        on_transects.sort_by(|a, b| a.total_cmp(b));
+        let med = quantile(&on_transects, 0.5);
+        let mut dev: Vec<f64> = on_transects.iter().map(|d| (d - med).abs()).collect();
+        dev.sort_by(|a, b| a.total_cmp(b));
+        let spread = 1.4826 * quantile(&dev, 0.5);
+        let (lo, hi) = (
+            p1.iter()
+                .fold([f64::INFINITY; 2], |m, p| [m[0].min(p[0]), m[1].min(p[1])]),
+            p1.iter().fold([f64::NEG_INFINITY; 2], |m, p| {
+                [m[0].max(p[0]), m[1].max(p[1])]
+            }),
+        );
+        let footprint = vec![vec![
+            [lo[0], lo[1]],
+            [hi[0], lo[1]],
+            [hi[0], hi[1]],
+            [lo[0], hi[1]],
+        ]];
+        let everywhere = common::dod::cells(&e1, &e2, &[footprint], 1.0);
+        let regions: Vec<common::dod::Polygon> =
+            common::dod::regions(&read_json(&areas_dir.join("event_regions.geojson")))
+                .into_iter()
+                .flat_map(|(_, p)| p)
+                .collect();
+        let captured = |tau: f64| {
+            let above: Vec<&((i64, i64), f64)> =
+                everywhere.iter().filter(|c| c.1.abs() > tau).collect();
+            let total: f64 = above.iter().map(|c| c.1.abs()).sum();
+            let inside: f64 = above
+                .iter()
+                .filter(|c| {
+                    let p = [(c.0 .0 as f64 + 0.5), (c.0 .1 as f64 + 0.5)];
+                    regions.iter().any(|poly| common::dod::contains(poly, p))
+                })
+                .map(|c| c.1.abs())
+                .sum();
+            inside / total.max(f64::MIN_POSITIVE)
+        };
+        let (tau_auto, tau_areas) = (value(&auto, "threshold"), value(&areas, "threshold"));
+        let (share, share_auto) = (captured(tau_areas), captured(tau_auto));
+        eprintln!(
+            "{:<20} {:>6.3} / {:<6.3} {:>6.3} / {:<6.3} {:>10.3} {:>8.1}% {:>8.1}% {:>8.2} {:>8.2}",
+            r.name,
+            sigma(&auto),
+            sigma(&areas),
+            tau_auto,
+            tau_areas,
+            spread,
+            100.0 * share,
+            100.0 * share_auto,
+            100.0 * quantile(&r.rel, 0.5),
+            100.0 * quantile(&r.rel, 0.9),
+        );
+        assert!(
+            sigma(&areas) <= 2.0 * spread,
+            "{}: σ_d {} with the transects, their spread {spread}",
+            r.name,
+            sigma(&areas)
+        );
+        // The share is reported, not asserted: the issue asks ≥ 90 %, and two pairs stay near
+        // 84–85 % at either τ (the change talus leaves outside its regions does not depend on
+        // the level of detection there); open in the issue.
+        all.extend_from_slice(&r.rel);
+    }
+    judge_events("with the transects", all);
+}
+
+/// The per-event agreement with the DoD over all pairs (`rel`: |V − DoD| / |DoD| of the events
+/// over 10 m³): median ≤ 5 %, 90th percentile ≤ 20 %.
+fn judge_events(what: &str, mut rel: Vec<f64>) {
+    rel.sort_by(|a, b| a.total_cmp(b));
+    let (median, p90) = (quantile(&rel, 0.5), quantile(&rel, 0.9));
+    eprintln!(
+        "{what}: {} events over 10 m³, median |V − DoD|/|DoD| {:.2} %, 90th percentile {:.2} %",
+        rel.len(),
         100.0 * median,
         100.0 * p90
     );
-    assert!(median <= 0.05, "median {median}");
-    assert!(p90 <= 0.20, "p90 {p90}");
+    assert!(median <= 0.05, "{what}: median {median}");
+    assert!(p90 <= 0.20, "{what}: p90 {p90}");
 }

@@ -178,10 +178,12 @@ fn plan(
         spacing,
         layout,
         core_points: None,
+        stable_areas: None,
         meshes: None,
         m3c2_only: false,
         units: Vec::new(),
     };
+    plan.stable_areas = super::compare::stable_areas(store, user, &plan.surveys)?;
     // The core points are the first survey's: within its bounds.
     let what = format!("the core points (from {})", epochs[0].arg.display());
     crate::plan::reach::check(&plan, Some((&what, &bounds[0])))?;

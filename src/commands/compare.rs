@@ -119,6 +119,26 @@ pub fn survey(store: &Store, label: &str, files: &SurveyFiles) -> Result<Survey>
     })
 }
 
+/// The user's stable areas (`--stable`), read and checked against `surveys`, with their
+/// content's key.
+pub(super) fn stable_areas(
+    store: &Store,
+    user: &UserParams,
+    surveys: &[crate::plan::Survey],
+) -> Result<Option<crate::plan::StableAreas>> {
+    let Some(path) = &user.stable else {
+        return Ok(None);
+    };
+    if !path.is_file() {
+        return Err(crate::error::Error::input(
+            path,
+            "cannot read the stable areas: no such file",
+        ));
+    }
+    let key = store.content_key(path)?;
+    crate::plan::StableAreas::read(path, key, surveys).map(Some)
+}
+
 /// Plan the comparison of `opts` in `store`.
 fn plan(store: &Store, opts: &CompareOptions, user: &UserParams, inputs: &Inputs) -> Result<Plan> {
     let (spacing, density_grid) =
@@ -161,10 +181,12 @@ fn plan(store: &Store, opts: &CompareOptions, user: &UserParams, inputs: &Inputs
         spacing,
         layout,
         core_points,
+        stable_areas: None,
         meshes,
         m3c2_only: opts.m3c2_only,
         units: Vec::new(),
     };
+    plan.stable_areas = stable_areas(store, user, &plan.surveys)?;
     let cores = opts.core_points.as_ref().zip(inputs.cores.as_ref());
     let cores = cores.map(|(p, c)| (format!("the core points {}", p.display()), c.bounds));
     crate::plan::reach::check(&plan, cores.as_ref().map(|(s, b)| (s.as_str(), b)))?;

@@ -98,6 +98,16 @@ pub struct Stable {
     pub stable_points: usize,
     pub sampled_points: usize,
     pub method: String,
+    /// Where the stable ground came from: `auto` (found in the distances) or `areas` (the core
+    /// points inside the user's polygons, `file`).
+    #[serde(default = "auto")]
+    pub source: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub file: Option<std::path::PathBuf>,
+}
+
+fn auto() -> String {
+    "auto".into()
 }
 
 impl Stable {
@@ -179,6 +189,8 @@ pub fn measure(samples: &[Sample], spacing: f64) -> Option<Stable> {
             keep.len(),
             finite.len()
         ),
+        source: auto(),
+        file: None,
     })
 }
 

@@ -49,6 +49,25 @@ pub struct Crs {
 }
 
 impl Crs {
+    /// The EPSG code of the CRS: the GeoTIFF keys', else the WKT's own authority (WKT 1: the
+    /// last `AUTHORITY["EPSG","n"]`, the outermost object's; WKT 2: the last `ID["EPSG",n]`).
+    pub fn epsg_code(&self) -> Option<u32> {
+        if self.epsg.is_some() {
+            return self.epsg;
+        }
+        let w = self.wkt.as_deref()?;
+        let at = w
+            .rfind("AUTHORITY[\"EPSG\"")
+            .or_else(|| w.rfind("ID[\"EPSG\""))?;
+        let rest = &w[at..];
+        let digits: String = rest[rest.find(',')? + 1..]
+            .chars()
+            .skip_while(|c| !c.is_ascii_digit())
+            .take_while(|c| c.is_ascii_digit())
+            .collect();
+        digits.parse().ok()
+    }
+
     /// A short human description: `EPSG:32755`, the WKT's name, or `unknown`.
     pub fn describe(&self) -> String {
         if let Some(e) = self.epsg {

@@ -37,6 +37,60 @@ pub struct InputFile {
     pub key: String,
 }
 
+/// The user's stable areas: the file (its content's key enters the units that use them) and its
+/// polygons.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StableAreas {
+    pub file: InputFile,
+    pub areas: crate::spatial::areas::Areas,
+}
+
+impl StableAreas {
+    /// Read `path` and check it against the surveys: its CRS (when both name an EPSG code) and
+    /// every polygon meeting the surveys' footprint. `key` is the file's content key.
+    pub fn read(path: &Path, key: String, surveys: &[Survey]) -> Result<StableAreas> {
+        let areas = crate::spatial::areas::Areas::read(path)?;
+        if let Some(e) = areas.epsg {
+            for s in surveys {
+                let Some(first) = s.files.first() else {
+                    continue;
+                };
+                let code = crate::io::open(&first.path)?.info().crs.epsg_code();
+                if let Some(c) = code.filter(|&c| c != e) {
+                    return Err(Error::input(
+                        path,
+                        format!(
+                            "its polygons are in EPSG:{e}, the survey {} in EPSG:{c}: give the \
+                             stable areas in the surveys' CRS",
+                            s.arg.display()
+                        ),
+                    ));
+                }
+            }
+        }
+        let all = crate::io::Bounds::union(&surveys.iter().map(|s| s.bounds).collect::<Vec<_>>());
+        for (i, b) in areas.boxes().iter().enumerate() {
+            if b[2] < all.min[0] || b[0] > all.max[0] || b[3] < all.min[1] || b[1] > all.max[1] {
+                return Err(Error::input(
+                    path,
+                    format!(
+                        "polygon {i} ([{:.2}, {:.2}] to [{:.2}, {:.2}]) lies wholly outside the \
+                         surveys (x {:.2} to {:.2}, y {:.2} to {:.2}): is it in their CRS?",
+                        b[0], b[1], b[2], b[3], all.min[0], all.max[0], all.min[1], all.max[1]
+                    ),
+                ));
+            }
+        }
+        Ok(StableAreas {
+            file: InputFile {
+                path: std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf()),
+                key,
+            },
+            areas,
+        })
+    }
+}
+
 /// One survey (epoch) of the run.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Survey {
@@ -162,6 +216,9 @@ pub struct Plan {
     pub spacing: Spacing,
     pub layout: Layout,
     pub core_points: Option<InputFile>,
+    /// The stable areas the user gave (`--stable`), read and checked.
+    #[serde(default)]
+    pub stable_areas: Option<StableAreas>,
     /// The user's surfaces (before, after) instead of the local reconstruction.
     pub meshes: Option<[InputFile; 2]>,
     /// Stop after M3C2: no events, volumes or meshes.

@@ -8,7 +8,9 @@
 //! - [`BoxIndex`]: which of many xy boxes contain a point (events' search boxes and claims).
 //! - [`DensityGrid`]: points per XY cell of a survey, and its densest square (tile sizes).
 //! - [`Tubes`]: which of many long thin cylinders hold a point (M3C2's walk across tiles).
+//! - [`areas::Areas`]: the user's stable areas (`--stable`), polygons and point-in-polygon.
 
+pub mod areas;
 mod boxes;
 mod columns;
 mod density;

@@ -63,9 +63,10 @@ impl Stage for AlignStage {
             return Ok(());
         }
         let key = format!(
-            "{:?}|{}|{WINDOWS}|chained",
+            "{:?}|{}|{WINDOWS}|chained|{}",
             p.plan.params.m3c2(),
-            p.plan.params.core_spacing.value
+            p.plan.params.core_spacing.value,
+            super::stable::areas_key(p.plan)
         );
         let first = p.the(&Spec::survey(TilingStage::KIND, 0))?;
         let later = later_surveys(p.plan);
@@ -145,7 +146,13 @@ pub fn align(samples: &[Sample], spacing: f64) -> Alignment {
 /// [`SAMPLE_CORES`] core points in all (never more than its cell). They depend on the first
 /// survey and the core spacing only, not on the tiles, so the sample — and the fit — is the same
 /// whatever the tile layout.
+///
+/// With the user's stable areas, the fit is on their ground alone: the windows are the polygons'
+/// boxes, and only the core points inside the polygons are sampled ([`sample`]).
 fn windows(plan: &crate::plan::Plan) -> Vec<[f64; 4]> {
+    if let Some(a) = &plan.stable_areas {
+        return a.areas.boxes();
+    }
     let b = &plan.surveys[0].bounds;
     let c = plan.params.core_spacing.value;
     let n = WINDOWS as f64;
@@ -183,9 +190,12 @@ fn sample(ctx: &Ctx, onto: usize, s: usize) -> Result<(Vec<Sample>, usize)> {
     let params = plan.params.m3c2();
     let (b, a) = (&plan.surveys[onto].bounds, &plan.surveys[s].bounds);
     let wins = windows(plan);
-    let inside = |p: &crate::geom::Point3| {
-        wins.iter()
-            .any(|w| p[0] >= w[0] && p[0] < w[2] && p[1] >= w[1] && p[1] < w[3])
+    let areas = plan.stable_areas.as_ref().map(|a| &a.areas);
+    let inside = |p: &crate::geom::Point3| match areas {
+        Some(a) => a.contains(p[0], p[1]),
+        None => wins
+            .iter()
+            .any(|w| p[0] >= w[0] && p[0] < w[2] && p[1] >= w[1] && p[1] < w[3]),
     };
     // Every point a window's core point uses for its normal (and its orientation's look-ups of
     // the top surface, up to 4 normal radii away in cells of half a radius) and its cylinder lies

@@ -62,13 +62,19 @@ impl Stage for StableStage {
     };
     type Meta = StableMeta;
 
-    /// One per pair, over the pair's M3C2 units.
+    /// One per pair, over the pair's M3C2 units (and the user's stable areas, by content).
     fn plan(p: &mut Planner) -> Result<()> {
         let samples = SAMPLES.to_string();
+        let areas = areas_key(p.plan);
         for pair in 0..p.plan.pairs.len() {
             let m3c2 = p.of_pair(M3c2Stage::KIND, pair);
             let label = p.plan.pairs[pair].label.clone();
-            p.add(Spec::pair(Self::KIND, pair), &label, &[&samples], m3c2);
+            p.add(
+                Spec::pair(Self::KIND, pair),
+                &label,
+                &[&samples, &areas],
+                m3c2,
+            );
         }
         Ok(())
     }
@@ -78,7 +84,16 @@ impl Stage for StableStage {
     }
 }
 
-/// Measure pair `pair`'s stable ground into `out`.
+/// The key part of the user's stable areas: their file's content key, or `auto`.
+pub fn areas_key(plan: &crate::plan::Plan) -> String {
+    plan.stable_areas
+        .as_ref()
+        .map_or_else(|| "auto".into(), |a| format!("areas {}", a.file.key))
+}
+
+/// Measure pair `pair`'s stable ground into `out`: on every `step`-th core point, or — with the
+/// user's stable areas — on every core point inside them (the areas may be narrow: transects a
+/// few metres wide would lose most of their points to a step).
 fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<StableMeta> {
     let total = pair_count(ctx, pair)?;
     let step = total.div_ceil(SAMPLES).max(1);
@@ -93,9 +108,20 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<StableMeta> {
     let mut n = 0u64;
     let need = ctx.plan.params.min_points.value.max(1);
     let mut reached = Reached::default();
+    let areas = ctx.plan.stable_areas.as_ref().map(|a| &a.areas);
+    let (mut inside, mut in_areas) = (0u64, 0u64);
     while let Some(k) = merged.next_result()? {
         reached.add(&k.r, need);
-        if n.is_multiple_of(step) && k.r.measured().is_finite() {
+        let take = match areas {
+            Some(a) => {
+                let within = a.contains(k.xyz[0], k.xyz[1]);
+                inside += u64::from(within);
+                within
+            }
+            None => n.is_multiple_of(step),
+        };
+        if take && k.r.measured().is_finite() {
+            in_areas += 1;
             samples.push(Sample {
                 xyz: k.xyz,
                 normal: k.r.normal,
@@ -110,7 +136,29 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<StableMeta> {
         return Err(Error::Epochs(reached.why_none(ctx.plan, pair, n)));
     }
     (ctx.progress)(samples.len() as u64);
-    let stable = measure(&samples, ctx.plan.params.core_spacing.value);
+    if let Some(a) = &ctx.plan.stable_areas {
+        if in_areas == 0 {
+            return Err(Error::input(
+                &a.file.path,
+                format!(
+                    "its polygons hold {inside} of the {n} core points of {}, none with a \
+                     distance: no stable ground to measure (are they where both surveys have \
+                     points?)",
+                    ctx.plan.pair_name(pair)
+                ),
+            ));
+        }
+    }
+    let mut stable = measure(&samples, ctx.plan.params.core_spacing.value);
+    if let (Some(s), Some(a)) = (stable.as_mut(), &ctx.plan.stable_areas) {
+        s.source = "areas".into();
+        s.file = Some(a.file.path.clone());
+        s.method = format!(
+            "{}; the candidates: the {in_areas} core points with a distance inside the stable \
+             areas",
+            s.method
+        );
+    }
     let ground = StableGround { stable };
     super::write_json(out, FILE, &ground)?;
     Ok(StableMeta {

@@ -87,6 +87,11 @@ impl Epoch {
 /// A polygon with holes: rings of (x, y).
 pub type Polygon = Vec<Vec<[f64; 2]>>;
 
+/// Whether `p` lies inside `poly` (even–odd rule over its rings).
+pub fn contains(poly: &Polygon, p: [f64; 2]) -> bool {
+    inside(poly, p)
+}
+
 fn inside(poly: &Polygon, p: [f64; 2]) -> bool {
     let mut n = 0;
     for ring in poly {

@@ -55,6 +55,25 @@ pub fn run_compare(before: &Path, after: &Path, out: &Path, extra: &[&str]) -> O
     run(&args)
 }
 
+/// `talus synth cliff --points POINTS` into `dir/scene`: (before.laz, after.laz).
+pub fn synth_cliff(dir: &Path, points: u64) -> (PathBuf, PathBuf) {
+    let scene = dir.join("scene");
+    let out = run(&[
+        "synth",
+        "cliff",
+        "--out",
+        scene.to_str().unwrap(),
+        "--points",
+        &points.to_string(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (scene.join("before.laz"), scene.join("after.laz"))
+}
+
 /// A fresh temporary directory.
 pub fn tempdir() -> tempfile::TempDir {
     tempfile::tempdir().unwrap()
