@@ -301,7 +301,7 @@ struct CampaignArgs {
 
 #[derive(Args)]
 struct SynthArgs {
-    /// hill | cube | spheres | cubes | cliff | deposit | hole | events | stable | large | dense |
+    /// hill | cube | spheres | cubes | cliff | deposit | hole | events | stable | large | dense | beach |
     /// campaign
     scene: String,
     /// Directory to write the epochs (before.laz, after.laz; a campaign's survey_*.laz) and

@@ -63,11 +63,12 @@ pub enum SceneKind {
     Stable,
     Large,
     Dense,
+    Beach,
 }
 
 impl SceneKind {
     /// All scenes, in the order of their names.
-    pub const ALL: [SceneKind; 11] = [
+    pub const ALL: [SceneKind; 12] = [
         SceneKind::Hill,
         SceneKind::Cube,
         SceneKind::Spheres,
@@ -79,6 +80,7 @@ impl SceneKind {
         SceneKind::Stable,
         SceneKind::Large,
         SceneKind::Dense,
+        SceneKind::Beach,
     ];
 
     /// The scene's name on the command line.
@@ -95,6 +97,7 @@ impl SceneKind {
             SceneKind::Stable => "stable",
             SceneKind::Large => "large",
             SceneKind::Dense => "dense",
+            SceneKind::Beach => "beach",
         }
     }
 

@@ -170,6 +170,8 @@ pub(crate) fn default_points(kind: SceneKind) -> u64 {
         SceneKind::Large => 120_000_000,
         // 990 m² at 1.5 cm spacing.
         SceneKind::Dense => 4_400_000,
+        // 60 m × 46 m at about 0.1 m spacing.
+        SceneKind::Beach => 280_000,
     }
 }
 
@@ -224,6 +226,7 @@ impl SceneModel {
             SceneKind::Stable => stable(),
             SceneKind::Large => large(points),
             SceneKind::Dense => dense(),
+            SceneKind::Beach => beach(),
         }
     }
 
@@ -884,6 +887,110 @@ fn wave(amp: f64, lx: f64, ly: f64, phase: f64) -> Wave {
         ky: TAU / ly,
         phase,
     }
+}
+
+/// Beach scene: its sea wall's top and the road behind it, the ground that does not move
+/// (`[x0, y0, x1, y1]`, local metres): what a user marks with `--stable`.
+pub const BEACH_STABLE: [[f64; 4]; 2] = [[0.0, 40.0, 60.0, 41.5], [0.0, 41.5, 60.0, 46.0]];
+
+/// beach: a 60 m × 46 m beach (y < 40, rising 3 % landward) below a sea wall (a 1 m block, y from
+/// 40 to 41.5) and a road behind it (y > 41.5, level with the wall's foot + 1 m: the block's top
+/// continues as the road, a plane). Between the surveys most of the beach moves: a lattice of
+/// 6 m cells (10 along the shore, 6 across) each holding a cos² bump or dent of radius 2.9 m,
+/// signs alternating like a chessboard, heights 0.1 to 1 m (a low-discrepancy spread), so 73 %
+/// of the beach (taking in their skirts, where the sand moved a few centimetres) changed. On
+/// the road, a pothole (box 2 m × 2 m, 8 cm deep) and a small heap (cos² R = 1.5 m, 10 cm): found
+/// only at the surveys' true level of detection, which the sand must not inflate. Truth: each
+/// bump ±h·R²(π/2 − 2/π), the box w·d·h.
+fn beach() -> SceneModel {
+    let size = [60.0, 46.0];
+    let base = Base {
+        z0: 100.0,
+        gx: 0.0,
+        gy: 0.03,
+        waves: Vec::new(),
+    };
+    // The wall and the road: one block 1 m high over y ≥ 40 (its seaward face a wall patch).
+    let wall = Feature::Block {
+        min: [0.0, 40.0],
+        max: [size[0], size[1]],
+        height: 1.0,
+    };
+    let (pitch, radius) = (6.0, 2.9);
+    let mut sand = Vec::new();
+    let mut events = Vec::new();
+    let f1 = Heightfield::new(base.clone(), vec![wall]);
+    for j in 0..6 {
+        for i in 0..10 {
+            let k = j * 10 + i;
+            let c = [pitch * (i as f64 + 0.5), 2.0 + pitch * (j as f64 + 0.5)];
+            let sign = if (i + j) % 2 == 0 { 1.0 } else { -1.0 };
+            let height = sign * (0.1 + 0.9 * ((0.5 + k as f64 * 0.618_033_988_749_894_9).fract()));
+            sand.push(Feature::Bump { c, radius, height });
+            events.push(ModelEvent {
+                volume_m3: bump_volume(radius, height),
+                centre: [c[0], c[1], z_at(&f1, c)],
+                radius_m: radius,
+                footprint: square(c, radius),
+                covered_volume_m3: None,
+                description: format!(
+                    "sand {}: cos² R = {radius} m, h = {:.3} m",
+                    if sign > 0.0 { "accreted" } else { "eroded" },
+                    height.abs()
+                ),
+            });
+        }
+    }
+    // On the road (its top at z = 101 + 0.03 y).
+    let pothole = Feature::Block {
+        min: [14.0, 43.0],
+        max: [16.0, 45.0],
+        height: -0.08,
+    };
+    let heap = Feature::Bump {
+        c: [40.0, 44.0],
+        radius: 1.5,
+        height: 0.1,
+    };
+    // The pothole lies within the road's block: features add, and its volume is its own.
+    let mut f2_features = vec![wall, heap, pothole];
+    f2_features.extend(sand);
+    let road = |c: [f64; 2]| 101.0 + 0.03 * c[1];
+    events.push(ModelEvent {
+        volume_m3: pothole.volume(),
+        centre: [15.0, 44.0, road([15.0, 44.0])],
+        radius_m: 2f64.sqrt(),
+        footprint: ground([14.0, 43.0], [16.0, 45.0]),
+        covered_volume_m3: None,
+        description: "pothole in the road: box 2 m × 2 m, 0.08 m deep".into(),
+    });
+    events.push(ModelEvent {
+        volume_m3: bump_volume(1.5, 0.1),
+        centre: [40.0, 44.0, road([40.0, 44.0])],
+        radius_m: 1.5,
+        footprint: square([40.0, 44.0], 1.5),
+        covered_volume_m3: None,
+        description: "heap on the road: cos² R = 1.5 m, h = 0.1 m".into(),
+    });
+    let f2 = Heightfield::new(base.clone(), f2_features);
+    // The wall's seaward face, from the beach up to its top.
+    let face = || {
+        vec![Patch::Wall {
+            base: base.clone(),
+            start: [0.0, 40.0],
+            dir: [1.0, 0.0],
+            len: size[0],
+            z: [0.0, 1.0],
+        }]
+    };
+    SceneModel::heightfield_scene(
+        size,
+        [f1, f2],
+        [face(), face()],
+        events,
+        "a beach below a sea wall and a road: most of the sand moved by 0.1 to 1 m; a pothole and \
+         a heap on the road",
+    )
 }
 
 /// stable: 40 m × 40 m undulating surface, the same in both epochs except a 5 mm vertical shift of
