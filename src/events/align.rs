@@ -89,7 +89,8 @@ pub struct Alignment {
     pub at_rest_share: f64,
     pub applied: bool,
     /// The transform is known: enough stable ground, seeing the vertical and both tilts, that
-    /// holds still as one rigid body once it is removed (rules 1, 2 and 4 of the module's header).
+    /// holds still as one rigid body, at rest, once it is removed (every rule of the module's
+    /// header but the significance (3) and the effect (5)).
     /// A known transform that is not applied is known to be too small to matter: a chain of
     /// alignments may pass through it as the identity ([`super::chain`]); an unknown one it may not.
     pub determined: bool,
