@@ -82,6 +82,26 @@ impl Areas {
         self.polygons.iter().any(|p| p.contains(x, y))
     }
 
+    /// The share, at most 1, of the rectangle `within` ([x0, y0, x1, y1]) the polygons' boxes
+    /// cover (overlaps counted twice): an upper bound of the share of its points inside them.
+    pub fn box_share(&self, within: [f64; 4]) -> f64 {
+        let area = |b: [f64; 4]| (b[2] - b[0]).max(0.0) * (b[3] - b[1]).max(0.0);
+        let covered: f64 = self
+            .polygons
+            .iter()
+            .map(|p| {
+                let b = p.bbox;
+                area([
+                    b[0].max(within[0]),
+                    b[1].max(within[1]),
+                    b[2].min(within[2]),
+                    b[3].min(within[3]),
+                ])
+            })
+            .sum();
+        (covered / area(within).max(f64::MIN_POSITIVE)).min(1.0)
+    }
+
     /// [x0, y0, x1, y1] of every polygon.
     pub fn boxes(&self) -> Vec<[f64; 4]> {
         self.polygons.iter().map(|p| p.bbox).collect()
@@ -252,6 +272,16 @@ mod tests {
         let l = Areas::parse(&l).unwrap();
         assert!(l.contains(0.5, 3.0) && l.contains(3.0, 0.5) && !l.contains(3.0, 3.0));
         assert_eq!(l.epsg, None);
+    }
+
+    #[test]
+    fn box_share_bounds_the_share_inside() {
+        let v = json!({"type": "MultiPolygon", "coordinates": [[square(0.0, 0.0, 10.0)], [square(95.0, 95.0, 10.0)]]});
+        let a = Areas::parse(&v).unwrap();
+        // 100 + 25 (the second box clipped to the rectangle) of 10,000.
+        assert!((a.box_share([0.0, 0.0, 100.0, 100.0]) - 0.0125).abs() < 1e-12);
+        assert_eq!(a.box_share([0.0, 0.0, 5.0, 5.0]), 1.0);
+        assert_eq!(a.box_share([200.0, 200.0, 300.0, 300.0]), 0.0);
     }
 
     #[test]

@@ -96,32 +96,45 @@ pub fn areas_key(plan: &crate::plan::Plan) -> String {
 /// few metres wide would lose most of their points to a step).
 fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<StableMeta> {
     let total = pair_count(ctx, pair)?;
-    let step = total.div_ceil(SAMPLES).max(1);
+    let areas = ctx.plan.stable_areas.as_ref().map(|a| &a.areas);
+    // With the user's areas, every core point inside them up to about SAMPLES: their boxes'
+    // share of the extent bounds the share of core points inside, so a step on that many keeps
+    // the sample (and the memory reserved for it) within SAMPLES; narrow areas keep every one.
+    let candidates = match areas {
+        Some(a) => {
+            let e = &ctx.plan.layout.extent;
+            let share = a.box_share([e.min[0], e.min[1], e.max[0], e.max[1]]);
+            (total as f64 * share).ceil() as u64
+        }
+        None => total,
+    };
+    let step = candidates.div_ceil(SAMPLES).max(1);
+    // At most SAMPLES are kept (areas denser than the rest could offer more: the rest is
+    // left out, and the reservation holds).
+    let most = total.div_ceil(step).min(SAMPLES);
     let _held = ctx.reserve(
-        total.div_ceil(step) * BYTES_PER_SAMPLE
-            + (8 << 20)
-            + super::m3c2::merge_need(ctx.plan.layout.len()),
+        most * BYTES_PER_SAMPLE + (8 << 20) + super::m3c2::merge_need(ctx.plan.layout.len()),
         "the stable-ground sample and the merge of the pair's tiles",
     )?;
-    let mut samples = Vec::with_capacity(total.min(SAMPLES) as usize);
+    let mut samples = Vec::with_capacity(most as usize);
     let mut merged = Merged::new(ctx, pair)?;
     let mut n = 0u64;
     let need = ctx.plan.params.min_points.value.max(1);
     let mut reached = Reached::default();
-    let areas = ctx.plan.stable_areas.as_ref().map(|a| &a.areas);
     let (mut inside, mut in_areas) = (0u64, 0u64);
     while let Some(k) = merged.next_result()? {
         reached.add(&k.r, need);
+        let finite = k.r.measured().is_finite();
         let take = match areas {
             Some(a) => {
                 let within = a.contains(k.xyz[0], k.xyz[1]);
                 inside += u64::from(within);
-                within
+                in_areas += u64::from(within && finite);
+                within && (inside - 1).is_multiple_of(step)
             }
             None => n.is_multiple_of(step),
         };
-        if take && k.r.measured().is_finite() {
-            in_areas += 1;
+        if take && finite && (samples.len() as u64) < most {
             samples.push(Sample {
                 xyz: k.xyz,
                 normal: k.r.normal,
