@@ -284,3 +284,32 @@ fn bounds(p: &[(Point3, u8)]) -> ([f64; 3], [f64; 3]) {
 fn json(path: &Path) -> serde_json::Value {
     serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap()
 }
+
+/// `talus info` says which classes a LAS file carries and how many points a comparison leaves
+/// out by default, and measures the spacing on the rest (as `compare` does).
+#[test]
+fn info_lists_the_classes_and_what_a_comparison_leaves_out() {
+    let dir = common::tempdir();
+    let pts = classified_points(2000);
+    let path = dir.path().join("c.laz");
+    write_las(&path, 6, true, &pts);
+    let left_out = pts
+        .iter()
+        .filter(|p| [3, 4, 5, 7, 18].contains(&p.1))
+        .count();
+    let o = common::run(&["info", path.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.contains("classes        1: 223, 2: 223, 3: 222, 4: 222"),
+        "{text}"
+    );
+    assert!(
+        text.contains(&format!("a comparison leaves out {left_out} points")),
+        "{text}"
+    );
+    let o = common::run(&["info", "--json", path.to_str().unwrap()]);
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v[0]["classes"]["left_out"], left_out as u64);
+    assert_eq!(v[0]["classes"]["classified"], true);
+}

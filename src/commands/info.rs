@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 use serde::Serialize;
 
 use crate::error::Result;
+use crate::io::classes::Classes;
 use crate::io::{self, Bounds, CloudFormat};
 use crate::params::{Params, UserParams};
 use crate::sampling::{self, Spacing};
@@ -19,16 +20,31 @@ pub struct CloudReport {
     pub bounds: Bounds,
     pub crs: String,
     pub crs_wkt: Option<String>,
+    /// The points per LAS class, and those a comparison leaves out by default (null for text
+    /// and PLY).
+    pub classes: Option<crate::units::outputs::SurveyClasses>,
     pub spacing: Spacing,
     pub derived: Params,
 }
 
-/// Inspect one cloud (reads it once or twice; never holds more than a window of it).
+/// Inspect one cloud (reads it two or three times; never holds more than a window of it). The
+/// spacing is measured, as a comparison measures it, on the classes a comparison keeps by default.
 pub fn inspect(path: &Path) -> Result<CloudReport> {
     let reader = io::open(path)?;
     let info = reader.info().clone();
     drop(reader);
-    let spacing = sampling::measure(path)?;
+    let keep = Classes::default();
+    let classes = match info.format {
+        CloudFormat::Las | CloudFormat::Laz => {
+            let mut r = io::open_with(path, Some(&keep))?;
+            let mut buf = Vec::new();
+            while r.fill(&mut buf, 1 << 16)? > 0 {}
+            r.class_counts()
+                .map(|c| crate::units::outputs::SurveyClasses::of(&c))
+        }
+        _ => None,
+    };
+    let (spacing, _) = sampling::measure_with_density(path, Some(&keep))?;
     let derived = Params::resolve(&UserParams::default(), spacing.effective_spacing)?;
     Ok(CloudReport {
         path: path.to_path_buf(),
@@ -38,6 +54,7 @@ pub fn inspect(path: &Path) -> Result<CloudReport> {
         bounds: info.bounds,
         crs: info.crs.describe(),
         crs_wkt: info.crs.wkt,
+        classes,
         spacing,
         derived,
     })
@@ -80,6 +97,29 @@ pub fn print(files: &[PathBuf], json: bool) -> Result<()> {
             b.max[2]
         );
         outln!(out, "  crs            {}", r.crs);
+        if let Some(c) = &r.classes {
+            let per: Vec<String> = c
+                .per_class
+                .iter()
+                .map(|k| format!("{}: {}", k.class, k.points))
+                .collect();
+            outln!(
+                out,
+                "  classes        {}{}",
+                per.join(", "),
+                if !c.classified {
+                    " (unclassified: nothing is left out)".to_string()
+                } else if c.left_out > 0 {
+                    format!(
+                        "; a comparison leaves out {} points (vegetation 3, 4, 5 and noise 7, 18; \
+                         --classes chooses), and the spacing below is theirs without them",
+                        c.left_out
+                    )
+                } else {
+                    String::new()
+                }
+            );
+        }
         outln!(
             out,
             "  spacing        {:.4} effective point spacing s = 1/√density: the parameters below derive from it",

@@ -183,7 +183,7 @@ pub struct ClassRow {
 }
 
 impl SurveyClasses {
-    fn of(c: &crate::io::classes::ClassCounts) -> SurveyClasses {
+    pub fn of(c: &crate::io::classes::ClassCounts) -> SurveyClasses {
         SurveyClasses {
             classified: c.classified(),
             left_out: c.left_out(),
