@@ -11,7 +11,7 @@
 use std::path::Path;
 
 use crate::error::{Error, Result};
-use crate::io::classes::Classes;
+use crate::io::classes::{ClassCounts, Classes};
 use crate::io::{self, Bounds, Point3};
 use crate::spatial::{DensityGrid, Index};
 
@@ -38,17 +38,19 @@ pub struct Spacing {
     pub method: String,
 }
 
-/// Measure the point spacing of the cloud at `path`.
-pub fn measure(path: &Path) -> Result<Spacing> {
-    measure_with_density(path, None).map(|(s, _)| s)
+/// What [`measure`] finds in a cloud.
+pub struct Measured {
+    pub spacing: Spacing,
+    /// Points per XY cell, counted on the way (one of the passes reads every point anyway).
+    pub density: DensityGrid,
+    /// With a class filter on a LAS/LAZ file: its points per class and those left out (from the
+    /// same pass).
+    pub classes: Option<ClassCounts>,
 }
 
-/// [`measure`], and the cloud's [`DensityGrid`] counted on the way (one of the passes reads every
-/// point anyway), over the points of the classes `classes` keeps (those a comparison uses).
-pub fn measure_with_density(
-    path: &Path,
-    classes: Option<&Classes>,
-) -> Result<(Spacing, DensityGrid)> {
+/// Measure the point spacing of the cloud at `path` over the points of the classes `classes`
+/// keeps (those a comparison uses).
+pub fn measure(path: &Path, classes: Option<&Classes>) -> Result<Measured> {
     let mut reader = io::open_with(path, classes)?;
     let info = reader.info().clone();
     let no_spacing = || {
@@ -77,7 +79,11 @@ pub fn measure_with_density(
             measured_points: all.len(),
             method: "over all points".into(),
         };
-        return Ok((spacing, grid));
+        return Ok(Measured {
+            spacing,
+            density: grid,
+            classes: reader.class_counts(),
+        });
     }
     drop(reader);
     let b = info.bounds;
@@ -86,9 +92,10 @@ pub fn measure_with_density(
     let density = info.point_count as f64 / area;
     let mut half = 0.5 * (WINDOW_TARGET / density).sqrt();
     let max_half = 0.5 * (b.max[0] - b.min[0]).max(b.max[1] - b.min[1]) + 1.0;
-    // The first pass reads the whole file, whatever the window holds, for the density grid.
-    let mut grid = DensityGrid::new(&b);
-    let mut counting = Some(&mut grid);
+    // The first pass reads the whole file, whatever the window holds, for the density grid and
+    // the class counts.
+    let mut whole = (DensityGrid::new(&b), None);
+    let mut counting = Some(&mut whole);
     for _ in 0..12 {
         let pts = window(
             path,
@@ -123,7 +130,12 @@ pub fn measure_with_density(
                         2.0 * half
                     ),
                 };
-                return Ok((spacing, grid));
+                let (density, classes) = whole;
+                return Ok(Measured {
+                    spacing,
+                    density,
+                    classes,
+                });
             }
         }
     }
@@ -178,7 +190,8 @@ fn footprint_area(b: &Bounds) -> f64 {
 }
 
 /// The points within the XY window, or None when more than `cap` fall in it; every point of
-/// the file counted into `grid` when given (then the whole file is read).
+/// the file counted into `whole`'s grid when given (then the whole file is read, and its class
+/// counts recorded there).
 fn window(
     path: &Path,
     classes: Option<&Classes>,
@@ -186,14 +199,14 @@ fn window(
     cy: f64,
     half: f64,
     cap: usize,
-    mut grid: Option<&mut DensityGrid>,
+    mut whole: Option<&mut (DensityGrid, Option<ClassCounts>)>,
 ) -> Result<Option<Vec<Point3>>> {
     let mut reader = io::open_with(path, classes)?;
     let mut buf = Vec::new();
     let mut out = Vec::new();
     let mut over = false;
     while reader.fill(&mut buf, 1 << 16)? > 0 {
-        if let Some(g) = grid.as_deref_mut() {
+        if let Some((g, _)) = whole.as_deref_mut() {
             g.add(&buf);
         }
         if over {
@@ -209,9 +222,12 @@ fn window(
                 }
             }
         }
-        if over && grid.is_none() {
+        if over && whole.is_none() {
             return Ok(None);
         }
+    }
+    if let Some((_, c)) = whole {
+        *c = reader.class_counts();
     }
     Ok((!over).then_some(out))
 }

@@ -134,8 +134,11 @@ fn plan(
     files: &[SurveyFiles],
 ) -> Result<Plan> {
     // One parameter set: from the first survey, which an appended survey does not change.
-    let (spacing, density_grid) =
-        sampling::measure_with_density(&files[0].first().path, Some(&user.classes()?))?;
+    let sampling::Measured {
+        spacing,
+        density: density_grid,
+        ..
+    } = sampling::measure(&files[0].first().path, Some(&user.classes()?))?;
     let params = Params::resolve(user, spacing.effective_spacing)?;
     let surveys = epochs
         .iter()

@@ -116,6 +116,7 @@ pub fn survey(store: &Store, label: &str, files: &SurveyFiles) -> Result<Survey>
         format: files.format(),
         crs: files.first().crs.describe(),
         scale: files.scale(),
+        epsg: files.first().crs.epsg_code(),
     })
 }
 
@@ -141,8 +142,11 @@ pub(super) fn stable_areas(
 
 /// Plan the comparison of `opts` in `store`.
 fn plan(store: &Store, opts: &CompareOptions, user: &UserParams, inputs: &Inputs) -> Result<Plan> {
-    let (spacing, density_grid) =
-        sampling::measure_with_density(&inputs.before.first().path, Some(&user.classes()?))?;
+    let sampling::Measured {
+        spacing,
+        density: density_grid,
+        ..
+    } = sampling::measure(&inputs.before.first().path, Some(&user.classes()?))?;
     crate::progress::trace(|| "spacing measured".into());
     let params = Params::resolve(user, spacing.effective_spacing)?;
     let surveys = vec![

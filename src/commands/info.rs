@@ -27,24 +27,17 @@ pub struct CloudReport {
     pub derived: Params,
 }
 
-/// Inspect one cloud (reads it two or three times; never holds more than a window of it). The
-/// spacing is measured, as a comparison measures it, on the classes a comparison keeps by default.
+/// Inspect one cloud (reads it once or twice; never holds more than a window of it). The spacing
+/// is measured, as a comparison measures it, on the classes a comparison keeps by default; the
+/// classes are counted in the same pass.
 pub fn inspect(path: &Path) -> Result<CloudReport> {
     let reader = io::open(path)?;
     let info = reader.info().clone();
     drop(reader);
-    let keep = Classes::default();
-    let classes = match info.format {
-        CloudFormat::Las | CloudFormat::Laz => {
-            let mut r = io::open_with(path, Some(&keep))?;
-            let mut buf = Vec::new();
-            while r.fill(&mut buf, 1 << 16)? > 0 {}
-            r.class_counts()
-                .map(|c| crate::units::outputs::SurveyClasses::of(&c))
-        }
-        _ => None,
-    };
-    let (spacing, _) = sampling::measure_with_density(path, Some(&keep))?;
+    let sampling::Measured {
+        spacing, classes, ..
+    } = sampling::measure(path, Some(&Classes::default()))?;
+    let classes = classes.map(|c| crate::units::outputs::SurveyClasses::of(&c));
     let derived = Params::resolve(&UserParams::default(), spacing.effective_spacing)?;
     Ok(CloudReport {
         path: path.to_path_buf(),

@@ -247,15 +247,6 @@ impl LasReader {
             counts,
         })
     }
-
-    /// Points left out by the class filter so far.
-    fn left_out(&self) -> u64 {
-        self.counts.as_ref().map_or(0, |c| {
-            c.lock()
-                .map(|t| t.1.iter().sum::<u64>())
-                .unwrap_or_default()
-        })
-    }
 }
 
 /// How many [`guarded`] calls are running: while any is, panics raised inside the las and laz
@@ -680,6 +671,14 @@ impl PointReader for LasReader {
         let c = self.counts.as_ref()?;
         let t = c.lock().ok()?;
         Some(ClassCounts::from_tables(&t.0, &t.1))
+    }
+
+    fn left_out(&self) -> u64 {
+        self.counts.as_ref().map_or(0, |c| {
+            c.lock()
+                .map(|t| t.1.iter().sum::<u64>())
+                .unwrap_or_default()
+        })
     }
 
     fn fill(&mut self, buf: &mut Vec<Point3>, max: usize) -> Result<usize> {

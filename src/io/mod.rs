@@ -116,6 +116,11 @@ pub trait PointReader: Send {
     fn class_counts(&self) -> Option<classes::ClassCounts> {
         None
     }
+    /// Points the class filter left out so far (what [`PointReader::class_counts`] sums, without
+    /// building it: a reader's consumer may ask after every chunk).
+    fn left_out(&self) -> u64 {
+        0
+    }
 }
 
 /// [`PointReader::fill`] for readers that decode one point at a time: clear `buf`, then push

@@ -52,11 +52,7 @@ impl StableAreas {
         let areas = crate::spatial::areas::Areas::read(path)?;
         if let Some(e) = areas.epsg {
             for s in surveys {
-                let Some(first) = s.files.first() else {
-                    continue;
-                };
-                let code = crate::io::open(&first.path)?.info().crs.epsg_code();
-                if let Some(c) = code.filter(|&c| c != e) {
+                if let Some(c) = s.epsg.filter(|&c| c != e) {
                     return Err(Error::input(
                         path,
                         format!(
@@ -112,6 +108,9 @@ pub struct Survey {
     pub crs: String,
     /// The LAS scale factors (coordinate quanta), None for text and PLY.
     pub scale: Option<[f64; 3]>,
+    /// The EPSG code its CRS names, if any (checked against `--stable`'s).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub epsg: Option<u32>,
 }
 
 /// Two surveys compared.

@@ -102,6 +102,22 @@ impl Areas {
         (covered / area(within).max(f64::MIN_POSITIVE)).min(1.0)
     }
 
+    /// One core point in how many to take from the areas so that about `target` are taken,
+    /// when `points` core points cover the rectangle `within`: its share the polygons' boxes
+    /// cover bounds how many of them lie inside (at least 1: narrow areas give every one).
+    pub fn one_in(&self, within: [f64; 4], points: f64, target: u64) -> u64 {
+        ((self.box_share(within) * points / target as f64).ceil() as u64).max(1)
+    }
+
+    /// Whether the core point of `key` is one of the one in `n` taken ([`Areas::one_in`]): by a
+    /// hash of the key (SplitMix64), so the choice has no pattern in space and is the same
+    /// whatever the tiles.
+    pub fn takes(key: u64, n: u64) -> bool {
+        crate::rng::SplitMix64::new(key)
+            .next_u64()
+            .is_multiple_of(n)
+    }
+
     /// [x0, y0, x1, y1] of every polygon.
     pub fn boxes(&self) -> Vec<[f64; 4]> {
         self.polygons.iter().map(|p| p.bbox).collect()

@@ -953,25 +953,24 @@ fn beach() -> SceneModel {
         height: 0.1,
     };
     // The pothole lies within the road's block: features add, and its volume is its own.
-    let mut f2_features = vec![wall, heap, pothole];
-    f2_features.extend(sand);
-    let road = |c: [f64; 2]| 101.0 + 0.03 * c[1];
     events.push(ModelEvent {
         volume_m3: pothole.volume(),
-        centre: [15.0, 44.0, road([15.0, 44.0])],
+        centre: [15.0, 44.0, z_at(&f1, [15.0, 44.0])],
         radius_m: 2f64.sqrt(),
         footprint: ground([14.0, 43.0], [16.0, 45.0]),
         covered_volume_m3: None,
         description: "pothole in the road: box 2 m × 2 m, 0.08 m deep".into(),
     });
     events.push(ModelEvent {
-        volume_m3: bump_volume(1.5, 0.1),
-        centre: [40.0, 44.0, road([40.0, 44.0])],
+        volume_m3: heap.volume(),
+        centre: [40.0, 44.0, z_at(&f1, [40.0, 44.0])],
         radius_m: 1.5,
         footprint: square([40.0, 44.0], 1.5),
         covered_volume_m3: None,
         description: "heap on the road: cos² R = 1.5 m, h = 0.1 m".into(),
     });
+    let mut f2_features = vec![wall, heap, pothole];
+    f2_features.extend(sand);
     let f2 = Heightfield::new(base.clone(), f2_features);
     // The wall's seaward face, from the beach up to its top.
     let face = || {

@@ -18,6 +18,7 @@ use crate::events::stable::{measure, select, Sample};
 use crate::m3c2::tile::{compute, EpochPoints};
 use crate::m3c2::{Extent, Reach};
 use crate::plan::Spec;
+use crate::spatial::areas::Areas;
 use crate::store::UnitWriter;
 
 /// Windows across and along the first survey's footprint the fit samples (see [`windows`]):
@@ -191,15 +192,16 @@ fn sample(ctx: &Ctx, onto: usize, s: usize) -> Result<(Vec<Sample>, usize)> {
     let (b, a) = (&plan.surveys[onto].bounds, &plan.surveys[s].bounds);
     let wins = windows(plan);
     let areas = plan.stable_areas.as_ref().map(|a| &a.areas);
-    // With the user's areas: about SAMPLE_CORES of their core points, one key in `thin` (by a
-    // hash of the key: spread over the areas, the same whatever the tiles), however large the
-    // areas — their boxes' share of the first survey's footprint bounds how many core points
-    // they hold.
+    // With the user's areas: about SAMPLE_CORES of their core points however large the areas
+    // (the first survey's footprint holds about its area / spacing² of them).
     let thin = areas.map_or(1, |a| {
         let c = plan.layout.core_spacing;
         let footprint = (b.max[0] - b.min[0]) * (b.max[1] - b.min[1]) / (c * c);
-        let share = a.box_share([b.min[0], b.min[1], b.max[0], b.max[1]]);
-        ((share * footprint / SAMPLE_CORES as f64).ceil() as u64).max(1)
+        a.one_in(
+            [b.min[0], b.min[1], b.max[0], b.max[1]],
+            footprint,
+            SAMPLE_CORES as u64,
+        )
     });
     let inside = |p: &crate::geom::Point3| match areas {
         Some(a) => a.contains(p[0], p[1]),
@@ -261,7 +263,7 @@ fn sample(ctx: &Ctx, onto: usize, s: usize) -> Result<(Vec<Sample>, usize)> {
         )
         .into_iter()
         .map(|(k, i)| (k, before.point(i)))
-        .filter(|(k, p)| inside(p) && mix(*k).is_multiple_of(thin))
+        .filter(|(k, p)| inside(p) && Areas::takes(*k, thin))
         .collect();
         if cores.is_empty() {
             continue;
@@ -299,14 +301,6 @@ fn sample(ctx: &Ctx, onto: usize, s: usize) -> Result<(Vec<Sample>, usize)> {
     // Key order: the same whatever order the tiles came in.
     keyed.sort_by_key(|(k, _)| *k);
     Ok((keyed.into_iter().map(|(_, s)| s).collect(), computed))
-}
-
-/// SplitMix64's finaliser (Steele et al. 2014): a key's bits mixed, for choosing one key in n
-/// without a pattern in space.
-fn mix(mut z: u64) -> u64 {
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
 }
 
 /// The points of `t` inside any of `boxes` ([x0, y0, x1, y1]), in their order.

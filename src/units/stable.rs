@@ -12,6 +12,7 @@ use crate::error::{Error, Result};
 use crate::events::stable::{measure, Sample, Stable};
 use crate::params::Params;
 use crate::plan::Spec;
+use crate::spatial::areas::Areas;
 use crate::store::UnitWriter;
 
 /// Core points sampled (evenly, in key order) for the measurement: enough for the fit and the
@@ -92,25 +93,27 @@ pub fn areas_key(plan: &crate::plan::Plan) -> String {
 }
 
 /// Measure pair `pair`'s stable ground into `out`: on every `step`-th core point, or — with the
-/// user's stable areas — on every core point inside them (the areas may be narrow: transects a
-/// few metres wide would lose most of their points to a step).
+/// user's stable areas — on the core points inside them, every one unless they could hold more
+/// than SAMPLES (the areas may be narrow: transects a few metres wide would lose most of their
+/// points to the pair's step).
 fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<StableMeta> {
     let total = pair_count(ctx, pair)?;
     let areas = ctx.plan.stable_areas.as_ref().map(|a| &a.areas);
-    // With the user's areas, every core point inside them up to about SAMPLES: their boxes'
-    // share of the extent bounds the share of core points inside, so a step on that many keeps
-    // the sample (and the memory reserved for it) within SAMPLES; narrow areas keep every one.
-    let candidates = match areas {
+    // Every step-th core point; with the user's areas, their core points — one in `step`
+    // ([`Areas::one_in`]) when they could hold more than SAMPLES, else every one.
+    let step = match areas {
         Some(a) => {
             let e = &ctx.plan.layout.extent;
-            let share = a.box_share([e.min[0], e.min[1], e.max[0], e.max[1]]);
-            (total as f64 * share).ceil() as u64
+            a.one_in(
+                [e.min[0], e.min[1], e.max[0], e.max[1]],
+                total as f64,
+                SAMPLES,
+            )
         }
-        None => total,
+        None => total.div_ceil(SAMPLES).max(1),
     };
-    let step = candidates.div_ceil(SAMPLES).max(1);
-    // At most SAMPLES are kept (areas denser than the rest could offer more: the rest is
-    // left out, and the reservation holds).
+    // At most SAMPLES are kept (areas denser than the rest could offer more: the rest is left
+    // out, and the reservation holds).
     let most = total.div_ceil(step).min(SAMPLES);
     let _held = ctx.reserve(
         most * BYTES_PER_SAMPLE + (8 << 20) + super::m3c2::merge_need(ctx.plan.layout.len()),
@@ -130,7 +133,7 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<StableMeta> {
                 let within = a.contains(k.xyz[0], k.xyz[1]);
                 inside += u64::from(within);
                 in_areas += u64::from(within && finite);
-                within && (inside - 1).is_multiple_of(step)
+                within && Areas::takes(k.key, step)
             }
             None => n.is_multiple_of(step),
         };

@@ -160,13 +160,16 @@ pub fn split(
             points += buf.len() as u64;
             // The points read, those left out by class included: the line counts up to the
             // survey's points.
-            let out = reader.class_counts().map_or(0, |c| c.left_out());
+            let out = reader.left_out();
             (ctx.progress)(buf.len() as u64 + out - left_out);
             left_out = out;
             crate::interrupt::check()?;
         }
         if let Some(c) = reader.class_counts() {
-            classes = Some(classes.map_or(c.clone(), |all| all.merge(&c)));
+            classes = Some(match classes {
+                Some(all) => all.merge(&c),
+                None => c,
+            });
         }
     }
     // Points per tile (halo included), in grid order. A tile without points has no file from

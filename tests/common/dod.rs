@@ -89,10 +89,6 @@ pub type Polygon = Vec<Vec<[f64; 2]>>;
 
 /// Whether `p` lies inside `poly` (even–odd rule over its rings).
 pub fn contains(poly: &Polygon, p: [f64; 2]) -> bool {
-    inside(poly, p)
-}
-
-fn inside(poly: &Polygon, p: [f64; 2]) -> bool {
     let mut n = 0;
     for ring in poly {
         for k in 0..ring.len() {
@@ -135,7 +131,7 @@ pub fn cells(
         for j in j0..j1 {
             for i in i0..i1 {
                 let c = [(i as f64 + 0.5) * cell, (j as f64 + 0.5) * cell];
-                if !inside(poly, c) {
+                if !contains(poly, c) {
                     continue;
                 }
                 if let (Some(z1), Some(z2)) = (before.height(c[0], c[1]), after.height(c[0], c[1]))
