@@ -110,6 +110,7 @@ fn event(
         significant: volume.abs() > uncertainty,
         // One event measured in part, as a dense survey with a short --cyl-halflen gives.
         complete: !(track == 2 && pair == 3),
+        vegetation: false,
         track_id: track,
         centroid: [ORIGIN[0] + x, ORIGIN[1] + y, 640.0 + 0.4 * y],
         region,

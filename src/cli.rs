@@ -154,6 +154,12 @@ struct ParamArgs {
     /// constrained, else reported) | off (default: auto).
     #[arg(long, value_name = "auto|off")]
     align: Option<String>,
+    /// Vegetation, recognised from the LAS classes and, for unclassified points, from its
+    /// volumetric scatter: flag (its events are listed but left out of totals and tracks) |
+    /// keep (they count like any other) | remove (vegetation-like points are dropped before
+    /// M3C2) (default: flag).
+    #[arg(long, value_name = "keep|flag|remove")]
+    vegetation: Option<String>,
     /// Significance threshold τ on |distance|, in the input's units (default: 3 σ_d + 1.96
     /// reg_error from the stable ground).
     #[arg(long, value_name = "M")]
@@ -351,6 +357,10 @@ struct SynthArgs {
     /// Write uncompressed LAS instead of LAZ.
     #[arg(long)]
     las: bool,
+    /// `synth vegetation`: deliver the surveys classified (ground 2, grass 3, shrubs 4, tree 5)
+    /// instead of unclassified (1).
+    #[arg(long)]
+    classified: bool,
 }
 
 impl ParamArgs {
@@ -367,6 +377,7 @@ impl ParamArgs {
             stable: self.stable.clone(),
             orientation: self.orientation.clone(),
             align: self.align.clone(),
+            vegetation: self.vegetation.clone(),
             threshold: self.threshold,
             smooth_k: self.smooth_k,
             smooth_sigma: self.smooth_sigma,
@@ -450,6 +461,7 @@ fn run(cli: Cli) -> crate::Result<()> {
                 turn_deg: s.turn,
                 creep_m: s.creep,
                 laz: !s.las,
+                classified: s.classified,
             },
         ),
         Command::View { dir, port, bind } => crate::commands::view::command(&dir, bind, port),

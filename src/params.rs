@@ -49,6 +49,8 @@ pub struct UserParams {
     pub orientation: Option<String>,
     /// `auto` (align the later survey on the stable ground when it helps) or `off`.
     pub align: Option<String>,
+    /// `keep`, `flag` or `remove` (SPEC.md §4 "Vegetation").
+    pub vegetation: Option<String>,
     pub threshold: Option<f64>,
     pub smooth_k: Option<u32>,
     pub smooth_sigma: Option<f64>,
@@ -227,6 +229,7 @@ impl UserParams {
             stable: self.stable.or(base.stable),
             orientation: self.orientation.or(base.orientation),
             align: self.align.or(base.align),
+            vegetation: self.vegetation.or(base.vegetation),
             threshold: self.threshold.or(base.threshold),
             smooth_k: self.smooth_k.or(base.smooth_k),
             smooth_sigma: self.smooth_sigma.or(base.smooth_sigma),
@@ -267,6 +270,10 @@ pub struct Params {
     /// plan written before it existed: off.
     #[serde(default = "align_off")]
     pub align: Resolved<String>,
+    /// What vegetation events count for (SPEC.md §4). Absent from a plan written before it
+    /// existed: keep.
+    #[serde(default = "vegetation_keep")]
+    pub vegetation: Resolved<Vegetation>,
     pub threshold: Resolved<f64>,
     pub smooth_k: Resolved<u32>,
     pub smooth_sigma: Resolved<f64>,
@@ -283,6 +290,44 @@ fn classes_all() -> Resolved<String> {
     Resolved {
         value: "all".into(),
         source: "default of an older plan".into(),
+    }
+}
+
+fn vegetation_keep() -> Resolved<Vegetation> {
+    Resolved {
+        value: Vegetation::Keep,
+        source: "default of an older plan".into(),
+    }
+}
+
+/// What talus does with vegetation (`--vegetation`, SPEC.md §4 "Vegetation").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Vegetation {
+    /// Events are judged (`vegetation_fraction`, `vegetation`) and count like any other.
+    Keep,
+    /// Vegetation events are listed but left out of totals, campaign sums, tracks and the
+    /// magnitude–frequency fit (the default).
+    Flag,
+    /// Vegetation-like points are dropped before M3C2; what is left of vegetation events is
+    /// flagged as with `flag`.
+    Remove,
+}
+
+impl Vegetation {
+    /// Whether vegetation events are kept apart (left out of totals and tracks).
+    pub fn kept_apart(self) -> bool {
+        self != Vegetation::Keep
+    }
+}
+
+impl std::fmt::Display for Vegetation {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Vegetation::Keep => "keep",
+            Vegetation::Flag => "flag",
+            Vegetation::Remove => "remove",
+        })
     }
 }
 
@@ -447,6 +492,20 @@ impl Params {
                 return Err(user.bad_value("align", format!("auto or off, not '{other}'")));
             }
         };
+        let vegetation = match user.vegetation.as_deref() {
+            None => Resolved {
+                value: Vegetation::Flag,
+                source: "default: flag (SPEC.md §4)".into(),
+            },
+            Some("keep") => Resolved::user(Vegetation::Keep),
+            Some("flag") => Resolved::user(Vegetation::Flag),
+            Some("remove") => Resolved::user(Vegetation::Remove),
+            Some(other) => {
+                return Err(
+                    user.bad_value("vegetation", format!("keep, flag or remove, not '{other}'"))
+                );
+            }
+        };
         let classes = match user.classes {
             None => Resolved {
                 value: Classes::default().to_string(),
@@ -516,6 +575,7 @@ impl Params {
                 value: orientation,
             },
             align,
+            vegetation,
             threshold: pick(
                 user.threshold,
                 0.5 * s,

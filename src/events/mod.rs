@@ -16,6 +16,7 @@ pub mod smooth;
 pub mod stable;
 pub mod tiled;
 pub mod union_find;
+pub mod vegetation;
 
 pub use describe::{describe, Event, Kind, Obb};
 

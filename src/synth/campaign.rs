@@ -692,7 +692,7 @@ pub fn write(out_dir: &Path, opts: &CampaignOptions) -> Result<CampaignTruth> {
         let file = PathBuf::from(file_name(k, opts.laz));
         let points = output::write_epoch(
             &out_dir.join(&file),
-            chunks_of(&r, opts, k),
+            chunks_of(&r, opts, k).map(|c| (c, 2)),
             ORIGIN,
             k as u16 + 1,
             opts.laz,

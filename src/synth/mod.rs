@@ -26,6 +26,7 @@
 
 pub mod campaign;
 mod output;
+mod plants;
 pub(crate) mod rng;
 mod sampling;
 pub mod scenes;
@@ -42,6 +43,7 @@ pub use truth::{Truth, TruthEvent};
 
 use crate::error::{Error, Result};
 use sampling::Placement;
+use surface::V3;
 
 /// Global origin of the local scene coordinates (UTM-like easting, northing; z kept as is).
 pub const ORIGIN: [f64; 3] = [500_000.0, 5_000_000.0, 0.0];
@@ -64,11 +66,12 @@ pub enum SceneKind {
     Large,
     Dense,
     Beach,
+    Vegetation,
 }
 
 impl SceneKind {
     /// All scenes, in the order of their names.
-    pub const ALL: [SceneKind; 12] = [
+    pub const ALL: [SceneKind; 13] = [
         SceneKind::Hill,
         SceneKind::Cube,
         SceneKind::Spheres,
@@ -81,6 +84,7 @@ impl SceneKind {
         SceneKind::Large,
         SceneKind::Dense,
         SceneKind::Beach,
+        SceneKind::Vegetation,
     ];
 
     /// The scene's name on the command line.
@@ -98,6 +102,7 @@ impl SceneKind {
             SceneKind::Large => "large",
             SceneKind::Dense => "dense",
             SceneKind::Beach => "beach",
+            SceneKind::Vegetation => "vegetation",
         }
     }
 
@@ -161,6 +166,9 @@ pub struct SynthOptions {
     pub creep_m: f64,
     /// Write LAZ (true) or LAS.
     pub laz: bool,
+    /// A scene with plants (`vegetation`) delivered classified: ground 2, grass 3, shrubs 4,
+    /// trees 5; otherwise every point of it is unclassified (1). Other scenes are ground (2).
+    pub classified: bool,
 }
 
 impl Default for SynthOptions {
@@ -175,6 +183,7 @@ impl Default for SynthOptions {
             turn_deg: [0.0; 3],
             creep_m: 0.0,
             laz: true,
+            classified: false,
         }
     }
 }
@@ -310,6 +319,11 @@ pub fn epoch_chunks(kind: SceneKind, opts: &SynthOptions, epoch: usize) -> Resul
     }
     let r = resolve(kind, opts)?;
     let model = SceneModel::new(kind, r.points[0], opts.seed);
+    if model.plants.iter().any(|p| !p.is_empty()) {
+        return Err(Error::Usage(format!(
+            "the {kind} scene's plants are not surfaces: its epochs are what `synth` writes"
+        )));
+    }
     Ok(chunks_of(
         &model,
         &r,
@@ -385,16 +399,36 @@ pub fn synth(kind: SceneKind, opts: &SynthOptions, out_dir: &Path) -> Result<Tru
     ];
     let mut written = [0u64; 2];
     let turn_z = turn_height(&model, &r, opts);
+    // Scenes without plants are ground, as before; a scene with plants is unclassified unless
+    // asked for classified.
+    let with_plants = model.plants.iter().any(|p| !p.is_empty());
+    let classified = !with_plants || opts.classified;
     for epoch in 0..2 {
-        let chunks = chunks_of(&model, &r, opts, epoch, turn_z);
+        let chunks = chunks_of(&model, &r, opts, epoch, turn_z).behind(model.plants[epoch].clone());
+        let density = epoch_points(&model, &r, epoch) as f64 / chunks.area();
+        let place = placement(&model, opts, epoch, turn_z);
+        let ground = chunks.map(move |c| (c, if classified { 2 } else { 1 }));
+        // A few thousand points a plant: held whole.
+        let plants: Vec<(Vec<V3>, u8)> = model.plants[epoch]
+            .iter()
+            .map(|p| {
+                let points = p
+                    .points(density, opts.seed, epoch as u64)
+                    .into_iter()
+                    .map(|q| place.apply(q))
+                    .collect();
+                (points, if classified { p.class() } else { 1 })
+            })
+            .collect();
+        let plant_points: u64 = plants.iter().map(|p| p.0.len() as u64).sum();
         written[epoch] = output::write_epoch(
             &out_dir.join(&names[epoch]),
-            chunks,
+            ground.chain(plants),
             ORIGIN,
             epoch as u16 + 1,
             opts.laz,
         )?;
-        let planned = epoch_points(&model, &r, epoch);
+        let planned = epoch_points(&model, &r, epoch) + plant_points;
         if written[epoch] != planned {
             return Err(Error::Internal(format!(
                 "synth wrote {} points, planned {planned}",

@@ -32,11 +32,12 @@ fn las_err(path: &Path, e: las::Error) -> Error {
     Error::output(path, std::io::Error::other(e))
 }
 
-/// Write `chunks` to `path` (LAZ when `laz`), through `path`.tmp renamed at the end; returns the
-/// number of points written. The temporary file is removed on failure.
+/// Write `chunks` (points with their LAS class) to `path` (LAZ when `laz`), through `path`.tmp
+/// renamed at the end; returns the number of points written. The temporary file is removed on
+/// failure.
 pub(crate) fn write_epoch(
     path: &Path,
-    chunks: impl Iterator<Item = Vec<V3>>,
+    chunks: impl Iterator<Item = (Vec<V3>, u8)>,
     origin: V3,
     epoch: u16,
     laz: bool,
@@ -49,7 +50,7 @@ pub(crate) fn write_epoch(
 
 fn write_to(
     path: &Path,
-    chunks: impl Iterator<Item = Vec<V3>>,
+    chunks: impl Iterator<Item = (Vec<V3>, u8)>,
     origin: V3,
     epoch: u16,
     laz: bool,
@@ -92,10 +93,10 @@ fn write_to(
     // iterator generates the next chunk.
     let write_all = || -> las::Result<u64> {
         let mut written = 0u64;
-        for chunk in chunks {
+        for (chunk, class) in chunks {
             let mut bytes = Vec::with_capacity(chunk.len() * RECORD_LEN);
             for p in &chunk {
-                encode(&mut bytes, p, &transforms, epoch);
+                encode(&mut bytes, p, &transforms, epoch, class);
             }
             let data = las::PointDataBuilder::new()
                 .with_format(format)
@@ -119,9 +120,9 @@ fn write_to(
 }
 
 /// One point format 6 record (LAS 1.4 R15 Table 13): X, Y, Z as scaled i32; intensity 0; return 1
-/// of 1; no flags; class 2 (ground); user data 0; scan angle 0; point source id = epoch (1 or 2);
-/// GPS time 0.
-fn encode(out: &mut Vec<u8>, p: &V3, t: &Vector<Transform>, epoch: u16) {
+/// of 1; no flags; class `class` (2, ground, for the surfaces of every scene but an unclassified
+/// delivery's); user data 0; scan angle 0; point source id = epoch (1 or 2); GPS time 0.
+fn encode(out: &mut Vec<u8>, p: &V3, t: &Vector<Transform>, epoch: u16, class: u8) {
     let raw = |v: f64, tr: &Transform| ((v - tr.offset) / tr.scale).round() as i32;
     out.extend_from_slice(&raw(p[0], &t.x).to_le_bytes());
     out.extend_from_slice(&raw(p[1], &t.y).to_le_bytes());
@@ -129,7 +130,7 @@ fn encode(out: &mut Vec<u8>, p: &V3, t: &Vector<Transform>, epoch: u16) {
     out.extend_from_slice(&0u16.to_le_bytes()); // intensity
     out.push(0x11); // return number 1 (bits 0-3), number of returns 1 (bits 4-7)
     out.push(0); // classification flags, scanner channel, scan direction, edge of flight line
-    out.push(2); // classification: ground
+    out.push(class); // classification
     out.push(0); // user data
     out.extend_from_slice(&0i16.to_le_bytes()); // scan angle
     out.extend_from_slice(&epoch.to_le_bytes()); // point source id

@@ -169,6 +169,9 @@ pub struct Chunks {
     epoch: u64,
     noise: f64,
     placement: Placement,
+    /// Plants whose crowns hide part of the surfaces (`plants::hidden`): a hidden draw is drawn
+    /// again, so the strip keeps its count.
+    plants: Vec<super::plants::Plant>,
 }
 
 impl Chunks {
@@ -225,7 +228,25 @@ impl Chunks {
             epoch,
             noise,
             placement,
+            plants: Vec::new(),
         }
+    }
+
+    /// The same chunks, with the surface behind `plants`' crowns partly hidden.
+    pub(crate) fn behind(mut self, plants: Vec<super::plants::Plant>) -> Self {
+        self.plants = plants;
+        self
+    }
+
+    /// The area of the surfaces.
+    pub(crate) fn area(&self) -> f64 {
+        self.patches
+            .iter()
+            .map(|p| {
+                let d = p.domain();
+                p.area(d[2], d[3], AREA_GRID, AREA_GRID)
+            })
+            .sum()
     }
 
     /// Fill `out` (of length strip.count) with the strip's points.
@@ -252,6 +273,11 @@ impl Chunks {
                 s.p[1] + e * s.n[1],
                 s.p[2] + e * s.n[2],
             ];
+            if !self.plants.is_empty()
+                && super::plants::hidden(&self.plants, &s.p, self.seed, self.epoch)
+            {
+                continue;
+            }
             out[filled] = self.placement.apply(p);
             filled += 1;
         }

@@ -9,6 +9,7 @@
 
 use std::f64::consts::{PI, TAU};
 
+use super::plants::{Plant, PlantKind, Standing};
 use super::rng::Rng;
 use super::surface::{
     box_walls, box_walls_on, bump_volume, cap_footprint, cap_volume, Base, Feature, Heightfield,
@@ -156,6 +157,8 @@ pub struct SceneModel {
     /// Centre of the scene's footprint: the vertical rotation axis of `--rotate`.
     pub(crate) centre: [f64; 2],
     pub(crate) summary: String,
+    /// Each epoch's plants (`plants`): points that are not surfaces, and the surface they hide.
+    pub(crate) plants: [Vec<Plant>; 2],
 }
 
 /// Default points per epoch of each scene (about 0.1 m spacing for the small ones; holes are left
@@ -172,6 +175,8 @@ pub(crate) fn default_points(kind: SceneKind) -> u64 {
         SceneKind::Dense => 4_400_000,
         // 60 m × 46 m at about 0.1 m spacing.
         SceneKind::Beach => 280_000,
+        // The cliff's 3600 m² of surfaces at about 7 cm spacing.
+        SceneKind::Vegetation => 750_000,
     }
 }
 
@@ -227,6 +232,7 @@ impl SceneModel {
             SceneKind::Large => large(points),
             SceneKind::Dense => dense(),
             SceneKind::Beach => beach(),
+            SceneKind::Vegetation => vegetation(),
         }
     }
 
@@ -294,6 +300,7 @@ impl SceneModel {
             observed: [1.0; 2],
             centre: [size[0] / 2.0, size[1] / 2.0],
             summary: summary.to_string(),
+            plants: [Vec::new(), Vec::new()],
         }
     }
 }
@@ -586,6 +593,7 @@ impl CliffFrame {
             observed: [1.0; 2],
             centre: [self.width / 2.0, (self.plateau - self.beach) / 2.0],
             summary: summary.into(),
+            plants: [Vec::new(), Vec::new()],
         }
     }
 }
@@ -798,6 +806,164 @@ pub(crate) fn scar_event(scar: &Scar, description: String) -> ModelEvent {
         covered_volume_m3: None,
         description,
     }
+}
+
+/// vegetation: the cliff scene's frame (beach, 30 m face, plateau) with rough rock and plants,
+/// where only two things move between the surveys:
+/// - a rockfall from the face: a box 3 m wide, 2 m high, 0.8 m deep at x ∈ [20, 23] (−4.8 m³);
+/// - a rubble deposit on the beach: a cos² mound R = 3 m, h = 0.5 m at (46, −11) with seven
+///   boulders (spherical caps) on it (the bump's and the caps' volumes: +5.48 m³).
+///
+/// In both surveys, and unchanged: a boulder beach (x 4–18 m, y −18 to −7 m: 50 caps of spheres
+/// 0.35–0.7 m, 0.5–0.8 of their radius high) and a scree cone at the face foot (a cos² mound
+/// R = 4.5 m, h = 1.2 m at (34, −4.5) under 300 clasts of 0.12–0.3 m). And plants, which change
+/// without any material moving: three shrubs on the face, two on the beach and a tree at the cliff
+/// top (grown 10 %, 10 % and 5 % in the second survey, their leaves resampled), 40 grass tufts on
+/// the plateau (grown 20 %), and a shrub on the beach cut before the second survey. Crowns hide
+/// 60 % of the surface behind them. Unclassified (class 1) unless `--classified` (ground 2, grass
+/// 3, shrubs 4, tree 5).
+fn vegetation() -> SceneModel {
+    let z0 = CLIFF.z0;
+    let mut rng = Rng::new(23, 0);
+    let cap = |rng: &mut Rng, c: [f64; 2], r: [f64; 2], h: [f64; 2]| {
+        let sphere_radius = rng.range(r[0], r[1]);
+        Feature::Cap {
+            c,
+            sphere_radius,
+            height: sphere_radius * rng.range(h[0], h[1]),
+        }
+    };
+    // Rough rock in both surveys.
+    let mut rock: Vec<Feature> = (0..50)
+        .map(|_| {
+            let c = [rng.range(4.0, 18.0), rng.range(-18.0, -7.0)];
+            cap(&mut rng, c, [0.35, 0.7], [0.5, 0.8])
+        })
+        .collect();
+    let scree_c = [34.0, -4.5];
+    rock.push(Feature::Bump {
+        c: scree_c,
+        radius: 4.5,
+        height: 1.2,
+    });
+    for _ in 0..300 {
+        let (r, a) = (4.0 * rng.uniform().sqrt(), TAU * rng.uniform());
+        let c = [
+            scree_c[0] + r * a.cos(),
+            (scree_c[1] + r * a.sin()).min(-0.4),
+        ];
+        rock.push(cap(&mut rng, c, [0.12, 0.3], [0.4, 0.7]));
+    }
+    // The rubble deposit: a mound and boulders on it.
+    let rubble_c = [46.0, -11.0];
+    let mut rubble = vec![Feature::Bump {
+        c: rubble_c,
+        radius: 3.0,
+        height: 0.5,
+    }];
+    for _ in 0..7 {
+        let (r, a) = (1.8 * rng.uniform().sqrt(), TAU * rng.uniform());
+        let c = [rubble_c[0] + r * a.cos(), rubble_c[1] + r * a.sin()];
+        rubble.push(cap(&mut rng, c, [0.4, 0.7], [0.5, 0.7]));
+    }
+    let rubble_volume: f64 = rubble.iter().map(|f| f.volume()).sum();
+    let scar = Scar::Box {
+        min: [20.0, z0 + 8.0],
+        max: [23.0, z0 + 10.0],
+        depth: 0.8,
+    };
+    let beach1 = Heightfield::new(CLIFF.beach_base(), rock.clone());
+    let p1 = CLIFF.patches(rock.clone(), Vec::new());
+    let mut after = rock;
+    after.extend(rubble);
+    let mut p2 = CLIFF.patches(after, vec![scar.hole(z0)]);
+    p2.extend(scar.patches());
+    let events = vec![
+        scar_event(
+            &scar,
+            "rockfall scar: box 3 m wide, 2 m high, 0.8 m deep into the face".into(),
+        ),
+        ModelEvent {
+            volume_m3: rubble_volume,
+            centre: [rubble_c[0], rubble_c[1], z_at(&beach1, rubble_c)],
+            radius_m: 3.0,
+            footprint: square(rubble_c, 3.0),
+            covered_volume_m3: None,
+            description: "rubble deposit: a cos² mound R = 3 m, h = 0.5 m with seven boulders on \
+                          it"
+            .into(),
+        },
+    ];
+    // Plants: each epoch's, with streams of their own.
+    let top = z0 + CLIFF.height;
+    let ground = |x: f64, y: f64| z_at(&beach1, [x, y]);
+    let shrub = |standing, root, size, stream| Plant {
+        kind: PlantKind::Shrub,
+        standing,
+        root,
+        size,
+        stream,
+    };
+    let mut both = vec![
+        shrub(Standing::Face, [8.0, 0.0, z0 + 20.0], [0.9, 0.6, 0.7], 1),
+        shrub(Standing::Face, [31.0, 0.0, z0 + 15.0], [0.9, 0.6, 0.7], 2),
+        shrub(Standing::Face, [52.0, 0.0, z0 + 6.0], [0.9, 0.6, 0.7], 3),
+        shrub(
+            Standing::Ground,
+            [28.0, -15.0, ground(28.0, -15.0)],
+            [1.0, 1.0, 0.8],
+            4,
+        ),
+        shrub(
+            Standing::Ground,
+            [40.0, -17.0, ground(40.0, -17.0)],
+            [0.8, 0.8, 0.6],
+            5,
+        ),
+        Plant {
+            kind: PlantKind::Tree,
+            standing: Standing::Ground,
+            root: [12.0, 4.0, top],
+            size: [2.0, 2.0, 1.8],
+            stream: 6,
+        },
+    ];
+    let growth = [1.1, 1.1, 1.1, 1.1, 1.1, 1.05];
+    for k in 0..40 {
+        let (x, y) = (rng.range(2.0, 58.0), rng.range(1.5, 9.0));
+        if (x - 12.0).hypot(y - 4.0) < 2.5 {
+            continue;
+        }
+        both.push(Plant {
+            kind: PlantKind::Tuft,
+            standing: Standing::Ground,
+            root: [x, y, top],
+            size: [0.08, 0.08, 0.3],
+            stream: 10 + k,
+        });
+    }
+    let cut = shrub(
+        Standing::Ground,
+        [54.0, -16.0, ground(54.0, -16.0)],
+        [1.0, 1.0, 0.8],
+        7,
+    );
+    let mut before = both.clone();
+    before.push(cut);
+    let after: Vec<Plant> = both
+        .iter()
+        .enumerate()
+        .map(|(i, p)| p.grown(*growth.get(i).unwrap_or(&1.2), 1000 + p.stream))
+        .collect();
+    let mut model = CLIFF.model(
+        [p1, p2],
+        [Vec::new(), vec![scar]],
+        events,
+        "vertical cliff face with beach and plateau, a boulder beach and a scree cone; shrubs, \
+         grass and a tree that grow or are cut; one rockfall and one rubble deposit",
+    );
+    model.plants = [before, after];
+    model
 }
 
 /// deposit: the cliff scene's frame without scars; epoch 2 has one debris deposit on the beach, a

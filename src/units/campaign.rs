@@ -237,7 +237,11 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<CampaignMeta> {
             ..x
         }));
     }
-    // Tracks over every pair's events.
+    // Vegetation events stay out of tracks, the fit and the report's sums (SPEC.md §4) unless
+    // `--vegetation keep`; the pairs' totals already leave them out.
+    let apart =
+        |e: &PairEvent| plan.params.vegetation.value.kept_apart() && e.properties.vegetation;
+    // Tracks over every pair's events that count.
     let depth = plan.params.cyl_halflen.value;
     let placed: Vec<Placed> = events
         .iter()
@@ -254,7 +258,12 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<CampaignMeta> {
             }
         })
         .collect();
-    let track = tracks::tracks(&placed);
+    let counted: Vec<usize> = (0..events.len()).filter(|&i| !apart(&events[i])).collect();
+    let mut track = vec![0u32; events.len()];
+    let subset: Vec<Placed> = counted.iter().map(|&i| placed[i].clone()).collect();
+    for (&i, t) in counted.iter().zip(tracks::tracks(&subset)) {
+        track[i] = t;
+    }
     // Magnitude–frequency over the consecutive pairs' significant events (a baseline pair
     // repeats them).
     let consecutive = |pair: usize| plan.pairs[pair].after == plan.pairs[pair].before + 1;
@@ -262,7 +271,9 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<CampaignMeta> {
         events
             .iter()
             .zip(&placed)
-            .filter(|(e, p)| p.gain == gain && consecutive(e.pair) && e.properties.significant)
+            .filter(|(e, p)| {
+                p.gain == gain && consecutive(e.pair) && e.properties.significant && !apart(e)
+            })
             .filter_map(|(e, _)| e.properties.volume_m3)
             .map(f64::abs)
             .collect()
@@ -318,6 +329,7 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<CampaignMeta> {
                 uncertainty_m3: e.properties.volume_uncertainty_m3,
                 significant: e.properties.significant,
                 complete: e.properties.complete,
+                vegetation: apart(e),
                 track_id: t,
                 centroid: e.centroid,
                 region: e.region.clone(),
@@ -375,7 +387,7 @@ fn write_events(
     let mut csv = String::from(
         "pair,before_date,after_date,track_id,id,kind,volume_m3,volume_uncertainty_m3,\
          significant,gain_m3,loss_m3,coverage,region_area_m2,n_points,area_m2,mean_distance_m,\
-         max_abs_distance_m,mean_lod95_m,complete,volume_note,x,y,z\n",
+         max_abs_distance_m,mean_lod95_m,complete,volume_note,vegetation_fraction,vegetation,x,y,z\n",
     );
     for (e, &t) in events.iter().zip(track) {
         let p = &plan.pairs[e.pair];
@@ -412,6 +424,8 @@ fn write_events(
             cell(&q.mean_lod95_m),
             cell(&q.complete),
             cell(&q.volume_note),
+            cell(&q.vegetation_fraction),
+            cell(&q.vegetation),
         ];
         row.extend(e.centroid.iter().map(|v| format!("{v:.4}")));
         csv.push_str(&row.join(","));

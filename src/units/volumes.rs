@@ -65,6 +65,9 @@ pub struct Measured {
     pub complete: bool,
     /// Why there is no volume, or why it is incomplete.
     pub note: Option<String>,
+    /// The share of the event's core points that look like vegetation in either epoch
+    /// (`events::vegetation`); None when the volume came from the user's surfaces (no points).
+    pub vegetation_fraction: Option<f64>,
 }
 
 /// Edges of open rim (see `volume::OpenRim`) that must have changed before an event is called
@@ -223,6 +226,40 @@ fn error_model(
     }
 }
 
+/// The share of event `e`'s core points `members` that look like vegetation in either epoch
+/// (`events::vegetation`), from the points gathered around it: the before survey at the core
+/// point, the after survey where its distance puts the after surface (the core point moved
+/// along its normal; the core point itself without a distance). The balls (up to 8 point
+/// spacings) lie inside the search boxes, which reach the volume margin and three spacings
+/// beyond the event's box.
+fn vegetation_fraction(
+    e: &Event,
+    members: &[&Kept],
+    before: &[Point3],
+    after: &[Point3],
+    params: &Params,
+) -> f64 {
+    use crate::events::vegetation;
+    let s = params.point_spacing.value;
+    let cell = vegetation::SCALES[0] * s;
+    let (b, a) = rayon::join(
+        || crate::spatial::Columns::new(before, e.centroid, cell),
+        || crate::spatial::Columns::new(after, e.centroid, cell),
+    );
+    let cores: Vec<(Point3, Point3)> = members
+        .iter()
+        .map(|k| {
+            let moved = if k.d.is_finite() && k.normal.iter().all(|c| c.is_finite()) {
+                [0, 1, 2].map(|j| k.xyz[j] + k.d * k.normal[j])
+            } else {
+                k.xyz
+            };
+            (b.to_local(&k.xyz), a.to_local(&moved))
+        })
+        .collect();
+    vegetation::fraction(&b, &a, &cores, s)
+}
+
 /// A search box: its half extents in the box frame, its xy bounds, the box.
 type SearchBox = ([f64; 3], [f64; 4], Obb);
 
@@ -313,8 +350,10 @@ impl Stage for VolumesStage {
                 format!("{}|{}", m1.key, m2.key)
             });
         let params = &p.plan.params;
+        // `vegetation 1`: the events' vegetation fractions (`events::vegetation`) are part of
+        // what a unit records.
         let key = format!(
-            "{}|{}|{}",
+            "{}|{}|{}|vegetation 1",
             params.cyl_radius.value, params.cyl_halflen.value, params.point_spacing.value
         );
         for pair in 0..p.plan.pairs.len() {
@@ -456,6 +495,10 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
                     ),
                 };
                 let m = members.get(&id).map(|v| v.as_slice()).unwrap_or(&[]);
+                let vegetation_fraction = match &user {
+                    Some(_) => None,
+                    None => Some(vegetation_fraction(&e, m, &before[i], &after[i], params)),
+                };
                 match v {
                     Ok(v) => {
                         let model = error_model(&v, m, params, stable);
@@ -480,6 +523,7 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
                                 meshes: true,
                                 complete: note.is_none(),
                                 note,
+                                vegetation_fraction,
                             },
                             Some(v),
                         )
@@ -499,6 +543,7 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
                             meshes: false,
                             complete: false,
                             note: Some(err.to_string()),
+                            vegetation_fraction,
                         },
                         None,
                     ),

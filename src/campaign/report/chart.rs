@@ -10,6 +10,8 @@ use crate::campaign::date::Date;
 // The viewer's colours (its distance ramp, ColorBrewer RdBu): see the module doc of the page.
 pub(super) const GAIN: &str = "#b2182b";
 pub(super) const LOSS: &str = "#2166ac";
+/// Vegetation events (`--vegetation flag|remove`).
+pub(super) const VEGETATION: &str = "#4d9221";
 pub(super) const NET: &str = "#2b2b2b";
 pub(super) const INK: &str = "#1a1a1a";
 pub(super) const MUTED: &str = "#5f6368";

@@ -1,12 +1,12 @@
 //! Section 4 of the report: a plan-view map per pair (x/y of the event regions, one extent and
-//! scale for all pairs). Gains and losses in two colours, events below their uncertainty
+//! scale for all pairs). Gains and losses in two colours, vegetation in a third, events below their uncertainty
 //! hatched, incomplete ones dashed, the other pairs' events as faint outlines, track ids where
 //! they do not overlap, a grid at the scale bar's length, a scale bar and a north arrow.
 
 use std::fmt::Write;
 
 use super::chart::{
-    empty_note, nice_step, step_decimals, svg_open, AXIS, GAIN, GRID, INK, LOSS, MUTED,
+    empty_note, nice_step, step_decimals, svg_open, AXIS, GAIN, GRID, INK, LOSS, MUTED, VEGETATION,
 };
 use super::text::{c, esc, fixed, grouped, plural, sig3, signed, with_sign};
 use super::{crs_name, EventRow, Report};
@@ -20,6 +20,7 @@ pub(super) fn maps_section(s: &mut String, report: &Report) {
          <div class=\"legend\"><span><i class=\"sw g\"></i>Gain (red: material added)</span><span><i class=\"sw l\"></i>Loss (blue: material removed)</span>\
          <span><i class=\"sw hg\"></i><i class=\"sw hl\"></i>Below its 95 % uncertainty (hollow marks where small)</span>\
          <span><i class=\"sw inc\"></i>Dashed: incomplete, measured in part only (no 95 % bound)</span>\
+         <span><i class=\"sw v\"></i>Vegetation (green: listed, but in no sum, track or fit)</span>\
          <span><i class=\"sw o\"></i>Events of the other pairs</span><span>T4: track 4 (events at one place across pairs)</span></div>\n",
     );
     let ext = extent(report);
@@ -379,7 +380,13 @@ impl Map {
     /// incomplete), and a mark at its centroid where the region is too small to see or
     /// missing. Returns its pixel box; `None` (nothing drawn) without coordinates.
     fn event(&self, s: &mut String, ev: &EventRow) -> Option<Box2> {
-        let colour = if ev.kind == "gain" { GAIN } else { LOSS };
+        let colour = if ev.vegetation {
+            VEGETATION
+        } else if ev.kind == "gain" {
+            GAIN
+        } else {
+            LOSS
+        };
         let tip = event_tip(ev);
         let bx = self.pixel_box(ev)?;
         let d = self.outline(ev);
@@ -390,7 +397,9 @@ impl Map {
             " stroke-dasharray=\"3 2\""
         };
         if !d.is_empty() {
-            let fill = if ev.significant {
+            let fill = if ev.vegetation {
+                format!("fill=\"{colour}\" fill-opacity=\"0.45\"")
+            } else if ev.significant {
                 format!("fill=\"{colour}\" fill-opacity=\"0.78\"")
             } else {
                 format!("fill=\"url(#hatch-{}-{})\"", kind_key(&ev.kind), self.k)
@@ -398,7 +407,11 @@ impl Map {
             w!(
                 s,
                 "<path class=\"event {}\" d=\"{d}\" {fill} fill-rule=\"evenodd\" stroke=\"{colour}\" stroke-width=\"1\"{dash} stroke-linejoin=\"round\"><title>{tip}</title></path>\n",
-                kind_key(&ev.kind)
+                if ev.vegetation {
+                    "vegetation"
+                } else {
+                    kind_key(&ev.kind)
+                }
             );
         }
         if d.is_empty() || small {
@@ -530,9 +543,10 @@ fn event_tip(ev: &EventRow) -> String {
         String::new()
     };
     format!(
-        "Event {} ({}): {}{interval} m³{}{}{}",
+        "Event {} ({}{}): {}{interval} m³{}{}{}",
         ev.id,
         esc(&ev.kind),
+        if ev.vegetation { ", vegetation" } else { "" },
         ev.volume_m3
             .map_or("no volume".into(), |v| with_sign(v, sig3(v))),
         if ev.complete {

@@ -87,6 +87,10 @@ pub struct EventRow {
     /// interval is not a 95 % bound and the map draws its outline dashed.
     #[serde(default = "whole")]
     pub complete: bool,
+    /// A vegetation event kept apart (`--vegetation flag|remove`): drawn in its own colour, in
+    /// no track, no sum and no fit.
+    #[serde(default)]
+    pub vegetation: bool,
     /// 0: none.
     pub track_id: u32,
     pub centroid: [f64; 3],
@@ -120,7 +124,7 @@ pub struct Report {
 pub fn magnitudes(events: &[EventRow], kind: &str) -> Vec<f64> {
     events
         .iter()
-        .filter(|e| e.significant && e.kind == kind)
+        .filter(|e| e.significant && !e.vegetation && e.kind == kind)
         .filter_map(|e| e.volume_m3)
         .map(f64::abs)
         .collect()
@@ -189,6 +193,7 @@ svg text{font-family:inherit}
 .sw{display:inline-block;width:16px;height:11px;border:1.2px solid}
 .sw.g{background:var(--gain);border-color:var(--gain);opacity:.8}
 .sw.l{background:var(--loss);border-color:var(--loss);opacity:.8}
+.sw.v{background:#4d9221;border-color:#4d9221;opacity:.55}
 .sw.hg{border-color:var(--gain);background:repeating-linear-gradient(45deg,var(--gain) 0 1.5px,#fff 1.5px 4px)}
 .sw.hl{border-color:var(--loss);background:repeating-linear-gradient(45deg,var(--loss) 0 1.5px,#fff 1.5px 4px)}
 .sw.o{border-color:#b8b8b8;background:none}
@@ -498,6 +503,7 @@ mod tests {
             uncertainty_m3: Some(0.3 + 0.05 * v.abs()),
             significant,
             complete: true,
+            vegetation: false,
             track_id: track,
             centroid: [x, y, 100.0],
             region: square(x, y, 1.0 + v.abs().sqrt()),

@@ -70,13 +70,31 @@ pub struct EventRecord {
     pub complete: bool,
     pub region: Vec<Vec<Vec<crate::io::Point3>>>,
     pub meshes: bool,
+    /// The share of its core points that look like vegetation in either epoch.
+    pub vegetation_fraction: Option<f64>,
+    /// Most of its core points look like vegetation (`events::vegetation::MOST`).
+    pub vegetation: bool,
 }
 
 impl EventRecord {
     fn new(mut event: Event, m: Measured) -> EventRecord {
         event.obb = m.obb;
+        // `kind` is the sign of the event's net volume where it has one: the cluster's sign
+        // (its smoothed distances) says where change began, but the region it is measured over
+        // may hold more of the other sign (a shrub resampled, a loss beside a larger gain), and
+        // a "loss" with a positive volume contradicts itself. Without a volume, the cluster's.
+        match m.volume_m3 {
+            Some(v) if v > 0.0 => event.kind = Kind::Gain,
+            Some(v) if v < 0.0 => event.kind = Kind::Loss,
+            _ => {}
+        }
         let u = m.uncertainty.map(|u| u.half_width_95_m3);
+        let vegetation = m
+            .vegetation_fraction
+            .is_some_and(|f| f > crate::events::vegetation::MOST);
         EventRecord {
+            vegetation_fraction: m.vegetation_fraction,
+            vegetation,
             significant: matches!((m.volume_m3, u), (Some(v), Some(u)) if v.abs() > u),
             event,
             volume_m3: m.volume_m3,
@@ -137,9 +155,14 @@ pub struct Summary {
     pub loss_events: usize,
     /// Events whose |volume| exceeds its 95 % uncertainty (the others stay out of the totals).
     pub significant_events: usize,
-    /// Sum of the positive volumes of the significant events, m³.
+    /// Events most of whose core points look like vegetation; with `--vegetation flag` or
+    /// `remove` they stay out of the totals.
+    #[serde(default)]
+    pub vegetation_events: usize,
+    /// Sum of the positive volumes of the significant events that count (not vegetation, unless
+    /// `--vegetation keep`), m³.
     pub total_gain_m3: f64,
-    /// Sum of the negative volumes of the significant events, m³ (≤ 0).
+    /// Sum of the negative volumes of the same events, m³ (≤ 0).
     pub total_loss_m3: f64,
     /// How far M3C2 looked for the other epoch (SPEC.md §1 "Change of any depth").
     #[serde(default)]
@@ -313,9 +336,21 @@ impl Summary {
             self.loss_events,
             self.total_loss_m3,
             self.tiles,
-        ) + &self.reach_line()
+        ) + &self.vegetation_line()
+            + &self.reach_line()
             + &self.alignment_line()
             + &self.classes_line()
+    }
+
+    /// What the one line says of vegetation events, when there are any.
+    fn vegetation_line(&self) -> String {
+        match (self.vegetation_events, self.parameters.vegetation.value) {
+            (0, _) => String::new(),
+            (n, crate::params::Vegetation::Keep) => {
+                format!("; {n} vegetation event(s), counted (--vegetation keep)")
+            }
+            (n, _) => format!("; {n} vegetation event(s), left out of the totals"),
+        }
     }
 
     /// What the one line says of the classes: the points left out, when any were.
@@ -454,7 +489,13 @@ impl Stage for OutputsStage {
             .find(&Spec::run(UserCoresStage::KIND))
             .or_else(|| p.find(&Spec::survey(ThinnedStage::KIND, 0)));
         let cores = super::m3c2::cores_key(core_unit);
-        let version = format!("{}|{}", env!("CARGO_PKG_VERSION"), p.plan.m3c2_only);
+        // The vegetation mode decides what the totals count.
+        let version = format!(
+            "{}|{}|vegetation {}",
+            env!("CARGO_PKG_VERSION"),
+            p.plan.m3c2_only,
+            p.plan.params.vegetation.value
+        );
         for pair in 0..p.plan.pairs.len() {
             let whose = match p.plan.pairs.len() {
                 1 => "the pair's".to_string(),
@@ -707,7 +748,9 @@ fn summarize(
             })
         })
         .collect();
+    let apart = params.vegetation.value.kept_apart();
     let significant = || records.iter().filter(|e| e.significant);
+    let counted = || significant().filter(|e| !(apart && e.vegetation));
     let reach = ReachSummary::new(&params, written, records);
     let alignment = super::aligned::route(ctx, p.after)?.map(|r| AlignmentSummary::of(&r));
     let classes = ClassesSummary {
@@ -741,11 +784,12 @@ fn summarize(
             .filter(|e| e.event.kind == Kind::Loss)
             .count(),
         significant_events: significant().count(),
-        total_gain_m3: significant()
+        vegetation_events: records.iter().filter(|e| e.vegetation).count(),
+        total_gain_m3: counted()
             .filter_map(|e| e.volume_m3)
             .filter(|v| *v > 0.0)
             .sum(),
-        total_loss_m3: significant()
+        total_loss_m3: counted()
             .filter_map(|e| e.volume_m3)
             .filter(|v| *v < 0.0)
             .sum(),

@@ -65,6 +65,14 @@ pub struct EventProperties {
     /// False where a limit cut the event's measurement short (`volume_note` says which).
     pub complete: bool,
     pub volume_note: Option<String>,
+    /// The share of its core points that look like vegetation in either epoch (null: not
+    /// judged, the volume came from the user's surfaces). Absent from older results.
+    #[serde(default)]
+    pub vegetation_fraction: Option<f64>,
+    /// Most of its core points look like vegetation: listed, but left out of totals, tracks and
+    /// the magnitude–frequency fit unless `--vegetation keep`.
+    #[serde(default)]
+    pub vegetation: bool,
 }
 
 impl EventProperties {
@@ -96,6 +104,8 @@ impl EventProperties {
             obb: e.obb,
             complete: r.complete,
             volume_note: r.volume_note.clone(),
+            vegetation_fraction: finite(r.vegetation_fraction),
+            vegetation: r.vegetation,
         }
     }
 }
@@ -248,7 +258,8 @@ pub fn write_tables(out: &mut UnitWriter, events: &[EventRecord], crs: &Crs) -> 
         "id,kind,x,y,z,volume_m3,volume_uncertainty_m3,significant,gain_m3,loss_m3,n_points,area_m2,\
          mean_distance_m,max_abs_distance_m,mean_lod95_m,coverage,region_area_m2,obb_center_x,obb_center_y,obb_center_z,\
          obb_axis1_x,obb_axis1_y,obb_axis1_z,obb_axis2_x,obb_axis2_y,obb_axis2_z,\
-         obb_axis3_x,obb_axis3_y,obb_axis3_z,obb_half_1,obb_half_2,obb_half_3,complete,volume_note\n",
+         obb_axis3_x,obb_axis3_y,obb_axis3_z,obb_half_1,obb_half_2,obb_half_3,complete,volume_note,\
+         vegetation_fraction,vegetation\n",
     );
     let f = |v: Option<f64>| v.map(|x| format!("{x:.6}")).unwrap_or_default();
     for r in events {
@@ -280,6 +291,8 @@ pub fn write_tables(out: &mut UnitWriter, events: &[EventRecord], crs: &Crs) -> 
         row.extend(o.half_extents.iter().map(|v| format!("{v:.4}")));
         row.push(r.complete.to_string());
         row.push(csv_text(r.volume_note.as_deref().unwrap_or("")));
+        row.push(f(r.vegetation_fraction));
+        row.push(r.vegetation.to_string());
         csv.push_str(&row.join(","));
         csv.push('\n');
     }
