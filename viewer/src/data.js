@@ -48,7 +48,9 @@ export async function loadSummary(base = DATA) {
 
 /**
  * events.geojson → [{ ...properties, centroid (global f64), local [3] }], plus the collection's
- * crs_name (or null).
+ * crs_name (or null). `vegetation` is always a boolean and `vegetation_fraction` a number in
+ * 0..1 or null: results written before talus judged vegetation lack both, and read as "not
+ * vegetation, not judged".
  */
 export async function loadEvents(origin) {
   return parseEvents(await (await fetchOk('events.geojson')).json(), origin, 'events.geojson');
@@ -64,6 +66,8 @@ export function parseEvents(fc, origin, name) {
     if (!Number.isInteger(p.id) || !isVec3(c)) continue;
     const centroid = [c[0], c[1], Number.isFinite(c[2]) ? c[2] : (p.obb?.center?.[2] ?? origin[2])];
     p.kind = p.kind === 'loss' || (p.kind !== 'gain' && p.volume_m3 < 0) ? 'loss' : 'gain';
+    p.vegetation = p.vegetation === true;
+    p.vegetation_fraction = Number.isFinite(p.vegetation_fraction) ? p.vegetation_fraction : null;
     p.centroid = centroid;
     p.local = centroid.map((v, a) => v - origin[a]);
     events.push(p);

@@ -2,6 +2,10 @@
 // campaign's pair or track; diameter ∝ ∛|volume|), a label "+12.3 ± 1.1 m³", and its two
 // solids: "before" translucent with its edges, "after" opaque.
 //
+// A vegetation event (most of its points look like vegetation: plants that grew or were cut
+// rather than ground that moved) is green whatever its kind or colouring, so it is not read as
+// a gain or loss of ground: talus lists it but leaves it out of the totals and of the tracks.
+//
 // Labels are decluttered in screen space after every frame (`declutter`): the selected and the
 // hovered event's label first, then by |volume|; a label that would overlap one already shown
 // is hidden (class `crowded`) until the view, the hover or the selection makes room for it.
@@ -12,6 +16,9 @@ import { volumeLabel } from './format.js';
 
 export const KIND_COLOR = { gain: 0xe4573d, loss: 0x3d8fe0 };
 const AFTER_COLOR = { gain: 0xf4a582, loss: 0x92c5de };
+/** Vegetation events: the marker (and label rim), and the lighter "after" solid. */
+export const VEGETATION_COLOR = 0x4daf4a;
+const VEGETATION_AFTER_COLOR = 0xb3e0a6;
 
 /** Labels beyond this many (the largest |volume| first) are not drawn: DOM cost and clutter. */
 const MAX_LABELS = 150;
@@ -78,9 +85,9 @@ export class EventLayer {
 
       const wrap = document.createElement('div');
       const div = document.createElement('div');
-      div.className = `event-label ${e.kind}${e.complete === false ? ' incomplete' : ''}`;
+      div.className = `event-label ${e.kind}${e.complete === false ? ' incomplete' : ''}${e.vegetation ? ' vegetation' : ''}`;
       div.textContent = volumeLabel(e.volume_m3, e.volume_uncertainty_m3, e.complete);
-      const c = colourOf?.(e);
+      const c = e.vegetation ? null : colourOf?.(e); // a vegetation label's rim is green (style.css)
       if (c != null) div.style.borderColor = `#${c.toString(16).padStart(6, '0')}`;
       div.dataset.id = String(e.id);
       div.style.marginBottom = `${Math.round(px / 2 + 3)}px`; // sit just above the marker
@@ -97,9 +104,15 @@ export class EventLayer {
     );
   }
 
+  /** The marker colour of event `e` (0xRRGGBB): vegetation, else the colouring's, else the kind's. */
+  markerColour(e) {
+    if (e.vegetation) return VEGETATION_COLOR;
+    return this.colourOf?.(e) ?? KIND_COLOR[e.kind];
+  }
+
   /** The marker material of event `e` (selected or not), one per colour. */
   material(e, sel) {
-    const c = this.colourOf?.(e) ?? KIND_COLOR[e.kind];
+    const c = this.markerColour(e);
     const key = `${c}${sel ? '-sel' : ''}`;
     if (!this.materials[key]) {
       this.materials[key] = new THREE.SpriteMaterial({
@@ -124,7 +137,7 @@ export class EventLayer {
   addSolids(id, before, after) {
     const item = this.byId.get(id);
     if (!item) return;
-    const kind = item.event.kind;
+    const afterColour = item.event.vegetation ? VEGETATION_AFTER_COLOR : AFTER_COLOR[item.event.kind];
     const geom = (m) => {
       const g = new THREE.BufferGeometry();
       g.setAttribute('position', new THREE.BufferAttribute(m.positions, 3));
@@ -137,7 +150,7 @@ export class EventLayer {
     const parts = {};
     if (after) {
       parts.after = new THREE.Mesh(geom(after), new THREE.MeshStandardMaterial({
-        color: AFTER_COLOR[kind], roughness: 0.8, flatShading: true,
+        color: afterColour, roughness: 0.8, flatShading: true,
         polygonOffset: true, polygonOffsetFactor: 1, polygonOffsetUnits: 1,
       }));
       parts.after.userData.eventId = id;

@@ -36,3 +36,19 @@ export function fixed(v, digits) {
 export function coords(p, digits = 3) {
   return `x ${fixed(p[0], digits)}  y ${fixed(p[1], digits)}  z ${fixed(p[2], digits)}`;
 }
+
+/** "80 %": a fraction 0..1 as a whole percentage. */
+export function percent(f) {
+  return `${Math.round(f * 100)} %`;
+}
+
+/**
+ * What an event's points say about vegetation: "vegetation (80 % of its points)" for an event
+ * judged vegetation (listed, but outside the totals), "vegetation-like points: 12 %" for one
+ * judged otherwise, null when not judged (older results, or no fraction).
+ */
+export function vegetationText(e) {
+  const f = Number.isFinite(e.vegetation_fraction) ? e.vegetation_fraction : null;
+  if (e.vegetation === true) return f == null ? 'vegetation' : `vegetation (${percent(f)} of its points)`;
+  return f == null ? null : `vegetation-like points: ${percent(f)}`;
+}

@@ -21,9 +21,9 @@ import { loadCampaign, readState, goTo, savedCamera, sceneEvents, colouring, dra
 import { distanceColors, rampHalfWidth } from './colormap.js';
 import { Terrain, interleaveTerrain } from './terrain.js';
 import { EyeDome } from './edl.js';
-import { EventLayer, KIND_COLOR } from './events.js';
+import { EventLayer } from './events.js';
 import { EventTable, showEvent, drawLegend, drawMeta } from './ui.js';
-import { coords, signed, volumeLabel } from './format.js';
+import { coords, signed, volumeLabel, vegetationText } from './format.js';
 
 const $ = (id) => document.getElementById(id);
 
@@ -264,7 +264,10 @@ async function main() {
   function applyFilter() {
     const min = Math.max(0, Number($('min-volume').value) || 0);
     const kind = $('kind').value;
-    const pred = (e) => Math.abs(e.volume_m3) >= min && (kind === 'all' || e.kind === kind);
+    // Vegetation events are listed apart from ground change: show them, hide them, or only them.
+    const veg = $('vegetation').value;
+    const vegOk = (e) => (veg === 'hide' ? !e.vegetation : veg === 'only' ? e.vegetation : true);
+    const pred = (e) => Math.abs(e.volume_m3) >= min && (kind === 'all' || e.kind === kind) && vegOk(e);
     layer.setFilter(pred);
     table.setFilter(pred);
     table.select(pinned);
@@ -275,6 +278,7 @@ async function main() {
   }
   $('min-volume').addEventListener('input', applyFilter);
   $('kind').addEventListener('change', applyFilter);
+  $('vegetation').addEventListener('change', applyFilter);
   const layerToggle = (el, name) => el.addEventListener('change', () => {
     layer.setLayer(name, el.checked);
     T.markers = layer.visibleMarkers();
@@ -299,8 +303,12 @@ async function main() {
     requestRender();
   });
 
-  drawLegend($('legend'), half, view.units, campaign ? colourKeys(campaign, state, events) : null);
-  drawMeta($('meta'), view, crsName, events.length, summary);
+  // The vegetation key once the result judges vegetation (older results never do).
+  const judged = events.some((e) => e.vegetation || e.vegetation_fraction != null);
+  drawLegend($('legend'), half, view.units, campaign ? colourKeys(campaign, state, events) : null, judged);
+  drawMeta($('meta'), view, crsName, events.length, summary, events.filter((e) => e.vegetation).length);
+  /** The marker colour of every event (0xRRGGBB), by id. */
+  T.markerColours = Object.fromEntries(events.map((e) => [e.id, layer.markerColour(e)]));
   if (campaign) {
     const pose = () => ({ position: camera.position.toArray(), target: controls.target.toArray() });
     drawCampaign($('campaign'), campaign, state, (next) => goTo(next, pose()));
@@ -311,8 +319,6 @@ async function main() {
       + `${p.before_date ?? p.before} → ${p.after_date ?? p.after}` + (state.scope === 'all' ? ' · events of all pairs' : '');
     $('meta').prepend(line);
     T.campaign = { ...state, pairs: campaign.pairs.map((q) => q.label) };
-    /** The marker colour of every event (0xRRGGBB), by id. */
-    T.markerColours = Object.fromEntries(events.map((e) => [e.id, layer.colourOf?.(e) ?? KIND_COLOR[e.kind]]));
   }
 
   // --- hover and click ----------------------------------------------------------------------------
@@ -352,7 +358,8 @@ async function main() {
     if (hit.kind === 'event') {
       const e = byId.get(hit.id);
       const where = hit.local ? `surface ${coords(toGlobal(hit.local))}` : `centre ${coords(e.centroid)}`;
-      return `Event #${e.id} (${e.kind}) ${volumeLabel(e.volume_m3, e.volume_uncertainty_m3, e.complete)} · ${where} · ${crsText}`;
+      const veg = e.vegetation ? ` · ${vegetationText(e)}` : '';
+      return `Event #${e.id} (${e.kind}) ${volumeLabel(e.volume_m3, e.volume_uncertainty_m3, e.complete)}${veg} · ${where} · ${crsText}`;
     }
     const p = terrain.positions;
     const i = hit.index;

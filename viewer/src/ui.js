@@ -2,9 +2,9 @@
 // legend and the header line. Plain DOM; the table is rebuilt on sort/filter (events number in
 // the hundreds, not millions).
 
-import { fixed, signed, volumeLabel, coords } from './format.js';
+import { fixed, signed, volumeLabel, coords, percent, vegetationText } from './format.js';
 import { rampCss, NO_DATA } from './colormap.js';
-import { KIND_COLOR } from './events.js';
+import { KIND_COLOR, VEGETATION_COLOR } from './events.js';
 
 const hex = (c) => `#${c.toString(16).padStart(6, '0')}`;
 
@@ -99,6 +99,17 @@ export class EventTable {
         tr.appendChild(td);
       }
       tr.children[2 + this.extra.length].dataset.value = String(e.volume_m3);
+      // Vegetation is said beside the kind (the kind still sorts the column); the row's tooltip
+      // has the whole sentence, and the fraction of an event judged otherwise.
+      const veg = vegetationText(e);
+      if (veg) tr.title = veg;
+      if (e.vegetation) {
+        tr.classList.add('vegetation');
+        const tag = document.createElement('span');
+        tag.className = 'veg';
+        tag.textContent = e.vegetation_fraction == null ? 'vegetation' : `vegetation (${percent(e.vegetation_fraction)})`;
+        tr.children[1].appendChild(tag);
+      }
       frag.appendChild(tr);
     }
     this.tbody.replaceChildren(frag);
@@ -121,6 +132,12 @@ export function showEvent(panel, e, units) {
   const h = document.createElement('h2');
   h.innerHTML = `Event #${e.id} <span class="kind ${e.kind}"></span>`;
   h.querySelector('span').textContent = e.kind;
+  if (e.vegetation) {
+    const tag = document.createElement('span');
+    tag.className = 'veg';
+    tag.textContent = ' vegetation';
+    h.appendChild(tag);
+  }
   panel.appendChild(h);
   const dl = document.createElement('dl');
   const add = (label, text, field, cls) => {
@@ -133,6 +150,9 @@ export function showEvent(panel, e, units) {
     dl.append(dt, dd);
   };
   const u = units || 'm';
+  const veg = vegetationText(e);
+  // First: a vegetation event's volume is no ground change (talus leaves it out of the totals).
+  if (veg) add('Vegetation', veg, 'vegetation', e.vegetation ? 'veg' : '');
   add('Volume', `${signed(e.volume_m3, 2)} ${u}³`, 'volume_m3', 'big');
   if (e.complete === false) {
     add('Uncertainty', `± ${fixed(e.volume_uncertainty_m3, 2)} ${u}³ of the measured part: not a 95 % bound`,
@@ -164,7 +184,7 @@ export function showEvent(panel, e, units) {
   // Anything else the writer added, so the panel shows *all* properties.
   const known = new Set(['id', 'kind', 'volume_m3', 'volume_uncertainty_m3', 'gain_m3', 'loss_m3',
     'n_points', 'area_m2', 'mean_distance_m', 'max_abs_distance_m', 'mean_lod95_m', 'obb',
-    'centroid', 'local', 'mesh_id', 'volume_note']);
+    'centroid', 'local', 'mesh_id', 'volume_note', 'vegetation', 'vegetation_fraction']);
   for (const [k, v] of Object.entries(e)) {
     if (known.has(k)) continue;
     add(k, typeof v === 'number' ? String(v) : JSON.stringify(v), k);
@@ -172,8 +192,11 @@ export function showEvent(panel, e, units) {
   panel.appendChild(dl);
 }
 
-/** The legend: the distance ramp with ticks and units, marker colours and sizes. */
-export function drawLegend(el, half, units, colourKeys = null) {
+/**
+ * The legend: the distance ramp with ticks and units, marker colours and sizes; `vegetation`
+ * adds the vegetation events' colour (when the result judges vegetation at all).
+ */
+export function drawLegend(el, half, units, colourKeys = null, vegetation = false) {
   const u = units || 'm';
   // Three significant figures, trailing zeros dropped: "+0.3", "−0.0075", "+150".
   const tick = (v) => (v === 0 ? '0' : (v < 0 ? '\u2212' : '+') + String(Number(Math.abs(v).toPrecision(3))));
@@ -188,6 +211,7 @@ export function drawLegend(el, half, units, colourKeys = null) {
       <span><span class="sw" style="background:rgb(${NO_DATA.join(',')})"></span>not computed</span>
       ${colourKeys ? '' : `<span><span class="dot" style="background:${hex(KIND_COLOR.gain)}"></span>gain (red: material added)</span>
       <span><span class="dot" style="background:${hex(KIND_COLOR.loss)}"></span>loss (blue: material removed)</span>`}
+      ${vegetation ? `<span><span class="dot" style="background:${hex(VEGETATION_COLOR)}"></span>vegetation (not in totals)</span>` : ''}
       <span>marker size ∝ ∛|volume|</span>
     </div>`;
   if (colourKeys) {
@@ -208,11 +232,15 @@ export function drawLegend(el, half, units, colourKeys = null) {
   }
 }
 
-/** The header: CRS, counts, and tool version and inputs from summary.json when present. */
-export function drawMeta(el, view, crsName, nEvents, summary) {
+/**
+ * The header: CRS, counts (`nVegetation` of the events are vegetation), and tool version and
+ * inputs from summary.json when present.
+ */
+export function drawMeta(el, view, crsName, nEvents, summary, nVegetation = 0) {
   const lines = [];
   const crs = crsName && crsName !== view.crs ? `${view.crs} (${crsName})` : view.crs;
-  lines.push(`CRS <b></b> · ${view.points.toLocaleString('en-US')} terrain points · ${nEvents} events`);
+  lines.push(`CRS <b></b> · ${view.points.toLocaleString('en-US')} terrain points · ${nEvents} events`
+    + (nVegetation ? `, ${nVegetation} of them vegetation` : ''));
   const esc = (s) => String(s).replace(/[&<>"]/g, (c) => ({ '&': '&amp;', '<': '&lt;', '>': '&gt;', '"': '&quot;' })[c]);
   if (summary && typeof summary === 'object') {
     const version = summary.version ?? summary.tool_version ?? summary.tool?.version;

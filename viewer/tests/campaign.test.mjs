@@ -205,7 +205,9 @@ test('events of all pairs, coloured by pair or by track', async () => {
   await page.waitForFunction(() => window.__talus?.ready && window.__talus.campaign?.scope === 'all', null, { timeout: 120_000 });
   const order = synth.table.map((p) => p.label);
   const want = [...synth.events].sort((a, b) => order.indexOf(a.pair) - order.indexOf(b.pair) || a.id - b.id);
-  const got = await page.evaluate(() => window.__talus.events.map((e) => ({ id: e.id, pair: e.pair, event_id: e.event_id, track: e.track_id, volume: e.volume_m3 })));
+  const got = await page.evaluate(() => window.__talus.events.map((e) => ({ id: e.id, pair: e.pair, event_id: e.event_id, track: e.track_id, volume: e.volume_m3, vegetation: e.vegetation })));
+  // Vegetation events stay green under any colouring (they belong to no track).
+  const vegetation = new Set(got.filter((e) => e.vegetation).map((e) => e.id));
   assert.deepEqual(got.map((e) => [e.pair, e.event_id, e.track, e.volume]), want.map((e) => [e.pair, e.id, e.track_id, e.volume_m3]));
   assert.deepEqual(got.map((e) => e.id), want.map((_, i) => i + 1));
   assert.equal(await page.evaluate(() => window.__talus.markers), want.length);
@@ -221,6 +223,7 @@ test('events of all pairs, coloured by pair or by track', async () => {
   const trackOf = new Map(got.map((e) => [e.id, e.track]));
   const perTrack = new Map();
   for (const [id, c] of Object.entries(byTrack)) {
+    if (vegetation.has(Number(id))) { assert.equal(c, 0x4daf4a, `vegetation event ${id}`); continue; }
     const t = trackOf.get(Number(id));
     if (perTrack.has(t)) assert.equal(c, perTrack.get(t), `track ${t}`);
     perTrack.set(t, c);
@@ -250,6 +253,7 @@ test('events of all pairs, coloured by pair or by track', async () => {
   const pairOf = new Map(got.map((e) => [e.id, e.pair]));
   const perPair = new Map();
   for (const [id, col] of Object.entries(byPair)) {
+    if (vegetation.has(Number(id))) { assert.equal(col, 0x4daf4a, `vegetation event ${id}`); continue; }
     const q = pairOf.get(Number(id));
     if (perPair.has(q)) assert.equal(col, perPair.get(q));
     perPair.set(q, col);

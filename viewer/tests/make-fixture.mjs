@@ -2,7 +2,9 @@
 // events.geojson, terrain.bin, meshes/*.ply, summary.json) with known answers:
 // box-shaped solids whose volumes are exact (footprint × height difference), UTM-sized
 // coordinates, and a 50k-point terrain whose M3C2 distances are positive around the gain events
-// and negative around the loss events.
+// and negative around the loss events. Event 5 is a vegetation event (vegetation_fraction 0.8,
+// vegetation true), event 3 was judged and is not (fraction 0.12); the others carry neither
+// property, as results written before talus judged vegetation.
 //
 // Usage: node make-fixture.mjs DIR [scale]   (or import { makeFixture } and call it)
 
@@ -26,7 +28,15 @@ const SPECS = [
   { id: 2, cx: 90, cy: 60, w: 9, d: 6, hBefore: 1.9, hAfter: 1.0, amp: -0.9, sigma: 5, unc: 3.1 },
   { id: 3, cx: 65, cy: 80, w: 4, d: 4, hBefore: 1.0, hAfter: 1.3, amp: 0.3, sigma: 2.5, unc: 0.9 },
   { id: 4, cx: 105, cy: 20, w: 3, d: 2.5, hBefore: 1.2, hAfter: 1.0, amp: -0.2, sigma: 2, unc: 0.4 },
+  // A small gain (|volume| < 2 m³, so the volume filters keep their answers) of vegetation.
+  { id: 5, cx: 45, cy: 60, w: 3, d: 2, hBefore: 1.0, hAfter: 1.25, amp: 0.4, sigma: 2.5, unc: 0.5 },
 ];
+
+/** The vegetation judgement of an event, by id (absent: not judged, an older result). */
+const VEGETATION = {
+  3: { vegetation_fraction: 0.12, vegetation: false },
+  5: { vegetation_fraction: 0.8, vegetation: true },
+};
 
 /** A deterministic pseudo-random sequence (mulberry32), so the fixture is the same every run. */
 function rng(seed) {
@@ -77,7 +87,8 @@ function percentile(sorted, p) {
 
 /**
  * Write the fixture into `dir` and return what a reader should find:
- * { origin, points, events: [{ id, kind, volume_m3, volume_uncertainty_m3, centroid }], range }.
+ * { origin, points, events: [{ id, kind, volume_m3, volume_uncertainty_m3, centroid,
+ * vegetation_fraction (or null), vegetation }], range }.
  */
 export function makeFixture(dir, scale = 1) {
   const NX = Math.round(250 * scale);
@@ -155,8 +166,10 @@ export function makeFixture(dir, scale = 1) {
       properties.gain_m3 = volume + 0.5;
       properties.loss_m3 = -0.5;
     }
+    Object.assign(properties, VEGETATION[s.id]);
     features.push({ type: 'Feature', geometry: { type: 'Point', coordinates: centroid }, properties });
-    expected.push({ id: s.id, kind, volume_m3: volume, volume_uncertainty_m3: s.unc, centroid });
+    const veg = VEGETATION[s.id] || { vegetation_fraction: null, vegetation: false };
+    expected.push({ id: s.id, kind, volume_m3: volume, volume_uncertainty_m3: s.unc, centroid, ...veg });
   }
   writeFileSync(
     join(dir, 'events.geojson'),

@@ -153,7 +153,13 @@ test('loads the result into a WebGL2 scene', async () => {
     t.events.map((e) => [e.id, e.kind, e.volume_m3]),
     fixture.events.map((e) => [e.id, e.kind, e.volume_m3]),
   );
+  // Events without the vegetation properties (an older result) read as not vegetation, not judged.
+  assert.deepEqual(
+    t.events.map((e) => [e.id, e.vegetation, e.vegetation_fraction]),
+    fixture.events.map((e) => [e.id, e.vegetation, e.vegetation_fraction]),
+  );
   const meta = await page.textContent('#meta');
+  assert.match(meta, /5 events, 1 of them vegetation/);
   assert.match(meta, /EPSG:32633/);
   assert.match(meta, /slope_2021\.laz → slope_2023\.laz/);
   assert.match(meta, /0\.1\.0-fixture/);
@@ -171,6 +177,28 @@ test('the legend says the colour convention (the report uses the same)', async (
   const text = await page.$eval('#legend', (el) => el.textContent);
   assert.match(text, /gain \(red: material added\)/);
   assert.match(text, /loss \(blue: material removed\)/);
+  assert.match(text, /vegetation \(not in totals\)/);
+});
+
+test('a vegetation event is green whatever its kind, on its marker too', async () => {
+  const colours = await page.evaluate(() => window.__talus.markerColours);
+  for (const e of fixture.events) {
+    const want = e.vegetation ? 0x4daf4a : e.kind === 'gain' ? 0xe4573d : 0x3d8fe0;
+    assert.equal(colours[e.id], want, `event ${e.id} (${e.kind}${e.vegetation ? ', vegetation' : ''})`);
+  }
+  const veg = fixture.events.find((e) => e.vegetation);
+  assert.equal(veg.kind, 'gain');
+  // The colour reaches the screen: the marker's centre on the canvas (alone: no labels or panels).
+  await setChecked('show-labels', false);
+  const px = await canvasPixels();
+  const [r, g, b] = colourAt(px, await page.evaluate((id) => window.__talus.project(id), veg.id), 1);
+  assert.ok(g > r + 40 && g > b + 40, `vegetation marker colour ${[r, g, b]}`);
+  // Its label is green-rimmed too, not the gain's red.
+  const label = await page.$eval(`.event-label[data-id="${veg.id}"]`, (el) => ({ cls: el.className, colour: getComputedStyle(el).borderTopColor }));
+  assert.match(label.cls, /\bvegetation\b/);
+  assert.match(label.colour, /rgba?\(77, 175, 74/);
+  await setChecked('show-labels', true);
+  await nextFrames();
 });
 
 test('the canvas shows the terrain coloured by distance: red on gains, blue on losses', async () => {
@@ -268,6 +296,43 @@ test('filters hide rows, markers and labels', async () => {
   await check(0, 'all');
 });
 
+test('the vegetation filter: show, hide or only the vegetation events', async () => {
+  const check = async (veg, kind = 'all') => {
+    await page.selectOption('#vegetation', veg);
+    await page.selectOption('#kind', kind);
+    await nextFrames();
+    const want = fixture.events
+      .filter((e) => (veg === 'hide' ? !e.vegetation : veg === 'only' ? e.vegetation : true))
+      .filter((e) => kind === 'all' || e.kind === kind)
+      .map((e) => e.id);
+    assert.deepEqual(await rowIds(), want, `rows for vegetation ${veg}, ${kind}`);
+    assert.equal(await page.evaluate(() => window.__talus.markers), want.length);
+    assert.deepEqual(await page.evaluate(() => window.__talus.visibleEventIds), want);
+    assert.equal((await visibleLabels()).length, want.length);
+    return want;
+  };
+  assert.equal(await page.inputValue('#vegetation'), 'show');
+  assert.deepEqual(await check('hide'), [1, 2, 3, 4]);
+  assert.deepEqual(await check('only'), [5]);
+  assert.deepEqual(await check('only', 'loss'), []);
+  assert.deepEqual(await check('show'), [1, 2, 3, 4, 5]);
+  // Hidden, its marker is gone from the canvas as well (the terrain is under it again).
+  await setChecked('show-labels', false);
+  const veg = fixture.events.find((e) => e.vegetation);
+  const at = async () => {
+    const px = await canvasPixels();
+    return colourAt(px, await page.evaluate((id) => window.__talus.project(id), veg.id), 1);
+  };
+  const shown = await at();
+  await page.selectOption('#vegetation', 'hide');
+  const hidden = await at();
+  assert.ok(shown[1] > shown[0] + 40, `shown: ${shown}`);
+  assert.ok(!(hidden[1] > hidden[0] + 40 && hidden[1] > hidden[2] + 40), `hidden, still green: ${hidden}`);
+  await page.selectOption('#vegetation', 'show');
+  await setChecked('show-labels', true);
+  await nextFrames();
+});
+
 test('sorting by volume', async () => {
   const th = page.locator('th[data-key="volume_m3"]');
   const volumes = () => page.$$eval('#events tbody td[data-value]', (tds) => tds.map((td) => Number(td.dataset.value)));
@@ -301,11 +366,42 @@ test('clicking a row flies to the event and shows its properties', async () => {
   // Event 1 carries the optional gain/loss split.
   assert.match(await page.textContent('#panel [data-field="gain_m3"]'), /\+120\.50/);
 
+  // No vegetation line for an event not judged (event 1: an older result's properties).
+  assert.equal(await page.locator('#panel [data-field="vegetation"]').count(), 0);
+
   await page.click('#reset');
   await page.waitForFunction(() => !window.__talus.flying, null, { timeout: 10_000 });
   await nextFrames();
   mkdirSync(ARTIFACTS, { recursive: true });
   await page.screenshot({ path: join(ARTIFACTS, 'viewer.png') });
+});
+
+test('the panel, the row and the read-out say what share of its points look like vegetation', async () => {
+  const veg = fixture.events.find((e) => e.vegetation);
+  const row = page.locator(`#events tbody tr[data-id="${veg.id}"]`);
+  assert.match(await row.textContent(), /vegetation \(80 %\)/);
+  assert.equal(await row.getAttribute('title'), 'vegetation (80 % of its points)');
+  await row.click();
+  await page.waitForFunction((id) => window.__talus.selected === id && !window.__talus.flying, veg.id, { timeout: 10_000 });
+  assert.match(await page.textContent('#panel h2'), new RegExp(`Event #${veg.id}\\b.*vegetation`));
+  assert.equal(await page.textContent('#panel [data-field="vegetation"]'), 'vegetation (80 % of its points)');
+  // Hovering its marker says it too.
+  const p = await page.evaluate((id) => window.__talus.project(id), veg.id);
+  await page.mouse.move(p.x, p.y);
+  await page.waitForFunction((id) => window.__talus.hovered?.id === id, veg.id, { timeout: 5000 });
+  assert.match(await page.textContent('#readout'), new RegExp(`Event #${veg.id} \\(gain\\) .*vegetation \\(80 % of its points\\)`));
+  await page.mouse.move(5, 5);
+  // An event judged not vegetation: its fraction, in the panel and the row's tooltip.
+  const judged = fixture.events.find((e) => !e.vegetation && e.vegetation_fraction != null);
+  const jrow = page.locator(`#events tbody tr[data-id="${judged.id}"]`);
+  assert.doesNotMatch(await jrow.textContent(), /vegetation/);
+  assert.equal(await jrow.getAttribute('title'), 'vegetation-like points: 12 %');
+  await jrow.click();
+  await page.waitForFunction((id) => window.__talus.selected === id && !window.__talus.flying, judged.id, { timeout: 10_000 });
+  assert.equal(await page.textContent('#panel [data-field="vegetation"]'), 'vegetation-like points: 12 %');
+  assert.doesNotMatch(await page.textContent('#panel h2'), /vegetation/);
+  await page.click('#reset');
+  await page.waitForFunction(() => !window.__talus.flying, null, { timeout: 10_000 });
 });
 
 test('no console errors, no failed requests, nothing but 127.0.0.1', async () => {
