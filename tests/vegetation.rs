@@ -295,3 +295,70 @@ fn a_campaign_keeps_vegetation_out_of_tracks_and_the_fit() {
     assert!(report.contains("class=\"event vegetation\""));
     assert!(report.contains("Vegetation (green"));
 }
+
+/// `--vegetation remove`: the vegetation-like points are dropped before M3C2, so the plants'
+/// events are gone (what is left of them stays under 0.2 m³ unflagged), the real events are
+/// right and the totals are the real change's within 2 %. summary.json counts the points
+/// removed from each survey. The cleared surveys do not depend on the tiling: 12 m tiles give
+/// the one-tile run's events and m3c2.laz byte for byte.
+#[test]
+fn removed_vegetation_leaves_the_real_change() {
+    let tmp = common::tempdir();
+    let data = synth(&tmp.path().join("data"), &[]);
+    let truth = json_file(&data.join("truth.json"));
+    let whole = tmp.path().join("whole");
+    let (events, summary) = compare(&data, &whole, &["--vegetation", "remove"]);
+    let real = real_events_right("remove", &truth, &events);
+    for (i, (p, _)) in events.iter().enumerate() {
+        if !real.contains(&i) && p["vegetation"] == Value::Bool(false) {
+            assert!(
+                volume(p).abs() <= 0.2,
+                "an unflagged event over 0.2 m³: {p}"
+            );
+        }
+    }
+    let removed: Vec<u64> = summary["vegetation_removed"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_u64().unwrap())
+        .collect();
+    println!(
+        "remove: {} events ({} flagged), points removed {removed:?}",
+        events.len(),
+        events
+            .iter()
+            .filter(|e| e.0["vegetation"] == Value::Bool(true))
+            .count()
+    );
+    // The plants hold about 25,000 points per survey; the cut shrub's are only in the first.
+    assert!(
+        removed.iter().all(|&n| (15_000..40_000).contains(&n)),
+        "{removed:?}"
+    );
+    let (gain, loss) = (
+        truth["total_gain_m3"].as_f64().unwrap(),
+        truth["total_loss_m3"].as_f64().unwrap(),
+    );
+    let (g, l) = (
+        summary["total_gain_m3"].as_f64().unwrap(),
+        summary["total_loss_m3"].as_f64().unwrap(),
+    );
+    println!("remove: totals {g:+.3} / {l:+.3} m³ for {gain:+.3} / {loss:+.3}");
+    assert!(((g - gain) / gain).abs() < 0.02 && ((l - loss) / loss).abs() < 0.02);
+
+    let tiled = tmp.path().join("tiled");
+    let (again, s2) = compare(
+        &data,
+        &tiled,
+        &["--vegetation", "remove", "--tile-size", "12"],
+    );
+    assert!(s2["tiles"].as_u64().unwrap() > 4, "{}", s2["tiles"]);
+    assert_eq!(again, events);
+    for f in ["m3c2.laz", "events.csv", "event_regions.geojson"] {
+        assert!(
+            std::fs::read(whole.join(f)).unwrap() == std::fs::read(tiled.join(f)).unwrap(),
+            "{f} differs with 12 m tiles"
+        );
+    }
+}

@@ -78,12 +78,7 @@ impl Stage for AlignedStage {
             });
         }
         let m = a.matrix();
-        let quantum = ctx.plan.surveys[s]
-            .files
-            .first()
-            .map(|f| crate::io::open(&f.path))
-            .transpose()?
-            .and_then(|r| r.info().transform);
+        let quantum = ctx.quantum(s)?;
         let map = move |pts: &mut [crate::geom::Point3]| {
             for p in pts.iter_mut() {
                 let q: [f64; 3] = std::array::from_fn(|i| {

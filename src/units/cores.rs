@@ -6,7 +6,6 @@
 use talus_tiling::{Column, ColumnData, TileColumns, TileId};
 
 use super::stage::{Line, Planner, Scope, Stage, Total};
-use super::tiling::TilingStage;
 use super::{read_tile, Ctx};
 use crate::error::{Error, Result};
 use crate::io::Point3;
@@ -69,10 +68,11 @@ impl Stage for ThinnedStage {
         if p.cores != super::stage::CoreSource::Campaign {
             return Ok(());
         }
-        let t = p.the(&Spec::survey(TilingStage::KIND, 0))?;
+        // The first survey's tiles (its cleared tiling with `--vegetation remove`).
+        let t = p.survey_tiles(0)?;
         let c = p.plan.params.core_spacing.value.to_string();
         let label = format!("thinned-{}", p.plan.surveys[0].label);
-        p.add(Spec::survey(Self::KIND, 0), &label, &[&c], vec![t]);
+        p.add(Spec::survey(Self::KIND, 0), &label, &[&c], t);
         Ok(())
     }
 

@@ -15,6 +15,7 @@
 pub mod align;
 pub mod aligned;
 pub mod campaign;
+pub mod cleared;
 pub mod cores;
 pub mod events;
 pub mod m3c2;
@@ -122,9 +123,22 @@ impl Ctx<'_> {
             .ok_or_else(|| Error::Internal(format!("unit {} without a tile", u.name)))
     }
 
-    /// The unit whose tile files hold survey `survey` in the run's frame: its aligned tiling
-    /// when its alignment applied ([`aligned`]), else its own tiling.
+    /// The unit whose tile files hold survey `survey` in the run's frame: its cleared tiling with
+    /// `--vegetation remove` ([`cleared`]), else its aligned tiling when its alignment applied
+    /// ([`aligned`]), else its own tiling.
     pub fn tiling(&self, survey: usize) -> Result<usize> {
+        match self
+            .plan
+            .find(&Spec::survey(cleared::ClearedStage::KIND, survey))
+        {
+            Some(c) => Ok(c),
+            None => self.uncleared_tiling(survey),
+        }
+    }
+
+    /// The unit holding survey `survey`'s tiles in the run's frame before `--vegetation remove`
+    /// clears them: its aligned tiling where the alignment applies, else its own.
+    pub fn uncleared_tiling(&self, survey: usize) -> Result<usize> {
         if let Some(a) = self
             .plan
             .find(&Spec::survey(aligned::AlignedStage::KIND, survey))
@@ -136,9 +150,29 @@ impl Ctx<'_> {
         self.unit(&Spec::survey(tiling::TilingStage::KIND, survey))
     }
 
+    /// The coordinate quantum (scale, offset per axis) of survey `survey`'s first file, which
+    /// a stage that tiles the survey anew keeps (None for text and PLY).
+    pub fn quantum(&self, survey: usize) -> Result<Option<[[f64; 2]; 3]>> {
+        Ok(self.plan.surveys[survey]
+            .files
+            .first()
+            .map(|f| crate::io::open(&f.path))
+            .transpose()?
+            .and_then(|r| r.info().transform))
+    }
+
     /// The tiling record of survey `survey` in the run's frame (see [`Ctx::tiling`]).
     pub fn tiling_meta(&self, survey: usize) -> Result<tiling::TilingMeta> {
         let u = self.tiling(survey)?;
+        if self.plan.units[u].kind() == cleared::ClearedStage::KIND {
+            return Ok(self.meta::<cleared::ClearedStage>(u)?.tiling);
+        }
+        self.uncleared_tiling_meta(survey)
+    }
+
+    /// The tiling record of [`Ctx::uncleared_tiling`].
+    pub fn uncleared_tiling_meta(&self, survey: usize) -> Result<tiling::TilingMeta> {
+        let u = self.uncleared_tiling(survey)?;
         if self.plan.units[u].kind() == aligned::AlignedStage::KIND {
             if let Some(t) = self.meta::<aligned::AlignedStage>(u)?.tiling {
                 return Ok(t);

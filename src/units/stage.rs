@@ -183,6 +183,7 @@ pub fn default_stages() -> Vec<&'static dyn Registered> {
         entry::<tiling::TilingStage>(),
         entry::<align::AlignStage>(),
         entry::<aligned::AlignedStage>(),
+        entry::<cleared::ClearedStage>(),
         entry::<cores::UserCoresStage>(),
         entry::<cores::ThinnedStage>(),
         entry::<m3c2::M3c2Stage>(),
@@ -317,11 +318,13 @@ impl Planner<'_> {
         self.plan.of_pair(kind, pair).collect()
     }
 
-    /// The units holding survey `s`'s tiles: its tiling, and its aligned tiling when it has one
-    /// (which of the two holds them is known once the alignment ran: `Ctx::tiling`).
+    /// The units holding survey `s`'s tiles: its tiling, its aligned tiling when it has one
+    /// (which of the two holds them is known once the alignment ran: `Ctx::tiling`), and its
+    /// cleared tiling with `--vegetation remove`.
     pub fn survey_tiles(&self, s: usize) -> Result<Vec<usize>> {
         let mut out = vec![self.the(&Spec::survey(super::tiling::TilingStage::KIND, s))?];
         out.extend(self.find(&Spec::survey(super::aligned::AlignedStage::KIND, s)));
+        out.extend(self.find(&Spec::survey(super::cleared::ClearedStage::KIND, s)));
         Ok(out)
     }
 }

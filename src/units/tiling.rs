@@ -126,38 +126,23 @@ pub fn split(
     out: &mut UnitWriter,
 ) -> Result<TilingMeta> {
     let plan = ctx.plan;
-    let layout = &plan.layout;
-    let grid = layout.grid()?;
     let files = &plan.surveys[survey].files;
-    let budget = split_budget(plan);
-    let _held = ctx.reserve(
-        need(budget),
-        &format!("tiling survey {}", plan.surveys[survey].label),
-    )?;
-    // The unit's own directory: where the splitter writes its tile files.
-    let dir = out
-        .path("tile")?
-        .parent()
-        .map(|d| d.to_path_buf())
-        .ok_or_else(|| crate::error::Error::Internal("a unit without a directory".into()))?;
-    let mut splitter = TileSplitter::new(&dir, grid, layout.halo, budget)?;
+    let mut splitting = Splitting::new(ctx, survey, out)?;
     let mut buf = Vec::new();
-    let mut points = 0u64;
     let keep = plan.params.classes();
     let mut classes: Option<ClassCounts> = None;
     // A survey delivered as tiles: its files one after the other, in name order.
     for (k, f) in files.iter().enumerate() {
         let mut reader = io::open_with(&f.path, Some(&keep))?;
         if k == 0 {
-            splitter.set_options(write_options(reader.info().transform));
+            splitting.quantum(reader.info().transform);
         }
         let mut left_out = 0;
         while reader.fill(&mut buf, 1 << 16)? > 0 {
             if let Some(f) = transform {
                 f(&mut buf);
             }
-            splitter.push(&buf)?;
-            points += buf.len() as u64;
+            splitting.push(&buf)?;
             // The points read, those left out by class included: the line counts up to the
             // survey's points.
             let out = reader.left_out();
@@ -172,24 +157,76 @@ pub fn split(
             });
         }
     }
-    // Points per tile (halo included), in grid order. A tile without points has no file from
-    // the splitter.
-    let mut tile_points = vec![0u64; grid.len()];
-    for (id, n, digest) in splitter.finish_with_digests()? {
-        tile_points[grid.index(id)] = n;
-        out.add(&tile_file(id), digest.crc32, digest.size);
+    splitting.finish(out, classes)
+}
+
+/// Points being cut into the run's tiles (square + halo, owned flag) in a unit's directory,
+/// within the splitting budget reserved from the pool: [`split`]'s, and any stage that writes a
+/// survey's tiling of its own (`--vegetation remove`'s cleared survey).
+pub struct Splitting<'a> {
+    splitter: TileSplitter,
+    points: u64,
+    _held: crate::memory::Reservation<'a>,
+}
+
+impl<'a> Splitting<'a> {
+    /// Start the tiling of survey `survey` in `out`'s directory.
+    pub fn new(ctx: &'a Ctx, survey: usize, out: &mut UnitWriter) -> Result<Splitting<'a>> {
+        let plan = ctx.plan;
+        let layout = &plan.layout;
+        let budget = split_budget(plan);
+        let held = ctx.reserve(
+            need(budget),
+            &format!("tiling survey {}", plan.surveys[survey].label),
+        )?;
+        // The unit's own directory: where the splitter writes its tile files.
+        let dir = out
+            .path("tile")?
+            .parent()
+            .map(|d| d.to_path_buf())
+            .ok_or_else(|| crate::error::Error::Internal("a unit without a directory".into()))?;
+        Ok(Splitting {
+            splitter: TileSplitter::new(&dir, layout.grid()?, layout.halo, budget)?,
+            points: 0,
+            _held: held,
+        })
     }
-    for id in grid.tiles() {
-        if tile_points[grid.index(id)] == 0 {
-            let name = tile_file(id);
-            let digest =
-                talus_tiling::write_tile(&out.path(&name)?, &talus_tiling::empty_columns())?;
-            out.add(&name, digest.crc32, digest.size);
+
+    /// The coordinate quantum of the survey's file (scale, offset per axis), which the tiles
+    /// keep as their exact integer encoding.
+    pub fn quantum(&mut self, transform: Option<[[f64; 2]; 3]>) {
+        self.splitter.set_options(write_options(transform));
+    }
+
+    pub fn push(&mut self, points: &[crate::geom::Point3]) -> Result<()> {
+        self.splitter.push(points)?;
+        self.points += points.len() as u64;
+        Ok(())
+    }
+
+    /// Write the last frames and record every tile file in `out` (an empty file for a tile
+    /// without points).
+    pub fn finish(self, out: &mut UnitWriter, classes: Option<ClassCounts>) -> Result<TilingMeta> {
+        let grid = *self.splitter.grid();
+        // Points per tile (halo included), in grid order. A tile without points has no file
+        // from the splitter.
+        let mut tile_points = vec![0u64; grid.len()];
+        for (id, n, digest) in self.splitter.finish_with_digests()? {
+            tile_points[grid.index(id)] = n;
+            out.add(&tile_file(id), digest.crc32, digest.size);
         }
+        for id in grid.tiles() {
+            if tile_points[grid.index(id)] == 0 {
+                let name = tile_file(id);
+                let digest =
+                    talus_tiling::write_tile(&out.path(&name)?, &talus_tiling::empty_columns())?;
+                out.add(&name, digest.crc32, digest.size);
+            }
+        }
+        Ok(TilingMeta {
+            points: self.points,
+            tile_points,
+            classes,
+        })
     }
-    Ok(TilingMeta {
-        points,
-        tile_points,
-        classes,
-    })
 }

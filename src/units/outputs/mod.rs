@@ -173,6 +173,10 @@ pub struct Summary {
     /// The LAS classes compared and the points each survey left out by class.
     #[serde(default)]
     pub classes: ClassesSummary,
+    /// With `--vegetation remove`: the points judged vegetation-like and dropped before M3C2,
+    /// before then after.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub vegetation_removed: Option<[u64; 2]>,
     pub stages: Vec<StageTime>,
 }
 
@@ -344,12 +348,17 @@ impl Summary {
 
     /// What the one line says of vegetation events, when there are any.
     fn vegetation_line(&self) -> String {
-        match (self.vegetation_events, self.parameters.vegetation.value) {
+        (match (self.vegetation_events, self.parameters.vegetation.value) {
             (0, _) => String::new(),
             (n, crate::params::Vegetation::Keep) => {
                 format!("; {n} vegetation event(s), counted (--vegetation keep)")
             }
             (n, _) => format!("; {n} vegetation event(s), left out of the totals"),
+        }) + &match self.vegetation_removed {
+            Some([b, a]) => {
+                format!("; vegetation-like points removed before M3C2: before {b}, after {a}")
+            }
+            None => String::new(),
         }
     }
 
@@ -760,7 +769,18 @@ fn summarize(
             .map(|&s| Ok(ctx.tiling_meta(s)?.classes.as_ref().map(SurveyClasses::of)))
             .collect::<Result<_>>()?,
     };
+    let removed = |s: usize| -> Result<Option<u64>> {
+        match plan.find(&Spec::survey(super::cleared::ClearedStage::KIND, s)) {
+            Some(u) => Ok(Some(ctx.meta::<super::cleared::ClearedStage>(u)?.removed)),
+            None => Ok(None),
+        }
+    };
+    let vegetation_removed = match (removed(p.before)?, removed(p.after)?) {
+        (Some(b), Some(a)) => Some([b, a]),
+        _ => None,
+    };
     Ok(Summary {
+        vegetation_removed,
         tool: "talus".into(),
         version: env!("CARGO_PKG_VERSION").into(),
         inputs,
