@@ -128,3 +128,45 @@ fn walks_across_tiles_equal_the_whole_cloud_run() {
     assert_same_outputs(&whole, &tiled);
     assert_eq!(s, summary_without_timings(&tiled));
 }
+
+/// More tiles than one merge may hold (`units::merged::FAN_IN`): the pair's results are merged
+/// in rounds before the stages after M3C2 read them. With 1 m tiles the cliff has 1770 tiles —
+/// two rounds (56 runs, then 2) — and with 4 m tiles 120 (one round): both give the one-tile
+/// run's outputs byte for byte, and no round's temporary run is left in the unit.
+#[test]
+fn results_merged_in_rounds_equal_the_whole_cloud_run() {
+    let tmp = common::tempdir();
+    let (before, after) = cliff(&tmp.path().join("scene"), 120_000);
+    let whole = tmp.path().join("whole");
+    compare(&before, &after, &whole, &["--tile-size", "1000"]);
+    assert!(
+        !whole.join(".talus/units/merged").exists(),
+        "one tile: no merge"
+    );
+    for (ts, rounds) in [("4", 1), ("1", 2)] {
+        let tiled = tmp.path().join(format!("tiles-{ts}"));
+        compare(&before, &after, &tiled, &["--tile-size", ts]);
+        let unit = std::fs::read_dir(tiled.join(".talus/units/merged"))
+            .unwrap()
+            .next()
+            .unwrap()
+            .unwrap()
+            .path();
+        let record: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(unit.join("record.json")).unwrap()).unwrap();
+        assert_eq!(record["meta"]["rounds"], rounds, "{}", record["meta"]);
+        assert!(record["meta"]["runs"].as_array().unwrap().len() <= 32);
+        for f in std::fs::read_dir(&unit).unwrap() {
+            let name = f.unwrap().file_name().into_string().unwrap();
+            assert!(
+                name == "record.json" || name.starts_with("m_"),
+                "{name} left in the merged unit"
+            );
+        }
+        assert_same_outputs(&whole, &tiled);
+        assert_eq!(
+            summary_without_timings(&whole),
+            summary_without_timings(&tiled)
+        );
+    }
+}

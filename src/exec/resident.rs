@@ -93,22 +93,3 @@ impl Drop for Watch {
         }
     }
 }
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_unit_that_touches_memory_has_a_peak_above_it() {
-        let w = Watch::start();
-        w.begin(7);
-        let before = resident_bytes().unwrap();
-        let v = vec![1u8; 64 << 20];
-        std::thread::sleep(4 * SAMPLE);
-        std::hint::black_box(&v);
-        drop(v);
-        let peak = w.end(7).unwrap();
-        assert!(peak >= before + (60 << 20), "peak {peak}, before {before}");
-        assert!(w.end(7).is_none(), "a unit ends once");
-    }
-}

@@ -160,6 +160,11 @@ impl Stage for CampaignStage {
         let mut deps = vec![p.the(&Spec::survey(ThinnedStage::KIND, 0))?];
         deps.extend(p.plan.of_kind(OutputsStage::KIND).collect::<Vec<_>>());
         deps.extend(p.plan.of_kind(M3c2Stage::KIND).collect::<Vec<_>>());
+        deps.extend(
+            p.plan
+                .of_kind(super::merged::MergedStage::KIND)
+                .collect::<Vec<_>>(),
+        );
         let pairs = serde_json::to_string(&p.plan.pairs).unwrap_or_default();
         let version = env!("CARGO_PKG_VERSION");
         p.add(

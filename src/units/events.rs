@@ -12,7 +12,7 @@ use rustc_hash::FxHashMap as HashMap;
 use serde::{Deserialize, Serialize};
 use talus_tiling::{Column, ColumnData, TileColumns};
 
-use super::m3c2::{M3c2Stage, Merged};
+use super::m3c2::Merged;
 use super::stable::StableStage;
 use super::stage::{Line, Planner, Scope, Stage, Total};
 use super::Ctx;
@@ -117,7 +117,7 @@ impl Stage for EventsStage {
         );
         for pair in 0..p.plan.pairs.len() {
             let mut deps = vec![p.the(&Spec::pair(StableStage::KIND, pair))?];
-            deps.extend(p.of_pair(M3c2Stage::KIND, pair));
+            deps.extend(p.pair_results(pair));
             let label = p.plan.pairs[pair].label.clone();
             p.add(Spec::pair(Self::KIND, pair), &label, &[&key], deps);
         }

@@ -19,6 +19,7 @@ pub mod cleared;
 pub mod cores;
 pub mod events;
 pub mod m3c2;
+pub mod merged;
 pub mod outputs;
 pub mod stable;
 pub mod stage;

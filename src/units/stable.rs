@@ -5,7 +5,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::m3c2::{pair_count, M3c2Stage, Merged};
+use super::m3c2::{pair_count, Merged};
 use super::stage::{Line, Planner, Scope, Stage, Total};
 use super::Ctx;
 use crate::error::{Error, Result};
@@ -68,7 +68,7 @@ impl Stage for StableStage {
         let samples = SAMPLES.to_string();
         let areas = areas_key(p.plan);
         for pair in 0..p.plan.pairs.len() {
-            let m3c2 = p.of_pair(M3c2Stage::KIND, pair);
+            let m3c2 = p.pair_results(pair);
             let label = p.plan.pairs[pair].label.clone();
             p.add(
                 Spec::pair(Self::KIND, pair),

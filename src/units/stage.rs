@@ -187,6 +187,7 @@ pub fn default_stages() -> Vec<&'static dyn Registered> {
         entry::<cores::UserCoresStage>(),
         entry::<cores::ThinnedStage>(),
         entry::<m3c2::M3c2Stage>(),
+        entry::<merged::MergedStage>(),
         entry::<stable::StableStage>(),
         entry::<events::EventsStage>(),
         entry::<volumes::VolumesStage>(),
@@ -311,6 +312,14 @@ impl Planner<'_> {
             Some(i) => i,
             None => self.plan.push(spec, label, key_parts, deps),
         }
+    }
+
+    /// The units holding pair `pair`'s M3C2 results: its M3C2 units, and its merged runs when
+    /// the layout has more tiles than one merge holds (`units::merged`).
+    pub fn pair_results(&self, pair: usize) -> Vec<usize> {
+        let mut out = self.of_pair(super::m3c2::M3c2Stage::KIND, pair);
+        out.extend(self.find(&Spec::pair(super::merged::MergedStage::KIND, pair)));
+        out
     }
 
     /// The units of `kind` for pair `pair`, in plan order.

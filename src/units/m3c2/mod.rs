@@ -313,21 +313,26 @@ fn gather_along(
 /// parallel, a group at a time (the encoded bytes of a group are held until written), and
 /// written plainly: the unit's commit makes them durable.
 fn write_chunks(out: &mut UnitWriter, results: &[KeyedResult]) -> Result<usize> {
-    use rayon::prelude::*;
     const GROUP: usize = 16;
     let parts: Vec<&[KeyedResult]> = results.chunks(CHUNK_ROWS).collect();
     for (g, group) in parts.chunks(GROUP).enumerate() {
-        let encoded: Vec<std::result::Result<Vec<u8>, String>> = group
-            .par_iter()
-            .map(|part| talus_tiling::encode_tile(&to_columns(part), &Default::default()))
-            .collect();
-        for (i, bytes) in encoded.into_iter().enumerate() {
-            let file = chunk_file(g * GROUP + i);
-            let bytes = bytes.map_err(|p| Error::Internal(format!("{file}: {p}")))?;
-            super::write_bytes(out, &file, &bytes)?;
+        for (i, bytes) in encode_chunks(group)?.into_iter().enumerate() {
+            super::write_bytes(out, &chunk_file(g * GROUP + i), &bytes)?;
         }
     }
     Ok(parts.len())
+}
+
+/// Result chunks encoded as chunk files' bytes, in parallel.
+pub fn encode_chunks<C: AsRef<[KeyedResult]> + Sync>(chunks: &[C]) -> Result<Vec<Vec<u8>>> {
+    use rayon::prelude::*;
+    chunks
+        .par_iter()
+        .map(|part| {
+            talus_tiling::encode_tile(&to_columns(part.as_ref()), &Default::default())
+                .map_err(|p| Error::Internal(format!("a result chunk: {p}")))
+        })
+        .collect()
 }
 
 fn f64col(name: &str, v: Vec<f64>) -> Column {
@@ -435,6 +440,27 @@ pub fn read_chunk(path: &std::path::Path) -> Result<Vec<KeyedResult>> {
 
 /// The chunk files of a pair's M3C2 units, per tile in grid order.
 pub fn pair_chunks(ctx: &Ctx, pair: usize) -> Result<Vec<Vec<PathBuf>>> {
+    match ctx
+        .plan
+        .find(&Spec::pair(super::merged::MergedStage::KIND, pair))
+    {
+        Some(u) => {
+            let runs = ctx.meta::<super::merged::MergedStage>(u)?.runs;
+            runs.iter()
+                .enumerate()
+                .map(|(r, &n)| {
+                    (0..n)
+                        .map(|k| ctx.input(u, &super::merged::run_file(r, k)))
+                        .collect()
+                })
+                .collect()
+        }
+        None => tile_chunks(ctx, pair),
+    }
+}
+
+/// The chunk files of each of pair `pair`'s M3C2 units, in grid order.
+pub fn tile_chunks(ctx: &Ctx, pair: usize) -> Result<Vec<Vec<PathBuf>>> {
     let grid = ctx.plan.layout.grid()?;
     grid.tiles()
         .map(|t| {
@@ -466,11 +492,13 @@ fn ahead(tiles: usize) -> usize {
     (LOOKAHEAD / tiles.max(1)).max(1)
 }
 
-/// Resident bytes of a [`Merged`] over `tiles` tiles: the other tiles' chunks (one each, a few
+/// Resident bytes of a [`Merged`] over `tiles` tiles (at most [`super::merged::FAN_IN`]: more
+/// are merged in rounds first, `super::merged`): the other tiles' chunks (one each, a few
 /// when the tiles are few) while one tile reads its next ones: its last chunk, the new chunks and
 /// their files' decoded columns (about as large again). A stage that merges reserves it: a layout
 /// of many small tiles (a low budget, a dense site) costs the merge a chunk for each.
 pub fn merge_need(tiles: usize) -> u64 {
+    let tiles = tiles.min(super::merged::FAN_IN);
     let chunk = (CHUNK_ROWS * std::mem::size_of::<KeyedResult>()) as u64;
     let a = ahead(tiles) as u64;
     ((tiles.max(1) as u64 - 1) * a + 1 + 2 * a) * chunk
@@ -496,7 +524,11 @@ struct Cursor {
 
 impl Merged {
     pub fn new(ctx: &Ctx, pair: usize) -> Result<Self> {
-        let tiles = pair_chunks(ctx, pair)?;
+        Self::of_runs(pair_chunks(ctx, pair)?)
+    }
+
+    /// The merge of `tiles`: each a sorted run of chunk files.
+    pub fn of_runs(tiles: Vec<Vec<PathBuf>>) -> Result<Self> {
         let mut m = Merged {
             cursors: (0..tiles.len()).map(|_| Cursor::default()).collect(),
             ahead: ahead(tiles.len()),

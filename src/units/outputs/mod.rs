@@ -15,7 +15,6 @@ use serde::{Deserialize, Serialize};
 
 use super::cores::{ThinnedStage, UserCoresStage};
 use super::events::EventsStage;
-use super::m3c2::M3c2Stage;
 use super::stable::StableStage;
 use super::stage::{registry, Line, Planner, Publishes, Scope, Stage, Total};
 use super::volumes::{mesh_files, Measured, VolumesStage};
@@ -517,7 +516,7 @@ impl Stage for OutputsStage {
             )?;
             let (b, a) = (p.plan.pairs[pair].before, p.plan.pairs[pair].after);
             let mut deps = vec![p.the(&Spec::pair(StableStage::KIND, pair))?];
-            deps.extend(p.of_pair(M3c2Stage::KIND, pair));
+            deps.extend(p.pair_results(pair));
             if let Some(e) = p.find(&Spec::pair(EventsStage::KIND, pair)) {
                 deps.push(e);
                 deps.extend(p.of_pair(VolumesStage::KIND, pair));

@@ -1,0 +1,164 @@
+//! A pair's M3C2 results merged in rounds of bounded fan-in, when the layout has more tiles than
+//! one merge may hold ([`FAN_IN`]).
+//!
+//! The stages after M3C2 read a pair's results in global key order through a k-way merge that
+//! holds a chunk per input (`m3c2::Merged`). Over the tiles directly, that is a chunk per tile: a
+//! small budget makes many tiles, and the merge then needs more than the budget (issue 24: 576
+//! tiles, 582 MiB). So where the tiles are more than [`FAN_IN`], this unit merges them once, in
+//! groups of at most [`FAN_IN`], into sorted runs — round after round, its intermediate runs
+//! deleted as the next round consumes them, until [`FAN_IN`] or fewer remain — and the stable,
+//! events, outputs and campaign units merge those runs instead. Every merge then holds at most
+//! [`FAN_IN`] chunks, whatever the tile count (a classic external merge sort's balanced merge;
+//! Knuth, TAOCP vol. 3, §5.4). A core point's key is unique, so the order is the one a direct
+//! merge gives and every output is the same bytes.
+
+use std::path::PathBuf;
+
+use serde::{Deserialize, Serialize};
+
+use super::m3c2::{merge_need, M3c2Stage, Merged, CHUNK_ROWS};
+use super::stage::{Line, Planner, Scope, Stage, Total};
+use super::Ctx;
+use crate::error::{Error, Result};
+use crate::plan::Spec;
+use crate::store::UnitWriter;
+
+/// The most inputs one merge holds a chunk of.
+pub const FAN_IN: usize = 32;
+
+/// Chunks encoded at once while a run is written (their bytes held until written).
+const GROUP: usize = 8;
+
+/// The file of chunk `k` of final run `r`.
+pub fn run_file(r: usize, k: usize) -> String {
+    format!("m_{r:03}_{k:05}.tile")
+}
+
+/// Resident bytes of a merged unit: its merge of [`FAN_IN`] inputs and the chunks it encodes.
+pub fn need() -> u64 {
+    merge_need(FAN_IN)
+        + (GROUP * CHUNK_ROWS * std::mem::size_of::<crate::m3c2::tile::KeyedResult>()) as u64 * 2
+}
+
+/// A pair's results as sorted runs.
+pub struct MergedStage;
+
+/// What a merged unit records: the chunks of each final run, and the rounds it took.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct MergedMeta {
+    pub runs: Vec<usize>,
+    pub rounds: usize,
+    pub core_points: u64,
+}
+
+impl Stage for MergedStage {
+    const KIND: &'static str = "merged";
+    const SCOPE: Scope = Scope::Pair;
+    const LINE: Line = Line {
+        name: "merging tiles",
+        counts: "core points",
+        total: Total::Unknown,
+    };
+    type Meta = MergedMeta;
+
+    /// One per pair when the layout has more than [`FAN_IN`] tiles, over the pair's M3C2 units.
+    fn plan(p: &mut Planner) -> Result<()> {
+        if p.plan.layout.len() <= FAN_IN {
+            return Ok(());
+        }
+        crate::memory::refuse_unless_fits(
+            need(),
+            p.plan.params.memory_bytes.value,
+            &format!("merging the results of {FAN_IN} tiles at a time"),
+        )?;
+        let fan_in = FAN_IN.to_string();
+        for pair in 0..p.plan.pairs.len() {
+            let deps = p.of_pair(M3c2Stage::KIND, pair);
+            let label = p.plan.pairs[pair].label.clone();
+            p.add(Spec::pair(Self::KIND, pair), &label, &[&fan_in], deps);
+        }
+        Ok(())
+    }
+
+    fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<MergedMeta> {
+        let pair = ctx.pair(unit)?;
+        let _held = ctx.reserve(need(), "merging the pair's results in rounds")?;
+        let mut runs: Vec<Vec<PathBuf>> = super::m3c2::tile_chunks(ctx, pair)?;
+        let mut temporary: Vec<PathBuf> = Vec::new();
+        let mut rounds = 0;
+        let mut core_points;
+        let mut counts = Vec::new();
+        loop {
+            let groups: Vec<Vec<Vec<PathBuf>>> = runs.chunks(FAN_IN).map(|g| g.to_vec()).collect();
+            let last = groups.len() <= FAN_IN;
+            let mut next = Vec::with_capacity(groups.len());
+            let mut written = Vec::new();
+            counts.clear();
+            core_points = 0;
+            for (g, group) in groups.into_iter().enumerate() {
+                let mut merged = Merged::of_runs(group)?;
+                let mut files = Vec::new();
+                let mut batch: Vec<Vec<crate::m3c2::tile::KeyedResult>> = Vec::new();
+                let mut chunk = Vec::with_capacity(CHUNK_ROWS);
+                let mut n = 0u64;
+                let mut flush = |batch: &mut Vec<Vec<_>>, files: &mut Vec<PathBuf>| -> Result<()> {
+                    for bytes in super::m3c2::encode_chunks(batch)? {
+                        let k = files.len();
+                        let name = if last {
+                            run_file(g, k)
+                        } else {
+                            format!("round{rounds}_{g:04}_{k:05}.tmp")
+                        };
+                        let path = out.path(&name)?;
+                        if last {
+                            super::write_bytes(out, &name, &bytes)?;
+                        } else {
+                            std::fs::write(&path, &bytes).map_err(|e| Error::output(&path, e))?;
+                            written.push(path.clone());
+                        }
+                        files.push(path);
+                    }
+                    batch.clear();
+                    Ok(())
+                };
+                while let Some(r) = merged.next_result()? {
+                    n += 1;
+                    chunk.push(r);
+                    if chunk.len() == CHUNK_ROWS {
+                        batch.push(std::mem::replace(
+                            &mut chunk,
+                            Vec::with_capacity(CHUNK_ROWS),
+                        ));
+                        if batch.len() == GROUP {
+                            flush(&mut batch, &mut files)?;
+                            crate::interrupt::check()?;
+                        }
+                    }
+                }
+                if !chunk.is_empty() {
+                    batch.push(chunk);
+                }
+                flush(&mut batch, &mut files)?;
+                core_points += n;
+                (ctx.progress)(n);
+                counts.push(files.len());
+                next.push(files);
+            }
+            // The previous round's runs are consumed.
+            for f in temporary.drain(..) {
+                std::fs::remove_file(&f).map_err(|e| Error::output(&f, e))?;
+            }
+            temporary = written;
+            runs = next;
+            rounds += 1;
+            if last {
+                break;
+            }
+        }
+        Ok(MergedMeta {
+            runs: counts,
+            rounds,
+            core_points,
+        })
+    }
+}
