@@ -129,10 +129,12 @@ fn walks_across_tiles_equal_the_whole_cloud_run() {
     assert_eq!(s, summary_without_timings(&tiled));
 }
 
-/// More tiles than one merge may hold (`units::merged::FAN_IN`): the pair's results are merged
-/// in rounds before the stages after M3C2 read them. With 1 m tiles the cliff has 1770 tiles —
-/// two rounds (56 runs, then 2) — and with 4 m tiles 120 (one round): both give the one-tile
-/// run's outputs byte for byte, and no round's temporary run is left in the unit.
+/// More tiles than one merge may hold (`units::merged::FAN_IN`) at a budget their direct merge
+/// would strain (400 MiB): the pair's results are merged in rounds before the stages after M3C2
+/// read them. With 1 m tiles the cliff has 1770 tiles — two rounds (56 runs, then 2) — and with
+/// 4 m tiles 120 (one round): both give the one-tile run's outputs byte for byte, and no round's
+/// temporary run is left in the unit. At the default budget (2 GiB) the 120 tiles' direct merge
+/// (122 MiB) is merged directly: no merged unit.
 #[test]
 fn results_merged_in_rounds_equal_the_whole_cloud_run() {
     let tmp = common::tempdir();
@@ -143,9 +145,20 @@ fn results_merged_in_rounds_equal_the_whole_cloud_run() {
         !whole.join(".talus/units/merged").exists(),
         "one tile: no merge"
     );
+    let direct = tmp.path().join("direct");
+    compare(&before, &after, &direct, &["--tile-size", "4"]);
+    assert!(
+        !direct.join(".talus/units/merged").exists(),
+        "merged directly"
+    );
     for (ts, rounds) in [("4", 1), ("1", 2)] {
         let tiled = tmp.path().join(format!("tiles-{ts}"));
-        compare(&before, &after, &tiled, &["--tile-size", ts]);
+        compare(
+            &before,
+            &after,
+            &tiled,
+            &["--tile-size", ts, "--memory", "400MiB"],
+        );
         let unit = std::fs::read_dir(tiled.join(".talus/units/merged"))
             .unwrap()
             .next()
@@ -164,9 +177,15 @@ fn results_merged_in_rounds_equal_the_whole_cloud_run() {
             );
         }
         assert_same_outputs(&whole, &tiled);
-        assert_eq!(
-            summary_without_timings(&whole),
-            summary_without_timings(&tiled)
-        );
+        // The budget given is echoed back among the parameters; the rest is the same.
+        let without_budget = |d: &Path| {
+            let mut v = summary_without_timings(d);
+            v["parameters"]
+                .as_object_mut()
+                .unwrap()
+                .remove("memory_bytes");
+            v
+        };
+        assert_eq!(without_budget(&whole), without_budget(&tiled));
     }
 }

@@ -492,13 +492,12 @@ fn ahead(tiles: usize) -> usize {
     (LOOKAHEAD / tiles.max(1)).max(1)
 }
 
-/// Resident bytes of a [`Merged`] over `tiles` tiles (at most [`super::merged::FAN_IN`]: more
-/// are merged in rounds first, `super::merged`): the other tiles' chunks (one each, a few
+/// Resident bytes of a [`Merged`] over `tiles` inputs (tiles, or the runs of
+/// `super::merged`: [`super::merged::merge_inputs`]): the other tiles' chunks (one each, a few
 /// when the tiles are few) while one tile reads its next ones: its last chunk, the new chunks and
 /// their files' decoded columns (about as large again). A stage that merges reserves it: a layout
 /// of many small tiles (a low budget, a dense site) costs the merge a chunk for each.
 pub fn merge_need(tiles: usize) -> u64 {
-    let tiles = tiles.min(super::merged::FAN_IN);
     let chunk = (CHUNK_ROWS * std::mem::size_of::<KeyedResult>()) as u64;
     let a = ahead(tiles) as u64;
     ((tiles.max(1) as u64 - 1) * a + 1 + 2 * a) * chunk

@@ -462,9 +462,10 @@ impl Publish {
 /// with 15 tiles, of which the merge's about 18).
 pub const FIXED: u64 = 112 << 20;
 
-/// Resident bytes of an outputs unit over `tiles` tiles.
-pub fn need(tiles: usize) -> u64 {
-    FIXED + super::m3c2::merge_need(tiles)
+/// Resident bytes of an outputs unit whose merge holds `inputs` inputs
+/// (`merged::merge_inputs`).
+pub fn need(inputs: usize) -> u64 {
+    FIXED + super::m3c2::merge_need(inputs)
 }
 
 /// A pair's outputs, ready to publish.
@@ -510,9 +511,16 @@ impl Stage for OutputsStage {
                 _ => format!("pair {}'s", p.plan.pairs[pair].label),
             };
             crate::memory::refuse_unless_fits(
-                need(tiles),
+                need(super::merged::merge_inputs(p.plan)),
                 p.plan.params.memory_bytes.value,
-                &format!("writing {whose} outputs, merging the results of its {tiles} tiles"),
+                &format!(
+                    "writing {whose} outputs, merging the results of its {tiles} tiles{}",
+                    if super::merged::in_rounds(p.plan) {
+                        " (in rounds)"
+                    } else {
+                        ""
+                    }
+                ),
             )?;
             let (b, a) = (p.plan.pairs[pair].before, p.plan.pairs[pair].after);
             let mut deps = vec![p.the(&Spec::pair(StableStage::KIND, pair))?];
@@ -557,7 +565,7 @@ fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<Outp
     let params = ground.params(plan);
     let grid = plan.layout.grid()?;
     let _held = ctx.reserve(
-        need(plan.layout.len()),
+        need(super::merged::merge_inputs(plan)),
         "writing the outputs (and the merge of the pair's tiles)",
     )?;
     // Events with their volumes, in id order.
