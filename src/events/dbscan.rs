@@ -17,8 +17,9 @@
 //! 1. [`core_flags`] per tile decides the core status of the tile's owned points (exact,
 //!    because the whole eps-ball of an owned point lies inside the tile);
 //! 2. [`tile_links`] per tile, given the core flag of every point in the tile (halo points'
-//!    flags come from their owning tiles), emits the union edges (owned core ↔ core within
-//!    eps) and the border assignments of the owned non-core points;
+//!    flags come from their owning tiles), unites the owned core points with the core points
+//!    within eps and emits a spanning forest of those unions (an edge from each linked point to
+//!    its set's root) and the border assignments of the owned non-core points;
 //! 3. [`merge`] unions all edges over global ids (union-find, order independent) and numbers
 //!    the clusters 1.. by the smallest global id of each cluster.
 //!
@@ -68,7 +69,8 @@ pub fn core_flags(
 pub struct TileLinks {
     /// The tile's owned core points.
     pub cores: Vec<u64>,
-    /// Union edges between an owned core point and a core point within eps (owned or halo).
+    /// A spanning forest of the tile's unions of owned core points with core points within eps
+    /// (owned or halo): (a linked core point, its set's root).
     pub edges: Vec<(u64, u64)>,
     /// (owned border point, its core neighbour with the smallest global id).
     pub borders: Vec<(u64, u64)>,
@@ -77,6 +79,13 @@ pub struct TileLinks {
 /// Phase 2: union edges and border assignments of one tile. `core` holds the core flag of
 /// every point of the tile (owned ones from [`core_flags`] of this tile, halo ones from their
 /// owning tiles); `ids` are the global ids.
+///
+/// The tile's core–core links within eps are united here, over the tile's own points, and only
+/// a spanning forest of them is emitted: one edge from each linked core point to its set's root.
+/// The global merge sees the same connectivity (so the same clusters) from at most one edge per
+/// core point, where every link would be about ten per point at the derived eps (2.5 core
+/// spacings) — most of the events unit's memory on a large pair. The links are found a batch of
+/// points at a time, so they are never all held either.
 pub fn tile_links(
     points: &[[f64; 3]],
     ids: &[u64],
@@ -84,49 +93,62 @@ pub fn tile_links(
     core: &[bool],
     eps: f64,
 ) -> Result<TileLinks> {
+    /// Points whose links are found (in parallel) before they are united.
+    const BATCH: usize = 1 << 14;
     let local = relative(points, origin_of(points));
     let tree = build_tree(&local)?;
     let r2 = eps * eps;
-    // Per point: its union edges and its border assignment.
-    type PointLinks = (Vec<(u64, u64)>, Option<(u64, u64)>);
-    let per_point: Vec<PointLinks> = (0..local.len())
-        .into_par_iter()
-        .map(|i| {
-            if !owned[i] {
-                return (Vec::new(), None);
-            }
-            let mut edges = Vec::new();
-            let mut best: Option<u64> = None;
-            tree.query(&local[i])
-                .within::<SquaredEuclidean<f64>>(r2)
-                .unsorted()
-                .visit(|it| {
-                    let j = it.item as usize;
-                    if j == i || !core[j] {
-                        return;
-                    }
-                    if core[i] {
-                        // The reverse edge comes from j's tile when j is owned here and has the
-                        // smaller id; emit each owned-owned edge once.
-                        if !owned[j] || ids[i] < ids[j] {
-                            edges.push((ids[i], ids[j]));
-                        }
-                    } else {
-                        best = Some(best.map_or(ids[j], |b| b.min(ids[j])));
-                    }
-                });
-            edges.sort_unstable();
-            (edges, best.map(|c| (ids[i], c)))
-        })
-        .collect();
+    let mut sets = UnionFind::new(local.len());
     let mut links = TileLinks::default();
-    for (i, (edges, border)) in per_point.into_iter().enumerate() {
-        if owned[i] && core[i] {
-            links.cores.push(ids[i]);
+    // Per point: the core points it is linked to (tile indices), and its border assignment.
+    type PointLinks = (Vec<u32>, Option<(u64, u64)>);
+    for start in (0..local.len()).step_by(BATCH) {
+        let end = (start + BATCH).min(local.len());
+        let per_point: Vec<PointLinks> = (start..end)
+            .into_par_iter()
+            .map(|i| {
+                if !owned[i] {
+                    return (Vec::new(), None);
+                }
+                let mut edges = Vec::new();
+                let mut best: Option<u64> = None;
+                tree.query(&local[i])
+                    .within::<SquaredEuclidean<f64>>(r2)
+                    .unsorted()
+                    .visit(|it| {
+                        let j = it.item as usize;
+                        if j == i || !core[j] {
+                            return;
+                        }
+                        if core[i] {
+                            edges.push(j as u32);
+                        } else {
+                            best = Some(best.map_or(ids[j], |b| b.min(ids[j])));
+                        }
+                    });
+                (edges, best.map(|c| (ids[i], c)))
+            })
+            .collect();
+        for (k, (edges, border)) in per_point.into_iter().enumerate() {
+            let i = start + k;
+            if owned[i] && core[i] {
+                links.cores.push(ids[i]);
+            }
+            for j in edges {
+                sets.union(i, j as usize);
+            }
+            links.borders.extend(border);
         }
-        links.edges.extend(edges);
-        links.borders.extend(border);
     }
+    // The spanning forest: each linked point to its set's root (the root is the set's smallest
+    // tile index, whatever order the unions came in).
+    for i in 0..local.len() {
+        let r = sets.find(i);
+        if r != i {
+            links.edges.push((ids[i], ids[r]));
+        }
+    }
+    links.edges.sort_unstable();
     Ok(links)
 }
 
