@@ -315,9 +315,10 @@ pub enum Vegetation {
 }
 
 impl Vegetation {
-    /// Whether vegetation events are kept apart (left out of totals and tracks).
-    pub fn kept_apart(self) -> bool {
-        self != Vegetation::Keep
+    /// Whether an event counts in totals, campaign sums, tracks and the magnitude–frequency fit:
+    /// every event but a vegetation one kept apart (`flag`, `remove`).
+    pub fn counts(self, vegetation_event: bool) -> bool {
+        self == Vegetation::Keep || !vegetation_event
     }
 }
 

@@ -12,7 +12,7 @@ mod pipeline_common;
 
 use std::path::Path;
 
-use pipeline_common::{assert_same_outputs, cliff, compare};
+use pipeline_common::{assert_same_outputs, cliff, compare, unit_dir};
 
 /// summary.json without what legitimately differs: timings, tile count and side, thread count.
 fn summary_without_timings(dir: &Path) -> serde_json::Value {
@@ -159,12 +159,7 @@ fn results_merged_in_rounds_equal_the_whole_cloud_run() {
             &tiled,
             &["--tile-size", ts, "--memory", "400MiB"],
         );
-        let unit = std::fs::read_dir(tiled.join(".talus/units/merged"))
-            .unwrap()
-            .next()
-            .unwrap()
-            .unwrap()
-            .path();
+        let unit = unit_dir(&tiled, "merged", "pair-");
         let record: serde_json::Value =
             serde_json::from_slice(&std::fs::read(unit.join("record.json")).unwrap()).unwrap();
         assert_eq!(record["meta"]["rounds"], rounds, "{}", record["meta"]);

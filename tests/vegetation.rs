@@ -126,6 +126,34 @@ fn real_events_right(label: &str, truth: &Value, events: &[(Value, [f64; 3])]) -
     m
 }
 
+/// Every event but the real ones (`real`, their indices) is flagged as vegetation or under
+/// 0.2 m³.
+fn no_unflagged_event_over_0_2_m3(events: &[(Value, [f64; 3])], real: &[usize]) {
+    for (i, (p, _)) in events.iter().enumerate() {
+        if !real.contains(&i) && p["vegetation"] == Value::Bool(false) {
+            assert!(
+                volume(p).abs() <= 0.2,
+                "an unflagged event over 0.2 m³: {p}"
+            );
+        }
+    }
+}
+
+/// summary.json's totals (gain, loss), asserted within 2 % of the planted ones.
+fn totals_right(label: &str, truth: &Value, summary: &Value) -> (f64, f64) {
+    let (gain, loss) = (
+        truth["total_gain_m3"].as_f64().unwrap(),
+        truth["total_loss_m3"].as_f64().unwrap(),
+    );
+    let (g, l) = (
+        summary["total_gain_m3"].as_f64().unwrap(),
+        summary["total_loss_m3"].as_f64().unwrap(),
+    );
+    println!("{label}: totals {g:+.3} / {l:+.3} m³ for {gain:+.3} / {loss:+.3}");
+    assert!(((g - gain) / gain).abs() < 0.02 && ((l - loss) / loss).abs() < 0.02);
+    (g, l)
+}
+
 /// Unclassified surveys: vegetation recognised from its geometry. `flag` (the default) lists
 /// the shrubs', grass's and tree's events, flagged, and leaves them out of the totals, which are
 /// then the real change's within 2 %; no unflagged event other than the real ones exceeds
@@ -149,26 +177,10 @@ fn unclassified_vegetation_is_flagged_and_left_out_of_the_totals() {
         flagged.iter().map(|p| volume(p).abs()).sum::<f64>()
     );
     assert!(flagged.len() >= 5, "the plants' events are flagged");
-    for (i, (p, _)) in events.iter().enumerate() {
-        if !real.contains(&i) && p["vegetation"] == Value::Bool(false) {
-            assert!(
-                volume(p).abs() <= 0.2,
-                "an unflagged event over 0.2 m³: {p}"
-            );
-        }
-    }
+    no_unflagged_event_over_0_2_m3(&events, &real);
     assert_eq!(summary["vegetation_events"], flagged.len());
     assert_eq!(summary["parameters"]["vegetation"]["value"], "flag");
-    let (gain, loss) = (
-        truth["total_gain_m3"].as_f64().unwrap(),
-        truth["total_loss_m3"].as_f64().unwrap(),
-    );
-    let (g, l) = (
-        summary["total_gain_m3"].as_f64().unwrap(),
-        summary["total_loss_m3"].as_f64().unwrap(),
-    );
-    println!("flag: totals {g:+.3} / {l:+.3} m³ for {gain:+.3} / {loss:+.3}");
-    assert!(((g - gain) / gain).abs() < 0.02 && ((l - loss) / loss).abs() < 0.02);
+    let (g, l) = totals_right("flag", &truth, &summary);
     let csv = std::fs::read_to_string(tmp.path().join("flag/events.csv")).unwrap();
     assert!(csv
         .lines()
@@ -309,14 +321,7 @@ fn removed_vegetation_leaves_the_real_change() {
     let whole = tmp.path().join("whole");
     let (events, summary) = compare(&data, &whole, &["--vegetation", "remove"]);
     let real = real_events_right("remove", &truth, &events);
-    for (i, (p, _)) in events.iter().enumerate() {
-        if !real.contains(&i) && p["vegetation"] == Value::Bool(false) {
-            assert!(
-                volume(p).abs() <= 0.2,
-                "an unflagged event over 0.2 m³: {p}"
-            );
-        }
-    }
+    no_unflagged_event_over_0_2_m3(&events, &real);
     let removed: Vec<u64> = summary["vegetation_removed"]
         .as_array()
         .unwrap()
@@ -336,16 +341,7 @@ fn removed_vegetation_leaves_the_real_change() {
         removed.iter().all(|&n| (15_000..40_000).contains(&n)),
         "{removed:?}"
     );
-    let (gain, loss) = (
-        truth["total_gain_m3"].as_f64().unwrap(),
-        truth["total_loss_m3"].as_f64().unwrap(),
-    );
-    let (g, l) = (
-        summary["total_gain_m3"].as_f64().unwrap(),
-        summary["total_loss_m3"].as_f64().unwrap(),
-    );
-    println!("remove: totals {g:+.3} / {l:+.3} m³ for {gain:+.3} / {loss:+.3}");
-    assert!(((g - gain) / gain).abs() < 0.02 && ((l - loss) / loss).abs() < 0.02);
+    totals_right("remove", &truth, &summary);
 
     let tiled = tmp.path().join("tiled");
     let (again, s2) = compare(

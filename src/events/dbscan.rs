@@ -148,7 +148,6 @@ pub fn tile_links(
             links.edges.push((ids[i], ids[r]));
         }
     }
-    links.edges.sort_unstable();
     Ok(links)
 }
 

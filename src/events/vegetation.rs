@@ -27,7 +27,7 @@
 //! The moments are exact integer sums (`m3c2::moments`), so the verdict does not depend on the
 //! order in which points arrive.
 
-use nalgebra::{Matrix3, SymmetricEigen};
+use nalgebra::SymmetricEigen;
 
 use crate::geom::Point3;
 use crate::m3c2::moments::Moments3;
@@ -57,8 +57,7 @@ pub fn shares(c: &[f64; 6]) -> Option<[f64; 3]> {
     if c.iter().any(|v| !v.is_finite()) {
         return None;
     }
-    let m = Matrix3::new(c[0], c[1], c[2], c[1], c[3], c[4], c[2], c[4], c[5]);
-    let mut l: Vec<f64> = SymmetricEigen::new(m)
+    let mut l: Vec<f64> = SymmetricEigen::new(crate::m3c2::normals::symmetric(c))
         .eigenvalues
         .iter()
         .map(|v| v.max(0.0).sqrt())
@@ -132,18 +131,14 @@ mod tests {
     use super::*;
     use crate::rng::SplitMix64;
 
-    fn uniform(r: &mut SplitMix64) -> f64 {
-        r.uniform()
-    }
-
     /// A surface z = f(x, y) over [0, 8]², one point per s² at random, with noise `sd` (a
     /// uniform noise of that standard deviation).
     fn surface(r: &mut SplitMix64, s: f64, sd: f64, f: impl Fn(f64, f64) -> f64) -> Vec<Point3> {
         let n = (64.0 / (s * s)) as usize;
         (0..n)
             .map(|_| {
-                let (x, y) = (8.0 * uniform(r), 8.0 * uniform(r));
-                [x, y, f(x, y) + sd * 3f64.sqrt() * (2.0 * uniform(r) - 1.0)]
+                let (x, y) = (8.0 * r.uniform(), 8.0 * r.uniform());
+                [x, y, f(x, y) + sd * 3f64.sqrt() * (2.0 * r.uniform() - 1.0)]
             })
             .collect()
     }
@@ -186,10 +181,10 @@ mod tests {
             let boulders: Vec<[f64; 4]> = (0..120)
                 .map(|_| {
                     [
-                        8.0 * uniform(&mut r),
-                        8.0 * uniform(&mut r),
+                        8.0 * r.uniform(),
+                        8.0 * r.uniform(),
                         0.0,
-                        0.2 + 0.4 * uniform(&mut r),
+                        0.2 + 0.4 * r.uniform(),
                     ]
                 })
                 .collect();
@@ -217,12 +212,9 @@ mod tests {
             // Leaves of a 2 m crown centred 4.5 m up: mostly its outer half metre.
             let n = (4.0 * std::f64::consts::PI * 4.0 / (s * s)) as usize;
             for _ in 0..n {
-                let (u, v) = (
-                    2.0 * uniform(&mut r) - 1.0,
-                    std::f64::consts::TAU * uniform(&mut r),
-                );
+                let (u, v) = (2.0 * r.uniform() - 1.0, std::f64::consts::TAU * r.uniform());
                 let w = (1.0 - u * u).sqrt();
-                let depth = -0.4 * (1.0 - uniform(&mut r)).ln();
+                let depth = -0.4 * (1.0 - r.uniform()).ln();
                 let rad = (2.0 - depth).max(0.0);
                 pts.push([
                     4.0 + rad * w * v.cos(),

@@ -30,10 +30,16 @@ pub fn normal_at(index: &Columns, q: &Point3, radius: f64) -> Option<(Point3, f6
     smallest_eigenvector(&m.covariance())
 }
 
+/// The symmetric 3×3 matrix whose upper triangle is `c` (xx xy xz yy yz zz), as
+/// [`super::moments::Moments3::covariance`] gives it.
+pub fn symmetric(c: &[f64; 6]) -> Matrix3<f64> {
+    Matrix3::new(c[0], c[1], c[2], c[1], c[3], c[4], c[2], c[4], c[5])
+}
+
 /// The unit eigenvector of the smallest eigenvalue of a symmetric 3×3 matrix given as its upper
 /// triangle (xx xy xz yy yz zz), and the ratio λ_min / trace.
 pub fn smallest_eigenvector(c: &[f64; 6]) -> Option<(Point3, f64)> {
-    let m = Matrix3::new(c[0], c[1], c[2], c[1], c[3], c[4], c[2], c[4], c[5]);
+    let m = symmetric(c);
     let trace = c[0] + c[3] + c[5];
     if trace.is_nan() || trace <= 0.0 || !trace.is_finite() {
         return None;

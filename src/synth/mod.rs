@@ -319,7 +319,7 @@ pub fn epoch_chunks(kind: SceneKind, opts: &SynthOptions, epoch: usize) -> Resul
     }
     let r = resolve(kind, opts)?;
     let model = SceneModel::new(kind, r.points[0], opts.seed);
-    if model.plants.iter().any(|p| !p.is_empty()) {
+    if model.has_plants() {
         return Err(Error::Usage(format!(
             "the {kind} scene's plants are not surfaces: its epochs are what `synth` writes"
         )));
@@ -401,8 +401,7 @@ pub fn synth(kind: SceneKind, opts: &SynthOptions, out_dir: &Path) -> Result<Tru
     let turn_z = turn_height(&model, &r, opts);
     // Scenes without plants are ground, as before; a scene with plants is unclassified unless
     // asked for classified.
-    let with_plants = model.plants.iter().any(|p| !p.is_empty());
-    let classified = !with_plants || opts.classified;
+    let classified = !model.has_plants() || opts.classified;
     for epoch in 0..2 {
         let chunks = chunks_of(&model, &r, opts, epoch, turn_z).behind(model.plants[epoch].clone());
         let density = epoch_points(&model, &r, epoch) as f64 / chunks.area();

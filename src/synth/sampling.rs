@@ -172,6 +172,8 @@ pub struct Chunks {
     /// Plants whose crowns hide part of the surfaces (`plants::hidden`): a hidden draw is drawn
     /// again, so the strip keeps its count.
     plants: Vec<super::plants::Plant>,
+    /// The surfaces' area (the one the points are shared out by).
+    area: f64,
 }
 
 impl Chunks {
@@ -229,6 +231,7 @@ impl Chunks {
             noise,
             placement,
             plants: Vec::new(),
+            area: all,
         }
     }
 
@@ -240,13 +243,7 @@ impl Chunks {
 
     /// The area of the surfaces.
     pub(crate) fn area(&self) -> f64 {
-        self.patches
-            .iter()
-            .map(|p| {
-                let d = p.domain();
-                p.area(d[2], d[3], AREA_GRID, AREA_GRID)
-            })
-            .sum()
+        self.area
     }
 
     /// Fill `out` (of length strip.count) with the strip's points.

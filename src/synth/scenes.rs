@@ -236,6 +236,11 @@ impl SceneModel {
         }
     }
 
+    /// Whether the scene has plants (points that are not surfaces: `plants`).
+    pub(crate) fn has_plants(&self) -> bool {
+        self.plants.iter().any(|p| !p.is_empty())
+    }
+
     /// The events with their closed-form volumes (local coordinates).
     pub fn events(&self) -> &[ModelEvent] {
         &self.events

@@ -244,18 +244,20 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<CampaignMeta> {
     }
     // Vegetation events stay out of tracks, the fit and the report's sums (SPEC.md §4) unless
     // `--vegetation keep`; the pairs' totals already leave them out.
-    let apart =
-        |e: &PairEvent| plan.params.vegetation.value.kept_apart() && e.properties.vegetation;
-    // Tracks over every pair's events that count.
+    let counts = |e: &PairEvent| plan.params.vegetation.value.counts(e.properties.vegetation);
+    let gain = |e: &PairEvent| e.properties.kind == Kind::Gain;
+    // Tracks over every pair's events that count; the others keep track 0.
     let depth = plan.params.cyl_halflen.value;
-    let placed: Vec<Placed> = events
+    let counted: Vec<usize> = (0..events.len()).filter(|&i| counts(&events[i])).collect();
+    let placed: Vec<Placed> = counted
         .iter()
-        .map(|e| {
+        .map(|&i| {
+            let e = &events[i];
             let obb = e.properties.obb;
             Placed {
                 pair: e.pair,
                 id: e.properties.id,
-                gain: e.properties.kind == Kind::Gain,
+                gain: gain(e),
                 centroid: e.centroid,
                 depth: obb.half_extents[2] + depth,
                 obb,
@@ -263,23 +265,20 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<CampaignMeta> {
             }
         })
         .collect();
-    let counted: Vec<usize> = (0..events.len()).filter(|&i| !apart(&events[i])).collect();
     let mut track = vec![0u32; events.len()];
-    let subset: Vec<Placed> = counted.iter().map(|&i| placed[i].clone()).collect();
-    for (&i, t) in counted.iter().zip(tracks::tracks(&subset)) {
+    for (&i, t) in counted.iter().zip(tracks::tracks(&placed)) {
         track[i] = t;
     }
     // Magnitude–frequency over the consecutive pairs' significant events (a baseline pair
     // repeats them).
     let consecutive = |pair: usize| plan.pairs[pair].after == plan.pairs[pair].before + 1;
-    let magnitudes = |gain: bool| -> Vec<f64> {
+    let magnitudes = |kind: bool| -> Vec<f64> {
         events
             .iter()
-            .zip(&placed)
-            .filter(|(e, p)| {
-                p.gain == gain && consecutive(e.pair) && e.properties.significant && !apart(e)
+            .filter(|e| {
+                gain(e) == kind && consecutive(e.pair) && e.properties.significant && counts(e)
             })
-            .filter_map(|(e, _)| e.properties.volume_m3)
+            .filter_map(|e| e.properties.volume_m3)
             .map(f64::abs)
             .collect()
     };
@@ -324,17 +323,16 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<CampaignMeta> {
         pairs: rows.iter().map(|r| r.row.clone()).collect(),
         events: events
             .iter()
-            .zip(&placed)
             .zip(&track)
-            .map(|((e, p), &t)| EventRow {
+            .map(|(e, &t)| EventRow {
                 pair: e.pair,
-                id: p.id,
-                kind: if p.gain { "gain" } else { "loss" }.into(),
+                id: e.properties.id,
+                kind: e.properties.kind.as_str().into(),
                 volume_m3: e.properties.volume_m3,
                 uncertainty_m3: e.properties.volume_uncertainty_m3,
                 significant: e.properties.significant,
                 complete: e.properties.complete,
-                vegetation: apart(e),
+                vegetation: !counts(e),
                 track_id: t,
                 centroid: e.centroid,
                 region: e.region.clone(),

@@ -71,18 +71,21 @@ impl Stage for ClearedStage {
         let grid = plan.layout.grid()?;
         let spacing = plan.params.point_spacing.value;
         let cell = crate::events::vegetation::SCALES[0] * spacing;
-        let mut splitting = Splitting::new(ctx, s, out)?;
+        // The largest tile, judged while the splitter holds its frames: one reservation for both.
+        let largest = meta.tile_points.iter().copied().max().unwrap_or(0);
+        let mut splitting = Splitting::with(
+            ctx,
+            s,
+            out,
+            largest * BYTES_PER_POINT,
+            &format!(" without its vegetation (tiles of up to {largest} points judged)"),
+        )?;
         splitting.quantum(ctx.quantum(s)?);
         let mut removed = 0u64;
         for id in grid.tiles() {
-            let n = meta.tile_points[grid.index(id)];
-            if n == 0 {
+            if meta.tile_points[grid.index(id)] == 0 {
                 continue;
             }
-            let _held = ctx.reserve(
-                n * BYTES_PER_POINT,
-                &format!("judging the vegetation of tile {} ({n} points)", id.name()),
-            )?;
             let t = read_tile(ctx, source, id)?;
             let index = crate::spatial::Columns::from_fn(
                 t.owned.len(),

@@ -135,7 +135,7 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<EventsMeta> {
     let (tau, reg) = (params.threshold.value, params.reg_error.value);
     let mut kept = Vec::new();
     let merging = ctx.reserve(
-        super::m3c2::merge_need(super::merged::merge_inputs(ctx.plan)),
+        super::merged::pair_merge_need(ctx.plan),
         "the merge of the pair's tiles",
     )?;
     let mut merged = Merged::new(ctx, pair)?;

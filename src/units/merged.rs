@@ -21,6 +21,7 @@ use super::m3c2::{merge_need, M3c2Stage, Merged, CHUNK_ROWS};
 use super::stage::{Line, Planner, Scope, Stage, Total};
 use super::Ctx;
 use crate::error::{Error, Result};
+use crate::m3c2::tile::KeyedResult;
 use crate::plan::Spec;
 use crate::store::UnitWriter;
 
@@ -46,6 +47,11 @@ pub fn merge_inputs(plan: &crate::plan::Plan) -> usize {
     }
 }
 
+/// Resident bytes of a merge of one of `plan`'s pairs' results (its tiles, or its runs).
+pub fn pair_merge_need(plan: &crate::plan::Plan) -> u64 {
+    merge_need(merge_inputs(plan))
+}
+
 /// Chunks encoded at once while a run is written (their bytes held until written).
 const GROUP: usize = 8;
 
@@ -56,8 +62,7 @@ pub fn run_file(r: usize, k: usize) -> String {
 
 /// Resident bytes of a merged unit: its merge of [`FAN_IN`] inputs and the chunks it encodes.
 pub fn need() -> u64 {
-    merge_need(FAN_IN)
-        + (GROUP * CHUNK_ROWS * std::mem::size_of::<crate::m3c2::tile::KeyedResult>()) as u64 * 2
+    merge_need(FAN_IN) + (GROUP * CHUNK_ROWS * std::mem::size_of::<KeyedResult>()) as u64 * 2
 }
 
 /// A pair's results as sorted runs.
@@ -68,7 +73,6 @@ pub struct MergedStage;
 pub struct MergedMeta {
     pub runs: Vec<usize>,
     pub rounds: usize,
-    pub core_points: u64,
 }
 
 impl Stage for MergedStage {
@@ -104,82 +108,81 @@ impl Stage for MergedStage {
     fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<MergedMeta> {
         let pair = ctx.pair(unit)?;
         let _held = ctx.reserve(need(), "merging the pair's results in rounds")?;
+        // The tiles' chunks first (the M3C2 units' own files), then each round's runs.
         let mut runs: Vec<Vec<PathBuf>> = super::m3c2::tile_chunks(ctx, pair)?;
-        let mut temporary: Vec<PathBuf> = Vec::new();
         let mut rounds = 0;
-        let mut core_points;
-        let mut counts = Vec::new();
         loop {
-            let groups: Vec<Vec<Vec<PathBuf>>> = runs.chunks(FAN_IN).map(|g| g.to_vec()).collect();
+            let groups: Vec<Vec<Vec<PathBuf>>> = runs.chunks(FAN_IN).map(<[_]>::to_vec).collect();
+            // The last round leaves at most FAN_IN runs, recorded as the unit's files; the
+            // others' runs are temporary files in the unit's directory.
             let last = groups.len() <= FAN_IN;
             let mut next = Vec::with_capacity(groups.len());
-            let mut written = Vec::new();
-            counts.clear();
-            core_points = 0;
             for (g, group) in groups.into_iter().enumerate() {
-                let mut merged = Merged::of_runs(group)?;
-                let mut files = Vec::new();
-                let mut batch: Vec<Vec<crate::m3c2::tile::KeyedResult>> = Vec::new();
-                let mut chunk = Vec::with_capacity(CHUNK_ROWS);
-                let mut n = 0u64;
-                let mut flush = |batch: &mut Vec<Vec<_>>, files: &mut Vec<PathBuf>| -> Result<()> {
-                    for bytes in super::m3c2::encode_chunks(batch)? {
-                        let k = files.len();
-                        let name = if last {
-                            run_file(g, k)
-                        } else {
-                            format!("round{rounds}_{g:04}_{k:05}.tmp")
-                        };
-                        let path = out.path(&name)?;
-                        if last {
-                            super::write_bytes(out, &name, &bytes)?;
-                        } else {
-                            std::fs::write(&path, &bytes).map_err(|e| Error::output(&path, e))?;
-                            written.push(path.clone());
-                        }
-                        files.push(path);
+                let (files, n) = write_run(Merged::of_runs(group)?, |k, bytes| {
+                    if last {
+                        let name = run_file(g, k);
+                        super::write_bytes(out, &name, &bytes)?;
+                        out.path(&name)
+                    } else {
+                        let path = out.path(&format!("round{rounds}_{g:04}_{k:05}.tmp"))?;
+                        std::fs::write(&path, &bytes).map_err(|e| Error::output(&path, e))?;
+                        Ok(path)
                     }
-                    batch.clear();
-                    Ok(())
-                };
-                while let Some(r) = merged.next_result()? {
-                    n += 1;
-                    chunk.push(r);
-                    if chunk.len() == CHUNK_ROWS {
-                        batch.push(std::mem::replace(
-                            &mut chunk,
-                            Vec::with_capacity(CHUNK_ROWS),
-                        ));
-                        if batch.len() == GROUP {
-                            flush(&mut batch, &mut files)?;
-                            crate::interrupt::check()?;
-                        }
-                    }
+                })?;
+                if last {
+                    (ctx.progress)(n);
                 }
-                if !chunk.is_empty() {
-                    batch.push(chunk);
-                }
-                flush(&mut batch, &mut files)?;
-                core_points += n;
-                (ctx.progress)(n);
-                counts.push(files.len());
                 next.push(files);
             }
-            // The previous round's runs are consumed.
-            for f in temporary.drain(..) {
-                std::fs::remove_file(&f).map_err(|e| Error::output(&f, e))?;
+            if rounds > 0 {
+                // The previous round's temporary runs are consumed.
+                for f in runs.iter().flatten() {
+                    std::fs::remove_file(f).map_err(|e| Error::output(f, e))?;
+                }
             }
-            temporary = written;
             runs = next;
             rounds += 1;
             if last {
-                break;
+                return Ok(MergedMeta {
+                    runs: runs.iter().map(Vec::len).collect(),
+                    rounds,
+                });
             }
         }
-        Ok(MergedMeta {
-            runs: counts,
-            rounds,
-            core_points,
-        })
+    }
+}
+
+/// Write `merged` as a sorted run of chunk files, [`GROUP`] chunks encoded at a time:
+/// `write(k, bytes)` stores chunk `k` and says where. Returns the files and the results written.
+fn write_run(
+    mut merged: Merged,
+    mut write: impl FnMut(usize, Vec<u8>) -> Result<PathBuf>,
+) -> Result<(Vec<PathBuf>, u64)> {
+    let (mut files, mut n) = (Vec::new(), 0u64);
+    let mut batch: Vec<Vec<KeyedResult>> = Vec::with_capacity(GROUP);
+    let mut chunk = Vec::with_capacity(CHUNK_ROWS);
+    loop {
+        let next = merged.next_result()?;
+        let done = next.is_none();
+        if let Some(r) = next {
+            chunk.push(r);
+            n += 1;
+        }
+        if chunk.len() == CHUNK_ROWS || (done && !chunk.is_empty()) {
+            batch.push(std::mem::replace(
+                &mut chunk,
+                Vec::with_capacity(CHUNK_ROWS),
+            ));
+        }
+        if batch.len() == GROUP || (done && !batch.is_empty()) {
+            for bytes in super::m3c2::encode_chunks(&batch)? {
+                files.push(write(files.len(), bytes)?);
+            }
+            batch.clear();
+            crate::interrupt::check()?;
+        }
+        if done {
+            return Ok((files, n));
+        }
     }
 }

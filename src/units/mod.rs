@@ -164,22 +164,25 @@ impl Ctx<'_> {
 
     /// The tiling record of survey `survey` in the run's frame (see [`Ctx::tiling`]).
     pub fn tiling_meta(&self, survey: usize) -> Result<tiling::TilingMeta> {
-        let u = self.tiling(survey)?;
-        if self.plan.units[u].kind() == cleared::ClearedStage::KIND {
-            return Ok(self.meta::<cleared::ClearedStage>(u)?.tiling);
-        }
-        self.uncleared_tiling_meta(survey)
+        self.tiling_meta_of(self.tiling(survey)?)
     }
 
     /// The tiling record of [`Ctx::uncleared_tiling`].
     pub fn uncleared_tiling_meta(&self, survey: usize) -> Result<tiling::TilingMeta> {
-        let u = self.uncleared_tiling(survey)?;
-        if self.plan.units[u].kind() == aligned::AlignedStage::KIND {
-            if let Some(t) = self.meta::<aligned::AlignedStage>(u)?.tiling {
-                return Ok(t);
-            }
+        self.tiling_meta_of(self.uncleared_tiling(survey)?)
+    }
+
+    /// The tiling record of unit `u`, which holds a survey's tiles: a tiling, an aligned tiling
+    /// that applied, or a cleared one.
+    fn tiling_meta_of(&self, u: usize) -> Result<tiling::TilingMeta> {
+        match self.plan.units[u].kind() {
+            cleared::ClearedStage::KIND => Ok(self.meta::<cleared::ClearedStage>(u)?.tiling),
+            aligned::AlignedStage::KIND => self
+                .meta::<aligned::AlignedStage>(u)?
+                .tiling
+                .ok_or_else(|| Error::Internal("an aligned unit without tiles read".into())),
+            _ => self.meta::<tiling::TilingStage>(u),
         }
-        self.meta::<tiling::TilingStage>(u)
     }
 
     /// The dependency of unit `i` of stage `S`, if it has one.

@@ -116,9 +116,7 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<StableMeta> {
     // out, and the reservation holds).
     let most = total.div_ceil(step).min(SAMPLES);
     let _held = ctx.reserve(
-        most * BYTES_PER_SAMPLE
-            + (8 << 20)
-            + super::m3c2::merge_need(super::merged::merge_inputs(ctx.plan)),
+        most * BYTES_PER_SAMPLE + (8 << 20) + super::merged::pair_merge_need(ctx.plan),
         "the stable-ground sample and the merge of the pair's tiles",
     )?;
     let mut samples = Vec::with_capacity(most as usize);

@@ -172,12 +172,25 @@ pub struct Splitting<'a> {
 impl<'a> Splitting<'a> {
     /// Start the tiling of survey `survey` in `out`'s directory.
     pub fn new(ctx: &'a Ctx, survey: usize, out: &mut UnitWriter) -> Result<Splitting<'a>> {
+        Self::with(ctx, survey, out, 0, "")
+    }
+
+    /// [`Splitting::new`] for a unit that also holds up to `extra` bytes of its own while it
+    /// splits (`what` they are for): reserved with the splitter's in one reservation, since a
+    /// unit may wait only while it holds none.
+    pub fn with(
+        ctx: &'a Ctx,
+        survey: usize,
+        out: &mut UnitWriter,
+        extra: u64,
+        what: &str,
+    ) -> Result<Splitting<'a>> {
         let plan = ctx.plan;
         let layout = &plan.layout;
         let budget = split_budget(plan);
         let held = ctx.reserve(
-            need(budget),
-            &format!("tiling survey {}", plan.surveys[survey].label),
+            need(budget) + extra,
+            &format!("tiling survey {}{what}", plan.surveys[survey].label),
         )?;
         // The unit's own directory: where the splitter writes its tile files.
         let dir = out

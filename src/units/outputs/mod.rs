@@ -347,18 +347,17 @@ impl Summary {
 
     /// What the one line says of vegetation events, when there are any.
     fn vegetation_line(&self) -> String {
-        (match (self.vegetation_events, self.parameters.vegetation.value) {
+        let mut line = match (self.vegetation_events, self.parameters.vegetation.value) {
             (0, _) => String::new(),
             (n, crate::params::Vegetation::Keep) => {
                 format!("; {n} vegetation event(s), counted (--vegetation keep)")
             }
             (n, _) => format!("; {n} vegetation event(s), left out of the totals"),
-        }) + &match self.vegetation_removed {
-            Some([b, a]) => {
-                format!("; vegetation-like points removed before M3C2: before {b}, after {a}")
-            }
-            None => String::new(),
+        };
+        if let Some([b, a]) = self.vegetation_removed {
+            line += &format!("; vegetation-like points removed before M3C2: before {b}, after {a}");
         }
+        line
     }
 
     /// What the one line says of the classes: the points left out, when any were.
@@ -764,9 +763,9 @@ fn summarize(
             })
         })
         .collect();
-    let apart = params.vegetation.value.kept_apart();
     let significant = || records.iter().filter(|e| e.significant);
-    let counted = || significant().filter(|e| !(apart && e.vegetation));
+    let mode = params.vegetation.value;
+    let counted = || significant().filter(|e| mode.counts(e.vegetation));
     let reach = ReachSummary::new(&params, written, records);
     let alignment = super::aligned::route(ctx, p.after)?.map(|r| AlignmentSummary::of(&r));
     let classes = ClassesSummary {
