@@ -135,3 +135,26 @@ fn a_merge_of_too_many_tiles_is_refused_before_anything_runs() {
     let o = run_compare(&b, &a, &out, &["--memory", &budget, "--tile-size", "10"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 }
+
+#[test]
+fn a_stable_sample_beyond_the_budget_is_refused_before_anything_runs() {
+    // 2 × 600k points: the stable-ground sample may hold 500,000 core points (SAMPLES, 256
+    // bytes each) beside the merge; at 160 MiB that is refused while planning, not after M3C2.
+    let dir = tempdir();
+    let (b, a) = planes(dir.path(), 14, 600_000, 300.0, 300.0);
+    let out = dir.path().join("out");
+    let err = refused(&b, &a, &out, &["--memory", "160MiB"]);
+    assert!(
+        err.contains(
+            "--memory 160 MiB is too small: the stable-ground sample and the merge of the pair's tiles needs"
+        ),
+        "{err}"
+    );
+    assert!(!err.contains("tiling"), "refused before tiling: {err}");
+    assert!(!out.exists());
+    // The budget it names is enough.
+    let budget = format!("{}MiB", suggested(&err));
+    let out = dir.path().join("out2");
+    let o = run_compare(&b, &a, &out, &["--memory", &budget]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}

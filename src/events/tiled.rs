@@ -25,18 +25,22 @@ pub fn cluster(
     eps: f64,
     min_pts: usize,
 ) -> Result<Vec<u32>> {
-    let mut members: Vec<Vec<usize>> = vec![Vec::new(); grid.len()];
-    let mut owner = Vec::with_capacity(pts.len());
+    // u32 indices: these lists are most of the clustering's memory beside the points.
+    let mut members: Vec<Vec<u32>> = vec![Vec::new(); grid.len()];
+    let mut owner: Vec<u32> = Vec::with_capacity(pts.len());
     for (i, p) in pts.iter().enumerate() {
-        owner.push(grid.index(grid.owner(p[0], p[1])));
+        owner.push(grid.index(grid.owner(p[0], p[1])) as u32);
         for t in grid.tiles_touching(p[0], p[1], eps) {
-            members[grid.index(t)].push(i);
+            members[grid.index(t)].push(i as u32);
         }
     }
     let tile_points = |t: usize| -> (Vec<Point3>, Vec<bool>) {
         (
-            members[t].iter().map(|&i| pts[i]).collect(),
-            members[t].iter().map(|&i| owner[i] == t).collect(),
+            members[t].iter().map(|&i| pts[i as usize]).collect(),
+            members[t]
+                .iter()
+                .map(|&i| owner[i as usize] as usize == t)
+                .collect(),
         )
     };
     // Phase 1: each tile decides the core status of the points it owns.
@@ -50,8 +54,8 @@ pub fn cluster(
     let mut core = vec![false; pts.len()];
     for (t, f) in flags.iter().enumerate() {
         for (j, &i) in members[t].iter().enumerate() {
-            if owner[i] == t {
-                core[i] = f[j];
+            if owner[i as usize] as usize == t {
+                core[i as usize] = f[j];
             }
         }
     }
@@ -60,8 +64,8 @@ pub fn cluster(
         .into_par_iter()
         .map(|t| {
             let (p, owned) = tile_points(t);
-            let ids: Vec<u64> = members[t].iter().map(|&i| keys[i]).collect();
-            let c: Vec<bool> = members[t].iter().map(|&i| core[i]).collect();
+            let ids: Vec<u64> = members[t].iter().map(|&i| keys[i as usize]).collect();
+            let c: Vec<bool> = members[t].iter().map(|&i| core[i as usize]).collect();
             dbscan::tile_links(&p, &ids, &owned, &c, eps)
         })
         .collect::<Result<_>>()?;

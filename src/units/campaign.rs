@@ -22,6 +22,8 @@ use super::{read_json, Ctx};
 use crate::campaign::powerlaw::{self, PowerLawFit};
 use crate::campaign::report::{self, EventRow, PairRow, Report};
 use crate::campaign::tracks::{self, Placed};
+use std::io::{Read, Write};
+
 use crate::error::{Error, Result};
 use crate::events::Kind;
 use crate::io::las_out::{CoordinateGrid, ExtraDim, ExtraType, ResultWriter};
@@ -536,30 +538,68 @@ fn write_timeseries(
         CoordinateGrid::for_extent(extent.min, extent.max, &scales),
         Some(super::m3c2::pair_count(ctx, 0)?),
     )?;
-    let mut streams: Vec<super::m3c2::Merged> = (0..plan.pairs.len())
-        .map(|k| super::m3c2::Merged::new(ctx, k))
-        .collect::<Result<_>>()?;
-    let mut n = 0u64;
-    let mut values = vec![f64::NAN; streams.len()];
-    loop {
-        let first = streams[0].next_result()?;
-        let Some(first) = first else { break };
-        values[0] = first.r.measured();
-        for (k, s) in streams.iter_mut().enumerate().skip(1) {
-            let r = s.next_result()?.ok_or_else(|| {
-                Error::Internal(format!("pair {k} has fewer core points than pair 0"))
-            })?;
-            if r.key != first.key {
-                return Err(Error::Internal(format!(
-                    "pair {k}'s core points differ from pair 0's (key {} vs {})",
-                    r.key, first.key
-                )));
+    // One pair's merge at a time (each holds up to `merged::FAN_IN` chunks; all at once grew
+    // with the pairs): the later pairs' distances go to temporary columns in the unit's
+    // directory, then one pass over pair 0's results reads them beside it. Every pair has the
+    // campaign's core points in key order; a count and a hash of the keys check it.
+    const BUFFER: usize = 1 << 16;
+    let _held = ctx.reserve(
+        super::merged::pair_merge_need(plan) + (plan.pairs.len() * BUFFER) as u64 + (8 << 20),
+        "the time series (a pair's merge at a time)",
+    )?;
+    let keys_of =
+        |k: usize, each: &mut dyn FnMut(&crate::m3c2::tile::KeyedResult) -> Result<()>| {
+            let mut s = super::m3c2::Merged::new(ctx, k)?;
+            let (mut n, mut h) = (0u64, talus_tiling::Fnv64::new());
+            while let Some(r) = s.next_result()? {
+                h.write_u64(r.key);
+                n += 1;
+                each(&r)?;
             }
-            values[k] = r.r.measured();
-        }
-        w.write(first.xyz, &values)?;
-        n += 1;
+            Ok::<_, Error>((n, h.finish()))
+        };
+    let mut columns = Vec::new();
+    for k in 1..plan.pairs.len() {
+        let path = out.path(&format!("timeseries_{k:05}.tmp"))?;
+        let file = std::fs::File::create(&path).map_err(|e| Error::output(&path, e))?;
+        let mut w = std::io::BufWriter::with_capacity(BUFFER, file);
+        let seen = keys_of(k, &mut |r| {
+            w.write_all(&r.r.measured().to_le_bytes())
+                .map_err(|e| Error::output(&path, e))
+        })?;
+        w.flush().map_err(|e| Error::output(&path, e))?;
+        columns.push((path, seen));
     }
+    let mut readers = columns
+        .iter()
+        .map(|(p, _)| {
+            let f = std::fs::File::open(p).map_err(|e| Error::output(p, e))?;
+            Ok(std::io::BufReader::with_capacity(BUFFER, f))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let mut values = vec![f64::NAN; plan.pairs.len()];
+    let first = keys_of(0, &mut |r| {
+        values[0] = r.r.measured();
+        for (k, rd) in readers.iter_mut().enumerate() {
+            let mut b = [0u8; 8];
+            rd.read_exact(&mut b)
+                .map_err(|e| Error::output(&columns[k].0, e))?;
+            values[k + 1] = f64::from_le_bytes(b);
+        }
+        w.write(r.xyz, &values)
+    })?;
+    for (k, (path, seen)) in columns.iter().enumerate() {
+        if *seen != first {
+            return Err(Error::Internal(format!(
+                "pair {}'s core points differ from pair 0's ({} against {})",
+                k + 1,
+                seen.0,
+                first.0
+            )));
+        }
+        std::fs::remove_file(path).map_err(|e| Error::output(path, e))?;
+    }
+    let n = first.0;
     w.finish()?;
     out.add_file("timeseries.laz")?;
     Ok(n)

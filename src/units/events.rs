@@ -65,10 +65,12 @@ pub fn candidate_boxes(e: &Event, cluster: &[Point3]) -> Vec<Obb> {
     boxes
 }
 
-/// Resident bytes per kept core point in the events unit: the kept record (104), its copies for
-/// smoothing and clustering (40), the kd-tree and neighbour lists of smoothing (k = 10: ≈ 160),
-/// the clustering's labels and union-find (≈ 24), the columns written (≈ 70).
-pub const BYTES_PER_KEPT: u64 = 400;
+/// Resident bytes per kept core point in the events unit: the kept record (104), the positions
+/// and distances for smoothing (32) with its kd-tree (≈ 40), the clustering's copies, tile lists
+/// and links (≈ 50). `kept.tile` is written a frame at a time, so no column copy of them all.
+/// Measured on the 120M-point pair (839,640 kept): the unit's peak 184 MiB in a process of its
+/// own, ≈ 200 bytes each beyond the process's base.
+pub const BYTES_PER_KEPT: u64 = 224;
 
 /// The pair's events: filter, smoothing, signed clustering, description.
 pub struct EventsStage;
@@ -167,13 +169,15 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<EventsMeta> {
         &format!("the events of {} kept core points", kept.len()),
     )?;
     let pts: Vec<Point3> = kept.iter().map(|k| k.xyz).collect();
-    let d: Vec<f64> = kept.iter().map(|k| k.d).collect();
-    let smoothed = events::smooth::smooth(
-        &pts,
-        &d,
-        params.smooth_k.value as usize,
-        params.smooth_sigma.value,
-    )?;
+    let smoothed = {
+        let d: Vec<f64> = kept.iter().map(|k| k.d).collect();
+        events::smooth::smooth(
+            &pts,
+            &d,
+            params.smooth_k.value as usize,
+            params.smooth_sigma.value,
+        )?
+    };
     for (k, s) in kept.iter_mut().zip(&smoothed) {
         k.smoothed = *s;
     }
@@ -237,7 +241,7 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<EventsMeta> {
     }
     (ctx.progress)(drafts.len() as u64);
     super::write_json(out, EVENTS, &drafts)?;
-    super::write_columns(out, KEPT, &to_columns(&kept))?;
+    write_kept(out, &kept)?;
     Ok(EventsMeta {
         events: drafts.len(),
         kept: kept.len(),
@@ -274,24 +278,112 @@ fn to_columns(kept: &[Kept]) -> TileColumns {
     }
 }
 
-/// The events and kept core points of pair `pair` (its events unit must be done).
-pub fn read(ctx: &Ctx, pair: usize) -> Result<(Vec<Draft>, Vec<Kept>)> {
-    Ok((read_drafts(ctx, pair)?, read_kept(ctx, pair)?))
-}
-
 /// The events of pair `pair` (its events unit must be done).
 pub fn read_drafts(ctx: &Ctx, pair: usize) -> Result<Vec<Draft>> {
     let u = ctx.unit(&Spec::pair(EventsStage::KIND, pair))?;
     super::read_json(ctx, u, EVENTS)
 }
 
-/// The kept core points of pair `pair` (its events unit must be done).
-pub fn read_kept(ctx: &Ctx, pair: usize) -> Result<Vec<Kept>> {
-    let u = ctx.unit(&Spec::pair(EventsStage::KIND, pair))?;
-    let c = super::read_columns(ctx, u, KEPT)?;
-    let kept_path = ctx.input(u, KEPT)?;
+/// Rows of a `kept.tile` frame: its readers (the volumes units, the outputs) hold a frame at a
+/// time, never the pair's kept core points, which grow with the change.
+pub const KEPT_FRAME: usize = 1 << 16;
+
+/// Write `kept` (in key order) as `kept.tile`, [`KEPT_FRAME`] rows to a frame (one empty frame
+/// when nothing is kept).
+fn write_kept(out: &mut UnitWriter, kept: &[Kept]) -> Result<()> {
+    let path = out.path(KEPT)?;
+    let mut file = talus_tiling::framed::Framed::new(&path);
+    let opts = talus_tiling::WriteOptions::default();
+    let empty: &[Kept] = &[];
+    for rows in kept
+        .chunks(KEPT_FRAME)
+        .chain(kept.is_empty().then_some(empty))
+    {
+        file.append(&to_columns(rows), &opts)?;
+    }
+    let d = file.finish()?;
+    out.add(KEPT, d.crc32, d.size);
+    Ok(())
+}
+
+/// The kept core points of a pair, a frame at a time in key order.
+pub struct KeptFrames {
+    path: std::path::PathBuf,
+    frames: talus_tiling::TileFrames,
+}
+
+impl KeptFrames {
+    /// Pair `pair`'s kept core points (its events unit must be done).
+    pub fn open(ctx: &Ctx, pair: usize) -> Result<KeptFrames> {
+        let u = ctx.unit(&Spec::pair(EventsStage::KIND, pair))?;
+        let path = ctx.input(u, KEPT)?;
+        let frames = talus_tiling::TileFrames::open(&path).map_err(|e| super::damaged(&path, e))?;
+        Ok(KeptFrames { path, frames })
+    }
+
+    /// Kept core points in the file.
+    pub fn count(&self) -> u64 {
+        self.frames.point_count()
+    }
+
+    /// The next frame's kept core points; None after the last.
+    pub fn next_frame(&mut self) -> Result<Option<Vec<Kept>>> {
+        match self.frames.next_frame() {
+            Ok(Some(c)) => from_columns(&c, &self.path).map(Some),
+            Ok(None) => Ok(None),
+            Err(e) => Err(super::damaged(&self.path, e)),
+        }
+    }
+}
+
+/// Pair `pair`'s kept core points looked up by key, the keys asked in ascending order (as the
+/// merge of its results gives them): a frame held at a time.
+pub struct KeptByKey {
+    frames: Option<KeptFrames>,
+    rows: Vec<Kept>,
+    at: usize,
+}
+
+impl KeptByKey {
+    /// Over `frames`; None: no kept core points (an M3C2-only run).
+    pub fn new(frames: Option<KeptFrames>) -> KeptByKey {
+        KeptByKey {
+            frames,
+            rows: Vec::new(),
+            at: 0,
+        }
+    }
+
+    /// The kept core point of `key`, if it is one; `key` not below the last one asked.
+    pub fn get(&mut self, key: u64) -> Result<Option<&Kept>> {
+        loop {
+            while self.at < self.rows.len() && self.rows[self.at].key < key {
+                self.at += 1;
+            }
+            if self.at < self.rows.len() {
+                let k = &self.rows[self.at];
+                return Ok((k.key == key).then_some(k));
+            }
+            match self
+                .frames
+                .as_mut()
+                .map(KeptFrames::next_frame)
+                .transpose()?
+            {
+                Some(Some(rows)) => (self.rows, self.at) = (rows, 0),
+                _ => {
+                    self.frames = None;
+                    return Ok(None);
+                }
+            }
+        }
+    }
+}
+
+/// The kept core points of one frame of `kept.tile` at `path`.
+fn from_columns(c: &TileColumns, path: &std::path::Path) -> Result<Vec<Kept>> {
     let bad = |name: &str| Error::Damaged {
-        path: kept_path.clone(),
+        path: path.to_path_buf(),
         problem: format!("no column {name}"),
     };
     let f = |name: &str| match c.column(name) {

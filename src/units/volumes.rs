@@ -153,7 +153,7 @@ fn near_events(drafts: &[Draft], mine: &[&Draft], params: &Params) -> rustc_hash
 /// The claims of every event (one per candidate box) over their clustered core points.
 pub fn ownership(
     drafts: &[&Draft],
-    members: &HashMap<u32, Vec<&Kept>>,
+    members: &HashMap<u32, Vec<Kept>>,
     params: &Params,
 ) -> volume::Ownership {
     let claims = drafts
@@ -187,7 +187,7 @@ pub fn ownership(
 /// the registration error along the event's core normals (the user's value if given).
 fn error_model(
     v: &EventVolume,
-    members: &[&Kept],
+    members: &[Kept],
     params: &Params,
     stable: Option<&Stable>,
 ) -> uncertainty::ErrorModel {
@@ -234,7 +234,7 @@ fn error_model(
 /// beyond the event's box.
 fn vegetation_fraction(
     e: &Event,
-    members: &[&Kept],
+    members: &[Kept],
     before: &[Point3],
     after: &[Point3],
     params: &Params,
@@ -404,11 +404,14 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
         // the others are never asked (building every event's claim in every unit cost as much
         // as the tile's own volumes on the 120M-point pair).
         let near = near_events(&drafts, &mine, params);
-        let kept = super::events::read_kept(ctx, pair)?;
-        let mut members: HashMap<u32, Vec<&Kept>> = HashMap::default();
-        for k in kept.iter().filter(|k| k.event > 0) {
-            if near.contains(&k.event) {
-                members.entry(k.event).or_default().push(k);
+        // The near events' core points only, read a frame at a time.
+        let mut members: HashMap<u32, Vec<Kept>> = HashMap::default();
+        let mut kept = super::events::KeptFrames::open(ctx, pair)?;
+        while let Some(rows) = kept.next_frame()? {
+            for k in rows {
+                if k.event > 0 && near.contains(&k.event) {
+                    members.entry(k.event).or_default().push(k);
+                }
             }
         }
         let relevant: Vec<&Draft> = drafts

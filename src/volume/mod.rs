@@ -283,11 +283,6 @@ pub fn event_volume_in(
     let near_points =
         |c: [f64; 2]| cov1.covers(c[0], c[1], radius) && cov2.covers(c[0], c[1], radius);
     let region = region_of(&frame, &r, spacing, &tin1, &tin2, &near_points, owned);
-    let top = |tin: &Tin| {
-        let (v, f) = tin.mesh();
-        solid::clipped_top(&v, &f, &region)
-    };
-    let (top1, top2) = (top(&tin1), top(&tin2));
     let inside = |l: &Vec<[f64; 3]>| {
         l.iter()
             .filter(|p| {
@@ -299,17 +294,20 @@ pub fn event_volume_in(
             .count()
     };
     let counts = [inside(&local1), inside(&local2)];
-    let mut v = finish(
-        &frame,
-        region,
-        top1,
-        top2,
-        &tin1,
-        &tin2,
-        spacing,
-        local1.len(),
-        local2.len(),
-    )?;
+    let (n1, n2) = (local1.len(), local2.len());
+    // Counted, the event's own points are no longer needed (the triangulations hold theirs).
+    drop((local1, local2));
+    let top = |tin: &Tin| {
+        let (v, f) = tin.mesh();
+        solid::clipped_top(&v, &f, &region)
+    };
+    let (top1, top2) = (top(&tin1), top(&tin2));
+    covered(&region, &top1, &top2)?;
+    let change = change_of(&region, &tin1, &tin2, spacing);
+    // The triangulations are no longer needed: given back before the solids are grown (they
+    // were most of a large event's peak beside them).
+    drop((tin1, tin2, cov1, cov2));
+    let mut v = finish(&frame, region, top1, top2, change, spacing, n1, n2);
     v.region_points = counts;
     Ok(v)
 }
@@ -335,47 +333,77 @@ pub fn event_volume_from_surfaces(
     let none = || Error::Epochs("event footprint not covered by a surface".into());
     let top1 = solid::grid_top(before, &region, 2).ok_or_else(none)?;
     let top2 = solid::grid_top(after, &region, 2).ok_or_else(none)?;
-    finish(&frame, region, top1, top2, before, after, spacing, 0, 0)
+    covered(&region, &top1, &top2)?;
+    let change = change_of(&region, before, after, spacing);
+    Ok(finish(&frame, region, top1, top2, change, spacing, 0, 0))
 }
 
-#[allow(clippy::too_many_arguments)]
-fn finish(
-    frame: &Frame,
-    region: Region,
-    top1: Mesh,
-    top2: Mesh,
-    s1: &dyn Surface,
-    s2: &dyn Surface,
-    spacing: f64,
-    n1: usize,
-    n2: usize,
-) -> Result<EventVolume> {
+/// Refuse a region no part of which both epochs cover.
+fn covered(region: &Region, top1: &Mesh, top2: &Mesh) -> Result<()> {
     if region.is_empty() || top1.faces.is_empty() || top2.faces.is_empty() {
         return Err(Error::Epochs(format!(
             "no part of the footprint is covered by both epochs and free of other events (coverage {:.0} %)",
             100.0 * region.coverage()
         )));
     }
-    let r = region.cells.r;
+    Ok(())
+}
+
+/// What the two surfaces say of the change over the region beyond the solids: where the
+/// change reaches the region's rim, the variance of its steps, the gross gain and loss.
+struct Change {
+    open_rim: region::OpenRim,
+    step_variance_m6: f64,
+    gain: f64,
+    loss: f64,
+}
+
+fn change_of(region: &Region, s1: &dyn Surface, s2: &dyn Surface, spacing: f64) -> Change {
     let change = |u: f64, v: f64| Some(s2.height_at(u, v)? - s1.height_at(u, v)?);
     let dw = region.cell_changes(&change);
-    let open_rim = region.open_rim(&dw);
-    let step_variance_m6 = region.step_variance(&dw, spacing);
+    // Gross terms (reported, not part of V) by the midpoint rule on sub-cells of about
+    // spacing/2 (a step is misplaced by at most half a sub-cell).
+    let (gain, loss) = gross(s1, s2, region, spacing / 2.0);
+    Change {
+        open_rim: region.open_rim(&dw),
+        step_variance_m6: region.step_variance(&dw, spacing),
+        gain,
+        loss,
+    }
+}
+
+/// The event's volume from the tops clipped to the region (each closed into a solid over one
+/// base plane) and the surfaces' `change`.
+#[allow(clippy::too_many_arguments)]
+fn finish(
+    frame: &Frame,
+    region: Region,
+    top1: Mesh,
+    top2: Mesh,
+    change: Change,
+    spacing: f64,
+    n1: usize,
+    n2: usize,
+) -> EventVolume {
+    let r = region.cells.r;
     // One base plane below both surfaces, one spacing lower still so no wall is flat.
     let base = solid::min_height(&top1).min(solid::min_height(&top2)) - spacing;
     let solid1 = solid::close(top1, base, &r);
     let solid2 = solid::close(top2, base, &r);
     let (v1, v2) = (solid::signed_volume(&solid1), solid::signed_volume(&solid2));
-    // Gross terms (reported, not part of V) by the midpoint rule on sub-cells of about
-    // spacing/2 (a step is misplaced by at most half a sub-cell).
-    let (gain, loss) = gross(s1, s2, &region, spacing / 2.0);
+    let Change {
+        open_rim,
+        step_variance_m6,
+        gain,
+        loss,
+    } = change;
     let to_global = |mut m: Mesh| {
         for v in &mut m.vertices {
             *v = frame.to_global(v);
         }
         m
     };
-    Ok(EventVolume {
+    EventVolume {
         volume_m3: v2 - v1,
         gain_m3: gain,
         loss_m3: loss,
@@ -395,7 +423,7 @@ fn finish(
         region_points: [0; 2],
         open_rim,
         step_variance_m6,
-    })
+    }
 }
 
 /// Midpoint-rule gross gain and loss over the region's cells, each cut into sub-cells of at

@@ -342,6 +342,15 @@ mod tests {
         .unwrap();
         assert_eq!(streamed.unwrap(), all);
         assert_eq!(sizes.len(), 10);
+        // Pulled a frame at a time: the header's count first, the same frames, then nothing.
+        let mut pulled = crate::tile_file::TileFrames::open(&path).unwrap();
+        assert_eq!(pulled.point_count(), start as u64);
+        let mut pulled_sizes = Vec::new();
+        while let Some(f) = pulled.next_frame().unwrap() {
+            pulled_sizes.push(f.len());
+        }
+        assert_eq!(pulled_sizes, sizes);
+        assert!(pulled.next_frame().unwrap().is_none());
         let h = read_tile_header(&path).unwrap();
         assert_eq!((h.version, h.point_count), (VERSION, start as u64));
         assert_eq!(h.bounds, all.bounds());
@@ -382,5 +391,9 @@ mod tests {
         longer.push(0);
         std::fs::write(&damaged, &longer).unwrap();
         assert!(matches!(read_tile(&damaged), Err(Error::Corrupt { .. })));
+        assert!(matches!(
+            crate::tile_file::read_tile_frames(&damaged, |_| Ok(())),
+            Err(Error::Corrupt { .. })
+        ));
     }
 }

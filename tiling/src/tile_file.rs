@@ -280,52 +280,130 @@ pub fn read_tile(path: &Path) -> Result<TileColumns> {
 /// worth, not the tile's. Damage anywhere is an error, as with [`read_tile`]; `f` may have seen
 /// the frames before the damaged one.
 pub fn read_tile_frames(path: &Path, mut f: impl FnMut(TileColumns) -> Result<()>) -> Result<()> {
-    let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
-    let mut fixed = [0u8; 16];
-    read_exact_or_corrupt(&mut file, &mut fixed, path)?;
-    let version = check_magic_version(&fixed, &[VERSION, crate::framed::VERSION])
-        .map_err(|r| Error::corrupt(path, r))?;
-    if version == VERSION {
-        return f(read_tile(path)?);
+    let mut frames = TileFrames::open(path)?;
+    while let Some(cols) = frames.next_frame()? {
+        f(cols)?;
     }
-    let mut head = fixed.to_vec();
-    head.resize(crate::framed::HEADER_LEN, 0);
-    read_exact_or_corrupt(&mut file, &mut head[16..], path)?;
-    let h = crate::framed::parse_header(&head).map_err(|r| Error::corrupt(path, r))?;
-    let mut points = 0u64;
-    let mut bytes = Vec::new();
-    for k in 0..h.frames {
+    Ok(())
+}
+
+/// A tile file read a frame at a time by a reader that pulls (one that walks another sorted
+/// stream beside it); [`read_tile_frames`] is the same for one that is pushed to. Holds one
+/// frame's bytes and columns at a time.
+#[derive(Debug)]
+pub struct TileFrames {
+    path: std::path::PathBuf,
+    file: File,
+    /// A version-1 file: its one frame, until taken.
+    whole: Option<TileColumns>,
+    framed: bool,
+    /// Frames in the file, and the next to read.
+    frames: u32,
+    next: u32,
+    /// Points read so far, and the header's count.
+    points: u64,
+    expected: u64,
+    bytes: Vec<u8>,
+}
+
+impl TileFrames {
+    /// Open `path` and read its header.
+    pub fn open(path: &Path) -> Result<TileFrames> {
+        let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
+        let mut fixed = [0u8; 16];
         read_exact_or_corrupt(&mut file, &mut fixed, path)?;
-        let fh = read_v1_header(&mut file, path, fixed)?;
+        let version = check_magic_version(&fixed, &[VERSION, crate::framed::VERSION])
+            .map_err(|r| Error::corrupt(path, r))?;
+        let mut frames = TileFrames {
+            path: path.to_path_buf(),
+            file,
+            whole: None,
+            framed: version != VERSION,
+            frames: 0,
+            next: 0,
+            points: 0,
+            expected: 0,
+            bytes: Vec::new(),
+        };
+        if version == VERSION {
+            let whole = read_tile(path)?;
+            frames.expected = whole.len() as u64;
+            frames.whole = Some(whole);
+            return Ok(frames);
+        }
+        let mut head = fixed.to_vec();
+        head.resize(crate::framed::HEADER_LEN, 0);
+        read_exact_or_corrupt(&mut frames.file, &mut head[16..], path)?;
+        let h = crate::framed::parse_header(&head).map_err(|r| Error::corrupt(path, r))?;
+        frames.frames = h.frames;
+        frames.expected = h.point_count;
+        Ok(frames)
+    }
+
+    /// Points in the file (the header's count).
+    pub fn point_count(&self) -> u64 {
+        self.expected
+    }
+
+    /// The next frame's columns; None after the last (the file's length and count checked).
+    pub fn next_frame(&mut self) -> Result<Option<TileColumns>> {
+        let path = self.path.as_path();
+        if let Some(whole) = self.whole.take() {
+            return Ok(Some(whole));
+        }
+        if self.next == self.frames {
+            if self.next == u32::MAX {
+                return Ok(None);
+            }
+            self.next = u32::MAX;
+            self.frames = u32::MAX;
+            return self.check_end().map(|()| None);
+        }
+        let k = self.next;
+        let mut fixed = [0u8; 16];
+        read_exact_or_corrupt(&mut self.file, &mut fixed, path)?;
+        let fh = read_v1_header(&mut self.file, path, fixed)?;
         let len = (fh.header_len as u64)
             .checked_add(fh.payload_len)
             .and_then(|l| usize::try_from(l).ok())
             .ok_or_else(|| Error::corrupt(path, format!("frame {k}: payload length too large")))?;
-        bytes.clear();
-        bytes.extend_from_slice(&fixed);
-        bytes.resize(len, 0);
+        self.bytes.clear();
+        self.bytes.extend_from_slice(&fixed);
+        self.bytes.resize(len, 0);
         // Back to the frame's start (the header was read to learn the length), then all of it.
-        file.seek(std::io::SeekFrom::Current(-(fh.header_len as i64 - 16)))
+        self.file
+            .seek(std::io::SeekFrom::Current(-(fh.header_len as i64 - 16)))
             .map_err(|e| Error::io(path, e))?;
-        read_exact_or_corrupt(&mut file, &mut bytes[16..], path)?;
-        let cols = decode(&bytes).map_err(|r| Error::corrupt(path, format!("frame {k}: {r}")))?;
-        points += cols.len() as u64;
-        f(cols)?;
+        read_exact_or_corrupt(&mut self.file, &mut self.bytes[16..], path)?;
+        let cols =
+            decode(&self.bytes).map_err(|r| Error::corrupt(path, format!("frame {k}: {r}")))?;
+        self.points += cols.len() as u64;
+        self.next += 1;
+        Ok(Some(cols))
     }
-    let mut rest = [0u8; 1];
-    if file.read(&mut rest).map_err(|e| Error::io(path, e))? != 0 {
-        return Err(Error::corrupt(path, "file is longer than its frames"));
+
+    /// After the last frame of a framed file: nothing beyond it, and the header's count read
+    /// (a version-1 file was checked whole when read).
+    fn check_end(&mut self) -> Result<()> {
+        let path = self.path.as_path();
+        if !self.framed {
+            return Ok(());
+        }
+        let mut rest = [0u8; 1];
+        if self.file.read(&mut rest).map_err(|e| Error::io(path, e))? != 0 {
+            return Err(Error::corrupt(path, "file is longer than its frames"));
+        }
+        if self.points != self.expected {
+            return Err(Error::corrupt(
+                path,
+                format!(
+                    "frames hold {} points, the header says {}",
+                    self.points, self.expected
+                ),
+            ));
+        }
+        Ok(())
     }
-    if points != h.point_count {
-        return Err(Error::corrupt(
-            path,
-            format!(
-                "frames hold {points} points, the header says {}",
-                h.point_count
-            ),
-        ));
-    }
-    Ok(())
 }
 
 /// Read and verify only a tile file's header (count, bounds, column names).

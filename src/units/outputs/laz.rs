@@ -104,7 +104,7 @@ pub fn write_m3c2_laz(
     reg_error: f64,
     crs: &Crs,
     grid: CoordinateGrid,
-    event_of: &dyn Fn(u64) -> (f64, u32),
+    event_of: &mut dyn FnMut(u64) -> Result<(f64, u32)>,
     each: &mut dyn FnMut(&KeyedResult),
 ) -> Result<Written> {
     let path = out.path("m3c2.laz")?;
@@ -120,7 +120,7 @@ pub fn write_m3c2_laz(
         k.r = k.r.with_registration(reg_error);
         each(&k);
         let r = &k.r;
-        let (smoothed, event) = event_of(k.key);
+        let (smoothed, event) = event_of(k.key)?;
         // Beyond the user's half-length nothing is measured: the flag says why there is none.
         let beyond = r.reach == Reach::Beyond;
         let (uncertainty, significant) = match beyond {

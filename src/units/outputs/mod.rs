@@ -569,9 +569,10 @@ fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<Outp
     )?;
     // Events with their volumes, in id order.
     let (records, kept, mesh_sources) = if plan.m3c2_only {
-        (Vec::new(), Vec::new(), Vec::new())
+        (Vec::new(), None, Vec::new())
     } else {
-        let (drafts, kept) = super::events::read(ctx, pair)?;
+        let drafts = super::events::read_drafts(ctx, pair)?;
+        let kept = super::events::KeptFrames::open(ctx, pair)?;
         let mut measured: HashMap<u32, (Measured, usize)> = HashMap::default();
         for t in grid.tiles() {
             let v = ctx.unit(&Spec::tile(VolumesStage::KIND, pair, t))?;
@@ -589,12 +590,11 @@ fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<Outp
             sources.push((d.event.id, v, m.meshes));
             records.push(EventRecord::new(d.event, m));
         }
-        (records, kept, sources)
+        (records, Some(kept), sources)
     };
-    let per_point: HashMap<u64, (f64, u32)> = kept
-        .iter()
-        .map(|k| (k.key, (k.smoothed, k.event)))
-        .collect();
+    let kept_count = kept.as_ref().map_or(0, |k| k.count());
+    // The kept core points beside the results, both in key order.
+    let mut kept = super::events::KeptByKey::new(kept);
     // m3c2.laz and the viewer's terrain, in one pass over the results.
     let total = super::m3c2::pair_count(ctx, pair)?;
     let mut terrain = view::TerrainSample::new(total, plan.layout.anchor);
@@ -632,7 +632,11 @@ fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<Outp
         params.reg_error.value,
         &crs,
         CoordinateGrid::for_extent(extent.min, extent.max, &scales),
-        &|k| per_point.get(&k).copied().unwrap_or((f64::NAN, 0)),
+        &mut |k| {
+            Ok(kept
+                .get(k)?
+                .map_or((f64::NAN, 0), |k| (k.smoothed, k.event)))
+        },
         &mut |k| terrain.push(k),
     )?;
     (ctx.progress)(written.core_points);
@@ -667,7 +671,7 @@ fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<Outp
         ground.stable,
         &records,
         &written,
-        kept.len(),
+        kept_count as usize,
     )?;
     let text = serde_json::to_string_pretty(&summary)
         .map_err(|e| Error::Internal(format!("summary: {e}")))?;
