@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 
 use super::stage::{Line, Planner, Scope, Stage, Total};
 use super::tiling::TilingStage;
-use super::{read_tile, Ctx, TilePoints};
+use super::{read_tile_near, Ctx, TilePoints};
 use crate::error::Result;
 use crate::events::align::{fit, Alignment};
 use crate::events::chain::Fits;
@@ -237,8 +237,12 @@ fn sample(ctx: &Ctx, onto: usize, s: usize) -> Result<(Vec<Sample>, usize)> {
             super::m3c2::need(n),
             &format!("aligning: tile {} ({n} points with its halo)", tile.name()),
         )?;
-        let before = read_tile(ctx, t0, tile)?;
-        let after = read_tile(ctx, ts, tile)?;
+        // Only the frames that reach the windows or their neighbourhoods: every point `within`
+        // keeps and every point of a core-point cell `inside` a window (a cell is far smaller
+        // than `reach`) is in them, so the sample is the one the whole tile gives.
+        let reached: Vec<[f64; 4]> = near.iter().chain(&wins).copied().collect();
+        let before = read_tile_near(ctx, t0, tile, &reached)?;
+        let after = read_tile_near(ctx, ts, tile, &reached)?;
         fn epoch(t: &TilePoints) -> EpochPoints<'_> {
             EpochPoints {
                 x: &t.x,

@@ -232,6 +232,7 @@ pub fn damaged(path: &Path, e: talus_tiling::Error) -> Error {
 
 /// The points of one tile: global coordinates, as the columns the tile file holds (no copy into
 /// another layout), and whether the tile owns each one.
+#[derive(Default)]
 pub struct TilePoints {
     pub x: Vec<f64>,
     pub y: Vec<f64>,
@@ -261,16 +262,52 @@ impl TilePoints {
 pub fn read_tile(ctx: &Ctx, tiling: usize, id: TileId) -> Result<TilePoints> {
     let path = ctx.input(tiling, &tiling::tile_file(id))?;
     let cols = talus_tiling::read_tile(&path).map_err(|e| damaged(&path, e))?;
+    Ok(tile_points(cols))
+}
+
+/// The points of tile `id` of tiling unit `tiling` in the frames of its file that reach any of
+/// `boxes` ([x0, y0, x1, y1]), in their order: every point inside the boxes, and others beside
+/// them (the rest of those frames); the frames that do not reach them are not decoded.
+pub fn read_tile_near(
+    ctx: &Ctx,
+    tiling: usize,
+    id: TileId,
+    boxes: &[[f64; 4]],
+) -> Result<TilePoints> {
+    let path = ctx.input(tiling, &tiling::tile_file(id))?;
+    let mut frames = talus_tiling::TileFrames::open(&path).map_err(|e| damaged(&path, e))?;
+    let want = |b: &talus_tiling::Bounds3| boxes.iter().any(|w| reaches(b, w));
+    let mut t = TilePoints::default();
+    while let Some(f) = frames
+        .next_frame_where(&want)
+        .map_err(|e| damaged(&path, e))?
+    {
+        let f = tile_points(f);
+        t.x.extend(f.x);
+        t.y.extend(f.y);
+        t.z.extend(f.z);
+        t.owned.extend(f.owned);
+    }
+    Ok(t)
+}
+
+/// Do bounds `b` reach box `w` ([x0, y0, x1, y1]) in plan?
+pub fn reaches(b: &talus_tiling::Bounds3, w: &[f64; 4]) -> bool {
+    b.min[0] <= w[2] && w[0] <= b.max[0] && b.min[1] <= w[3] && w[1] <= b.max[1]
+}
+
+/// A tile file's columns as points with their owned flags.
+fn tile_points(cols: talus_tiling::TileColumns) -> TilePoints {
     let owned = match cols.column(talus_tiling::OWNED_COLUMN) {
         Some(talus_tiling::ColumnData::U8(v)) => v.iter().map(|&o| o == 1).collect(),
         _ => vec![true; cols.len()],
     };
-    Ok(TilePoints {
+    TilePoints {
         x: cols.x,
         y: cols.y,
         z: cols.z,
         owned,
-    })
+    }
 }
 
 /// Serialize `value` as JSON into `file` of `out`, recorded with its digest.

@@ -16,7 +16,7 @@ use talus_tiling::TileId;
 use super::events::{Draft, EventsStage, Kept};
 use super::stable::StableStage;
 use super::stage::{Line, Planner, Scope, Stage, Total};
-use super::{read_tile, Ctx};
+use super::Ctx;
 use crate::error::Result;
 use crate::events::stable::Stable;
 use crate::events::{Event, Obb};
@@ -29,14 +29,32 @@ use crate::volume::{self, uncertainty, EventVolume};
 
 pub const FILE: &str = "volumes.json";
 
-/// Resident bytes per point (both epochs) while one event's volume is computed: the points in
-/// the event's frame, the two Delaunay triangulations (≈ 60 per point: spade is lean), the
-/// coverage index, the region's grids at the point spacing, and above all the two tops clipped
-/// to the region's cells (≈ 3.5 vertices per point) and the closed solids grown from them.
-/// Measured: 857 bytes per point on the cliff's debris fan (286 k points, 234 MiB beside the
-/// process's base and the unit's other data); the points gathered for the unit's events
-/// (24 bytes each) are held beside it unreserved.
-pub const BYTES_PER_POINT: u64 = 900;
+/// Resident bytes per region cell while one event's volume is computed: the two tops clipped to
+/// the cells (each TIN triangle cut into a piece per cell it crosses: several vertices and faces
+/// a cell), their labels' tables while they are built, the solids grown from them with the sort
+/// of their edges, the region's grids. The cost follows the cells (about one per point spacing
+/// squared of the footprint), not the points. Measured on the cliff's three large events with
+/// `--threads 1` (VmHWM reset before each): 1,025, 1,360 and 1,460 bytes a cell (22.5 k, 95 k
+/// and 51 k cells).
+pub const BYTES_PER_CELL: u64 = 1600;
+
+/// Resident bytes per gathered point (both epochs) beside the cells' cost: the points in the
+/// event's frame, a triangulation's share (spade is lean: ≈ 40), its mesh copied out for
+/// clipping (48). The gathered points themselves (24 bytes each) are held beside it unreserved.
+pub const BYTES_PER_POINT: u64 = 100;
+
+/// What one event's volume holds at most: [`BYTES_PER_CELL`] for the cells of the largest of
+/// its candidate boxes' regions, [`BYTES_PER_POINT`] for its `points`.
+fn event_need(boxes: &[SearchBox], points: u64, margin: f64, spacing: f64) -> u64 {
+    let cells = boxes
+        .iter()
+        .map(|(_, _, o)| {
+            volume::region::Cells::new(&volume::Footprint::of_obb(o, margin), spacing).len()
+        })
+        .max()
+        .unwrap_or(0) as u64;
+    cells * BYTES_PER_CELL + points * BYTES_PER_POINT + (4 << 20)
+}
 
 /// The mesh files of event `id`: (before, after).
 pub fn mesh_files(id: u32) -> [String; 2] {
@@ -279,7 +297,8 @@ fn gather(
     if flat.is_empty() {
         return Ok(out);
     }
-    let index = BoxIndex::new(&flat.iter().map(|(_, b)| b.1).collect::<Vec<_>>());
+    let boxes_xy: Vec<[f64; 4]> = flat.iter().map(|(_, b)| b.1).collect();
+    let index = BoxIndex::new(&boxes_xy);
     let grid = ctx.plan.layout.grid()?;
     for id in grid.tiles() {
         let sq = grid.square(id);
@@ -287,7 +306,8 @@ fn gather(
             continue;
         }
         for (epoch, &tiling) in tilings.iter().enumerate() {
-            let t = read_tile(ctx, tiling, id)?;
+            // Only the tile's frames that reach a box (a frame holds a strip of the tile).
+            let t = super::read_tile_near(ctx, tiling, id, &boxes_xy)?;
             for (i, &own) in t.owned.iter().enumerate() {
                 if !own {
                     continue;
@@ -459,7 +479,7 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
         for (i, d) in mine.iter().enumerate() {
             let n = (before[i].len() + after[i].len()) as u64;
             let _held = ctx.reserve(
-                n * BYTES_PER_POINT + (4 << 20),
+                event_need(&boxes[i], n, margin, spacing),
                 &format!("the volume of event {} ({n} points)", d.event.id),
             )?;
             let (m, v): (Measured, Option<EventVolume>) = {

@@ -297,16 +297,19 @@ pub fn event_volume_in(
     let (n1, n2) = (local1.len(), local2.len());
     // Counted, the event's own points are no longer needed (the triangulations hold theirs).
     drop((local1, local2));
-    let top = |tin: &Tin| {
+    // What needs both triangulations first; then each top is clipped from its own, which is
+    // given back as soon as it is: a large event's peak was both triangulations beside both
+    // tops (≈ 2.2 KB per region cell on the cliff's debris fan).
+    let change = change_of(&region, &tin1, &tin2, spacing);
+    drop((cov1, cov2));
+    let top = |tin: Tin| {
         let (v, f) = tin.mesh();
+        drop(tin);
         solid::clipped_top(&v, &f, &region)
     };
-    let (top1, top2) = (top(&tin1), top(&tin2));
+    let top1 = top(tin1);
+    let top2 = top(tin2);
     covered(&region, &top1, &top2)?;
-    let change = change_of(&region, &tin1, &tin2, spacing);
-    // The triangulations are no longer needed: given back before the solids are grown (they
-    // were most of a large event's peak beside them).
-    drop((tin1, tin2, cov1, cov2));
     let mut v = finish(&frame, region, top1, top2, change, spacing, n1, n2);
     v.region_points = counts;
     Ok(v)

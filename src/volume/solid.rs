@@ -74,7 +74,7 @@ enum Line {
 }
 
 /// What a clipped vertex is; equal labels are the same vertex.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Label {
     Vertex(u32),
     /// TIN edge (a < b) ∩ a grid line.
@@ -115,13 +115,28 @@ impl Side {
 /// faces.
 pub fn clipped_top(tin_vertices: &[[f64; 3]], tin_faces: &[[u32; 3]], region: &Region) -> Mesh {
     let cells = &region.cells;
-    let mut index: HashMap<Label, u32> = HashMap::default();
+    // Each vertex's id by its label: TIN vertices and grid nodes in tables by their index (4
+    // bytes each), only the crossings in a hash map (a map of every label was most of a large
+    // event's peak: 20-byte keys in a table that doubles).
+    const NONE: u32 = u32::MAX;
+    let mut vertex_ids = vec![NONE; tin_vertices.len()];
+    let mut node_ids = vec![NONE; (cells.nu + 1) * (cells.nv + 1)];
+    let mut crossings: HashMap<(u32, u32, Line), u32> = HashMap::default();
     let mut top = Mesh::default();
     let mut id_of = |label: Label, pos: [f64; 3], top: &mut Mesh| -> u32 {
-        *index.entry(label).or_insert_with(|| {
+        let mut add = || {
             top.vertices.push(pos);
             (top.vertices.len() - 1) as u32
-        })
+        };
+        let slot = match label {
+            Label::Vertex(a) => &mut vertex_ids[a as usize],
+            Label::Node(i, j) => &mut node_ids[j as usize * (cells.nu + 1) + i as usize],
+            Label::Cross(a, b, l) => return *crossings.entry((a, b, l)).or_insert_with(add),
+        };
+        if *slot == NONE {
+            *slot = add();
+        }
+        *slot
     };
     // TIN edge ∩ grid line, always computed from the smaller index so that both triangles of an
     // edge get the same bits; an end of the edge when the line passes through it.
@@ -380,23 +395,31 @@ pub fn min_height(top: &Mesh) -> f64 {
 /// region touch (a pinch) gets one base vertex per loop through it (see [`boundary`]), so every
 /// edge of the solid has exactly one face on each side.
 /// The directed edges of `faces` whose reverse is not an edge of any face: the boundary, in no
-/// particular order. Found by sorting the edges by their vertex pair (8 bytes an edge; a hash
-/// map of the same edges costs about four times the memory and most of the time on a fan of
-/// millions of faces).
+/// particular order. Found by sorting the edges by their vertex pair, each packed in 8 bytes
+/// (a hash map of the same edges costs about eight times the memory and most of the time on a
+/// fan of millions of faces; a (pair, direction) tuple is padded to 16): the smaller vertex,
+/// the larger, and whether this copy runs from the smaller to the larger in the lowest bit.
 fn boundary_edges(faces: &[[u32; 3]]) -> Vec<(u32, u32)> {
-    // (unordered pair, whether this copy runs from the smaller vertex to the larger); a loop edge
-    // (a, a) is its own reverse.
-    let mut all: Vec<(u64, bool)> = faces
+    // Vertex indices below 2^31 (a mesh of fewer than two billion vertices) leave room for
+    // the direction bit.
+    let mut all: Vec<u64> = faces
         .iter()
         .flat_map(|f| (0..3).map(move |k| (f[k], f[(k + 1) % 3])))
-        .map(|(a, b)| ((u64::from(a.min(b)) << 32) | u64::from(a.max(b)), a < b))
+        .map(|(a, b)| (u64::from(a.min(b)) << 33) | (u64::from(a.max(b)) << 1) | u64::from(a < b))
         .collect();
     all.sort_unstable();
     let mut edges = Vec::new();
-    for group in all.chunk_by(|x, y| x.0 == y.0) {
-        let (up, down) = (group.iter().any(|e| e.1), group.iter().any(|e| !e.1));
-        if up != down && (group[0].0 >> 32) != (group[0].0 & 0xffff_ffff) {
-            let (lo, hi) = ((group[0].0 >> 32) as u32, group[0].0 as u32);
+    for group in all.chunk_by(|x, y| x >> 1 == y >> 1) {
+        let (up, down) = (
+            group.iter().any(|e| e & 1 == 1),
+            group.iter().any(|e| e & 1 == 0),
+        );
+        let (lo, hi) = (
+            (group[0] >> 33) as u32,
+            ((group[0] >> 1) & 0xffff_ffff) as u32,
+        );
+        // A loop edge (a, a) is its own reverse.
+        if up != down && lo != hi {
             edges.push(if up { (lo, hi) } else { (hi, lo) });
         }
     }

@@ -396,4 +396,46 @@ mod tests {
             Err(Error::Corrupt { .. })
         ));
     }
+
+    /// Frames a reader does not want are passed over: it gets exactly the frames whose bounds it
+    /// accepts, in order; a cut in a frame passed over is still found.
+    #[test]
+    fn frames_not_wanted_are_passed_over() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("strips.tile");
+        let mut w = Framed::new(&path);
+        // Five strips of 100 points, strip k with x in [10k, 10k + 1).
+        let strip = |k: usize| TileColumns {
+            x: (0..100)
+                .map(|i| 10.0 * k as f64 + 0.01 * i as f64)
+                .collect(),
+            y: vec![0.0; 100],
+            z: vec![0.0; 100],
+            extra: Vec::new(),
+        };
+        for k in 0..5 {
+            w.append(&strip(k), &WriteOptions::default()).unwrap();
+        }
+        w.finish().unwrap();
+        let wanted = |b: &Bounds3| b.max[0] >= 15.0 && b.min[0] <= 35.0;
+        let mut frames = crate::tile_file::TileFrames::open(&path).unwrap();
+        let mut got = Vec::new();
+        while let Some(f) = frames.next_frame_where(&wanted).unwrap() {
+            got.push(f);
+        }
+        assert_eq!(got, vec![strip(2), strip(3)]);
+        // The last strip cut short: found though it is never read.
+        let bytes = std::fs::read(&path).unwrap();
+        let cut = dir.path().join("cut.tile");
+        std::fs::write(&cut, &bytes[..bytes.len() - 3]).unwrap();
+        let mut frames = crate::tile_file::TileFrames::open(&cut).unwrap();
+        let found = loop {
+            match frames.next_frame_where(&wanted) {
+                Ok(Some(_)) => continue,
+                Ok(None) => break None,
+                Err(e) => break Some(e),
+            }
+        };
+        assert!(matches!(found, Some(Error::Corrupt { .. })), "{found:?}");
+    }
 }

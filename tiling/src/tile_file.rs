@@ -347,22 +347,55 @@ impl TileFrames {
 
     /// The next frame's columns; None after the last (the file's length and count checked).
     pub fn next_frame(&mut self) -> Result<Option<TileColumns>> {
-        let path = self.path.as_path();
+        self.next_frame_where(&|_| true)
+    }
+
+    /// The next frame whose bounds `want` accepts; the frames before it that it does not accept
+    /// are passed over unread (their points counted from their headers, their payloads neither
+    /// decoded nor checked). A version-1 file's one frame is always given. A reader that needs
+    /// only the points in some boxes reads only the frames that reach them: a tile's frames hold
+    /// its points in the survey's order, which on real and synthetic files alike is a scan's
+    /// or a grid's, so a frame covers a strip of the tile, not all of it.
+    pub fn next_frame_where(
+        &mut self,
+        want: &dyn Fn(&Bounds3) -> bool,
+    ) -> Result<Option<TileColumns>> {
         if let Some(whole) = self.whole.take() {
             return Ok(Some(whole));
         }
-        if self.next == self.frames {
-            if self.next == u32::MAX {
-                return Ok(None);
+        loop {
+            if self.next == self.frames {
+                if self.next == u32::MAX {
+                    return Ok(None);
+                }
+                self.next = u32::MAX;
+                self.frames = u32::MAX;
+                return self.check_end().map(|()| None);
             }
-            self.next = u32::MAX;
-            self.frames = u32::MAX;
-            return self.check_end().map(|()| None);
+            let mut fixed = [0u8; 16];
+            read_exact_or_corrupt(&mut self.file, &mut fixed, &self.path)?;
+            let fh = read_v1_header(&mut self.file, &self.path, fixed)?;
+            if want(&fh.bounds) {
+                return self.rest_of_frame(fixed, &fh).map(Some);
+            }
+            let skip = i64::try_from(fh.payload_len).map_err(|_| {
+                Error::corrupt(
+                    &self.path,
+                    format!("frame {}: payload too large", self.next),
+                )
+            })?;
+            self.file
+                .seek(std::io::SeekFrom::Current(skip))
+                .map_err(|e| Error::io(&self.path, e))?;
+            self.points += fh.point_count;
+            self.next += 1;
         }
+    }
+
+    /// The frame whose first 16 bytes are `fixed` and header `fh` (read, the file just past it).
+    fn rest_of_frame(&mut self, fixed: [u8; 16], fh: &Header) -> Result<TileColumns> {
+        let path = self.path.as_path();
         let k = self.next;
-        let mut fixed = [0u8; 16];
-        read_exact_or_corrupt(&mut self.file, &mut fixed, path)?;
-        let fh = read_v1_header(&mut self.file, path, fixed)?;
         let len = (fh.header_len as u64)
             .checked_add(fh.payload_len)
             .and_then(|l| usize::try_from(l).ok())
@@ -379,7 +412,7 @@ impl TileFrames {
             decode(&self.bytes).map_err(|r| Error::corrupt(path, format!("frame {k}: {r}")))?;
         self.points += cols.len() as u64;
         self.next += 1;
-        Ok(Some(cols))
+        Ok(cols)
     }
 
     /// After the last frame of a framed file: nothing beyond it, and the header's count read
@@ -389,9 +422,22 @@ impl TileFrames {
         if !self.framed {
             return Ok(());
         }
-        let mut rest = [0u8; 1];
-        if self.file.read(&mut rest).map_err(|e| Error::io(path, e))? != 0 {
-            return Err(Error::corrupt(path, "file is longer than its frames"));
+        // Where the frames end against the file's length: frames passed over were sought
+        // past, not read, so a cut in one shows only here.
+        let at = self
+            .file
+            .stream_position()
+            .map_err(|e| Error::io(path, e))?;
+        let len = self.file.metadata().map_err(|e| Error::io(path, e))?.len();
+        if at != len {
+            return Err(Error::corrupt(
+                path,
+                if at > len {
+                    "file is truncated"
+                } else {
+                    "file is longer than its frames"
+                },
+            ));
         }
         if self.points != self.expected {
             return Err(Error::corrupt(

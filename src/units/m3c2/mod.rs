@@ -289,21 +289,14 @@ fn gather_along(
                 );
                 continue;
             }
-            let path = ctx.input(tiling, &super::tiling::tile_file(id))?;
-            talus_tiling::read_tile_frames(&path, |f| {
-                let owned = match f.column(talus_tiling::OWNED_COLUMN) {
-                    Some(talus_tiling::ColumnData::U8(v)) => v.clone(),
-                    _ => vec![1; f.len()],
-                };
-                out[e].extend(
-                    (0..f.len())
-                        .filter(|&i| owned[i] == 1)
-                        .map(|i| [f.x[i], f.y[i], f.z[i]])
-                        .filter(|p| near(p)),
-                );
-                Ok(())
-            })
-            .map_err(|e| super::damaged(&path, e))?;
+            // The frames that reach the walks' plan bounds only.
+            let t = super::read_tile_near(ctx, tiling, id, &[xy])?;
+            out[e].extend(
+                (0..t.len())
+                    .filter(|&i| t.owned[i])
+                    .map(|i| t.point(i))
+                    .filter(|p| near(p)),
+            );
         }
     }
     Ok(out)
