@@ -94,8 +94,10 @@ pub fn wall_flags(local: &[[f64; 3]], spacing: f64) -> Vec<bool> {
                     let b = y * nx + x;
                     for &j in &sorted[start[b] as usize..start[b + 1] as usize] {
                         let q = &local[j as usize];
-                        let d = (q[0] - p[0]).hypot(q[1] - p[1]);
-                        if d <= rho && (q[2] - p[2]).abs() > WALL_SLOPE * d + spacing {
+                        let (du, dv) = (q[0] - p[0], q[1] - p[1]);
+                        let d2 = du * du + dv * dv;
+                        if d2 <= rho * rho && (q[2] - p[2]).abs() > WALL_SLOPE * d2.sqrt() + spacing
+                        {
                             return true;
                         }
                     }
@@ -192,7 +194,8 @@ pub fn unchanged_walls(
             for dv in -1..=1 {
                 for &k in buckets.get(&(cu + du, cv + dv)).map_or(&[][..], |v| v) {
                     let (r, ok, ..) = &wall[k];
-                    if !ok && (r[0] - q[0]).hypot(r[1] - q[1]) <= spacing {
+                    let (du, dv) = (r[0] - q[0], r[1] - q[1]);
+                    if !ok && du * du + dv * dv <= spacing * spacing {
                         whole = false;
                         break 'scan;
                     }

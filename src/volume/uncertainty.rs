@@ -124,7 +124,10 @@ fn mean_covariance(region: &Region, v: &Variogram) -> f64 {
     let mut sum = 0.0;
     for _ in 0..PAIRS {
         let (p, q) = (location(), location());
-        sum += v.covariance((p[0] - q[0]).hypot(p[1] - q[1]));
+        // sqrt of the squares, not hypot: no overflow is possible at these lags, and libm's
+        // correctly rounded hypot was 6 % of the volumes stage (10⁵ pairs an event).
+        let (du, dv) = (p[0] - q[0], p[1] - q[1]);
+        sum += v.covariance((du * du + dv * dv).sqrt());
     }
     sum / PAIRS as f64
 }
