@@ -2,7 +2,9 @@
 //! description (SPEC.md §1), over the pair's M3C2 results in key order, with the parameters its
 //! stable-ground unit resolved.
 //!
-//! The kept core points (significant and |d| ≥ τ) are few next to the epochs, so they are held.
+//! The kept core points (significant and |d| ≥ τ) are few next to the epochs, so their keys,
+//! positions and distances are held (smoothing's k nearest and the clusters are over all of them:
+//! this need grows with the change); the rest of each waits in a temporary file of the unit.
 //! Writes `events.json` (each event described, with the boxes its volume may be extruded along)
 //! and `kept.tile` (every kept core point: key, smoothed distance, event id or 0, normal and
 //! per-epoch spread, for m3c2.laz and for the volumes' claims and uncertainty).
@@ -65,12 +67,13 @@ pub fn candidate_boxes(e: &Event, cluster: &[Point3]) -> Vec<Obb> {
     boxes
 }
 
-/// Resident bytes per kept core point in the events unit: the kept record (104), the positions
-/// and distances for smoothing (32) with its kd-tree (≈ 40), the clustering's copies, tile lists
-/// and links (≈ 50). `kept.tile` is written a frame at a time, so no column copy of them all.
-/// Measured on the 120M-point pair (839,640 kept): the unit's peak 184 MiB in a process of its
-/// own, ≈ 200 bytes each beyond the process's base.
-pub const BYTES_PER_KEPT: u64 = 224;
+/// Resident bytes per kept core point in the events unit: its key, position and distance (40;
+/// the rest waits on disk), the smoothed distance and event id (12), smoothing's kd-tree over the
+/// positions (≈ 40), the clustering's copies, tile lists and links (≈ 50), and the clustered
+/// points' LoDs and normals for their descriptions (32). Measured on the 120M-point pair (839,640
+/// kept): the unit's peak 121–127 MiB in a process of its own (184 MiB before the spill, 381
+/// before `kept.tile` was written in frames), ≈ 140 bytes each beyond the process's base.
+pub const BYTES_PER_KEPT: u64 = 160;
 
 /// The pair's events: filter, smoothing, signed clustering, description.
 pub struct EventsStage;
@@ -131,120 +134,223 @@ impl Stage for EventsStage {
     }
 }
 
+/// The temporary file of an events unit: the kept core points' fields that smoothing and
+/// clustering do not use, in key order (see [`Passive`]).
+const SPILL: &str = "kept_passive.tmp";
+
+/// What smoothing and clustering do not use of a kept core point: held on disk meanwhile (57 of
+/// a kept record's 104 bytes; the unit holds its key, position and distance only), read back
+/// for the events' descriptions and for `kept.tile`.
+#[derive(Clone, Copy)]
+struct Passive {
+    lod: f64,
+    normal: Point3,
+    std_dev: [f64; 2],
+    beyond: bool,
+}
+
+impl Passive {
+    const BYTES: usize = 6 * 8 + 1;
+
+    fn write(&self, w: &mut impl std::io::Write) -> std::io::Result<()> {
+        let mut b = [0u8; Self::BYTES];
+        let v = [
+            self.lod,
+            self.normal[0],
+            self.normal[1],
+            self.normal[2],
+            self.std_dev[0],
+            self.std_dev[1],
+        ];
+        for (k, x) in v.iter().enumerate() {
+            b[8 * k..8 * k + 8].copy_from_slice(&x.to_le_bytes());
+        }
+        b[48] = u8::from(self.beyond);
+        w.write_all(&b)
+    }
+
+    fn read(r: &mut impl std::io::Read) -> std::io::Result<Passive> {
+        let mut b = [0u8; Self::BYTES];
+        r.read_exact(&mut b)?;
+        let f = |k: usize| f64::from_le_bytes(b[8 * k..8 * k + 8].try_into().expect("8 bytes"));
+        Ok(Passive {
+            lod: f(0),
+            normal: [f(1), f(2), f(3)],
+            std_dev: [f(4), f(5)],
+            beyond: b[48] == 1,
+        })
+    }
+}
+
+/// The spilled fields of the `n` kept core points, in order, from `path`.
+fn spilled(path: &std::path::Path, n: usize) -> Result<impl Iterator<Item = Result<Passive>> + '_> {
+    let f = std::fs::File::open(path).map_err(|e| Error::output(path, e))?;
+    let mut r = std::io::BufReader::with_capacity(1 << 16, f);
+    Ok((0..n).map(move |_| Passive::read(&mut r).map_err(|e| Error::output(path, e))))
+}
+
 /// Run pair `pair`'s events into `out`.
 fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<EventsMeta> {
     let params = super::stable::read(ctx, pair)?.params(ctx.plan);
     let (tau, reg) = (params.threshold.value, params.reg_error.value);
-    let mut kept = Vec::new();
+    // The kept core points' keys, positions and distances; the rest to the spill file.
+    let (mut keys, mut pts, mut d) = (Vec::new(), Vec::<Point3>::new(), Vec::new());
+    let spill_path = out.path(SPILL)?;
     let merging = ctx.reserve(
         super::merged::pair_merge_need(ctx.plan),
         "the merge of the pair's tiles",
     )?;
-    let mut merged = Merged::new(ctx, pair)?;
-    while let Some(k) = merged.next_result()? {
-        let r = k.r.with_registration(reg);
-        // A core point beyond the user's reach takes part with the distance the walk found: the
-        // change is there, and the event it belongs to says it is incomplete.
-        if events::filter::is_kept(r.distance, r.uncertainty, tau) {
-            kept.push(Kept {
-                key: k.key,
-                xyz: k.xyz,
-                d: r.distance,
-                lod: r.uncertainty,
-                normal: r.normal,
-                std_dev: [r.std_dev1, r.std_dev2],
-                smoothed: f64::NAN,
-                event: 0,
-                beyond: r.reach == crate::m3c2::Reach::Beyond,
-            });
+    {
+        let f = std::fs::File::create(&spill_path).map_err(|e| Error::output(&spill_path, e))?;
+        let mut spill = std::io::BufWriter::with_capacity(1 << 16, f);
+        let mut merged = Merged::new(ctx, pair)?;
+        while let Some(k) = merged.next_result()? {
+            let r = k.r.with_registration(reg);
+            // A core point beyond the user's reach takes part with the distance the walk found:
+            // the change is there, and the event it belongs to says it is incomplete.
+            if events::filter::is_kept(r.distance, r.uncertainty, tau) {
+                keys.push(k.key);
+                pts.push(k.xyz);
+                d.push(r.distance);
+                Passive {
+                    lod: r.uncertainty,
+                    normal: r.normal,
+                    std_dev: [r.std_dev1, r.std_dev2],
+                    beyond: r.reach == crate::m3c2::Reach::Beyond,
+                }
+                .write(&mut spill)
+                .map_err(|e| Error::output(&spill_path, e))?;
+            }
         }
+        std::io::Write::flush(&mut spill).map_err(|e| Error::output(&spill_path, e))?;
     }
-    drop(merged);
     // Given back before the next reservation: a unit waits only while it holds none.
     drop(merging);
-    // The kept points are known only once streamed (≈ 104 bytes each, held unreserved meanwhile:
-    // a small share of what smoothing and clustering then add).
+    let n = keys.len();
+    // The kept points are known only once streamed (40 bytes each, held unreserved meanwhile: a
+    // small share of what smoothing and clustering then add).
     let _held = ctx.reserve(
-        kept.len() as u64 * BYTES_PER_KEPT + (8 << 20),
-        &format!("the events of {} kept core points", kept.len()),
+        n as u64 * BYTES_PER_KEPT + (8 << 20),
+        &format!("the events of {n} kept core points"),
     )?;
-    let pts: Vec<Point3> = kept.iter().map(|k| k.xyz).collect();
-    let smoothed = {
-        let d: Vec<f64> = kept.iter().map(|k| k.d).collect();
-        events::smooth::smooth(
-            &pts,
-            &d,
-            params.smooth_k.value as usize,
-            params.smooth_sigma.value,
-        )?
-    };
-    for (k, s) in kept.iter_mut().zip(&smoothed) {
-        k.smoothed = *s;
-    }
-    // Signed clusters, each sign on its own, tile by tile over the run's grid.
+    let smoothed = events::smooth::smooth(
+        &pts,
+        &d,
+        params.smooth_k.value as usize,
+        params.smooth_sigma.value,
+    )?;
+    // Signed clusters, each sign on its own, tile by tile over the run's grid; members in
+    // ascending order of kept index.
     let grid = ctx.plan.layout.grid()?;
-    let mut clusters: Vec<(u64, Kind, Vec<usize>)> = Vec::new();
+    let mut clusters: Vec<(u64, Kind, Vec<u32>)> = Vec::new();
     for kind in [Kind::Gain, Kind::Loss] {
-        let idx: Vec<usize> = (0..kept.len())
-            .filter(|&i| kind.matches(smoothed[i]))
+        let idx: Vec<u32> = (0..n as u32)
+            .filter(|&i| kind.matches(smoothed[i as usize]))
             .collect();
-        let p: Vec<Point3> = idx.iter().map(|&i| pts[i]).collect();
-        let keys: Vec<u64> = idx.iter().map(|&i| kept[i].key).collect();
+        let p: Vec<Point3> = idx.iter().map(|&i| pts[i as usize]).collect();
+        let k: Vec<u64> = idx.iter().map(|&i| keys[i as usize]).collect();
         let labels = events::tiled::cluster(
             &p,
-            &keys,
+            &k,
             &grid,
             params.eps.value,
             params.cluster_min_points.value as usize,
         )?;
-        let mut by_label: HashMap<u32, Vec<usize>> = HashMap::default();
+        drop((p, k));
+        let mut by_label: HashMap<u32, Vec<u32>> = HashMap::default();
         for (j, &l) in labels.iter().enumerate() {
             if l > 0 {
                 by_label.entry(l).or_default().push(idx[j]);
             }
         }
         for (_, members) in by_label {
-            let min_key = members.iter().map(|&i| kept[i].key).min().unwrap_or(0);
+            let min_key = members.iter().map(|&i| keys[i as usize]).min().unwrap_or(0);
             clusters.push((min_key, kind, members));
         }
     }
     // Event ids in a canonical order: by the smallest key of each cluster.
     clusters.sort_by_key(|c| c.0);
-    let mut drafts = Vec::new();
-    for (n, (_, kind, members)) in clusters.iter().enumerate() {
-        let id = n as u32 + 1;
-        let get = |f: &dyn Fn(&Kept) -> Point3| -> Vec<Point3> {
-            members.iter().map(|&i| f(&kept[i])).collect()
-        };
-        let (p, normals) = (get(&|k| k.xyz), get(&|k| k.normal));
-        let dist: Vec<f64> = members.iter().map(|&i| kept[i].d).collect();
-        let lod: Vec<f64> = members.iter().map(|&i| kept[i].lod).collect();
+    let mut event = vec![0u32; n];
+    for (c, (_, _, members)) in clusters.iter().enumerate() {
         for &i in members {
-            kept[i].event = id;
+            event[i as usize] = c as u32 + 1;
         }
+    }
+    // The clustered points' LoDs and normals, read back in kept order (each cluster's in its
+    // members' order), and how many of each cluster's points lie beyond reach.
+    let mut lods: Vec<Vec<f64>> = vec![Vec::new(); clusters.len()];
+    let mut normals: Vec<Vec<Point3>> = vec![Vec::new(); clusters.len()];
+    let mut beyond = vec![0usize; clusters.len()];
+    for (i, p) in spilled(&spill_path, n)?.enumerate() {
+        let p = p?;
+        if let Some(c) = event[i].checked_sub(1) {
+            let c = c as usize;
+            lods[c].push(p.lod);
+            normals[c].push(p.normal);
+            beyond[c] += usize::from(p.beyond);
+        }
+    }
+    let mut drafts = Vec::new();
+    for (c, (_, kind, members)) in clusters.iter().enumerate() {
+        let id = c as u32 + 1;
+        let p: Vec<Point3> = members.iter().map(|&i| pts[i as usize]).collect();
+        let dist: Vec<f64> = members.iter().map(|&i| d[i as usize]).collect();
+        let (lod, normal) = (
+            std::mem::take(&mut lods[c]),
+            std::mem::take(&mut normals[c]),
+        );
         if let Some(e) = events::describe(
             id,
             *kind,
             &p,
             &dist,
             &lod,
-            &normals,
+            &normal,
             params.core_spacing.value,
         ) {
             let candidates = candidate_boxes(&e, &p);
             drafts.push(Draft {
                 event: e,
                 candidates,
-                beyond_reach: members.iter().filter(|&&i| kept[i].beyond).count(),
+                beyond_reach: beyond[c],
             });
         }
     }
+    drop(clusters);
     (ctx.progress)(drafts.len() as u64);
     super::write_json(out, EVENTS, &drafts)?;
-    write_kept(out, &kept)?;
+    // kept.tile: every kept core point, a frame at a time, its spilled fields read back once more.
+    let mut passive = spilled(&spill_path, n)?;
+    let mut rows = Vec::with_capacity(KEPT_FRAME.min(n));
+    let mut file = KeptWriter::new(out)?;
+    for i in 0..n {
+        let p = passive.next().expect("n spilled rows")?;
+        rows.push(Kept {
+            key: keys[i],
+            xyz: pts[i],
+            d: d[i],
+            lod: p.lod,
+            normal: p.normal,
+            std_dev: p.std_dev,
+            smoothed: smoothed[i],
+            event: event[i],
+            beyond: p.beyond,
+        });
+        if rows.len() == KEPT_FRAME {
+            file.append(&rows)?;
+            rows.clear();
+        }
+    }
+    // The last frame, or the one empty frame when nothing is kept.
+    if !rows.is_empty() || n == 0 {
+        file.append(&rows)?;
+    }
+    drop(passive);
+    file.finish(out)?;
+    std::fs::remove_file(&spill_path).map_err(|e| Error::output(&spill_path, e))?;
     Ok(EventsMeta {
         events: drafts.len(),
-        kept: kept.len(),
+        kept: n,
     })
 }
 
@@ -288,22 +394,30 @@ pub fn read_drafts(ctx: &Ctx, pair: usize) -> Result<Vec<Draft>> {
 /// time, never the pair's kept core points, which grow with the change.
 pub const KEPT_FRAME: usize = 1 << 16;
 
-/// Write `kept` (in key order) as `kept.tile`, [`KEPT_FRAME`] rows to a frame (one empty frame
-/// when nothing is kept).
-fn write_kept(out: &mut UnitWriter, kept: &[Kept]) -> Result<()> {
-    let path = out.path(KEPT)?;
-    let mut file = talus_tiling::framed::Framed::new(&path);
-    let opts = talus_tiling::WriteOptions::default();
-    let empty: &[Kept] = &[];
-    for rows in kept
-        .chunks(KEPT_FRAME)
-        .chain(kept.is_empty().then_some(empty))
-    {
-        file.append(&to_columns(rows), &opts)?;
+/// `kept.tile` being written: the kept core points in key order, [`KEPT_FRAME`] rows to a frame
+/// (one empty frame when nothing is kept).
+struct KeptWriter {
+    file: talus_tiling::framed::Framed,
+    opts: talus_tiling::WriteOptions,
+}
+
+impl KeptWriter {
+    fn new(out: &mut UnitWriter) -> Result<KeptWriter> {
+        Ok(KeptWriter {
+            file: talus_tiling::framed::Framed::new(&out.path(KEPT)?),
+            opts: talus_tiling::WriteOptions::default(),
+        })
     }
-    let d = file.finish()?;
-    out.add(KEPT, d.crc32, d.size);
-    Ok(())
+
+    fn append(&mut self, rows: &[Kept]) -> Result<()> {
+        Ok(self.file.append(&to_columns(rows), &self.opts)?)
+    }
+
+    fn finish(self, out: &mut UnitWriter) -> Result<()> {
+        let d = self.file.finish()?;
+        out.add(KEPT, d.crc32, d.size);
+        Ok(())
+    }
 }
 
 /// The kept core points of a pair, a frame at a time in key order.
