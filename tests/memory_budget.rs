@@ -137,24 +137,30 @@ fn a_merge_of_too_many_tiles_is_refused_before_anything_runs() {
 }
 
 #[test]
-fn a_stable_sample_beyond_the_budget_is_refused_before_anything_runs() {
-    // 2 × 600k points: the stable-ground sample may hold 500,000 core points (SAMPLES, 256
-    // bytes each) beside the merge; at 160 MiB that is refused while planning, not after M3C2.
+fn the_stable_sample_is_fixed_and_fits_the_smallest_budget() {
+    // 2 × 600k points, more core points than the stable ground samples (500,000); the sample's
+    // need (176 bytes each beside the merge) is fixed, refused while planning if a budget could
+    // not hold it, and the smallest budget holds it.
     let dir = tempdir();
     let (b, a) = planes(dir.path(), 14, 600_000, 300.0, 300.0);
     let out = dir.path().join("out");
-    let err = refused(&b, &a, &out, &["--memory", "160MiB"]);
-    assert!(
-        err.contains(
-            "--memory 160 MiB is too small: the stable-ground sample and the merge of the pair's tiles needs"
-        ),
-        "{err}"
+    // Core points at 0.2 m (the points are about 0.39 m apart): nearly every point is one.
+    let o = run_compare(
+        &b,
+        &a,
+        &out,
+        &["--memory", "160MiB", "--core-spacing", "0.2"],
     );
-    assert!(!err.contains("tiling"), "refused before tiling: {err}");
-    assert!(!out.exists());
-    // The budget it names is enough.
-    let budget = format!("{}MiB", suggested(&err));
-    let out = dir.path().join("out2");
-    let o = run_compare(&b, &a, &out, &["--memory", &budget]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(o.status.success(), "{err}");
+    let s: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    let sampled = s["stable"]["sampled_points"]
+        .as_u64()
+        .unwrap_or_else(|| panic!("{s}"));
+    let cores = s["core_points"].as_u64().unwrap();
+    assert!(
+        sampled <= talus::units::stable::SAMPLES && sampled < cores,
+        "{sampled} of {cores}"
+    );
 }

@@ -23,9 +23,11 @@ use crate::store::UnitWriter;
 pub const SAMPLES: u64 = 500_000;
 
 /// Resident bytes per sampled core point while the stable ground is measured: the sample (80)
-/// and the measurement's index lists, residuals and variogram pairs (measured: 185 MiB for
-/// 757 k samples, i.e. about 240).
-pub const BYTES_PER_SAMPLE: u64 = 256;
+/// and the measurement's index lists, residuals and variogram pairs. Measured on the 40M-point
+/// pair (481,675 samples): the unit's peak 112–117 MiB in a process of its own, of which the
+/// merge of the pair's runs holds up to 34 MiB and the process's base about 12: ≈ 155 bytes a
+/// sample (was counted as 256 from an older measurement, 185 MiB for 757 k).
+pub const BYTES_PER_SAMPLE: u64 = 176;
 
 /// The file of a stable unit.
 pub const FILE: &str = "stable.json";
