@@ -139,8 +139,7 @@ fn a_merge_of_too_many_tiles_is_refused_before_anything_runs() {
 #[test]
 fn the_stable_sample_is_fixed_and_fits_the_smallest_budget() {
     // 2 × 600k points, more core points than the stable ground samples (500,000); the sample's
-    // need (176 bytes each beside the merge) is fixed, refused while planning if a budget could
-    // not hold it, and the smallest budget holds it.
+    // need (176 bytes each beside the merge) is fixed, and the smallest budget holds it.
     let dir = tempdir();
     let (b, a) = planes(dir.path(), 14, 600_000, 300.0, 300.0);
     let out = dir.path().join("out");

@@ -7,7 +7,7 @@
 
 mod common;
 
-use common::{run_compare, talus, tempdir};
+use common::{run_compare, synth_cliff, tempdir};
 
 /// The largest resident set of any finished child of this process, in bytes.
 fn children_peak() -> u64 {
@@ -21,14 +21,7 @@ fn children_peak() -> u64 {
 #[test]
 fn the_cliff_at_256_mib_stays_within_the_budget_and_gives_the_same_bytes() {
     let dir = tempdir();
-    let scene = dir.path().join("cliff");
-    let o = talus()
-        .args(["synth", "cliff", "--points", "5200000", "--out"])
-        .arg(&scene)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let (b, a) = (scene.join("before.laz"), scene.join("after.laz"));
+    let (b, a) = synth_cliff(dir.path(), 5_200_000);
     let small = dir.path().join("small");
     let o = run_compare(&b, &a, &small, &["--memory", "256MiB"]);
     let err = String::from_utf8_lossy(&o.stderr).into_owned();

@@ -27,8 +27,8 @@ pub const BASE: u64 = 16 << 20;
 /// headers): measured peak minus the sum of reservations on the 5.2M-point cliff at 300 MiB.
 pub const SLACK: f64 = 0.05;
 
-/// The smallest budget: the one whose pool holds the outputs unit, the largest need that does not
-/// depend on the data (a tiling unit's need is a share of the budget; see `units::tiling::need`).
+/// The smallest budget: the one whose pool holds the outputs unit and the stable ground's fixed
+/// sample, the largest needs that do not depend on the data (a tiling unit's need is a share of the budget; see `units::tiling::need`).
 pub const MIN_BUDGET: u64 = 160 << 20;
 
 /// The pool of a budget of `budget` bytes: what is left after [`BASE`] and [`SLACK`].
@@ -108,6 +108,10 @@ mod tests {
     fn the_smallest_budget_holds_the_fixed_needs() {
         let pool = pool_bytes(MIN_BUDGET);
         assert!(crate::units::outputs::need(1) <= pool, "outputs do not fit");
+        // The stable ground's fixed sample, beside the largest merge a later stage holds.
+        let stable =
+            crate::units::stable::need(crate::units::stable::SAMPLES, crate::units::merged::FAN_IN);
+        assert!(stable <= pool, "the stable sample does not fit");
         let split = (MIN_BUDGET / crate::units::tiling::SPLIT_BUDGET_SHARE).max(8 << 20);
         // Two tilings run at once (one per survey of a pair).
         assert!(

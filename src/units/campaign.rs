@@ -22,8 +22,6 @@ use super::{read_json, Ctx};
 use crate::campaign::powerlaw::{self, PowerLawFit};
 use crate::campaign::report::{self, EventRow, PairRow, Report};
 use crate::campaign::tracks::{self, Placed};
-use std::io::{Read, Write};
-
 use crate::error::{Error, Result};
 use crate::events::Kind;
 use crate::io::las_out::{CoordinateGrid, ExtraDim, ExtraType, ResultWriter};
@@ -542,9 +540,8 @@ fn write_timeseries(
     // with the pairs): the later pairs' distances go to temporary columns in the unit's
     // directory, then one pass over pair 0's results reads them beside it. Every pair has the
     // campaign's core points in key order; a count and a hash of the keys check it.
-    const BUFFER: usize = 1 << 16;
     let _held = ctx.reserve(
-        super::merged::pair_merge_need(plan) + (plan.pairs.len() * BUFFER) as u64 + (8 << 20),
+        super::merged::pair_merge_need(plan) + (plan.pairs.len() << 16) as u64 + (8 << 20),
         "the time series (a pair's merge at a time)",
     )?;
     let keys_of =
@@ -560,36 +557,25 @@ fn write_timeseries(
         };
     let mut columns = Vec::new();
     for k in 1..plan.pairs.len() {
-        let path = out.path(&format!("timeseries_{k:05}.tmp"))?;
-        let file = std::fs::File::create(&path).map_err(|e| Error::output(&path, e))?;
-        let mut w = std::io::BufWriter::with_capacity(BUFFER, file);
-        let seen = keys_of(k, &mut |r| {
-            w.write_all(&r.r.measured().to_le_bytes())
-                .map_err(|e| Error::output(&path, e))
-        })?;
-        w.flush().map_err(|e| Error::output(&path, e))?;
-        columns.push((path, seen));
+        let mut w = super::scratch::RowsWriter::create(out, &format!("timeseries_{k:05}.tmp"), 1)?;
+        let seen = keys_of(k, &mut |r| w.push(&[r.r.measured()]))?;
+        columns.push((w.finish()?, seen));
     }
     let mut readers = columns
         .iter()
-        .map(|(p, _)| {
-            let f = std::fs::File::open(p).map_err(|e| Error::output(p, e))?;
-            Ok(std::io::BufReader::with_capacity(BUFFER, f))
-        })
+        .map(|(c, _)| c.reader())
         .collect::<Result<Vec<_>>>()?;
     let mut values = vec![f64::NAN; plan.pairs.len()];
     let first = keys_of(0, &mut |r| {
         values[0] = r.r.measured();
         for (k, rd) in readers.iter_mut().enumerate() {
-            let mut b = [0u8; 8];
-            rd.read_exact(&mut b)
-                .map_err(|e| Error::output(&columns[k].0, e))?;
-            values[k + 1] = f64::from_le_bytes(b);
+            values[k + 1] = rd.next_row()?[0];
         }
         w.write(r.xyz, &values)
     })?;
-    for (k, (path, seen)) in columns.iter().enumerate() {
-        if *seen != first {
+    drop(readers);
+    for (k, (column, seen)) in columns.into_iter().enumerate() {
+        if seen != first {
             return Err(Error::Internal(format!(
                 "pair {}'s core points differ from pair 0's ({} against {})",
                 k + 1,
@@ -597,7 +583,7 @@ fn write_timeseries(
                 first.0
             )));
         }
-        std::fs::remove_file(path).map_err(|e| Error::output(path, e))?;
+        column.remove()?;
     }
     let n = first.0;
     w.finish()?;

@@ -134,96 +134,48 @@ impl Stage for EventsStage {
     }
 }
 
-/// The temporary file of an events unit: the kept core points' fields that smoothing and
-/// clustering do not use, in key order (see [`Passive`]).
+/// The scratch rows of an events unit: the kept core points' fields that smoothing and
+/// clustering do not use, in key order — LoD, normal (3), spreads (2), beyond reach (1 or 0).
+/// Held on disk meanwhile (the unit holds their keys, positions and distances only), read back
+/// once, for the events' descriptions and for `kept.tile` together.
 const SPILL: &str = "kept_passive.tmp";
-
-/// What smoothing and clustering do not use of a kept core point: held on disk meanwhile (57 of
-/// a kept record's 104 bytes; the unit holds its key, position and distance only), read back
-/// for the events' descriptions and for `kept.tile`.
-#[derive(Clone, Copy)]
-struct Passive {
-    lod: f64,
-    normal: Point3,
-    std_dev: [f64; 2],
-    beyond: bool,
-}
-
-impl Passive {
-    const BYTES: usize = 6 * 8 + 1;
-
-    fn write(&self, w: &mut impl std::io::Write) -> std::io::Result<()> {
-        let mut b = [0u8; Self::BYTES];
-        let v = [
-            self.lod,
-            self.normal[0],
-            self.normal[1],
-            self.normal[2],
-            self.std_dev[0],
-            self.std_dev[1],
-        ];
-        for (k, x) in v.iter().enumerate() {
-            b[8 * k..8 * k + 8].copy_from_slice(&x.to_le_bytes());
-        }
-        b[48] = u8::from(self.beyond);
-        w.write_all(&b)
-    }
-
-    fn read(r: &mut impl std::io::Read) -> std::io::Result<Passive> {
-        let mut b = [0u8; Self::BYTES];
-        r.read_exact(&mut b)?;
-        let f = |k: usize| f64::from_le_bytes(b[8 * k..8 * k + 8].try_into().expect("8 bytes"));
-        Ok(Passive {
-            lod: f(0),
-            normal: [f(1), f(2), f(3)],
-            std_dev: [f(4), f(5)],
-            beyond: b[48] == 1,
-        })
-    }
-}
-
-/// The spilled fields of the `n` kept core points, in order, from `path`.
-fn spilled(path: &std::path::Path, n: usize) -> Result<impl Iterator<Item = Result<Passive>> + '_> {
-    let f = std::fs::File::open(path).map_err(|e| Error::output(path, e))?;
-    let mut r = std::io::BufReader::with_capacity(1 << 16, f);
-    Ok((0..n).map(move |_| Passive::read(&mut r).map_err(|e| Error::output(path, e))))
-}
+const SPILL_WIDTH: usize = 7;
 
 /// Run pair `pair`'s events into `out`.
 fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<EventsMeta> {
     let params = super::stable::read(ctx, pair)?.params(ctx.plan);
     let (tau, reg) = (params.threshold.value, params.reg_error.value);
-    // The kept core points' keys, positions and distances; the rest to the spill file.
+    // The kept core points' keys, positions and distances; the rest to the scratch rows.
     let (mut keys, mut pts, mut d) = (Vec::new(), Vec::<Point3>::new(), Vec::new());
-    let spill_path = out.path(SPILL)?;
+    let mut spill = super::scratch::RowsWriter::create(out, SPILL, SPILL_WIDTH)?;
     let merging = ctx.reserve(
         super::merged::pair_merge_need(ctx.plan),
         "the merge of the pair's tiles",
     )?;
-    {
-        let f = std::fs::File::create(&spill_path).map_err(|e| Error::output(&spill_path, e))?;
-        let mut spill = std::io::BufWriter::with_capacity(1 << 16, f);
-        let mut merged = Merged::new(ctx, pair)?;
-        while let Some(k) = merged.next_result()? {
-            let r = k.r.with_registration(reg);
-            // A core point beyond the user's reach takes part with the distance the walk found:
-            // the change is there, and the event it belongs to says it is incomplete.
-            if events::filter::is_kept(r.distance, r.uncertainty, tau) {
-                keys.push(k.key);
-                pts.push(k.xyz);
-                d.push(r.distance);
-                Passive {
-                    lod: r.uncertainty,
-                    normal: r.normal,
-                    std_dev: [r.std_dev1, r.std_dev2],
-                    beyond: r.reach == crate::m3c2::Reach::Beyond,
-                }
-                .write(&mut spill)
-                .map_err(|e| Error::output(&spill_path, e))?;
-            }
+    let mut merged = Merged::new(ctx, pair)?;
+    while let Some(k) = merged.next_result()? {
+        let r = k.r.with_registration(reg);
+        // A core point beyond the user's reach takes part with the distance the walk found: the
+        // change is there, and the event it belongs to says it is incomplete.
+        if events::filter::is_kept(r.distance, r.uncertainty, tau) {
+            keys.push(k.key);
+            pts.push(k.xyz);
+            d.push(r.distance);
+            let beyond = r.reach == crate::m3c2::Reach::Beyond;
+            let [nx, ny, nz] = r.normal;
+            spill.push(&[
+                r.uncertainty,
+                nx,
+                ny,
+                nz,
+                r.std_dev1,
+                r.std_dev2,
+                f64::from(u8::from(beyond)),
+            ])?;
         }
-        std::io::Write::flush(&mut spill).map_err(|e| Error::output(&spill_path, e))?;
     }
+    drop(merged);
+    let spill = spill.finish()?;
     // Given back before the next reservation: a unit waits only while it holds none.
     drop(merging);
     let n = keys.len();
@@ -276,20 +228,47 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<EventsMeta> {
             event[i as usize] = c as u32 + 1;
         }
     }
-    // The clustered points' LoDs and normals, read back in kept order (each cluster's in its
+    // One pass over the scratch rows, in kept order: every kept core point to `kept.tile`, a
+    // frame at a time; the clustered points' LoDs and normals to their clusters (each in its
     // members' order), and how many of each cluster's points lie beyond reach.
     let mut lods: Vec<Vec<f64>> = vec![Vec::new(); clusters.len()];
     let mut normals: Vec<Vec<Point3>> = vec![Vec::new(); clusters.len()];
     let mut beyond = vec![0usize; clusters.len()];
-    for (i, p) in spilled(&spill_path, n)?.enumerate() {
-        let p = p?;
-        if let Some(c) = event[i].checked_sub(1) {
+    let mut rows = Vec::with_capacity(KEPT_FRAME.min(n));
+    let mut file = KeptWriter::new(out)?;
+    let mut passive = spill.reader()?;
+    for i in 0..n {
+        let p = passive.next_row()?;
+        let k = Kept {
+            key: keys[i],
+            xyz: pts[i],
+            d: d[i],
+            lod: p[0],
+            normal: [p[1], p[2], p[3]],
+            std_dev: [p[4], p[5]],
+            smoothed: smoothed[i],
+            event: event[i],
+            beyond: p[6] == 1.0,
+        };
+        if let Some(c) = k.event.checked_sub(1) {
             let c = c as usize;
-            lods[c].push(p.lod);
-            normals[c].push(p.normal);
-            beyond[c] += usize::from(p.beyond);
+            lods[c].push(k.lod);
+            normals[c].push(k.normal);
+            beyond[c] += usize::from(k.beyond);
+        }
+        rows.push(k);
+        if rows.len() == KEPT_FRAME {
+            file.append(&rows)?;
+            rows.clear();
         }
     }
+    // The last frame, or the one empty frame when nothing is kept.
+    if !rows.is_empty() || n == 0 {
+        file.append(&rows)?;
+    }
+    drop((rows, passive));
+    file.finish(out)?;
+    spill.remove()?;
     let mut drafts = Vec::new();
     for (c, (_, kind, members)) in clusters.iter().enumerate() {
         let id = c as u32 + 1;
@@ -316,38 +295,8 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<EventsMeta> {
             });
         }
     }
-    drop(clusters);
     (ctx.progress)(drafts.len() as u64);
     super::write_json(out, EVENTS, &drafts)?;
-    // kept.tile: every kept core point, a frame at a time, its spilled fields read back once more.
-    let mut passive = spilled(&spill_path, n)?;
-    let mut rows = Vec::with_capacity(KEPT_FRAME.min(n));
-    let mut file = KeptWriter::new(out)?;
-    for i in 0..n {
-        let p = passive.next().expect("n spilled rows")?;
-        rows.push(Kept {
-            key: keys[i],
-            xyz: pts[i],
-            d: d[i],
-            lod: p.lod,
-            normal: p.normal,
-            std_dev: p.std_dev,
-            smoothed: smoothed[i],
-            event: event[i],
-            beyond: p.beyond,
-        });
-        if rows.len() == KEPT_FRAME {
-            file.append(&rows)?;
-            rows.clear();
-        }
-    }
-    // The last frame, or the one empty frame when nothing is kept.
-    if !rows.is_empty() || n == 0 {
-        file.append(&rows)?;
-    }
-    drop(passive);
-    file.finish(out)?;
-    std::fs::remove_file(&spill_path).map_err(|e| Error::output(&spill_path, e))?;
     Ok(EventsMeta {
         events: drafts.len(),
         kept: n,

@@ -21,6 +21,7 @@ pub mod events;
 pub mod m3c2;
 pub mod merged;
 pub mod outputs;
+pub mod scratch;
 pub mod stable;
 pub mod stage;
 pub mod tiling;
@@ -274,21 +275,35 @@ pub fn read_tile_near(
     id: TileId,
     boxes: &[[f64; 4]],
 ) -> Result<TilePoints> {
-    let path = ctx.input(tiling, &tiling::tile_file(id))?;
-    let mut frames = talus_tiling::TileFrames::open(&path).map_err(|e| damaged(&path, e))?;
-    let want = |b: &talus_tiling::Bounds3| boxes.iter().any(|w| reaches(b, w));
     let mut t = TilePoints::default();
-    while let Some(f) = frames
-        .next_frame_where(&want)
-        .map_err(|e| damaged(&path, e))?
-    {
-        let f = tile_points(f);
+    for_each_frame_near(ctx, tiling, id, boxes, |f| {
         t.x.extend(f.x);
         t.y.extend(f.y);
         t.z.extend(f.z);
         t.owned.extend(f.owned);
-    }
+    })?;
     Ok(t)
+}
+
+/// [`read_tile_near`] a frame at a time, for a reader that keeps only some of each frame's
+/// points: `f` gets the points of each frame that reaches `boxes`, in order.
+pub fn for_each_frame_near(
+    ctx: &Ctx,
+    tiling: usize,
+    id: TileId,
+    boxes: &[[f64; 4]],
+    mut f: impl FnMut(TilePoints),
+) -> Result<()> {
+    let path = ctx.input(tiling, &tiling::tile_file(id))?;
+    let mut frames = talus_tiling::TileFrames::open(&path).map_err(|e| damaged(&path, e))?;
+    let want = |b: &talus_tiling::Bounds3| boxes.iter().any(|w| reaches(b, w));
+    while let Some(cols) = frames
+        .next_frame_where(&want)
+        .map_err(|e| damaged(&path, e))?
+    {
+        f(tile_points(cols));
+    }
+    Ok(())
 }
 
 /// Do bounds `b` reach box `w` ([x0, y0, x1, y1]) in plan?

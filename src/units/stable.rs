@@ -70,23 +70,6 @@ impl Stage for StableStage {
 
     /// One per pair, over the pair's M3C2 units (and the user's stable areas, by content).
     fn plan(p: &mut Planner) -> Result<()> {
-        // Refused now, before any tiling, if the largest sample could not be held: SAMPLES, or
-        // fewer when no survey the core points come from has that many points (they are some
-        // of a pair's before survey's, a campaign's first survey's, or the user's file).
-        let plan = &*p.plan;
-        let most = match plan.core_points {
-            Some(_) => SAMPLES,
-            None => (plan.pairs.iter().map(|q| q.before).chain([0]))
-                .filter_map(|s| plan.surveys.get(s).map(|s| s.points))
-                .max()
-                .unwrap_or(0)
-                .min(SAMPLES),
-        };
-        crate::memory::refuse_unless_fits(
-            need(p.plan, most),
-            p.plan.params.memory_bytes.value,
-            "the stable-ground sample and the merge of the pair's tiles",
-        )?;
         let samples = SAMPLES.to_string();
         let areas = areas_key(p.plan);
         for pair in 0..p.plan.pairs.len() {
@@ -107,10 +90,11 @@ impl Stage for StableStage {
     }
 }
 
-/// Resident bytes of a stable unit sampling `most` core points: the sample and its measurement,
-/// and the merge of the pair's results (bounded by `merged::FAN_IN` inputs).
-fn need(plan: &crate::plan::Plan, most: u64) -> u64 {
-    most * BYTES_PER_SAMPLE + (8 << 20) + super::merged::pair_merge_need(plan)
+/// Resident bytes of a stable unit sampling `most` core points beside a merge of `inputs`
+/// inputs (`merged::merge_inputs`). Fixed: at most SAMPLES and FAN_IN runs, which the smallest
+/// budget holds (`memory::MIN_BUDGET`'s test), so no budget talus accepts refuses it.
+pub fn need(most: u64, inputs: usize) -> u64 {
+    most * BYTES_PER_SAMPLE + (8 << 20) + super::m3c2::merge_need(inputs)
 }
 
 /// The key part of the user's stable areas: their file's content key, or `auto`.
@@ -144,7 +128,7 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<StableMeta> {
     // out, and the reservation holds).
     let most = total.div_ceil(step).min(SAMPLES);
     let _held = ctx.reserve(
-        need(ctx.plan, most),
+        need(most, super::merged::merge_inputs(ctx.plan)),
         "the stable-ground sample and the merge of the pair's tiles",
     )?;
     let mut samples = Vec::with_capacity(most as usize);

@@ -306,26 +306,28 @@ fn gather(
             continue;
         }
         for (epoch, &tiling) in tilings.iter().enumerate() {
-            // Only the tile's frames that reach a box (a frame holds a strip of the tile).
-            let t = super::read_tile_near(ctx, tiling, id, &boxes_xy)?;
-            for (i, &own) in t.owned.iter().enumerate() {
-                if !own {
-                    continue;
-                }
-                let p = t.point(i);
-                let mut last = usize::MAX;
-                for k in index.containing(p[0], p[1]) {
-                    let (e, (h, _, obb)) = flat[k];
-                    if e == last {
+            // Only the tile's frames that reach a box (a frame holds a strip of the tile), a
+            // frame held at a time.
+            super::for_each_frame_near(ctx, tiling, id, &boxes_xy, |t| {
+                for (i, &own) in t.owned.iter().enumerate() {
+                    if !own {
                         continue;
                     }
-                    let l = obb.to_local(&p);
-                    if l[0].abs() <= h[0] && l[1].abs() <= h[1] && l[2].abs() <= h[2] {
-                        out[epoch][e].push(p);
-                        last = e;
+                    let p = t.point(i);
+                    let mut last = usize::MAX;
+                    for k in index.containing(p[0], p[1]) {
+                        let (e, (h, _, obb)) = flat[k];
+                        if e == last {
+                            continue;
+                        }
+                        let l = obb.to_local(&p);
+                        if l[0].abs() <= h[0] && l[1].abs() <= h[1] && l[2].abs() <= h[2] {
+                            out[epoch][e].push(p);
+                            last = e;
+                        }
                     }
                 }
-            }
+            })?;
         }
     }
     Ok(out)

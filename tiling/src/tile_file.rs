@@ -296,7 +296,8 @@ pub struct TileFrames {
     file: File,
     /// A version-1 file: its one frame, until taken.
     whole: Option<TileColumns>,
-    framed: bool,
+    /// Every frame given (and a framed file's end checked).
+    done: bool,
     /// Frames in the file, and the next to read.
     frames: u32,
     next: u32,
@@ -318,7 +319,7 @@ impl TileFrames {
             path: path.to_path_buf(),
             file,
             whole: None,
-            framed: version != VERSION,
+            done: false,
             frames: 0,
             next: 0,
             points: 0,
@@ -361,15 +362,15 @@ impl TileFrames {
         want: &dyn Fn(&Bounds3) -> bool,
     ) -> Result<Option<TileColumns>> {
         if let Some(whole) = self.whole.take() {
+            self.done = true;
             return Ok(Some(whole));
         }
         loop {
+            if self.done {
+                return Ok(None);
+            }
             if self.next == self.frames {
-                if self.next == u32::MAX {
-                    return Ok(None);
-                }
-                self.next = u32::MAX;
-                self.frames = u32::MAX;
+                self.done = true;
                 return self.check_end().map(|()| None);
             }
             let mut fixed = [0u8; 16];
@@ -416,12 +417,9 @@ impl TileFrames {
     }
 
     /// After the last frame of a framed file: nothing beyond it, and the header's count read
-    /// (a version-1 file was checked whole when read).
+    /// (a version-1 file was checked whole when read, and never gets here).
     fn check_end(&mut self) -> Result<()> {
         let path = self.path.as_path();
-        if !self.framed {
-            return Ok(());
-        }
         // Where the frames end against the file's length: frames passed over were sought
         // past, not read, so a cut in one shows only here.
         let at = self

@@ -289,14 +289,15 @@ fn gather_along(
                 );
                 continue;
             }
-            // The frames that reach the walks' plan bounds only.
-            let t = super::read_tile_near(ctx, tiling, id, &[xy])?;
-            out[e].extend(
-                (0..t.len())
-                    .filter(|&i| t.owned[i])
-                    .map(|i| t.point(i))
-                    .filter(|p| near(p)),
-            );
+            // The frames that reach the walks' plan bounds only, a frame held at a time.
+            super::for_each_frame_near(ctx, tiling, id, &[xy], |t| {
+                out[e].extend(
+                    (0..t.len())
+                        .filter(|&i| t.owned[i])
+                        .map(|i| t.point(i))
+                        .filter(|p| near(p)),
+                );
+            })?;
         }
     }
     Ok(out)

@@ -1,0 +1,115 @@
+//! Scratch rows: a temporary file of fixed-width rows of f64 in a unit's directory, written in
+//! order and read back in order, for what a unit must keep of every row of a stream it cannot
+//! hold (the events unit's kept core points' other fields, the campaign's later pairs'
+//! distances). Exact (the values' bits), removed by the unit before it commits.
+
+use std::fs::File;
+use std::io::{BufReader, BufWriter, Read, Write};
+use std::path::PathBuf;
+
+use crate::error::{Error, Result};
+use crate::store::UnitWriter;
+
+/// Bytes buffered by a writer or a reader.
+const BUFFER: usize = 1 << 16;
+
+/// Scratch rows being written.
+pub struct RowsWriter {
+    path: PathBuf,
+    file: BufWriter<File>,
+    width: usize,
+    rows: u64,
+}
+
+impl RowsWriter {
+    /// A new scratch file `name` (ending in `.tmp`) of rows of `width` values in `out`'s directory.
+    pub fn create(out: &mut UnitWriter, name: &str, width: usize) -> Result<RowsWriter> {
+        let path = out.path(name)?;
+        let file = File::create(&path).map_err(|e| Error::output(&path, e))?;
+        Ok(RowsWriter {
+            file: BufWriter::with_capacity(BUFFER, file),
+            path,
+            width,
+            rows: 0,
+        })
+    }
+
+    /// Append one row of `width` values.
+    pub fn push(&mut self, row: &[f64]) -> Result<()> {
+        debug_assert_eq!(row.len(), self.width);
+        for v in row {
+            self.file
+                .write_all(&v.to_le_bytes())
+                .map_err(|e| Error::output(&self.path, e))?;
+        }
+        self.rows += 1;
+        Ok(())
+    }
+
+    /// The rows written, ready to be read.
+    pub fn finish(mut self) -> Result<Rows> {
+        self.file
+            .flush()
+            .map_err(|e| Error::output(&self.path, e))?;
+        Ok(Rows {
+            path: self.path,
+            width: self.width,
+            rows: self.rows,
+        })
+    }
+}
+
+/// Finished scratch rows.
+pub struct Rows {
+    path: PathBuf,
+    width: usize,
+    rows: u64,
+}
+
+impl Rows {
+    /// Rows in the file.
+    pub fn len(&self) -> u64 {
+        self.rows
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.rows == 0
+    }
+
+    /// A reader from the first row.
+    pub fn reader(&self) -> Result<RowsReader> {
+        let file = File::open(&self.path).map_err(|e| Error::output(&self.path, e))?;
+        Ok(RowsReader {
+            path: self.path.clone(),
+            file: BufReader::with_capacity(BUFFER, file),
+            row: vec![0.0; self.width],
+        })
+    }
+
+    /// Remove the file.
+    pub fn remove(self) -> Result<()> {
+        std::fs::remove_file(&self.path).map_err(|e| Error::output(&self.path, e))
+    }
+}
+
+/// Scratch rows read in order.
+pub struct RowsReader {
+    path: PathBuf,
+    file: BufReader<File>,
+    row: Vec<f64>,
+}
+
+impl RowsReader {
+    /// The next row (the caller knows how many there are).
+    pub fn next_row(&mut self) -> Result<&[f64]> {
+        let mut b = [0u8; 8];
+        for v in &mut self.row {
+            self.file
+                .read_exact(&mut b)
+                .map_err(|e| Error::output(&self.path, e))?;
+            *v = f64::from_le_bytes(b);
+        }
+        Ok(&self.row)
+    }
+}
