@@ -136,12 +136,13 @@ pub fn start_clock() {
     CLOCK.get_or_init(Instant::now);
 }
 
-/// With `TALUS_TRACE` set in the environment, print `talus: [+S.SSS s] what` on stderr: when
+/// With `TALUS_TRACE` set in the environment, print `talus: [+S.SSS s, R MiB resident] what` on stderr: when
 /// each phase of a run and each unit started and ended, for profiling a run's timeline.
 pub fn trace(what: impl FnOnce() -> String) {
     static ON: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
     if *ON.get_or_init(|| std::env::var_os("TALUS_TRACE").is_some()) {
         let t = CLOCK.get_or_init(Instant::now).elapsed().as_secs_f64();
-        eprintln!("talus: [+{t:.3} s] {}", what());
+        let rss = crate::exec::resident::resident_bytes().unwrap_or(0) >> 20;
+        eprintln!("talus: [+{t:.3} s, {rss} MiB resident] {}", what());
     }
 }

@@ -363,6 +363,7 @@ fn claim_and_run(
     let ran = units::run(&ctx, i, &mut out);
     crate::progress::trace(|| format!("unit {} ends", unit.name));
     crate::memory::trim();
+    crate::progress::trace(|| format!("unit {} trimmed", unit.name));
     let peak = watch.end(i);
     let mut meta = ran?;
     if let Some(m) = meta.as_object_mut() {

@@ -44,13 +44,17 @@ pub struct TerrainSample {
 
 impl TerrainSample {
     /// A sample of at most [`MAX_TERRAIN_POINTS`] of `total` core points, relative to `origin`.
+    /// Its columns are allocated whole, at the size the stride gives: grown by doubling they
+    /// would hold up to twice that, and three times while a doubling copies.
     pub fn new(total: u64, origin: Point3) -> Self {
+        let stride = total.div_ceil(MAX_TERRAIN_POINTS).max(1);
+        let n = total.div_ceil(stride) as usize;
         TerrainSample {
-            stride: total.div_ceil(MAX_TERRAIN_POINTS).max(1),
+            stride,
             origin,
             seen: 0,
-            pos: Vec::new(),
-            dist: Vec::new(),
+            pos: Vec::with_capacity(3 * n),
+            dist: Vec::with_capacity(n),
         }
     }
 
@@ -73,27 +77,31 @@ impl TerrainSample {
         meshes: &[(u32, EventMeshes)],
     ) -> Result<()> {
         let TerrainSample {
-            origin, pos, dist, ..
+            origin,
+            pos,
+            mut dist,
+            ..
         } = self;
-        let mut finite: Vec<f32> = dist.iter().copied().filter(|d| d.is_finite()).collect();
-        let range = if finite.is_empty() {
+        write_floats(out, "terrain.bin", [&pos[..], &dist[..]])?;
+        let points = dist.len();
+        drop(pos);
+        // The colour range from the distances themselves (written already): no copy of them.
+        dist.retain(|d| d.is_finite());
+        let range = if dist.is_empty() {
             [0.0, 0.0]
         } else {
-            finite.sort_by(|a, b| a.total_cmp(b));
-            let q = |f: f64| finite[((finite.len() - 1) as f64 * f).round() as usize] as f64;
+            let mut q = |f: f64| {
+                let k = ((dist.len() - 1) as f64 * f).round() as usize;
+                *dist.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1 as f64
+            };
             [q(0.02), q(0.98)]
         };
-        let mut bytes = Vec::with_capacity((pos.len() + dist.len()) * 4);
-        for v in pos.iter().chain(dist.iter()) {
-            bytes.extend_from_slice(&v.to_le_bytes());
-        }
-        write_bytes(out, "terrain.bin", &bytes)?;
         let view = ViewJson {
             version: 1,
             crs: crs.describe(),
             units: "m",
             origin,
-            points: dist.len(),
+            points,
             distance_range: range,
             terrain: "terrain.bin",
             meshes: meshes
@@ -105,4 +113,28 @@ impl TerrainSample {
             serde_json::to_string_pretty(&view).map_err(|e| Error::Internal(e.to_string()))?;
         write_bytes(out, "view.json", text.as_bytes())
     }
+}
+
+/// Write `parts` one after another as little-endian float32 to `file` of the unit, streamed
+/// through a buffer (a byte copy of the viewer's terrain would be as large as the terrain).
+fn write_floats(out: &mut UnitWriter, file: &str, parts: [&[f32]; 2]) -> Result<()> {
+    use std::io::Write;
+    let path = out.path(file)?;
+    let f = std::fs::File::create(&path).map_err(|e| Error::output(&path, e))?;
+    let mut w = std::io::BufWriter::with_capacity(1 << 20, f);
+    let mut crc = crc32fast::Hasher::new();
+    let mut size = 0u64;
+    let mut bytes = Vec::with_capacity(1 << 16);
+    for part in parts {
+        for run in part.chunks(1 << 14) {
+            bytes.clear();
+            bytes.extend(run.iter().flat_map(|v| v.to_le_bytes()));
+            crc.update(&bytes);
+            w.write_all(&bytes).map_err(|e| Error::output(&path, e))?;
+            size += bytes.len() as u64;
+        }
+    }
+    w.flush().map_err(|e| Error::output(&path, e))?;
+    out.add(file, crc.finalize(), size);
+    Ok(())
 }
