@@ -34,9 +34,10 @@ pub const FILE: &str = "volumes.json";
 /// a cell), their labels' tables while they are built, the solids grown from them with the sort
 /// of their edges, the region's grids. The cost follows the cells (about one per point spacing
 /// squared of the footprint), not the points. Measured on the cliff's three large events with
-/// `--threads 1` (VmHWM reset before each): 1,025, 1,360 and 1,460 bytes a cell (22.5 k, 95 k
-/// and 51 k cells).
-pub const BYTES_PER_CELL: u64 = 1600;
+/// `--threads 1` (VmHWM reset before each, [`BYTES_PER_POINT`] a point taken off): 617, 926
+/// and 807 bytes a cell (95 k, 22.5 k and 51 k cells). Before large blocks were mapped on their
+/// own (`memory::MMAP_THRESHOLD`) the same events measured 1,360, 1,025 and 1,460.
+pub const BYTES_PER_CELL: u64 = 1024;
 
 /// Resident bytes per gathered point (both epochs) beside the cells' cost: the points in the
 /// event's frame, a triangulation's share (spade is lean: ≈ 40), its mesh copied out for
