@@ -72,8 +72,10 @@ pub fn candidate_boxes(e: &Event, cluster: &[Point3]) -> Vec<Obb> {
 /// positions (≈ 40), the clustering's copies, tile lists and links (≈ 50), and the clustered
 /// points' LoDs and normals for their descriptions (32). Measured on the 120M-point pair (839,640
 /// kept): the unit's peak 121–127 MiB in a process of its own (184 MiB before the spill, 381
-/// before `kept.tile` was written in frames), ≈ 140 bytes each beyond the process's base.
-pub const BYTES_PER_KEPT: u64 = 160;
+/// before `kept.tile` was written in frames), ≈ 140 bytes each beyond the process's base; with
+/// large blocks mapped on their own (`memory::MMAP_THRESHOLD`) 115.6 and 118.5 MiB in two runs
+/// (2 GiB and 164 MiB), ≈ 117 bytes each beyond the base and the fixed 8 MiB.
+pub const BYTES_PER_KEPT: u64 = 128;
 
 /// The pair's events: filter, smoothing, signed clustering, description.
 pub struct EventsStage;
