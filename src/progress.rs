@@ -142,7 +142,7 @@ pub fn trace(what: impl FnOnce() -> String) {
     static ON: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
     if *ON.get_or_init(|| std::env::var_os("TALUS_TRACE").is_some()) {
         let t = CLOCK.get_or_init(Instant::now).elapsed().as_secs_f64();
-        let rss = crate::exec::resident::resident_bytes().unwrap_or(0) >> 20;
+        let rss = crate::memory::resident_bytes().unwrap_or(0) >> 20;
         eprintln!("talus: [+{t:.3} s, {rss} MiB resident] {}", what());
     }
 }

@@ -12,8 +12,8 @@ const LAYERS: &[&str] = &[
     // base
     "error",
     "interrupt",
-    "progress",
     "memory",
+    "progress",
     "geom",
     "rng",
     // algorithms

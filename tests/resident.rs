@@ -3,7 +3,8 @@
 //! resident size, which tests running beside it in one process would move (a neighbour freeing
 //! its memory between the two readings made it fail in the library's tests).
 
-use talus::exec::resident::{resident_bytes, Watch, SAMPLE};
+use talus::exec::resident::{Watch, SAMPLE};
+use talus::memory::resident_bytes;
 
 #[test]
 fn a_unit_that_touches_memory_has_a_peak_above_it() {

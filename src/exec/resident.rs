@@ -17,23 +17,6 @@ use std::time::Duration;
 /// Time between samples.
 pub const SAMPLE: Duration = Duration::from_millis(5);
 
-/// Resident bytes of this process now (`None` where /proc is not there).
-pub fn resident_bytes() -> Option<u64> {
-    let statm = std::fs::read_to_string("/proc/self/statm").ok()?;
-    let pages: u64 = statm.split_whitespace().nth(1)?.parse().ok()?;
-    Some(pages * page_size())
-}
-
-fn page_size() -> u64 {
-    // SAFETY: sysconf has no preconditions; it only reads a system constant.
-    let n = unsafe { libc::sysconf(libc::_SC_PAGESIZE) };
-    if n > 0 {
-        n as u64
-    } else {
-        4096
-    }
-}
-
 /// Peak resident bytes per running unit, kept by a sampling thread that lives as long as this.
 pub struct Watch {
     running: Arc<Mutex<HashMap<usize, u64>>>,
@@ -46,11 +29,11 @@ impl Watch {
     pub fn start() -> Watch {
         let running: Arc<Mutex<HashMap<usize, u64>>> = Arc::default();
         let stop = Arc::new(AtomicBool::new(false));
-        let thread = resident_bytes().is_some().then(|| {
+        let thread = crate::memory::resident_bytes().is_some().then(|| {
             let (running, stop) = (running.clone(), stop.clone());
             std::thread::spawn(move || {
                 while !stop.load(Ordering::Relaxed) {
-                    if let Some(now) = resident_bytes() {
+                    if let Some(now) = crate::memory::resident_bytes() {
                         let mut r = running.lock().unwrap_or_else(|e| e.into_inner());
                         for peak in r.values_mut() {
                             *peak = (*peak).max(now);
@@ -69,13 +52,13 @@ impl Watch {
 
     /// Unit `i` starts.
     pub fn begin(&self, i: usize) {
-        let now = resident_bytes().unwrap_or(0);
+        let now = crate::memory::resident_bytes().unwrap_or(0);
         self.lock().insert(i, now);
     }
 
     /// Unit `i` ended: the highest resident memory seen while it ran (`None` when unknown).
     pub fn end(&self, i: usize) -> Option<u64> {
-        let now = resident_bytes();
+        let now = crate::memory::resident_bytes();
         let peak = self.lock().remove(&i)?;
         now.map(|n| n.max(peak))
     }

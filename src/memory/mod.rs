@@ -80,6 +80,23 @@ pub fn reserve<'a>(pool: &'a Pool, need: u64, budget: u64, what: &str) -> Result
         .ok_or(Error::Interrupted)
 }
 
+/// Resident bytes of this process now (`None` where /proc is not there).
+pub fn resident_bytes() -> Option<u64> {
+    let statm = std::fs::read_to_string("/proc/self/statm").ok()?;
+    let pages: u64 = statm.split_whitespace().nth(1)?.parse().ok()?;
+    Some(pages * page_size())
+}
+
+fn page_size() -> u64 {
+    // SAFETY: sysconf has no preconditions; it only reads a system constant.
+    let n = unsafe { libc::sysconf(libc::_SC_PAGESIZE) };
+    if n > 0 {
+        n as u64
+    } else {
+        4096
+    }
+}
+
 /// Arenas allowed: one per core of these 2-core machines; more only fragments.
 pub const ARENAS: i32 = 2;
 
