@@ -393,7 +393,16 @@ impl KeptFrames {
 
     /// The next frame's kept core points; None after the last.
     pub fn next_frame(&mut self) -> Result<Option<Vec<Kept>>> {
-        match self.frames.next_frame() {
+        self.next_frame_where(&|_| true)
+    }
+
+    /// The next frame whose bounds `want` accepts (the others are passed over undecoded: the
+    /// points are in key order, tile by tile, so a frame covers a strip of a few tiles).
+    pub fn next_frame_where(
+        &mut self,
+        want: &dyn Fn(&talus_tiling::Bounds3) -> bool,
+    ) -> Result<Option<Vec<Kept>>> {
+        match self.frames.next_frame_where(want) {
             Ok(Some(c)) => from_columns(&c, &self.path).map(Some),
             Ok(None) => Ok(None),
             Err(e) => Err(super::damaged(&self.path, e)),

@@ -169,6 +169,68 @@ fn near_events(drafts: &[Draft], mine: &[&Draft], params: &Params) -> rustc_hash
         .collect()
 }
 
+/// The core points of the `near` events, read a frame at a time, decoding only the frames that
+/// reach one of their boxes (an event's box encloses its core points, `events::describe`). Every
+/// event's count is checked against its record; should one fall short, the file is read whole.
+fn near_members(
+    ctx: &Ctx,
+    pair: usize,
+    drafts: &[Draft],
+    near: &rustc_hash::FxHashSet<u32>,
+) -> Result<HashMap<u32, Vec<Kept>>> {
+    let expected: HashMap<u32, usize> = drafts
+        .iter()
+        .filter(|d| near.contains(&d.event.id))
+        .map(|d| (d.event.id, d.event.n_points))
+        .collect();
+    let boxes: Vec<[f64; 4]> = drafts
+        .iter()
+        .filter(|d| near.contains(&d.event.id))
+        .map(|d| plan_box(&d.event.obb))
+        .collect();
+    let reached = |b: &talus_tiling::Bounds3| boxes.iter().any(|w| super::reaches(b, w));
+    let read = |want: &dyn Fn(&talus_tiling::Bounds3) -> bool| {
+        let mut members: HashMap<u32, Vec<Kept>> = HashMap::default();
+        let mut kept = super::events::KeptFrames::open(ctx, pair)?;
+        while let Some(rows) = kept.next_frame_where(want)? {
+            for k in rows {
+                if k.event > 0 && near.contains(&k.event) {
+                    members.entry(k.event).or_default().push(k);
+                }
+            }
+        }
+        Ok::<_, crate::Error>(members)
+    };
+    let members = read(&reached)?;
+    if expected
+        .iter()
+        .all(|(id, &n)| members.get(id).map_or(0, |m| m.len()) == n)
+    {
+        return Ok(members);
+    }
+    crate::progress::trace(|| format!("pair {pair}: kept core points read whole"));
+    read(&|_| true)
+}
+
+/// The box in plan ([x0, y0, x1, y1]) of an oriented box, padded by a millionth of its size and
+/// a micrometre against rounding.
+fn plan_box(o: &Obb) -> [f64; 4] {
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for corner in 0..8 {
+        let l: [f64; 3] = std::array::from_fn(|k| {
+            let s = if corner >> k & 1 == 1 { 1.0 } else { -1.0 };
+            s * o.half_extents[k]
+        });
+        let g = o.to_global(&l);
+        for k in 0..2 {
+            lo[k] = lo[k].min(g[k]);
+            hi[k] = hi[k].max(g[k]);
+        }
+    }
+    let pad = 1e-6 * (1.0 + (hi[0] - lo[0]).max(hi[1] - lo[1]));
+    [lo[0] - pad, lo[1] - pad, hi[0] + pad, hi[1] + pad]
+}
+
 /// The claims of every event (one per candidate box) over their clustered core points.
 pub fn ownership(
     drafts: &[&Draft],
@@ -427,16 +489,7 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
         // the others are never asked (building every event's claim in every unit cost as much
         // as the tile's own volumes on the 120M-point pair).
         let near = near_events(&drafts, &mine, params);
-        // The near events' core points only, read a frame at a time.
-        let mut members: HashMap<u32, Vec<Kept>> = HashMap::default();
-        let mut kept = super::events::KeptFrames::open(ctx, pair)?;
-        while let Some(rows) = kept.next_frame()? {
-            for k in rows {
-                if k.event > 0 && near.contains(&k.event) {
-                    members.entry(k.event).or_default().push(k);
-                }
-            }
-        }
+        let members = near_members(ctx, pair, &drafts, &near)?;
         let relevant: Vec<&Draft> = drafts
             .iter()
             .filter(|d| near.contains(&d.event.id))
