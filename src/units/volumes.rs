@@ -649,3 +649,52 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
         largest_event_points: largest,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every point of a turned, tilted box lies in its plan box: a unit that skips the kept
+    /// frames outside it loses none of an event's core points.
+    #[test]
+    fn the_plan_box_holds_every_point_of_the_oriented_box() {
+        let (a, b) = (0.5f64, 0.3f64);
+        let (ca, sa, cb, sb) = (a.cos(), a.sin(), b.cos(), b.sin());
+        // Turned by a about z, then tilted by b about the first axis.
+        let u = [ca, sa, 0.0];
+        let v = [-sa * cb, ca * cb, sb];
+        let w = [sa * sb, -ca * sb, cb];
+        let o = Obb {
+            center: [500_123.25, 4_999_876.5, 101.0],
+            axes: [u, v, w],
+            half_extents: [7.0, 2.5, 0.75],
+        };
+        let bx = plan_box(&o);
+        let mut rng = crate::rng::SplitMix64::new(7);
+        for _ in 0..10_000 {
+            let l: [f64; 3] =
+                std::array::from_fn(|k| rng.range(-o.half_extents[k], o.half_extents[k]));
+            let g = o.to_global(&l);
+            assert!(bx[0] <= g[0] && g[0] <= bx[2] && bx[1] <= g[1] && g[1] <= bx[3]);
+        }
+        // Each side of it touches a corner (within its padding): no larger than it must be.
+        let corners: Vec<Point3> = (0..8)
+            .map(|c| {
+                o.to_global(&std::array::from_fn(|k| {
+                    if c >> k & 1 == 1 {
+                        o.half_extents[k]
+                    } else {
+                        -o.half_extents[k]
+                    }
+                }))
+            })
+            .collect();
+        for (side, axis) in [(0, 0), (1, 1), (2, 0), (3, 1)] {
+            let gap = corners
+                .iter()
+                .map(|c| (c[axis] - bx[side]).abs())
+                .fold(f64::INFINITY, f64::min);
+            assert!(gap < 1e-3, "side {side}: {gap}");
+        }
+    }
+}
