@@ -136,8 +136,9 @@ pub fn start_clock() {
     CLOCK.get_or_init(Instant::now);
 }
 
-/// With `TALUS_TRACE` set in the environment, print `talus: [+S.SSS s, R MiB resident] what` on stderr: when
-/// each phase of a run and each unit started and ended, for profiling a run's timeline.
+/// With `TALUS_TRACE` set in the environment, print `talus: [+S.SSS s, R MiB resident] what` on
+/// stderr: when each phase of a run and each unit started and ended (and was trimmed), with the
+/// process's resident size then, for profiling a run's timeline.
 pub fn trace(what: impl FnOnce() -> String) {
     static ON: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
     if *ON.get_or_init(|| std::env::var_os("TALUS_TRACE").is_some()) {

@@ -40,39 +40,6 @@ pub fn write_ply_to(w: &mut impl Write, mesh: &Mesh) -> std::io::Result<()> {
     Ok(())
 }
 
-/// Write a mesh as binary little-endian PLY to `path` (plainly: in a unit's directory, whose
-/// commit makes it durable), computing the file's CRC-32 and size on the way.
-pub fn write_ply_digest(path: &Path, mesh: &Mesh) -> Result<(u32, u64)> {
-    struct Digest<W> {
-        inner: W,
-        crc: crc32fast::Hasher,
-        size: u64,
-    }
-    impl<W: Write> Write for Digest<W> {
-        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
-            let n = self.inner.write(buf)?;
-            self.crc.update(&buf[..n]);
-            self.size += n as u64;
-            Ok(n)
-        }
-        fn flush(&mut self) -> std::io::Result<()> {
-            self.inner.flush()
-        }
-    }
-    let write = || -> std::io::Result<(u32, u64)> {
-        let f = std::fs::File::create(path)?;
-        let mut d = Digest {
-            inner: std::io::BufWriter::with_capacity(1 << 20, f),
-            crc: crc32fast::Hasher::new(),
-            size: 0,
-        };
-        write_ply_to(&mut d, mesh)?;
-        d.flush()?;
-        Ok((d.crc.finalize(), d.size))
-    };
-    write().map_err(|e| Error::output(path, e))
-}
-
 /// Write a mesh as binary little-endian PLY (atomic: temporary file + rename).
 pub fn write_ply(path: &Path, mesh: &Mesh) -> Result<()> {
     Ok(talus_tiling::atomic_write_with(path, |f| {

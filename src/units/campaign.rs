@@ -541,7 +541,9 @@ fn write_timeseries(
     // directory, then one pass over pair 0's results reads them beside it. Every pair has the
     // campaign's core points in key order; a count and a hash of the keys check it.
     let _held = ctx.reserve(
-        super::merged::pair_merge_need(plan) + (plan.pairs.len() << 16) as u64 + (8 << 20),
+        super::merged::pair_merge_need(plan)
+            + (plan.pairs.len() * super::scratch::BUFFER) as u64
+            + (8 << 20),
         "the time series (a pair's merge at a time)",
     )?;
     let keys_of =

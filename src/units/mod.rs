@@ -296,7 +296,7 @@ pub fn for_each_frame_near(
 ) -> Result<()> {
     let path = ctx.input(tiling, &tiling::tile_file(id))?;
     let mut frames = talus_tiling::TileFrames::open(&path).map_err(|e| damaged(&path, e))?;
-    let want = |b: &talus_tiling::Bounds3| boxes.iter().any(|w| reaches(b, w));
+    let want = |b: &talus_tiling::Bounds3| reaches(b, boxes);
     while let Some(cols) = frames
         .next_frame_where(&want)
         .map_err(|e| damaged(&path, e))?
@@ -306,9 +306,11 @@ pub fn for_each_frame_near(
     Ok(())
 }
 
-/// Do bounds `b` reach box `w` ([x0, y0, x1, y1]) in plan?
-pub fn reaches(b: &talus_tiling::Bounds3, w: &[f64; 4]) -> bool {
-    b.min[0] <= w[2] && w[0] <= b.max[0] && b.min[1] <= w[3] && w[1] <= b.max[1]
+/// Do bounds `b` reach one of `boxes` ([x0, y0, x1, y1] each) in plan?
+pub fn reaches(b: &talus_tiling::Bounds3, boxes: &[[f64; 4]]) -> bool {
+    boxes
+        .iter()
+        .any(|w| b.min[0] <= w[2] && w[0] <= b.max[0] && b.min[1] <= w[3] && w[1] <= b.max[1])
 }
 
 /// A tile file's columns as points with their owned flags.
@@ -333,10 +335,46 @@ pub fn write_json(out: &mut UnitWriter, file: &str, value: &impl serde::Serializ
 
 /// Write `bytes` into `file` of `out`, recorded with its digest.
 pub fn write_bytes(out: &mut UnitWriter, file: &str, bytes: &[u8]) -> Result<()> {
+    write_streamed(out, file, |w| w.write_all(bytes))
+}
+
+/// Write `file` of `out` with `body` through a buffer, recorded with the CRC-32 and size computed
+/// on the way: plainly (the unit's commit makes it durable), never read back, never held whole.
+pub fn write_streamed(
+    out: &mut UnitWriter,
+    file: &str,
+    body: impl FnOnce(&mut dyn std::io::Write) -> std::io::Result<()>,
+) -> Result<()> {
+    use std::io::Write;
+    struct Digest<W> {
+        inner: W,
+        crc: crc32fast::Hasher,
+        size: u64,
+    }
+    impl<W: Write> Write for Digest<W> {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            let n = self.inner.write(buf)?;
+            self.crc.update(&buf[..n]);
+            self.size += n as u64;
+            Ok(n)
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            self.inner.flush()
+        }
+    }
     let path = out.path(file)?;
-    std::fs::write(&path, bytes).map_err(|e| Error::output(&path, e))?;
-    let d = talus_tiling::FileDigest::of(bytes);
-    out.add(file, d.crc32, d.size);
+    let write = || -> std::io::Result<(u32, u64)> {
+        let mut d = Digest {
+            inner: std::io::BufWriter::with_capacity(1 << 20, std::fs::File::create(&path)?),
+            crc: crc32fast::Hasher::new(),
+            size: 0,
+        };
+        body(&mut d)?;
+        d.flush()?;
+        Ok((d.crc.finalize(), d.size))
+    };
+    let (crc, size) = write().map_err(|e| Error::output(&path, e))?;
+    out.add(file, crc, size);
     Ok(())
 }
 

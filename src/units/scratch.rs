@@ -10,8 +10,8 @@ use std::path::PathBuf;
 use crate::error::{Error, Result};
 use crate::store::UnitWriter;
 
-/// Bytes buffered by a writer or a reader.
-const BUFFER: usize = 1 << 16;
+/// Bytes buffered by a writer or a reader (what a caller holding several reserves for each).
+pub const BUFFER: usize = 1 << 16;
 
 /// Scratch rows being written.
 pub struct RowsWriter {

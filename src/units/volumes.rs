@@ -178,17 +178,12 @@ fn near_members(
     drafts: &[Draft],
     near: &rustc_hash::FxHashSet<u32>,
 ) -> Result<HashMap<u32, Vec<Kept>>> {
-    let expected: HashMap<u32, usize> = drafts
-        .iter()
-        .filter(|d| near.contains(&d.event.id))
-        .map(|d| (d.event.id, d.event.n_points))
-        .collect();
-    let boxes: Vec<[f64; 4]> = drafts
-        .iter()
-        .filter(|d| near.contains(&d.event.id))
-        .map(|d| plan_box(&d.event.obb))
-        .collect();
-    let reached = |b: &talus_tiling::Bounds3| boxes.iter().any(|w| super::reaches(b, w));
+    let (mut expected, mut boxes) = (HashMap::default(), Vec::new());
+    for d in drafts.iter().filter(|d| near.contains(&d.event.id)) {
+        expected.insert(d.event.id, d.event.n_points);
+        boxes.push(plan_box(&d.event.obb));
+    }
+    let reached = |b: &talus_tiling::Bounds3| super::reaches(b, &boxes);
     let read = |want: &dyn Fn(&talus_tiling::Bounds3) -> bool| {
         let mut members: HashMap<u32, Vec<Kept>> = HashMap::default();
         let mut kept = super::events::KeptFrames::open(ctx, pair)?;
@@ -215,20 +210,9 @@ fn near_members(
 /// The box in plan ([x0, y0, x1, y1]) of an oriented box, padded by a millionth of its size and
 /// a micrometre against rounding.
 fn plan_box(o: &Obb) -> [f64; 4] {
-    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-    for corner in 0..8 {
-        let l: [f64; 3] = std::array::from_fn(|k| {
-            let s = if corner >> k & 1 == 1 { 1.0 } else { -1.0 };
-            s * o.half_extents[k]
-        });
-        let g = o.to_global(&l);
-        for k in 0..2 {
-            lo[k] = lo[k].min(g[k]);
-            hi[k] = hi[k].max(g[k]);
-        }
-    }
-    let pad = 1e-6 * (1.0 + (hi[0] - lo[0]).max(hi[1] - lo[1]));
-    [lo[0] - pad, lo[1] - pad, hi[0] + pad, hi[1] + pad]
+    let pad = 1e-6 * (1.0 + o.half_extents.iter().fold(0.0f64, |m, &h| m.max(2.0 * h)));
+    let h = o.half_extents.map(|h| h + pad);
+    volume::Frame::of_obb(o).bounds_xy(h.map(|x| -x), h)
 }
 
 /// The claims of every event (one per candidate box) over their clustered core points.
@@ -633,9 +617,9 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
                 // Written plainly, the digest computed on the way: the unit's commit makes them
                 // durable (a sync and a read-back per file cost 2 × 1028 of each at 120M).
                 for (name, solid) in names.iter().zip([&v.before_solid, &v.after_solid]) {
-                    let (crc, size) =
-                        crate::io::mesh_ply::write_ply_digest(&out.path(name)?, solid)?;
-                    out.add(name, crc, size);
+                    super::write_streamed(out, name, |mut w| {
+                        crate::io::mesh_ply::write_ply_to(&mut w, solid)
+                    })?;
                 }
             }
             measured.push(m);

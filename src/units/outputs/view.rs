@@ -8,7 +8,7 @@ use crate::error::{Error, Result};
 use crate::io::{Crs, Point3};
 use crate::m3c2::tile::KeyedResult;
 use crate::store::UnitWriter;
-use crate::units::write_bytes;
+use crate::units::{write_bytes, write_streamed};
 
 /// Upper bound on the terrain points the viewer gets.
 pub const MAX_TERRAIN_POINTS: u64 = 2_000_000;
@@ -82,7 +82,16 @@ impl TerrainSample {
             mut dist,
             ..
         } = self;
-        write_floats(out, "terrain.bin", [&pos[..], &dist[..]])?;
+        // Streamed, a run of values at a time (a byte copy would be as large as the terrain).
+        write_streamed(out, "terrain.bin", |w| {
+            let mut bytes = Vec::with_capacity(1 << 16);
+            for run in pos.chunks(1 << 14).chain(dist.chunks(1 << 14)) {
+                bytes.clear();
+                bytes.extend(run.iter().flat_map(|v| v.to_le_bytes()));
+                w.write_all(&bytes)?;
+            }
+            Ok(())
+        })?;
         let points = dist.len();
         drop(pos);
         // The colour range from the distances themselves (written already): no copy of them.
@@ -113,28 +122,4 @@ impl TerrainSample {
             serde_json::to_string_pretty(&view).map_err(|e| Error::Internal(e.to_string()))?;
         write_bytes(out, "view.json", text.as_bytes())
     }
-}
-
-/// Write `parts` one after another as little-endian float32 to `file` of the unit, streamed
-/// through a buffer (a byte copy of the viewer's terrain would be as large as the terrain).
-fn write_floats(out: &mut UnitWriter, file: &str, parts: [&[f32]; 2]) -> Result<()> {
-    use std::io::Write;
-    let path = out.path(file)?;
-    let f = std::fs::File::create(&path).map_err(|e| Error::output(&path, e))?;
-    let mut w = std::io::BufWriter::with_capacity(1 << 20, f);
-    let mut crc = crc32fast::Hasher::new();
-    let mut size = 0u64;
-    let mut bytes = Vec::with_capacity(1 << 16);
-    for part in parts {
-        for run in part.chunks(1 << 14) {
-            bytes.clear();
-            bytes.extend(run.iter().flat_map(|v| v.to_le_bytes()));
-            crc.update(&bytes);
-            w.write_all(&bytes).map_err(|e| Error::output(&path, e))?;
-            size += bytes.len() as u64;
-        }
-    }
-    w.flush().map_err(|e| Error::output(&path, e))?;
-    out.add(file, crc.finalize(), size);
-    Ok(())
 }
