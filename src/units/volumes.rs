@@ -151,6 +151,24 @@ pub fn search_box(obb: &Obb, depth: f64, params: &Params) -> ([f64; 3], [f64; 4]
     (h, xy)
 }
 
+/// The tiles that the plan bounds of `d`'s search boxes reach, in order: each box's corners
+/// through the grid's `owner` (so clamped onto the grid), every tile between. Two events whose
+/// boxes overlap reach a common tile (the owner of a point of the overlap: `owner` is monotone
+/// along each axis), and an event reaches the tile owning its centroid.
+pub fn reached_tiles(d: &Draft, params: &Params, grid: &talus_tiling::TileGrid) -> Vec<TileId> {
+    let mut out = Vec::new();
+    for o in &d.candidates {
+        let b = search_box(o, depth(d, params), params).1;
+        let (lo, hi) = (grid.owner(b[0], b[1]), grid.owner(b[2], b[3]));
+        for col in lo.col..=hi.col {
+            out.extend((lo.row..=hi.row).map(|row| TileId { col, row }));
+        }
+    }
+    out.sort_unstable();
+    out.dedup();
+    out
+}
+
 /// The ids of the events with a candidate whose search box overlaps, in xy, one of `mine`'s:
 /// every event whose claim can contain a location of `mine`'s regions.
 fn near_events(drafts: &[Draft], mine: &[&Draft], params: &Params) -> rustc_hash::FxHashSet<u32> {
@@ -459,15 +477,31 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
     let ground = super::stable::read(ctx, pair)?;
     let params = &ground.params(plan);
     let stable = ground.stable.as_ref();
-    let drafts = super::events::read_drafts(ctx, pair)?;
     let grid = plan.layout.grid()?;
-    let mine: Vec<&Draft> = drafts
+    // The events whose boxes reach this tile include those whose centroid it owns (a centroid
+    // lies in its event's box); the pair's whole events.json is never read.
+    let near_drafts = super::events::NearDrafts::open(ctx, pair)?;
+    let here = near_drafts.drafts(tile)?;
+    let mine: Vec<&Draft> = here
         .iter()
         .filter(|d| grid.owner(d.event.centroid[0], d.event.centroid[1]) == tile)
         .collect();
     let mut measured: Vec<Measured> = Vec::new();
     let (mut gathered, mut largest) = (0usize, 0usize);
     if !mine.is_empty() {
+        // Every event whose boxes overlap one of mine's reaches a tile that one of mine reaches.
+        let mut tiles: Vec<TileId> = mine
+            .iter()
+            .flat_map(|d| reached_tiles(d, params, &grid))
+            .collect();
+        tiles.sort_unstable();
+        tiles.dedup();
+        let mut drafts: Vec<Draft> = Vec::new();
+        for t in tiles {
+            drafts.extend(near_drafts.drafts(t)?);
+        }
+        drafts.sort_by_key(|d| d.event.id);
+        drafts.dedup_by_key(|d| d.event.id);
         // Only the events whose claims can reach this tile's events decide ownership here: an
         // event owns a location only inside its claim, which lies inside its search boxes, so
         // the others are never asked (building every event's claim in every unit cost as much
@@ -637,6 +671,86 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Two events whose search boxes overlap (as `near_events` judges) reach a common tile, and
+    /// every event reaches the tile owning its centroid: a volumes unit that reads the drafts of
+    /// the tiles its own events reach (`events::write_near`) finds every event near them. Boxes
+    /// turned and tilted at random, deep ones among them, inside the grid and beyond its edges.
+    #[test]
+    fn events_whose_boxes_overlap_reach_a_common_tile() {
+        let params = Params::resolve(&crate::params::UserParams::default(), 0.15).unwrap();
+        let grid = talus_tiling::TileGrid::new([100.0, 200.0], 12.5, 8, 6).unwrap();
+        let mut rng = crate::rng::SplitMix64::new(11);
+        let drafts: Vec<Draft> = (1..=400)
+            .map(|id| {
+                let c = [
+                    rng.range(90.0, 210.0),
+                    rng.range(190.0, 285.0),
+                    rng.range(-5.0, 5.0),
+                ];
+                let (a, b) = (rng.range(0.0, 6.3), rng.range(0.0, 1.2));
+                let (ca, sa, cb, sb) = (a.cos(), a.sin(), b.cos(), b.sin());
+                let w = [sa * sb, -ca * sb, cb];
+                let obb = Obb {
+                    center: c,
+                    axes: [[ca, sa, 0.0], [-sa * cb, ca * cb, sb], w],
+                    half_extents: [
+                        rng.range(0.0, 4.0),
+                        rng.range(0.0, 2.0),
+                        rng.range(0.0, 1.0),
+                    ],
+                };
+                let event = Event {
+                    id,
+                    kind: crate::events::Kind::Gain,
+                    n_points: 10,
+                    centroid: c,
+                    area_m2: 1.0,
+                    mean_distance: 0.5,
+                    max_abs_distance: rng.range(0.0, 8.0),
+                    mean_lod95: 0.01,
+                    obb,
+                    mean_normal: w,
+                };
+                Draft {
+                    event,
+                    candidates: vec![obb],
+                    beyond_reach: 0,
+                }
+            })
+            .collect();
+        let reached: Vec<Vec<TileId>> = drafts
+            .iter()
+            .map(|d| reached_tiles(d, &params, &grid))
+            .collect();
+        let (mut pairs, mut spread) = (0, 0);
+        for (i, d) in drafts.iter().enumerate() {
+            let c = d.event.centroid;
+            assert!(
+                reached[i].contains(&grid.owner(c[0], c[1])),
+                "event {}",
+                i + 1
+            );
+            spread += usize::from(reached[i].len() > 1);
+            let near = near_events(&drafts, &[d], &params);
+            for (j, e) in drafts.iter().enumerate() {
+                if j != i && near.contains(&e.event.id) {
+                    pairs += 1;
+                    assert!(
+                        reached[i].iter().any(|t| reached[j].contains(t)),
+                        "events {} and {}",
+                        i + 1,
+                        j + 1
+                    );
+                }
+            }
+        }
+        // Not vacuous: many near pairs, many events over more than one tile.
+        assert!(
+            pairs > 1000 && spread > 100,
+            "{pairs} near pairs, {spread} spread"
+        );
+    }
 
     /// Every point of a turned, tilted box lies in its plan box: a unit that skips the kept
     /// frames outside it loses none of an event's core points.
