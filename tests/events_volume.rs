@@ -817,12 +817,10 @@ fn clustered(rng: &mut Rng) -> Vec<[f64; 3]> {
     pts
 }
 
-/// `events::tiled::cluster` over a k×k grid of [0, 30]², global ids = indices.
-fn tiled_dbscan(pts: &[[f64; 3]], k: usize, eps: f64, min_pts: usize) -> Vec<u32> {
-    let grid =
-        talus_tiling::TileGrid::new([0.0, 0.0], 30.0 / k as f64, k as u32, k as u32).unwrap();
-    let keys: Vec<u64> = (0..pts.len() as u64).collect();
-    talus::events::tiled::cluster(pts, &keys, &grid, eps, min_pts).unwrap()
+/// `events::blocks::cluster` over blocks reaching `reach`, every point a member.
+fn blocks_dbscan(pts: &[[f64; 3]], reach: f64, eps: f64, min_pts: usize) -> Vec<u32> {
+    let blocks = talus::events::blocks::Blocks::new(pts, reach);
+    talus::events::blocks::cluster(pts, &|_| true, eps, min_pts, &blocks).unwrap()
 }
 
 #[test]
@@ -840,25 +838,90 @@ fn dbscan_matches_brute_force() {
 }
 
 #[test]
-fn tiled_dbscan_equals_whole_cloud() {
+fn dbscan_by_blocks_equals_whole_cloud() {
     let mut rng = Rng::new(14);
     let pts = clustered(&mut rng);
     let (eps, min_pts) = (1.0, 8);
     let whole = dbscan(&pts, eps, min_pts).unwrap();
-    for k in [2, 3, 5] {
-        let tiled = tiled_dbscan(&pts, k, eps, min_pts);
-        assert_eq!(tiled, whole, "{k}x{k} tiles");
+    for reach in [1.0, 1.7, 4.0, 40.0] {
+        let by_blocks = blocks_dbscan(&pts, reach, eps, min_pts);
+        assert_eq!(by_blocks, whole, "blocks reaching {reach}");
     }
-    // The corner blobs really straddle tiles: points of one cluster in several 3×3 tiles.
-    let size = 10.0;
+    // The clusters really straddle blocks: points of one cluster in several blocks of 4.0 (the
+    // side of those reaching 1.0), counted from the first point.
     let label = whole[150]; // first point of the blob at (10, 10)
-    let mut tiles = std::collections::HashSet::new();
+    let mut cells = std::collections::HashSet::new();
     for (i, p) in pts.iter().enumerate() {
         if whole[i] == label {
-            tiles.insert(((p[0] / size) as i32, (p[1] / size) as i32));
+            cells.insert([0, 1, 2].map(|k| ((p[k] - pts[0][k]) / 4.0).floor() as i64));
         }
     }
-    assert!(tiles.len() >= 3, "cluster spans {} tiles", tiles.len());
+    assert!(cells.len() >= 3, "cluster spans {} blocks", cells.len());
+    // Members only: the labels of a whole-cloud run over the members, the others noise.
+    let member = |i: usize| i % 3 != 1;
+    let sub: Vec<[f64; 3]> = (0..pts.len())
+        .filter(|&i| member(i))
+        .map(|i| pts[i])
+        .collect();
+    let mut expected = vec![0u32; pts.len()];
+    let sub_labels = dbscan(&sub, eps, min_pts).unwrap();
+    for (&l, i) in sub_labels.iter().zip((0..pts.len()).filter(|&i| member(i))) {
+        expected[i] = l;
+    }
+    assert!(*expected.iter().max().unwrap() >= 5);
+    let blocks = talus::events::blocks::Blocks::new(&pts, 1.3);
+    let got = talus::events::blocks::cluster(&pts, &member, eps, min_pts, &blocks).unwrap();
+    assert_eq!(got, expected);
+}
+
+/// Smoothing by blocks has the bits of the whole-cloud smoothing wherever a point's k nearest
+/// lie within the reach; where they do not (isolated points), it takes those within the reach,
+/// and the value moves by less than the weights beyond it (e^(−reach²/2σ²) each).
+#[test]
+fn smoothing_by_blocks_equals_whole_cloud_within_its_reach() {
+    use talus::events::blocks::{smooth, Blocks};
+    let mut rng = Rng::new(15);
+    let mut pts = clustered(&mut rng);
+    // A few isolated points, far from the others.
+    for k in 0..6 {
+        pts.push([50.0 + 7.0 * k as f64, 60.0, 1.0]);
+    }
+    let d: Vec<f64> = pts
+        .iter()
+        .map(|p| 0.1 * p[0].sin() + 0.05 * p[1] + rng.gauss() * 0.01)
+        .collect();
+    let (k, sigma) = (30, 0.5);
+    let reach = 5.0 * sigma;
+    let whole = talus::events::smooth::smooth(&pts, &d, k, sigma).unwrap();
+    let mut far = 0;
+    for blocks_reach in [reach, 4.0, 9.0] {
+        let by_blocks =
+            smooth(&pts, &d, k, sigma, reach, &Blocks::new(&pts, blocks_reach)).unwrap();
+        far = 0;
+        for i in 0..pts.len() {
+            // The k-th nearest distance, by brute force.
+            let mut r2: Vec<f64> = pts
+                .iter()
+                .map(|q| (0..3).map(|c| (pts[i][c] - q[c]).powi(2)).sum())
+                .collect();
+            r2.sort_by(|a, b| a.total_cmp(b));
+            if r2[k - 1] <= reach * reach * (1.0 - 1e-9) {
+                assert_eq!(by_blocks[i].to_bits(), whole[i].to_bits(), "point {i}");
+            } else {
+                far += 1;
+                let bound = k as f64 * (-reach * reach / (2.0 * sigma * sigma)).exp();
+                let spread = d.iter().fold(0.0f64, |m, x| m.max(x.abs())) * 2.0;
+                assert!(
+                    (by_blocks[i] - whole[i]).abs() <= bound * spread,
+                    "point {i}"
+                );
+            }
+        }
+    }
+    assert!(
+        far >= 6,
+        "{far} points with their k nearest beyond the reach"
+    );
 }
 
 #[test]

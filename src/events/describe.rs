@@ -87,6 +87,39 @@ pub struct Event {
     pub mean_normal: [f64; 3],
 }
 
+/// What a description needs of a cluster's LoD95s and normals: their sums over the finite ones,
+/// taken in the members' order ([`Sums::add`]), so a caller can add them up as the members go
+/// by instead of holding them.
+#[derive(Debug, Clone, Copy)]
+pub struct Sums {
+    lod: f64,
+    lods: usize,
+    normal: Vector3<f64>,
+}
+
+impl Default for Sums {
+    fn default() -> Self {
+        Sums {
+            lod: 0.0,
+            lods: 0,
+            normal: Vector3::zeros(),
+        }
+    }
+}
+
+impl Sums {
+    /// The next member's LoD95 and normal.
+    pub fn add(&mut self, lod95: f64, normal: &[f64; 3]) {
+        if lod95.is_finite() {
+            self.lod += lod95;
+            self.lods += 1;
+        }
+        if normal.iter().all(|x| x.is_finite()) {
+            self.normal += Vector3::new(normal[0], normal[1], normal[2]);
+        }
+    }
+}
+
 /// Describe a cluster from its core points and their distances, LoD95s and normals (all
 /// slices of the same length). `None` for an empty cluster.
 pub fn describe(
@@ -98,6 +131,22 @@ pub fn describe(
     normals: &[[f64; 3]],
     core_spacing: f64,
 ) -> Option<Event> {
+    let mut sums = Sums::default();
+    for (&l, nm) in lod95.iter().zip(normals) {
+        sums.add(l, nm);
+    }
+    describe_with(id, kind, points, distances, &sums, core_spacing)
+}
+
+/// [`describe`] with the members' LoD95s and normals given as their [`Sums`].
+pub fn describe_with(
+    id: u32,
+    kind: Kind,
+    points: &[[f64; 3]],
+    distances: &[f64],
+    sums: &Sums,
+    core_spacing: f64,
+) -> Option<Event> {
     let n = points.len();
     if n == 0 {
         return None;
@@ -105,12 +154,7 @@ pub fn describe(
     let nf = n as f64;
     let (centroid, cov) = centroid_cov(points);
 
-    let mut mn = Vector3::zeros();
-    for nm in normals {
-        if nm.iter().all(|x| x.is_finite()) {
-            mn += Vector3::new(nm[0], nm[1], nm[2]);
-        }
-    }
+    let mn = sums.normal;
     // Without usable normals, "out of the terrain" defaults to up and PCA gives the normal.
     let (mean_normal, axes) = if mn.norm() > 1e-12 {
         let n = mn.normalize();
@@ -126,7 +170,7 @@ pub fn describe(
             .fold((0.0, 0), |(s, m), &x| (s + x, m + 1))
     };
     let (sd, nd) = finite(distances);
-    let (sl, nl) = finite(lod95);
+    let (sl, nl) = (sums.lod, sums.lods);
     Some(Event {
         id,
         kind,

@@ -6,15 +6,16 @@
 //! [`filter`] (keep significant points) → [`smooth`] (normalised Gaussian smoothing of the
 //! distances over the k nearest kept neighbours) → [`dbscan`] (signed DBSCAN, tile-mergeable
 //! through the global [`union_find`]) → [`describe`] (centroid, statistics, PCA box).
+//! [`blocks`] runs smoothing and DBSCAN over a pair's kept points a cube of space at a time.
 
 pub mod align;
+pub mod blocks;
 pub mod chain;
 pub mod dbscan;
 pub mod describe;
 pub mod filter;
 pub mod smooth;
 pub mod stable;
-pub mod tiled;
 pub mod union_find;
 pub mod vegetation;
 

@@ -30,34 +30,53 @@ pub fn smooth(points: &[[f64; 3]], d: &[f64], k: usize, sigma: f64) -> Result<Ve
     let inv_two_sigma2 = 1.0 / (2.0 * sigma * sigma);
     Ok(local
         .par_iter()
-        .map(|p| {
-            let nearest = tree
-                .query(p)
-                .nearest_n::<SquaredEuclidean<f64>>(k)
-                .execute();
-            let kth = nearest.iter().map(|n| n.distance).fold(0.0f64, f64::max);
-            // Everything at or within the k-th distance, ordered by (distance, index): the
-            // first k are the deterministic k nearest whatever the tree returned on ties.
-            let mut within: Vec<(f64, u32)> = Vec::with_capacity(k.get() + 4);
-            tree.query(p)
-                .within::<SquaredEuclidean<f64>>(kth)
-                .unsorted()
-                .visit(|it| within.push((it.distance, it.item)));
-            within.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-            let (mut num, mut den) = (0.0, 0.0);
-            for &(r2, i) in within.iter().take(k.get()) {
-                let w = (-r2 * inv_two_sigma2).exp();
-                num += w * d[i as usize];
-                den += w;
-            }
-            // den ≥ 1 (the point itself, r = 0, is always among its nearest).
-            if den > 0.0 {
-                num / den
-            } else {
-                f64::NAN
-            }
-        })
+        .map(|p| mean_at(&tree, p, k, f64::INFINITY, &|i| i, d, inv_two_sigma2))
         .collect())
+}
+
+/// The normalised Gaussian mean at `p` (in `tree`'s frame) over its `k` nearest among the
+/// points within squared distance `reach2` of it (all of them: infinity), chosen by (distance,
+/// index) — so ties at the k-th distance do not depend on the tree's traversal order — and
+/// summed in that order. `index` turns a tree item into its point's index in `d`; `k` at most
+/// the tree's size.
+pub(crate) fn mean_at(
+    tree: &super::Tree3,
+    p: &[f64; 3],
+    k: NonZero<usize>,
+    reach2: f64,
+    index: &dyn Fn(u32) -> u32,
+    d: &[f64],
+    inv_two_sigma2: f64,
+) -> f64 {
+    let nearest = tree
+        .query(p)
+        .nearest_n::<SquaredEuclidean<f64>>(k)
+        .execute();
+    let kth = nearest
+        .iter()
+        .map(|n| n.distance)
+        .fold(0.0f64, f64::max)
+        .min(reach2);
+    // Everything at or within the k-th distance, ordered by (distance, index): the first k are
+    // the deterministic k nearest whatever the tree returned on ties.
+    let mut within: Vec<(f64, u32)> = Vec::with_capacity(k.get() + 4);
+    tree.query(p)
+        .within::<SquaredEuclidean<f64>>(kth)
+        .unsorted()
+        .visit(|it| within.push((it.distance, index(it.item))));
+    within.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    let (mut num, mut den) = (0.0, 0.0);
+    for &(r2, i) in within.iter().take(k.get()) {
+        let w = (-r2 * inv_two_sigma2).exp();
+        num += w * d[i as usize];
+        den += w;
+    }
+    // den ≥ 1 (the point itself, r = 0, is always among its nearest).
+    if den > 0.0 {
+        num / den
+    } else {
+        f64::NAN
+    }
 }
 
 #[cfg(test)]

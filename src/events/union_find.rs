@@ -2,17 +2,19 @@
 //! every set is its smallest element, so the result does not depend on the order in which
 //! unions arrive (tiles may be merged in any order, by any number of threads).
 
-/// Union-find over dense indices `0..n`.
+/// Union-find over dense indices `0..n` (n < 2³²: four bytes an element, as the events unit
+/// holds one over a pair's kept core points).
 #[derive(Debug, Clone)]
 pub struct UnionFind {
-    parent: Vec<usize>,
+    parent: Vec<u32>,
 }
 
 impl UnionFind {
     /// `n` singleton sets.
     pub fn new(n: usize) -> Self {
+        assert!(n <= u32::MAX as usize, "union-find over {n} elements");
         UnionFind {
-            parent: (0..n).collect(),
+            parent: (0..n as u32).collect(),
         }
     }
 
@@ -27,22 +29,23 @@ impl UnionFind {
     }
 
     /// The root (smallest element) of `x`'s set.
-    pub fn find(&mut self, mut x: usize) -> usize {
-        while self.parent[x] != x {
+    pub fn find(&mut self, x: usize) -> usize {
+        let mut x = x as u32;
+        while self.parent[x as usize] != x {
             // Path halving: point to the grandparent while walking up.
-            self.parent[x] = self.parent[self.parent[x]];
-            x = self.parent[x];
+            self.parent[x as usize] = self.parent[self.parent[x as usize] as usize];
+            x = self.parent[x as usize];
         }
-        x
+        x as usize
     }
 
     /// Merge the sets of `a` and `b`; the smaller root becomes the root.
     pub fn union(&mut self, a: usize, b: usize) {
         let (ra, rb) = (self.find(a), self.find(b));
         if ra < rb {
-            self.parent[rb] = ra;
+            self.parent[rb] = ra as u32;
         } else if rb < ra {
-            self.parent[ra] = rb;
+            self.parent[ra] = rb as u32;
         }
     }
 }

@@ -3,8 +3,10 @@
 //! stable-ground unit resolved.
 //!
 //! The kept core points (significant and |d| ≥ τ) are few next to the epochs, so their keys,
-//! positions and distances are held (smoothing's k nearest and the clusters are over all of them:
-//! this need grows with the change); the rest of each waits in a temporary file of the unit.
+//! positions and distances are held (this need grows with the change: 80 bytes a kept point in
+//! all, [`BYTES_PER_KEPT`]); the rest of each waits in a temporary file of the unit. Smoothing and
+//! DBSCAN see them a block of space at a time with what lies within reach (`events::blocks`),
+//! so their kd-trees and lists never span the pair.
 //! Writes `events.json` (each event described, with the boxes its volume may be extruded along)
 //! and `kept.tile` (every kept core point: key, smoothed distance, event id or 0, normal and
 //! per-epoch spread, for m3c2.laz and for the volumes' claims and uncertainty), and the drafts
@@ -73,14 +75,16 @@ pub fn candidate_boxes(e: &Event, cluster: &[Point3]) -> Vec<Obb> {
 }
 
 /// Resident bytes per kept core point in the events unit: its key, position and distance (40;
-/// the rest waits on disk), the smoothed distance and event id (12), smoothing's kd-tree over the
-/// positions (≈ 40), the clustering's copies, tile lists and links (≈ 50), and the clustered
-/// points' LoDs and normals for their descriptions (32). Measured on the 120M-point pair (839,640
-/// kept): the unit's peak 121–127 MiB in a process of its own (184 MiB before the spill, 381
-/// before `kept.tile` was written in frames), ≈ 140 bytes each beyond the process's base; with
-/// large blocks mapped on their own (`memory::MMAP_THRESHOLD`) 115.6 and 118.5 MiB in two runs
-/// (2 GiB and 164 MiB), ≈ 117 bytes each beyond the base and the fixed 8 MiB.
-pub const BYTES_PER_KEPT: u64 = 128;
+/// the rest waits on disk), the smoothed distance (8), the blocks' order (4), the clustering's
+/// core flags, sets and labels (9), the event ids and the clusters' member lists (8); the
+/// kd-trees are a block's surroundings only (`events::blocks`). Measured on the 120M-point pair
+/// (839,640 kept; VmHWM reset at each step, the process's base ≈ 9.5 MB): 42.7 MB resident once
+/// streamed, peaks 54.8 MB smoothing, 64.4 MB clustering, 83.2 MB writing `kept.tile` (its
+/// frame of 65,536 rows held twice, as rows and as columns, beside its compressed bytes):
+/// ≈ 65 bytes each beyond the base at the clustering's peak, ≈ 78 at the writing's beyond the
+/// base and the fixed 8 MiB. Before the blocks (one kd-tree and one clustering over every kept
+/// point) the unit took ≈ 117 bytes each.
+pub const BYTES_PER_KEPT: u64 = 80;
 
 /// The pair's events: filter, smoothing, signed clustering, description.
 pub struct EventsStage;
@@ -191,47 +195,47 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<EventsMeta> {
     // Given back before the next reservation: a unit waits only while it holds none.
     drop(merging);
     let n = keys.len();
-    // The kept points are known only once streamed (40 bytes each, held unreserved meanwhile: a
-    // small share of what smoothing and clustering then add).
+    // The kept points are known only once streamed (40 bytes each, held unreserved meanwhile:
+    // half of what the unit then needs, under the merge's reservation given back just before).
     let _held = ctx.reserve(
         n as u64 * BYTES_PER_KEPT + (8 << 20),
         &format!("the events of {n} kept core points"),
     )?;
-    let smoothed = events::smooth::smooth(
+    // Cubes of space holding every neighbourhood that smoothing and clustering look at, a
+    // block with the 26 around it held at a time (`events::blocks`).
+    let reach = events::blocks::SMOOTH_REACH_SIGMAS * params.smooth_sigma.value;
+    let blocks = events::blocks::Blocks::new(&pts, reach.max(params.eps.value));
+    let smoothed = events::blocks::smooth(
         &pts,
         &d,
         params.smooth_k.value as usize,
         params.smooth_sigma.value,
+        reach,
+        &blocks,
     )?;
-    // Signed clusters, each sign on its own, tile by tile over the run's grid; members in
-    // ascending order of kept index.
-    let grid = ctx.plan.layout.grid()?;
+    // Signed clusters, each sign on its own; members in ascending order of kept index.
     let mut clusters: Vec<(u64, Kind, Vec<u32>)> = Vec::new();
     for kind in [Kind::Gain, Kind::Loss] {
-        let idx: Vec<u32> = (0..n as u32)
-            .filter(|&i| kind.matches(smoothed[i as usize]))
-            .collect();
-        let p: Vec<Point3> = idx.iter().map(|&i| pts[i as usize]).collect();
-        let k: Vec<u64> = idx.iter().map(|&i| keys[i as usize]).collect();
-        let labels = events::tiled::cluster(
-            &p,
-            &k,
-            &grid,
+        let labels = events::blocks::cluster(
+            &pts,
+            &|i| kind.matches(smoothed[i]),
             params.eps.value,
             params.cluster_min_points.value as usize,
+            &blocks,
         )?;
-        drop((p, k));
-        let mut by_label: HashMap<u32, Vec<u32>> = HashMap::default();
-        for (j, &l) in labels.iter().enumerate() {
+        let mut members: Vec<Vec<u32>> = Vec::new();
+        for (i, &l) in labels.iter().enumerate() {
             if l > 0 {
-                by_label.entry(l).or_default().push(idx[j]);
+                // Labels come numbered by their first member: a new one is the next.
+                if l as usize > members.len() {
+                    members.push(Vec::new());
+                }
+                members[l as usize - 1].push(i as u32);
             }
         }
-        for (_, members) in by_label {
-            let min_key = members.iter().map(|&i| keys[i as usize]).min().unwrap_or(0);
-            clusters.push((min_key, kind, members));
-        }
+        clusters.extend(members.into_iter().map(|m| (keys[m[0] as usize], kind, m)));
     }
+    drop(blocks);
     // Event ids in a canonical order: by the smallest key of each cluster.
     clusters.sort_by_key(|c| c.0);
     let mut event = vec![0u32; n];
@@ -241,10 +245,9 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<EventsMeta> {
         }
     }
     // One pass over the scratch rows, in kept order: every kept core point to `kept.tile`, a
-    // frame at a time; the clustered points' LoDs and normals to their clusters (each in its
-    // members' order), and how many of each cluster's points lie beyond reach.
-    let mut lods: Vec<Vec<f64>> = vec![Vec::new(); clusters.len()];
-    let mut normals: Vec<Vec<Point3>> = vec![Vec::new(); clusters.len()];
+    // frame at a time; the clustered points' LoDs and normals added up for their clusters (each
+    // in its members' order, never held), and how many of each cluster's points lie beyond reach.
+    let mut sums = vec![events::describe::Sums::default(); clusters.len()];
     let mut beyond = vec![0usize; clusters.len()];
     let mut rows = Vec::with_capacity(KEPT_FRAME.min(n));
     let mut file = KeptWriter::new(out)?;
@@ -264,8 +267,7 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<EventsMeta> {
         };
         if let Some(c) = k.event.checked_sub(1) {
             let c = c as usize;
-            lods[c].push(k.lod);
-            normals[c].push(k.normal);
+            sums[c].add(k.lod, &k.normal);
             beyond[c] += usize::from(k.beyond);
         }
         rows.push(k);
@@ -286,17 +288,12 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<EventsMeta> {
         let id = c as u32 + 1;
         let p: Vec<Point3> = members.iter().map(|&i| pts[i as usize]).collect();
         let dist: Vec<f64> = members.iter().map(|&i| d[i as usize]).collect();
-        let (lod, normal) = (
-            std::mem::take(&mut lods[c]),
-            std::mem::take(&mut normals[c]),
-        );
-        if let Some(e) = events::describe(
+        if let Some(e) = events::describe::describe_with(
             id,
             *kind,
             &p,
             &dist,
-            &lod,
-            &normal,
+            &sums[c],
             params.core_spacing.value,
         ) {
             let candidates = candidate_boxes(&e, &p);
@@ -308,7 +305,7 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<EventsMeta> {
         }
     }
     (ctx.progress)(drafts.len() as u64);
-    write_near(out, &drafts, &params, &grid)?;
+    write_near(out, &drafts, &params, &ctx.plan.layout.grid()?)?;
     super::write_json(out, EVENTS, &drafts)?;
     Ok(EventsMeta {
         events: drafts.len(),
