@@ -122,10 +122,11 @@ impl Stage for EventsStage {
                 "measured".into()
             }
         };
-        // The last three size the volumes' search boxes, by which the drafts are filed by tile
-        // (`write_near`).
+        // The three after `near` size the volumes' search boxes, by which the drafts are filed
+        // by tile (`write_near`); `blocks 1`: smoothing takes the k nearest within its reach
+        // (`events::blocks`).
         let key = format!(
-            "{}|{}|{}|{}|{}|{}|near {}|{}|{}",
+            "{}|{}|{}|{}|{}|{}|near {}|{}|{}|blocks 1",
             user(&params.reg_error),
             user(&params.threshold),
             params.smooth_k.value,
