@@ -13,7 +13,7 @@ use std::num::NonZero;
 
 use rayon::prelude::*;
 
-use super::{build_tree, dbscan, origin_of, smooth, union_find::UnionFind};
+use super::{build_tree, dbscan, local, origin_of, smooth, union_find::UnionFind};
 use crate::error::Result;
 use crate::geom::Point3;
 
@@ -137,19 +137,13 @@ impl Blocks {
         f: impl Fn(usize) -> Result<T> + Sync,
         mut put: impl FnMut(T),
     ) -> Result<()> {
-        let all: Vec<usize> = (0..self.len()).collect();
-        for batch in all.chunks(BATCH) {
-            let done: Vec<T> = batch.par_iter().map(|&b| f(b)).collect::<Result<_>>()?;
+        for start in (0..self.len()).step_by(BATCH) {
+            let batch = start..(start + BATCH).min(self.len());
+            let done: Vec<T> = batch.into_par_iter().map(&f).collect::<Result<_>>()?;
             done.into_iter().for_each(&mut put);
         }
         Ok(())
     }
-}
-
-/// The point relative to the blocks' origin (the first point: [`super::origin_of`], the local
-/// frame of a whole-cloud smoothing, so distances have the same bits).
-fn local(p: &Point3, o: &Point3) -> Point3 {
-    [p[0] - o[0], p[1] - o[1], p[2] - o[2]]
 }
 
 /// Smoothed distances ([`super::smooth`]'s normalised Gaussian mean over the k nearest, chosen
@@ -177,6 +171,7 @@ pub fn smooth(
     );
     let inv_two_sigma2 = 1.0 / (2.0 * sigma * sigma);
     let reach2 = reach * reach;
+    // The first point: the local frame of a whole-cloud smoothing, so distances have its bits.
     let o = blocks.origin;
     let mut out = vec![f64::NAN; points.len()];
     blocks.each(

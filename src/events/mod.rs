@@ -30,10 +30,12 @@ pub(crate) type Tree3 = ImmutableKdTree<f64, 3>;
 /// Coordinates relative to `origin`: survey coordinates (UTM, 10⁶ m) would lose precision in
 /// squared distances, local ones keep it.
 pub(crate) fn relative(points: &[[f64; 3]], origin: [f64; 3]) -> Vec<[f64; 3]> {
-    points
-        .iter()
-        .map(|p| [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]])
-        .collect()
+    points.iter().map(|p| local(p, &origin)).collect()
+}
+
+/// One point relative to `origin` (the arithmetic of [`relative`]).
+pub(crate) fn local(p: &[f64; 3], origin: &[f64; 3]) -> [f64; 3] {
+    [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]]
 }
 
 /// The first point (a local origin for [`relative`]), or zero for an empty slice.

@@ -496,8 +496,9 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
             .collect();
         tiles.sort_unstable();
         tiles.dedup();
-        let mut drafts: Vec<Draft> = Vec::new();
-        for t in tiles {
+        // This tile's line is already read.
+        let mut drafts: Vec<Draft> = here.clone();
+        for t in tiles.into_iter().filter(|&t| t != tile) {
             drafts.extend(near_drafts.drafts(t)?);
         }
         drafts.sort_by_key(|d| d.event.id);
