@@ -199,9 +199,24 @@ fn volume_of(
     after: &[[f64; 3]],
     spacing: f64,
 ) -> EventVolume {
-    let v = event_volume(&event.obb, margin, before, after, spacing, &|_| true).expect("volume");
-    check_watertight(&v.before_solid).expect("before solid watertight");
-    check_watertight(&v.after_solid).expect("after solid watertight");
+    let mut solids = Vec::new();
+    let v = event_volume(
+        &event.obb,
+        margin,
+        before,
+        after,
+        spacing,
+        &|_| true,
+        &mut |pair| {
+            solids.push(pair);
+            Ok(())
+        },
+    )
+    .expect("volume");
+    for [b, a] in &solids {
+        check_watertight(b).expect("before solid watertight");
+        check_watertight(a).expect("after solid watertight");
+    }
     v
 }
 
@@ -217,7 +232,9 @@ fn report(case: &str, truth: f64, v: &EventVolume) -> f64 {
 const SPACING: f64 = 0.1;
 const NOISE: f64 = 0.005;
 
-fn box_case(after_density_factor: f64, seed: u64) -> (f64, EventVolume) {
+/// Two epochs and the event of a 4 × 3 × 1.5 m box raised on a plane (the after epoch at
+/// `after_density_factor` of the density).
+fn box_scene(after_density_factor: f64, seed: u64) -> (Vec<[f64; 3]>, Vec<[f64; 3]>, Event) {
     let mut rng = Rng::new(seed);
     let place = Place::identity();
     let density = 1.0 / (SPACING * SPACING);
@@ -239,6 +256,11 @@ fn box_case(after_density_factor: f64, seed: u64) -> (f64, EventVolume) {
         Kind::Gain,
         &mut rng,
     );
+    (before, after, ev)
+}
+
+fn box_case(after_density_factor: f64, seed: u64) -> (f64, EventVolume) {
+    let (before, after, ev) = box_scene(after_density_factor, seed);
     // The core grid spans [-1.8, 1.8] x [-1.4, 1.4]: the box footprint.
     assert!((ev.obb.half_extents[0] - 1.8).abs() < 0.02, "{:?}", ev.obb);
     assert!((ev.obb.half_extents[1] - 1.4).abs() < 0.02, "{:?}", ev.obb);
@@ -345,15 +367,15 @@ fn tilted_plane_with_bump() {
     cap_case(3.0, 0.7, 1.0, place, 5, "tilted plane, cap R=3 h=0.7");
 }
 
-#[test]
-fn vertical_face_with_box_hollow() {
-    // The face is the plane y = 0 (x across, z up), out of the rock = +y. Local (a, b, c) =
-    // (x, z, y): the hollow is 3 (x) by 2 (z) by 1 deep (−y). Epoch 2 at half density.
+/// Two epochs and the event of a hollow in a vertical face. The face is the plane y = 0 (x
+/// across, z up), out of the rock = +y. Local (a, b, c) = (x, z, y): the hollow is 3 (x) by 2 (z)
+/// by 1 deep (−y). Epoch 2 at half density.
+fn face_hollow_scene(seed: u64) -> (Vec<[f64; 3]>, Vec<[f64; 3]>, Event) {
     let place = Place {
         origin: [100.0, 200.0, 30.0],
         e: [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0]],
     };
-    let mut rng = Rng::new(6);
+    let mut rng = Rng::new(seed);
     let density = 1.0 / (SPACING * SPACING);
     let before = sample(&[rect(5.0, 5.0, 0.0)], density, NOISE, &place, &mut rng);
     let mut patches = vec![plane_minus_rect(5.0, 1.5, 1.0), rect(1.5, 1.0, -1.0)];
@@ -367,6 +389,12 @@ fn vertical_face_with_box_hollow() {
         Kind::Loss,
         &mut rng,
     );
+    (before, after, ev)
+}
+
+#[test]
+fn vertical_face_with_box_hollow() {
+    let (before, after, ev) = face_hollow_scene(6);
     assert!(
         ev.obb.axes[2][1] > 0.999,
         "third axis = +y: {:?}",
@@ -425,6 +453,8 @@ fn stable_pair_gives_no_volume() {
         &mut rng,
     );
     let v = volume_of(&ev, 0.25, &before, &after, spacing);
+    // Noise of 2.5 spacings makes walls of most points: the wall test in bands as whole.
+    pieces_measure_the_whole_at("stable pair", &ev, 0.25, &before, &after, spacing, &[10]);
     let bound = 0.01 * v.footprint_area_m2 * 0.01;
     eprintln!(
         "stable pair: footprint {:.3} m², V = {:.6} m³, bound {bound:.6} m³",
@@ -452,9 +482,10 @@ fn too_few_points_is_an_error_not_a_panic() {
         &[[1.0, 1.0, 1.0]],
         0.1,
         &|_| true,
+        &mut |_| Ok(()),
     );
     assert!(r.is_err());
-    let r = event_volume(&ev.obb, 0.5, &[], &[], 0.0, &|_| true);
+    let r = event_volume(&ev.obb, 0.5, &[], &[], 0.0, &|_| true, &mut |_| Ok(()));
     assert!(r.is_err());
 }
 
@@ -534,9 +565,16 @@ fn user_meshes_through_ply_give_the_box_volume() {
         UserMesh::new(&m1, &frame, &r),
         UserMesh::new(&m2, &frame, &r),
     );
-    let v = event_volume_from_surfaces(&ev.obb, 0.6, &s1, &s2, SPACING, &|_| true).unwrap();
-    check_watertight(&v.before_solid).unwrap();
-    check_watertight(&v.after_solid).unwrap();
+    let mut solids = Vec::new();
+    let v = event_volume_from_surfaces(&ev.obb, 0.6, &s1, &s2, SPACING, &|_| true, &mut |p| {
+        solids.push(p);
+        Ok(())
+    })
+    .unwrap();
+    for [before, after] in &solids {
+        check_watertight(before).unwrap();
+        check_watertight(after).unwrap();
+    }
     let err = report("user meshes, box 4x3x1.5", 18.0, &v);
     assert!(err.abs() < 1.0, "error {err} %");
 }
@@ -1013,4 +1051,100 @@ fn volume_types_can_cross_threads() {
     send_sync::<talus::volume::Tin>();
     send_sync::<UserMesh>();
     send_sync::<Event>();
+}
+
+/// A large event is measured in bands of rows (`volume::PIECE_CELLS`), each triangulated, clipped
+/// and closed on its own: cut into 10 to 40 bands, the raised box and a hollow in a vertical face
+/// (after at half density) give the volume, region, gross terms and step variance of the event
+/// measured whole (the bands' seams are the grid's lines, each band sees the points 3 spacings
+/// beyond it as the whole footprint does); each band's solids are watertight and their volumes add
+/// up to the event's.
+#[test]
+fn an_event_in_pieces_measures_what_it_does_whole() {
+    let (before, after, ev) = box_scene(1.0, 1);
+    pieces_measure_the_whole("box", &ev, 0.6, &before, &after);
+    let (before, after, ev) = face_hollow_scene(6);
+    pieces_measure_the_whole("face hollow", &ev, 0.5, &before, &after);
+}
+
+fn pieces_measure_the_whole(
+    case: &str,
+    ev: &Event,
+    margin: f64,
+    before: &[[f64; 3]],
+    after: &[[f64; 3]],
+) {
+    pieces_measure_the_whole_at(
+        case,
+        ev,
+        margin,
+        before,
+        after,
+        SPACING,
+        &[10, 20, usize::MAX],
+    )
+}
+
+fn pieces_measure_the_whole_at(
+    case: &str,
+    ev: &Event,
+    margin: f64,
+    before: &[[f64; 3]],
+    after: &[[f64; 3]],
+    spacing: f64,
+    cuts: &[usize],
+) {
+    let measure = |piece_cells: usize| {
+        let mut solids = Vec::new();
+        let v = talus::volume::event_volume_in(
+            &ev.obb,
+            margin,
+            f64::INFINITY,
+            [before, after],
+            spacing,
+            &|_| true,
+            piece_cells,
+            &mut |pair| {
+                solids.push(pair);
+                Ok(())
+            },
+        )
+        .expect("volume");
+        (v, solids)
+    };
+    let (whole, one) = measure(usize::MAX);
+    assert_eq!(one.len(), 1);
+    let cells = whole.region.cells;
+    // PIECE_CELLS, then bands of a tenth, a twentieth (a row each for MAX) of the cells.
+    let sizes = cuts.iter().map(|&k| match k {
+        usize::MAX => cells.nu,
+        k => cells.len() / k,
+    });
+    let mut most = 0;
+    for piece_cells in std::iter::once(talus::volume::PIECE_CELLS).chain(sizes) {
+        let (v, solids) = measure(piece_cells);
+        let bands = cells.bands(piece_cells).len();
+        assert_eq!(solids.len(), bands, "{case}: one pair of solids a band");
+        most = most.max(bands);
+        eprintln!(
+            "{case}, {bands} bands: {:.9} m³ (whole {:.9}), gain {:.9} ({:.9})",
+            v.volume_m3, whole.volume_m3, v.gain_m3, whole.gain_m3
+        );
+        let mut sum = 0.0;
+        for [b, a] in &solids {
+            check_watertight(b).expect("before piece watertight");
+            check_watertight(a).expect("after piece watertight");
+            sum += talus::volume::solid::signed_volume(a) - talus::volume::solid::signed_volume(b);
+        }
+        // Rounding only: sums in another order, band lines computed from the band's ends.
+        let close = |x: f64, y: f64| (x - y).abs() <= 1e-9 * (1.0 + y.abs());
+        assert!(close(sum, v.volume_m3), "{case}: {sum} vs {}", v.volume_m3);
+        assert!(close(v.volume_m3, whole.volume_m3), "{case}: {v:?}");
+        assert!(close(v.gain_m3, whole.gain_m3) && close(v.loss_m3, whole.loss_m3));
+        assert!(close(v.step_variance_m6, whole.step_variance_m6));
+        assert_eq!(v.region.inside, whole.region.inside, "{case}");
+        assert_eq!(v.region.covered, whole.region.covered, "{case}");
+        assert_eq!(v.region_points, whole.region_points, "{case}");
+    }
+    assert!(most >= 10, "{case}: {most} bands at most");
 }

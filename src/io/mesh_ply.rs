@@ -18,23 +18,42 @@ use crate::volume::Mesh;
 
 /// Write a mesh to `w` as binary little-endian PLY.
 pub fn write_ply_to(w: &mut impl Write, mesh: &Mesh) -> std::io::Result<()> {
+    write_header(w, mesh.vertices.len() as u64, mesh.faces.len() as u64)?;
+    write_vertices(w, &mesh.vertices)?;
+    write_faces(w, &mesh.faces, 0)
+}
+
+/// The header of a PLY file of `vertices` and `faces` (a file written in parts: the header,
+/// every part's vertices, every part's faces).
+pub fn write_header(w: &mut impl Write, vertices: u64, faces: u64) -> std::io::Result<()> {
     write!(
         w,
         "ply\nformat binary_little_endian 1.0\ncomment talus event solid\n\
-         element vertex {}\nproperty double x\nproperty double y\nproperty double z\n\
-         element face {}\nproperty list uchar int vertex_indices\nend_header\n",
-        mesh.vertices.len(),
-        mesh.faces.len()
-    )?;
-    for p in &mesh.vertices {
+         element vertex {vertices}\nproperty double x\nproperty double y\nproperty double z\n\
+         element face {faces}\nproperty list uchar int vertex_indices\nend_header\n",
+    )
+}
+
+/// Vertices as the body of a PLY file of [`write_header`].
+pub fn write_vertices(w: &mut impl Write, vertices: &[[f64; 3]]) -> std::io::Result<()> {
+    for p in vertices {
         for c in p {
             w.write_all(&c.to_le_bytes())?;
         }
     }
-    for f in &mesh.faces {
+    Ok(())
+}
+
+/// Faces as the body of a PLY file of [`write_header`], their vertex indices moved by `offset`
+/// (the vertices of the parts before). Fails on an index beyond a PLY `int`.
+pub fn write_faces(w: &mut impl Write, faces: &[[u32; 3]], offset: u64) -> std::io::Result<()> {
+    for f in faces {
         w.write_all(&[3u8])?;
         for &i in f {
-            w.write_all(&(i as i32).to_le_bytes())?;
+            let i = i32::try_from(u64::from(i) + offset).map_err(|_| {
+                std::io::Error::other("a solid of more than 2^31 vertices does not fit PLY's int")
+            })?;
+            w.write_all(&i.to_le_bytes())?;
         }
     }
     Ok(())

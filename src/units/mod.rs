@@ -22,6 +22,7 @@ pub mod m3c2;
 pub mod merged;
 pub mod outputs;
 pub mod scratch;
+pub mod solids;
 pub mod stable;
 pub mod stage;
 pub mod tiling;

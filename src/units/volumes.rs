@@ -29,32 +29,46 @@ use crate::volume::{self, uncertainty, EventVolume};
 
 pub const FILE: &str = "volumes.json";
 
-/// Resident bytes per region cell while one event's volume is computed: the two tops clipped to
-/// the cells (each TIN triangle cut into a piece per cell it crosses: several vertices and faces
-/// a cell), their labels' tables while they are built, the solids grown from them with the sort
-/// of their edges, the region's grids. The cost follows the cells (about one per point spacing
-/// squared of the footprint), not the points. Measured on the cliff's three large events with
-/// `--threads 1` (VmHWM reset before each, [`BYTES_PER_POINT`] a point taken off): 617, 926
-/// and 807 bytes a cell (95 k, 22.5 k and 51 k cells). Before large blocks were mapped on their
-/// own (`memory::MMAP_THRESHOLD`) the same events measured 1,360, 1,025 and 1,460.
+/// Resident bytes per cell of one piece of an event's volume (`volume::PIECE_CELLS` at most)
+/// while it is computed: the two tops clipped to the cells (each TIN triangle cut into a piece per
+/// cell it crosses: several vertices and faces a cell), their labels' tables while they are
+/// built, the solids grown from them with the sort of their edges, the piece's grids. The cost
+/// follows the cells (about one per point spacing squared of the footprint), not the points.
+/// Measured on the cliff's three large events with `--threads 1` (VmHWM reset before each,
+/// [`BYTES_PER_POINT`] a point taken off), each then in one piece: 617, 926 and 807 bytes a cell
+/// (95 k, 22.5 k and 51 k cells). Before large blocks were mapped on their own
+/// (`memory::MMAP_THRESHOLD`) the same events measured 1,360, 1,025 and 1,460.
 pub const BYTES_PER_CELL: u64 = 1024;
 
-/// Resident bytes per gathered point (both epochs) beside the cells' cost: the points in the
-/// event's frame, a triangulation's share (spade is lean: ≈ 40), its mesh copied out for
-/// clipping (48). The gathered points themselves (24 bytes each) are held beside it unreserved.
+/// Resident bytes per cell of the whole event beside its pieces: whether both epochs cover it
+/// and whether it is in the region (2), the surfaces' difference at its centre (16), the open
+/// rim's sort of the region's changes (8), the uncertainty's list of region cells (16, after the
+/// rest is given back).
+pub const BYTES_PER_GRID_CELL: u64 = 32;
+
+/// Resident bytes per point (both epochs) a piece triangulates, beside its cells' cost: the
+/// points in the event's frame, a triangulation's share (spade is lean: ≈ 40), its mesh copied
+/// out for clipping (48). The gathered points themselves (24 bytes each) are held beside it
+/// unreserved.
 pub const BYTES_PER_POINT: u64 = 100;
 
-/// What one event's volume holds at most: [`BYTES_PER_CELL`] for the cells of the largest of
-/// its candidate boxes' regions, [`BYTES_PER_POINT`] for its `points`.
-fn event_need(boxes: &[SearchBox], points: u64, margin: f64, spacing: f64) -> u64 {
-    let cells = boxes
+/// What one event's volume holds at most, over its candidate boxes: [`BYTES_PER_CELL`] for the
+/// cells of its largest piece, [`BYTES_PER_GRID_CELL`] for all its cells, [`BYTES_PER_POINT`] for
+/// the most points one of its pieces takes from `points` (before, after).
+fn event_need(boxes: &[SearchBox], points: [&[Point3]; 2], margin: f64, spacing: f64) -> u64 {
+    boxes
         .iter()
         .map(|(_, _, o)| {
-            volume::region::Cells::new(&volume::Footprint::of_obb(o, margin), spacing).len()
+            let cells = volume::region::Cells::new(&volume::Footprint::of_obb(o, margin), spacing);
+            let piece = cells.len().min(volume::PIECE_CELLS) as u64;
+            let taken = volume::piece_points(o, margin, points, spacing, volume::PIECE_CELLS);
+            piece * BYTES_PER_CELL
+                + cells.len() as u64 * BYTES_PER_GRID_CELL
+                + taken as u64 * BYTES_PER_POINT
         })
         .max()
-        .unwrap_or(0) as u64;
-    cells * BYTES_PER_CELL + points * BYTES_PER_POINT + (4 << 20)
+        .unwrap_or(0)
+        + (4 << 20)
 }
 
 /// The mesh files of event `id`: (before, after).
@@ -554,10 +568,11 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
         for (i, d) in mine.iter().enumerate() {
             let n = (before[i].len() + after[i].len()) as u64;
             let _held = ctx.reserve(
-                event_need(&boxes[i], n, margin, spacing),
+                event_need(&boxes[i], [&before[i], &after[i]], margin, spacing),
                 &format!("the volume of event {} ({n} points)", d.event.id),
             )?;
-            let (m, v): (Measured, Option<EventVolume>) = {
+            let mut solids = None;
+            let m: Measured = {
                 let mut e: Event = d.event.clone();
                 let mut window = boxes[i].first().map_or(f64::INFINITY, |b| b.0[2]);
                 // The extrusion axis: the candidate in which both epochs have the fewest points
@@ -578,6 +593,11 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
                 }
                 let id = e.id;
                 let owned = |x: &Point3| ownership.owner(x) == Some(id);
+                let cells =
+                    volume::region::Cells::new(&volume::Footprint::of_obb(&e.obb, margin), spacing);
+                let pieced = cells.bands(volume::PIECE_CELLS).len() > 1;
+                let sink = solids.insert(super::solids::EventSolids::new(out, id, pieced)?);
+                let mut send = |pair: [volume::Mesh; 2]| sink.push(pair);
                 let v = match &user {
                     Some((mb, ma)) => {
                         let frame = volume::Frame::of_obb(&e.obb);
@@ -585,11 +605,18 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
                         let sb = volume::UserMesh::new(mb, &frame, &r);
                         let sa = volume::UserMesh::new(ma, &frame, &r);
                         volume::event_volume_from_surfaces(
-                            &e.obb, margin, &sb, &sa, spacing, &owned,
+                            &e.obb, margin, &sb, &sa, spacing, &owned, &mut send,
                         )
                     }
                     None => volume::event_volume_in(
-                        &e.obb, margin, window, &before[i], &after[i], spacing, &owned,
+                        &e.obb,
+                        margin,
+                        window,
+                        [&before[i], &after[i]],
+                        spacing,
+                        &owned,
+                        volume::PIECE_CELLS,
+                        &mut send,
                     ),
                 };
                 let m = members.get(&id).map(|v| v.as_slice()).unwrap_or(&[]);
@@ -606,55 +633,48 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
                         let noise = 2.24
                             * ((model.variance[0] + model.variance[1]).sqrt() + model.systematic);
                         let note = incomplete(d, &v, noise, params);
-                        (
-                            Measured {
-                                id,
-                                obb: e.obb,
-                                volume_m3: Some(v.volume_m3),
-                                uncertainty: Some(u),
-                                gain_m3: Some(v.gain_m3),
-                                loss_m3: Some(v.loss_m3),
-                                footprint_area_m2: Some(v.footprint_area_m2),
-                                region_area_m2: Some(v.region_area_m2),
-                                coverage: Some(v.coverage),
-                                region: v.outline(),
-                                meshes: true,
-                                complete: note.is_none(),
-                                note,
-                                vegetation_fraction,
-                            },
-                            Some(v),
-                        )
-                    }
-                    Err(err) => (
                         Measured {
                             id,
                             obb: e.obb,
-                            volume_m3: None,
-                            uncertainty: None,
-                            gain_m3: None,
-                            loss_m3: None,
-                            footprint_area_m2: None,
-                            region_area_m2: None,
-                            coverage: None,
-                            region: Vec::new(),
-                            meshes: false,
-                            complete: false,
-                            note: Some(err.to_string()),
+                            volume_m3: Some(v.volume_m3),
+                            uncertainty: Some(u),
+                            gain_m3: Some(v.gain_m3),
+                            loss_m3: Some(v.loss_m3),
+                            footprint_area_m2: Some(v.footprint_area_m2),
+                            region_area_m2: Some(v.region_area_m2),
+                            coverage: Some(v.coverage),
+                            region: v.outline(),
+                            meshes: true,
+                            complete: note.is_none(),
+                            note,
                             vegetation_fraction,
-                        },
-                        None,
-                    ),
+                        }
+                    }
+                    Err(err) => Measured {
+                        id,
+                        obb: e.obb,
+                        volume_m3: None,
+                        uncertainty: None,
+                        gain_m3: None,
+                        loss_m3: None,
+                        footprint_area_m2: None,
+                        region_area_m2: None,
+                        coverage: None,
+                        region: Vec::new(),
+                        meshes: false,
+                        complete: false,
+                        note: Some(err.to_string()),
+                        vegetation_fraction,
+                    },
                 }
             };
-            if let Some(v) = v {
-                let names = mesh_files(m.id);
-                // Written plainly, the digest computed on the way: the unit's commit makes them
-                // durable (a sync and a read-back per file cost 2 × 1028 of each at 120M).
-                for (name, solid) in names.iter().zip([&v.before_solid, &v.after_solid]) {
-                    super::write_streamed(out, name, |mut w| {
-                        crate::io::mesh_ply::write_ply_to(&mut w, solid)
-                    })?;
+            // Written plainly, the digest computed on the way: the unit's commit makes them
+            // durable (a sync and a read-back per file cost 2 × 1028 of each at 120M).
+            if let Some(solids) = solids {
+                if m.meshes {
+                    solids.finish(out, m.id)?;
+                } else {
+                    solids.discard()?;
                 }
             }
             measured.push(m);

@@ -18,6 +18,14 @@
 //!    w_before, by the midpoint rule on sub-cells of about spacing/2. (Net V is exact for the
 //!    TINs; gain + loss equals it up to the sampling of the steps.)
 //!
+//! An event of more than [`PIECE_CELLS`] cells is measured in bands of whole rows of cells
+//! (steps 3 to 6 per band, each with the points 8 spacings around it, each band's solids closed
+//! over its own base; the volumes added up), and the region, its open rim and step variance from
+//! the whole grid's flags and changes: what one event holds is a band's surfaces and solids and a
+//! few bytes a cell of the whole, not its surfaces and solids whole. A band's triangulation is the
+//! whole one's inside it wherever the Delaunay circle of a triangle there stays within the 8
+//! spacings (every triangle of the tests' scenes, walls and noise of 2.5 spacings among them).
+//!
 //! Callers pass each epoch's points around the event: at least R grown by a few spacings in
 //! (u, v) (extra points are ignored beyond 3 spacings), and along w far enough to hold both
 //! surfaces (at least the M3C2 cylinder half-length, since a distance can reach it), and say
@@ -71,15 +79,14 @@ pub struct EventVolume {
     pub region: Region,
     /// The frame (origin, axes) the footprint is expressed in.
     pub frame: Frame,
-    /// The common base plane, w = base_w in the frame.
+    /// The common base plane, w = base_w in the frame (in pieces, the lowest of theirs).
     pub base_w: f64,
-    /// Volumes of the two solids above the base.
+    /// Volumes of the two solids above the base (summed over the pieces, each over its own
+    /// base).
     pub before_solid_m3: f64,
     pub after_solid_m3: f64,
-    /// The two watertight solids, global coordinates, outward-facing.
-    pub before_solid: Mesh,
-    pub after_solid: Mesh,
-    /// Points of each epoch used (inside the footprint grown by 3 spacings).
+    /// Points of each epoch used (inside the footprint grown by 3 spacings; in pieces, summed
+    /// over the bands grown by 3 spacings, so a point near a seam counts twice).
     pub n_before: usize,
     pub n_after: usize,
     /// Points of each epoch inside the region (0 for user meshes).
@@ -137,6 +144,32 @@ fn check_params(obb: &Obb, margin: f64, spacing: f64) -> Result<()> {
     Ok(())
 }
 
+/// Most cells one piece of an event's volume covers: a larger event is measured in bands of
+/// whole rows of its cells, each with its own triangulations, tops and solids, so what one event
+/// holds at a time is bounded by this, not by the event (SPEC.md §3: "a large event measured in
+/// pieces"). A constant, never the budget, so an event's numbers do not depend on `--memory`.
+/// 2^14 cells are 16 MiB at `units::volumes::BYTES_PER_CELL`, and a band of them takes the
+/// points of a quarter of what 2^16 would: the 20M-point cliff's debris fan (1.55 M points
+/// gathered) needed 173 MiB in bands of 2^16, and fits the smallest budget (164 MiB) in bands
+/// of 2^14.
+pub const PIECE_CELLS: usize = 1 << 14;
+
+/// How far (in spacings) beyond its band a piece triangulates the points: a band's triangles are
+/// the whole event's wherever their Delaunay circles stay within it. At 3 spacings (the whole
+/// footprint's own margin) a sampling of the face hollow of `tests/events_volume.rs` (walls, the
+/// after survey at half density) came out 2 × 10⁻⁶ off the whole in 14 bands; at 8, to rounding.
+const BAND_MARGIN_SPACINGS: f64 = 8.0;
+
+/// How far (in spacings) beyond its band a piece takes points to find the unchanged walls
+/// ([`axis::unchanged_walls`]) of the points it triangulates: a wall point's flags look a
+/// spacing or two around it, its match two spacings into the other epoch, its column one.
+const WALL_REACH_SPACINGS: f64 = BAND_MARGIN_SPACINGS + 5.0;
+
+/// Where each piece's two solids (before, after; global coordinates, each closed on its own) go,
+/// in the order of the pieces: an event of one piece has one pair of watertight solids, a larger
+/// one a pair per band (their walls on the seams face each other).
+pub type Solids<'a> = &'a mut dyn FnMut([Mesh; 2]) -> Result<()>;
+
 /// One epoch's (global) points in the event frame, over `r`: points beyond `r` grown by 3
 /// spacings are dropped. The points may come in any order (a tiled run gathers them tile by
 /// tile): they are sorted, because the triangulation of ties (points sharing u, v) depends on
@@ -147,7 +180,11 @@ pub fn epoch_local(
     points: &[[f64; 3]],
     spacing: f64,
 ) -> Vec<[f64; 3]> {
-    let keep = r.grown(3.0 * spacing);
+    local_in(frame, &r.grown(3.0 * spacing), points)
+}
+
+/// The points (global) inside `keep` in the event frame, sorted.
+fn local_in(frame: &Frame, keep: &Footprint, points: &[[f64; 3]]) -> Vec<[f64; 3]> {
     let mut local: Vec<[f64; 3]> = points
         .iter()
         .map(|p| frame.to_local(p))
@@ -161,30 +198,29 @@ pub fn epoch_local(
     local
 }
 
-/// Both epochs' local points ([`epoch_local`]) without the unchanged walls
-/// ([`axis::unchanged_walls`], the points gathered within |w| ≤ `window`), and their TINs.
-pub fn epoch_tins(
-    frame: &Frame,
-    r: &Footprint,
-    points: [&[[f64; 3]]; 2],
+/// Both epochs' local points ([`local_in`]) without the unchanged walls
+/// ([`axis::unchanged_walls`], the points gathered over `gathered` within |w| ≤ `window`), those
+/// inside `tin_keep` (all when None) triangulated.
+fn epoch_tins(
+    local: [Vec<[f64; 3]>; 2],
     spacing: f64,
+    gathered: &Footprint,
     window: f64,
+    tin_keep: Option<&Footprint>,
 ) -> Result<[(Tin, Vec<[f64; 3]>); 2]> {
     // Only the window's points: the gather may bring more (other candidate boxes), cut by
     // other faces.
-    let local = points.map(|p| {
-        let mut l = epoch_local(frame, r, p, spacing);
+    let local = local.map(|mut l| {
         l.retain(|q| q[2].abs() <= window);
         l
     });
-    let gathered = r.grown(3.0 * spacing);
-    let drop = axis::unchanged_walls([&local[0], &local[1]], spacing, &gathered, window);
+    let drop = axis::unchanged_walls([&local[0], &local[1]], spacing, gathered, window);
     let mut out = Vec::with_capacity(2);
     for ((l, d), epoch) in local.into_iter().zip(&drop).zip(["before", "after"]) {
         let kept: Vec<[f64; 3]> = l
             .into_iter()
             .zip(d)
-            .filter(|(_, &d)| !d)
+            .filter(|(p, &d)| !d && tin_keep.is_none_or(|k| k.contains(p[0], p[1])))
             .map(|(p, _)| p)
             .collect();
         let tin = Tin::new(&kept)
@@ -196,20 +232,17 @@ pub fn epoch_tins(
     Ok([before, after])
 }
 
-/// The region of footprint `r`: cells of about one `spacing` whose four corners both surfaces
-/// cover (`surface_covers` at a node, per epoch), that pass `cell_covered` (e.g. a point of each
-/// epoch near the centre), and whose location (the centre on the before surface, global) is
-/// `owned`.
+/// The region over `cells`: cells whose four corners both surfaces cover (`surface_covers` at a
+/// node, per epoch), that pass `cell_covered` (e.g. a point of each epoch near the centre), and
+/// whose location (the centre on the before surface, global) is `owned`.
 fn region_of(
     frame: &Frame,
-    r: &Footprint,
-    spacing: f64,
+    cells: Cells,
     before: &dyn Surface,
     after: &dyn Surface,
     cell_covered: &(dyn Fn([f64; 2]) -> bool + Sync),
     owned: Owned,
 ) -> Region {
-    let cells = Cells::new(r, spacing);
     let (nu, nv) = (cells.nu, cells.nv);
     // Nodes covered by both surfaces, row by row in parallel.
     let nodes: Vec<bool> = (0..=nv)
@@ -247,7 +280,7 @@ fn region_of(
 
 /// Volume change of one event from the two epochs' points around it (global coordinates;
 /// extra points are tolerated), `spacing` = point spacing of the clouds, over the part of the
-/// footprint both epochs cover and the event owns.
+/// footprint both epochs cover and the event owns; its solids to `solids`.
 pub fn event_volume(
     obb: &Obb,
     margin: f64,
@@ -255,64 +288,96 @@ pub fn event_volume(
     after: &[[f64; 3]],
     spacing: f64,
     owned: Owned,
+    solids: Solids,
 ) -> Result<EventVolume> {
-    event_volume_in(obb, margin, f64::INFINITY, before, after, spacing, owned)
+    event_volume_in(
+        obb,
+        margin,
+        f64::INFINITY,
+        [before, after],
+        spacing,
+        owned,
+        PIECE_CELLS,
+        solids,
+    )
 }
 
 /// [`event_volume`] of points gathered within |w| ≤ `window` of the box's centre along its third
-/// axis (the search box): the unchanged walls ([`axis::unchanged_walls`]) know where the window
-/// cut them.
+/// axis (the search box: the unchanged walls, [`axis::unchanged_walls`], know where the window
+/// cut them), in pieces of at most `piece_cells` cells ([`PIECE_CELLS`]).
+#[allow(clippy::too_many_arguments)]
 pub fn event_volume_in(
     obb: &Obb,
     margin: f64,
     window: f64,
-    before: &[[f64; 3]],
-    after: &[[f64; 3]],
+    points: [&[[f64; 3]]; 2],
     spacing: f64,
     owned: Owned,
+    piece_cells: usize,
+    solids: Solids,
 ) -> Result<EventVolume> {
     check_params(obb, margin, spacing)?;
     let frame = Frame::of_obb(obb);
     let r = Footprint::of_obb(obb, margin);
-    let [(tin1, local1), (tin2, local2)] =
-        epoch_tins(&frame, &r, [before, after], spacing, window)?;
-    let radius = region::COVER_RADIUS * spacing;
-    let uv =
-        |l: &Vec<[f64; 3]>| region::PointCoverage::new(l.iter().map(|p| [p[0], p[1]]), &r, radius);
-    let (cov1, cov2) = (uv(&local1), uv(&local2));
-    let near_points =
-        |c: [f64; 2]| cov1.covers(c[0], c[1], radius) && cov2.covers(c[0], c[1], radius);
-    let region = region_of(&frame, &r, spacing, &tin1, &tin2, &near_points, owned);
-    let inside = |l: &Vec<[f64; 3]>| {
-        l.iter()
-            .filter(|p| {
-                region
-                    .cells
-                    .cell_of(p[0], p[1])
-                    .is_some_and(|(i, j)| region.contains(i, j))
-            })
-            .count()
+    // The points the search box gathered reach 3 spacings beyond the footprint.
+    let gathered = r.grown(3.0 * spacing);
+    let piece = |c: Cells, whole: bool| -> Result<Piece> {
+        // A band takes the points a wall test of its own points needs, and triangulates those
+        // within 3 spacings of it (as a whole event does of its footprint).
+        let band = meet(&c.r.grown(BAND_MARGIN_SPACINGS * spacing), &gathered);
+        let keep = if whole {
+            gathered
+        } else {
+            meet(&c.r.grown(WALL_REACH_SPACINGS * spacing), &gathered)
+        };
+        let local = points.map(|p| local_in(&frame, &keep, p));
+        let tins = epoch_tins(local, spacing, &gathered, window, (!whole).then_some(&band));
+        let [(tin1, local1), (tin2, local2)] = match tins {
+            Ok(t) => t,
+            // A band neither epoch spans has nothing to measure (a whole event is refused).
+            Err(_) if !whole => return Ok(Piece::empty(c)),
+            Err(e) => return Err(e),
+        };
+        let radius = region::COVER_RADIUS * spacing;
+        let uv = |l: &Vec<[f64; 3]>| {
+            region::PointCoverage::new(l.iter().map(|p| [p[0], p[1]]), &c.r, radius)
+        };
+        let (cov1, cov2) = (uv(&local1), uv(&local2));
+        let near_points =
+            |q: [f64; 2]| cov1.covers(q[0], q[1], radius) && cov2.covers(q[0], q[1], radius);
+        let region = region_of(&frame, c, &tin1, &tin2, &near_points, owned);
+        let inside = |l: &Vec<[f64; 3]>| {
+            l.iter()
+                .filter(|p| {
+                    region
+                        .cells
+                        .cell_of(p[0], p[1])
+                        .is_some_and(|(i, j)| region.contains(i, j))
+                })
+                .count()
+        };
+        let region_points = [inside(&local1), inside(&local2)];
+        let used = [local1.len(), local2.len()];
+        // Counted, the event's own points are no longer needed (the triangulations hold theirs).
+        drop((local1, local2));
+        // What needs both triangulations first; then each top is clipped from its own, which is
+        // given back as soon as it is: a large event's peak was both triangulations beside both
+        // tops (≈ 2.2 KB per region cell on the cliff's debris fan).
+        let change = change_of(&region, &tin1, &tin2, spacing);
+        drop((cov1, cov2));
+        let top = |tin: Tin| {
+            let (v, f) = tin.mesh();
+            drop(tin);
+            solid::clipped_top(&v, &f, &region)
+        };
+        let tops = (!region.is_empty()).then(|| [top(tin1), top(tin2)]);
+        Ok(Piece {
+            used,
+            region_points,
+            ..Piece::new(region, change, tops)
+        })
     };
-    let counts = [inside(&local1), inside(&local2)];
-    let (n1, n2) = (local1.len(), local2.len());
-    // Counted, the event's own points are no longer needed (the triangulations hold theirs).
-    drop((local1, local2));
-    // What needs both triangulations first; then each top is clipped from its own, which is
-    // given back as soon as it is: a large event's peak was both triangulations beside both
-    // tops (≈ 2.2 KB per region cell on the cliff's debris fan).
-    let change = change_of(&region, &tin1, &tin2, spacing);
-    drop((cov1, cov2));
-    let top = |tin: Tin| {
-        let (v, f) = tin.mesh();
-        drop(tin);
-        solid::clipped_top(&v, &f, &region)
-    };
-    let top1 = top(tin1);
-    let top2 = top(tin2);
-    covered(&region, &top1, &top2)?;
-    let mut v = finish(&frame, region, top1, top2, change, spacing, n1, n2);
-    v.region_points = counts;
-    Ok(v)
+    measure(&frame, r, spacing, piece_cells, solids, &piece)
 }
 
 /// Volume change of one event between two arbitrary surfaces (e.g. the user's meshes,
@@ -325,6 +390,7 @@ pub fn event_volume_from_surfaces(
     after: &dyn Surface,
     spacing: f64,
     owned: Owned,
+    solids: Solids,
 ) -> Result<EventVolume> {
     check_params(obb, margin, spacing)?;
     let frame = Frame::of_obb(obb);
@@ -332,17 +398,192 @@ pub fn event_volume_from_surfaces(
     let both = |c: [f64; 2]| {
         before.height_at(c[0], c[1]).is_some() && after.height_at(c[0], c[1]).is_some()
     };
-    let region = region_of(&frame, &r, spacing, before, after, &both, owned);
-    let none = || Error::Epochs("event footprint not covered by a surface".into());
-    let top1 = solid::grid_top(before, &region, 2).ok_or_else(none)?;
-    let top2 = solid::grid_top(after, &region, 2).ok_or_else(none)?;
-    covered(&region, &top1, &top2)?;
-    let change = change_of(&region, before, after, spacing);
-    Ok(finish(&frame, region, top1, top2, change, spacing, 0, 0))
+    let piece = |c: Cells, _whole: bool| -> Result<Piece> {
+        let region = region_of(&frame, c, before, after, &both, owned);
+        let tops = if region.is_empty() {
+            None
+        } else {
+            let none = || Error::Epochs("event footprint not covered by a surface".into());
+            let top1 = solid::grid_top(before, &region, 2).ok_or_else(none)?;
+            let top2 = solid::grid_top(after, &region, 2).ok_or_else(none)?;
+            Some([top1, top2])
+        };
+        let change = change_of(&region, before, after, spacing);
+        Ok(Piece::new(region, change, tops))
+    };
+    measure(&frame, r, spacing, PIECE_CELLS, solids, &piece)
 }
 
-/// Refuse a region no part of which both epochs cover.
-fn covered(region: &Region, top1: &Mesh, top2: &Mesh) -> Result<()> {
+/// The most points (both epochs) one piece of the event's volume takes from `points`, in pieces
+/// of at most `piece_cells` cells (what its triangulations and wall test hold): the points of a
+/// band grown by the wall test's reach, within the gathered box.
+pub fn piece_points(
+    obb: &Obb,
+    margin: f64,
+    points: [&[[f64; 3]]; 2],
+    spacing: f64,
+    piece_cells: usize,
+) -> usize {
+    let frame = Frame::of_obb(obb);
+    let r = Footprint::of_obb(obb, margin);
+    let gathered = r.grown(3.0 * spacing);
+    let cells = Cells::new(&r, spacing);
+    let bands = cells.bands(piece_cells);
+    if bands.len() == 1 {
+        return points[0].len() + points[1].len();
+    }
+    let keep: Vec<Footprint> = bands
+        .into_iter()
+        .map(|b| {
+            meet(
+                &cells.band(b).r.grown(WALL_REACH_SPACINGS * spacing),
+                &gathered,
+            )
+        })
+        .collect();
+    let mut taken = vec![0usize; keep.len()];
+    for p in points.iter().flat_map(|p| p.iter()) {
+        let l = frame.to_local(p);
+        for (k, b) in keep.iter().enumerate() {
+            taken[k] += usize::from(b.contains(l[0], l[1]));
+        }
+    }
+    taken.into_iter().max().unwrap_or(0)
+}
+
+/// The rectangle both `a` and `b` cover.
+fn meet(a: &Footprint, b: &Footprint) -> Footprint {
+    Footprint {
+        u0: a.u0.max(b.u0),
+        u1: a.u1.min(b.u1),
+        v0: a.v0.max(b.v0),
+        v1: a.v1.min(b.v1),
+    }
+}
+
+/// What one band of an event's cells gives.
+struct Piece {
+    /// The band's region (its cells, row for row those of the event's grid).
+    region: Region,
+    /// The surfaces' difference at each of its cells' centres ([`Region::cell_changes`]).
+    dw: Vec<Option<f64>>,
+    gain: f64,
+    loss: f64,
+    /// The two tops clipped to the band's region (local); None when it has no region.
+    tops: Option<[Mesh; 2]>,
+    /// Points of each epoch triangulated, and those inside the band's region.
+    used: [usize; 2],
+    region_points: [usize; 2],
+}
+
+impl Piece {
+    /// A band's region, its change ([`change_of`]) and tops; no points counted.
+    fn new(region: Region, change: (Vec<Option<f64>>, f64, f64), tops: Option<[Mesh; 2]>) -> Piece {
+        let (dw, gain, loss) = change;
+        Piece {
+            region,
+            dw,
+            gain,
+            loss,
+            tops,
+            used: [0; 2],
+            region_points: [0; 2],
+        }
+    }
+
+    /// A band with nothing measured (no cell covered).
+    fn empty(c: Cells) -> Piece {
+        let n = c.len();
+        let region = Region::new(c, vec![false; n], &vec![false; n]);
+        Piece::new(region, (vec![None; n], 0.0, 0.0), None)
+    }
+}
+
+/// The event's volume over footprint `r`, band by band (`piece` measures one band: its cells
+/// and whether it is the whole grid): each band's tops closed into solids over a base plane of
+/// their own (one spacing below both) and sent to `solids`, the volumes added up; the region,
+/// its open rim and the step variance from the whole grid's flags and changes (a few bytes a
+/// cell), so they do not depend on where the seams fall.
+fn measure(
+    frame: &Frame,
+    r: Footprint,
+    spacing: f64,
+    piece_cells: usize,
+    solids: Solids,
+    piece: &dyn Fn(Cells, bool) -> Result<Piece>,
+) -> Result<EventVolume> {
+    let cells = Cells::new(&r, spacing);
+    let bands = cells.bands(piece_cells);
+    let whole = bands.len() == 1;
+    let mut covered = Vec::with_capacity(cells.len());
+    let mut inside = Vec::with_capacity(cells.len());
+    let mut dw = Vec::with_capacity(cells.len());
+    // Sums that start from the first band's value (a sum from 0.0 would turn −0.0 into 0.0).
+    let add = |s: &mut Option<f64>, x: f64| *s = Some(s.map_or(x, |s| s + x));
+    let (mut gain, mut loss, mut v1, mut v2) = (None, None, None, None);
+    let mut base_w = f64::INFINITY;
+    let (mut used, mut region_points) = ([0; 2], [0; 2]);
+    let to_global = |mut m: Mesh| {
+        for v in &mut m.vertices {
+            *v = frame.to_global(v);
+        }
+        m
+    };
+    for rows in bands {
+        let c = cells.band(rows);
+        let p = piece(c, whole)?;
+        if let Some([top1, top2]) = p.tops {
+            covered_by_both(&p.region, &top1, &top2)?;
+            // One base plane below both surfaces, one spacing lower still so no wall is flat.
+            let base = solid::min_height(&top1).min(solid::min_height(&top2)) - spacing;
+            let solid1 = solid::close(top1, base, &c.r);
+            let solid2 = solid::close(top2, base, &c.r);
+            add(&mut v1, solid::signed_volume(&solid1));
+            add(&mut v2, solid::signed_volume(&solid2));
+            base_w = base_w.min(base);
+            solids([to_global(solid1), to_global(solid2)])?;
+        }
+        add(&mut gain, p.gain);
+        add(&mut loss, p.loss);
+        for k in 0..2 {
+            used[k] += p.used[k];
+            region_points[k] += p.region_points[k];
+        }
+        covered.extend_from_slice(&p.region.covered);
+        inside.extend_from_slice(&p.region.inside);
+        dw.extend(p.dw);
+    }
+    let region = Region::new(cells, covered, &inside);
+    if region.is_empty() {
+        return Err(Error::Epochs(format!(
+            "no part of the footprint is covered by both epochs and free of other events (coverage {:.0} %)",
+            100.0 * region.coverage()
+        )));
+    }
+    let (v1, v2) = (v1.unwrap_or(0.0), v2.unwrap_or(0.0));
+    Ok(EventVolume {
+        volume_m3: v2 - v1,
+        gain_m3: gain.unwrap_or(0.0),
+        loss_m3: loss.unwrap_or(0.0),
+        footprint_area_m2: r.area(),
+        region_area_m2: region.area(),
+        coverage: region.coverage(),
+        footprint: r,
+        open_rim: region.open_rim(&dw),
+        step_variance_m6: region.step_variance(&dw, spacing),
+        region,
+        frame: *frame,
+        base_w,
+        before_solid_m3: v1,
+        after_solid_m3: v2,
+        n_before: used[0],
+        n_after: used[1],
+        region_points,
+    })
+}
+
+/// Refuse a region (or a band's) no part of which both epochs cover.
+fn covered_by_both(region: &Region, top1: &Mesh, top2: &Mesh) -> Result<()> {
     if region.is_empty() || top1.faces.is_empty() || top2.faces.is_empty() {
         return Err(Error::Epochs(format!(
             "no part of the footprint is covered by both epochs and free of other events (coverage {:.0} %)",
@@ -352,81 +593,20 @@ fn covered(region: &Region, top1: &Mesh, top2: &Mesh) -> Result<()> {
     Ok(())
 }
 
-/// What the two surfaces say of the change over the region beyond the solids: where the
-/// change reaches the region's rim, the variance of its steps, the gross gain and loss.
-struct Change {
-    open_rim: region::OpenRim,
-    step_variance_m6: f64,
-    gain: f64,
-    loss: f64,
-}
-
-fn change_of(region: &Region, s1: &dyn Surface, s2: &dyn Surface, spacing: f64) -> Change {
+/// What the two surfaces say of the change over the region beyond the solids: the difference at
+/// each cell's centre, and the gross gain and loss.
+fn change_of(
+    region: &Region,
+    s1: &dyn Surface,
+    s2: &dyn Surface,
+    spacing: f64,
+) -> (Vec<Option<f64>>, f64, f64) {
     let change = |u: f64, v: f64| Some(s2.height_at(u, v)? - s1.height_at(u, v)?);
     let dw = region.cell_changes(&change);
     // Gross terms (reported, not part of V) by the midpoint rule on sub-cells of about
     // spacing/2 (a step is misplaced by at most half a sub-cell).
     let (gain, loss) = gross(s1, s2, region, spacing / 2.0);
-    Change {
-        open_rim: region.open_rim(&dw),
-        step_variance_m6: region.step_variance(&dw, spacing),
-        gain,
-        loss,
-    }
-}
-
-/// The event's volume from the tops clipped to the region (each closed into a solid over one
-/// base plane) and the surfaces' `change`.
-#[allow(clippy::too_many_arguments)]
-fn finish(
-    frame: &Frame,
-    region: Region,
-    top1: Mesh,
-    top2: Mesh,
-    change: Change,
-    spacing: f64,
-    n1: usize,
-    n2: usize,
-) -> EventVolume {
-    let r = region.cells.r;
-    // One base plane below both surfaces, one spacing lower still so no wall is flat.
-    let base = solid::min_height(&top1).min(solid::min_height(&top2)) - spacing;
-    let solid1 = solid::close(top1, base, &r);
-    let solid2 = solid::close(top2, base, &r);
-    let (v1, v2) = (solid::signed_volume(&solid1), solid::signed_volume(&solid2));
-    let Change {
-        open_rim,
-        step_variance_m6,
-        gain,
-        loss,
-    } = change;
-    let to_global = |mut m: Mesh| {
-        for v in &mut m.vertices {
-            *v = frame.to_global(v);
-        }
-        m
-    };
-    EventVolume {
-        volume_m3: v2 - v1,
-        gain_m3: gain,
-        loss_m3: loss,
-        footprint_area_m2: r.area(),
-        region_area_m2: region.area(),
-        coverage: region.coverage(),
-        footprint: r,
-        region,
-        frame: *frame,
-        base_w: base,
-        before_solid_m3: v1,
-        after_solid_m3: v2,
-        before_solid: to_global(solid1),
-        after_solid: to_global(solid2),
-        n_before: n1,
-        n_after: n2,
-        region_points: [0; 2],
-        open_rim,
-        step_variance_m6,
-    }
+    (dw, gain, loss)
 }
 
 /// Midpoint-rule gross gain and loss over the region's cells, each cut into sub-cells of at

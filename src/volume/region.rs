@@ -75,6 +75,34 @@ impl Cells {
         }
     }
 
+    /// The rows `rows` of the grid as a grid of their own: the same columns, the same lines
+    /// (a band's first and last lines are the grid's), so bands side by side share their seams
+    /// exactly and a band's cells are a run of the grid's, row for row.
+    pub fn band(&self, rows: std::ops::Range<usize>) -> Cells {
+        if rows == (0..self.nv) {
+            return *self;
+        }
+        Cells {
+            r: Footprint {
+                v0: self.v(rows.start),
+                v1: self.v(rows.end),
+                ..self.r
+            },
+            nu: self.nu,
+            nv: rows.len(),
+        }
+    }
+
+    /// Bands of whole rows of at most `most` cells each (one row at least), as even as the rows
+    /// allow, in order.
+    pub fn bands(&self, most: usize) -> Vec<std::ops::Range<usize>> {
+        let rows = (most / self.nu).max(1);
+        let n = self.nv.div_ceil(rows);
+        (0..n)
+            .map(|k| k * self.nv / n..(k + 1) * self.nv / n)
+            .collect()
+    }
+
     /// Index of cell (i, j).
     pub fn index(&self, i: usize, j: usize) -> usize {
         j * self.nu + i
