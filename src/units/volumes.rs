@@ -40,17 +40,23 @@ pub const FILE: &str = "volumes.json";
 /// (`memory::MMAP_THRESHOLD`) the same events measured 1,360, 1,025 and 1,460.
 pub const BYTES_PER_CELL: u64 = 1024;
 
+/// How a large event is cut into pieces (`volume::pieces`).
+const CUTTING: volume::Cutting = volume::Cutting::Fewest(volume::PIECE_CELLS);
+
 /// Resident bytes per cell of the whole event beside its pieces: whether both epochs cover it
 /// and whether it is in the region (2), the surfaces' difference at its centre (16), the open
 /// rim's sort of the region's changes (8), the uncertainty's list of region cells (16, after the
 /// rest is given back).
 pub const BYTES_PER_GRID_CELL: u64 = 32;
 
-/// Resident bytes per point (both epochs) a piece triangulates, beside its cells' cost: the
-/// points in the event's frame, a triangulation's share (spade is lean: ≈ 40), its mesh copied
-/// out for clipping (48). The gathered points themselves (24 bytes each) are held beside it
-/// unreserved.
+/// Resident bytes per point (both epochs) a piece triangulates or tests for walls, beside its
+/// cells' cost: the points in the event's frame, a triangulation's share (spade is lean: ≈ 40),
+/// its mesh copied out for clipping (48).
 pub const BYTES_PER_POINT: u64 = 100;
+
+/// Resident bytes per point gathered around a unit's events (both epochs, global coordinates),
+/// held while all of them are measured: reserved with each event's need.
+pub const GATHERED_BYTES: u64 = 24;
 
 /// What one event's volume holds at most, over its candidate boxes: [`BYTES_PER_CELL`] for the
 /// cells of its largest piece, [`BYTES_PER_GRID_CELL`] for all its cells, [`BYTES_PER_POINT`] for
@@ -61,7 +67,7 @@ fn event_need(boxes: &[SearchBox], points: [&[Point3]; 2], margin: f64, spacing:
         .map(|(_, _, o)| {
             let cells = volume::region::Cells::new(&volume::Footprint::of_obb(o, margin), spacing);
             let piece = cells.len().min(volume::PIECE_CELLS) as u64;
-            let taken = volume::piece_points(o, margin, points, spacing, volume::PIECE_CELLS);
+            let taken = volume::pieces(o, margin, points, spacing, CUTTING).1;
             piece * BYTES_PER_CELL
                 + cells.len() as u64 * BYTES_PER_GRID_CELL
                 + taken as u64 * BYTES_PER_POINT
@@ -553,14 +559,19 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
                     .collect()
             })
             .collect();
-        let [before, after] = match user {
+        let [mut before, mut after] = match user {
             Some(_) => [vec![Vec::new(); mine.len()], vec![Vec::new(); mine.len()]],
             None => gather(ctx, tilings, &boxes)?,
         };
-        for (b, a) in before.iter().zip(&after) {
+        for (b, a) in before.iter_mut().zip(&mut after) {
+            // What was gathered is held while every event of the tile is measured: as much as
+            // its points (the pushes left up to twice that).
+            b.shrink_to_fit();
+            a.shrink_to_fit();
             gathered += b.len() + a.len();
             largest = largest.max(b.len() + a.len());
         }
+        let held = gathered as u64 * GATHERED_BYTES;
         // Gathered tile by tile, the points come in an order that depends on the tiling;
         // `volume::epoch_local` sorts what it triangulates, so the volumes do not.
         // One event at a time, each with its reservation (the triangulations, grids and solids of
@@ -568,8 +579,13 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
         for (i, d) in mine.iter().enumerate() {
             let n = (before[i].len() + after[i].len()) as u64;
             let _held = ctx.reserve(
-                event_need(&boxes[i], [&before[i], &after[i]], margin, spacing),
-                &format!("the volume of event {} ({n} points)", d.event.id),
+                event_need(&boxes[i], [&before[i], &after[i]], margin, spacing) + held,
+                &format!(
+                    "the volume of event {} ({n} points; {gathered} gathered for the tile's {} \
+                     events)",
+                    d.event.id,
+                    mine.len()
+                ),
             )?;
             let mut solids = None;
             let m: Measured = {
@@ -595,7 +611,7 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
                 let owned = |x: &Point3| ownership.owner(x) == Some(id);
                 let cells =
                     volume::region::Cells::new(&volume::Footprint::of_obb(&e.obb, margin), spacing);
-                let pieced = cells.bands(volume::PIECE_CELLS).len() > 1;
+                let pieced = cells.len() > volume::PIECE_CELLS;
                 let sink = solids.insert(super::solids::EventSolids::new(out, id, pieced)?);
                 let mut send = |pair: [volume::Mesh; 2]| sink.push(pair);
                 let v = match &user {
@@ -615,7 +631,7 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
                         [&before[i], &after[i]],
                         spacing,
                         &owned,
-                        volume::PIECE_CELLS,
+                        CUTTING,
                         &mut send,
                     ),
                 };

@@ -18,8 +18,9 @@
 //!    w_before, by the midpoint rule on sub-cells of about spacing/2. (Net V is exact for the
 //!    TINs; gain + loss equals it up to the sampling of the steps.)
 //!
-//! An event of more than [`PIECE_CELLS`] cells is measured in bands of whole rows of cells
-//! (steps 3 to 6 per band, each with the points 8 spacings around it, each band's solids closed
+//! An event of more than [`PIECE_CELLS`] cells is measured in bands of whole rows or whole
+//! columns of cells, whichever puts fewer points into its fullest band ([`pieces`]; steps 3 to 6
+//! per band, each with the points 8 spacings around it, each band's solids closed
 //! over its own base; the volumes added up), and the region, its open rim and step variance from
 //! the whole grid's flags and changes: what one event holds is a band's surfaces and solids and a
 //! few bytes a cell of the whole, not its surfaces and solids whole. A band's triangulation is the
@@ -44,7 +45,7 @@ pub mod user_mesh;
 
 pub use frame::{Footprint, Frame};
 pub use ownership::{Claim, Ownership};
-pub use region::{Cells, OpenRim, Polygon, Region};
+pub use region::{Cells, Cut, OpenRim, Polygon, Region};
 pub use solid::check_watertight;
 pub use solid::Mesh;
 pub use surface::{Surface, Tin};
@@ -145,13 +146,12 @@ fn check_params(obb: &Obb, margin: f64, spacing: f64) -> Result<()> {
 }
 
 /// Most cells one piece of an event's volume covers: a larger event is measured in bands of
-/// whole rows of its cells, each with its own triangulations, tops and solids, so what one event
-/// holds at a time is bounded by this, not by the event (SPEC.md §3: "a large event measured in
-/// pieces"). A constant, never the budget, so an event's numbers do not depend on `--memory`.
-/// 2^14 cells are 16 MiB at `units::volumes::BYTES_PER_CELL`, and a band of them takes the
-/// points of a quarter of what 2^16 would: the 20M-point cliff's debris fan (1.55 M points
-/// gathered) needed 173 MiB in bands of 2^16, and fits the smallest budget (164 MiB) in bands
-/// of 2^14.
+/// whole rows or columns of its cells ([`pieces`]), each with its own triangulations, tops and
+/// solids, so what one event holds at a time is bounded by this, not by the event (SPEC.md §3:
+/// "a large event measured in pieces"). A constant, never the budget, so an event's numbers do
+/// not depend on `--memory`. 2^14 cells are 16 MiB at `units::volumes::BYTES_PER_CELL`, and a
+/// band of them takes about a quarter of the points a band of 2^16 would: the 20M-point cliff's
+/// debris fan (1.55 M points gathered) needed 173 MiB in bands of 2^16 rows.
 pub const PIECE_CELLS: usize = 1 << 14;
 
 /// How far (in spacings) beyond its band a piece triangulates the points: a band's triangles are
@@ -297,14 +297,14 @@ pub fn event_volume(
         [before, after],
         spacing,
         owned,
-        PIECE_CELLS,
+        Cutting::Fewest(PIECE_CELLS),
         solids,
     )
 }
 
 /// [`event_volume`] of points gathered within |w| ≤ `window` of the box's centre along its third
 /// axis (the search box: the unchanged walls, [`axis::unchanged_walls`], know where the window
-/// cut them), in pieces of at most `piece_cells` cells ([`PIECE_CELLS`]).
+/// cut them), in pieces cut as `cutting` says ([`Cutting::Fewest`] of [`PIECE_CELLS`] in a run).
 #[allow(clippy::too_many_arguments)]
 pub fn event_volume_in(
     obb: &Obb,
@@ -313,7 +313,7 @@ pub fn event_volume_in(
     points: [&[[f64; 3]]; 2],
     spacing: f64,
     owned: Owned,
-    piece_cells: usize,
+    cutting: Cutting,
     solids: Solids,
 ) -> Result<EventVolume> {
     check_params(obb, margin, spacing)?;
@@ -377,7 +377,8 @@ pub fn event_volume_in(
             ..Piece::new(region, change, tops)
         })
     };
-    measure(&frame, r, spacing, piece_cells, solids, &piece)
+    let (parts, _) = pieces(obb, margin, points, spacing, cutting);
+    measure(&frame, r, spacing, parts, solids, &piece)
 }
 
 /// Volume change of one event between two arbitrary surfaces (e.g. the user's meshes,
@@ -411,44 +412,104 @@ pub fn event_volume_from_surfaces(
         let change = change_of(&region, before, after, spacing);
         Ok(Piece::new(region, change, tops))
     };
-    measure(&frame, r, spacing, PIECE_CELLS, solids, &piece)
+    let cells = Cells::new(&r, spacing);
+    measure(
+        &frame,
+        r,
+        spacing,
+        cells.bands(PIECE_CELLS, Cut::Rows),
+        solids,
+        &piece,
+    )
 }
 
-/// The most points (both epochs) one piece of the event's volume takes from `points`, in pieces
-/// of at most `piece_cells` cells (what its triangulations and wall test hold): the points of a
-/// band grown by the wall test's reach, within the gathered box.
-pub fn piece_points(
+/// The pieces of an event's grid (columns, rows of each), and the most points (both epochs) one
+/// of them takes from `points`: one piece when the grid has at most `piece_cells` cells, else
+/// bands of whole rows or of whole columns, whichever takes fewer points into its fullest band
+/// (rows on a tie). A band takes every point that projects into it grown by the wall test's
+/// reach, so a wall seen edge-on (a cliff face under a debris fan's box, most of the points
+/// gathered) falls into one band of rows but across every band of columns, or the reverse.
+pub type Pieces = Vec<(std::ops::Range<usize>, std::ops::Range<usize>)>;
+
+/// How an event's grid is cut into pieces.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Cutting {
+    /// Bands of at most this many cells, of rows or of columns, whichever takes fewer points.
+    Fewest(usize),
+    /// Bands of at most this many cells, along this way.
+    Along(usize, Cut),
+}
+
+/// [`Pieces`] of the event of box `obb` from its gathered `points`.
+pub fn pieces(
     obb: &Obb,
     margin: f64,
     points: [&[[f64; 3]]; 2],
     spacing: f64,
-    piece_cells: usize,
-) -> usize {
+    cutting: Cutting,
+) -> (Pieces, usize) {
+    let (Cutting::Fewest(piece_cells) | Cutting::Along(piece_cells, _)) = cutting;
     let frame = Frame::of_obb(obb);
     let r = Footprint::of_obb(obb, margin);
     let gathered = r.grown(3.0 * spacing);
     let cells = Cells::new(&r, spacing);
-    let bands = cells.bands(piece_cells);
-    if bands.len() == 1 {
-        return points[0].len() + points[1].len();
+    if cells.len() <= piece_cells {
+        return (
+            vec![(0..cells.nu, 0..cells.nv)],
+            points[0].len() + points[1].len(),
+        );
     }
-    let keep: Vec<Footprint> = bands
-        .into_iter()
-        .map(|b| {
-            meet(
-                &cells.band(b).r.grown(WALL_REACH_SPACINGS * spacing),
-                &gathered,
-            )
-        })
+    let reach = WALL_REACH_SPACINGS * spacing;
+    let local: Vec<[f64; 2]> = points
+        .iter()
+        .flat_map(|p| p.iter())
+        .map(|p| frame.to_local(p))
+        .filter(|l| gathered.contains(l[0], l[1]))
+        .map(|l| [l[0], l[1]])
         .collect();
-    let mut taken = vec![0usize; keep.len()];
-    for p in points.iter().flat_map(|p| p.iter()) {
-        let l = frame.to_local(p);
-        for (k, b) in keep.iter().enumerate() {
-            taken[k] += usize::from(b.contains(l[0], l[1]));
+    let count = |cut: Cut| {
+        let bands = cells.bands(piece_cells, cut);
+        // Each band's reach along the cut's axis: [start − reach, end + reach]; across it a band
+        // takes the whole gathered box.
+        let (axis, line): (usize, &dyn Fn(usize) -> f64) = match cut {
+            Cut::Rows => (1, &|j| cells.v(j)),
+            Cut::Columns => (0, &|i| cells.u(i)),
+        };
+        let span = |b: &(std::ops::Range<usize>, std::ops::Range<usize>)| match cut {
+            Cut::Rows => b.1.clone(),
+            Cut::Columns => b.0.clone(),
+        };
+        let reaches: Vec<[f64; 2]> = bands
+            .iter()
+            .map(|b| {
+                let s = span(b);
+                [line(s.start) - reach, line(s.end) + reach]
+            })
+            .collect();
+        let mut taken = vec![0usize; bands.len()];
+        for l in &local {
+            let x = l[axis];
+            // The reaches rise with the band: the first that does not end before x, then on.
+            let first = reaches.partition_point(|b| b[1] < x);
+            for (k, b) in reaches.iter().enumerate().skip(first) {
+                if b[0] > x {
+                    break;
+                }
+                taken[k] += 1;
+            }
         }
+        (bands, taken.into_iter().max().unwrap_or(0))
+    };
+    if let Cutting::Along(_, cut) = cutting {
+        return count(cut);
     }
-    taken.into_iter().max().unwrap_or(0)
+    let (rows, by_rows) = count(Cut::Rows);
+    let (columns, by_columns) = count(Cut::Columns);
+    if by_columns < by_rows {
+        (columns, by_columns)
+    } else {
+        (rows, by_rows)
+    }
 }
 
 /// The rectangle both `a` and `b` cover.
@@ -499,8 +560,8 @@ impl Piece {
     }
 }
 
-/// The event's volume over footprint `r`, band by band (`piece` measures one band: its cells
-/// and whether it is the whole grid): each band's tops closed into solids over a base plane of
+/// The event's volume over footprint `r`, band by band (`parts` of its grid; `piece` measures
+/// one: its cells and whether it is the whole grid): each band's tops closed into solids over a base plane of
 /// their own (one spacing below both) and sent to `solids`, the volumes added up; the region,
 /// its open rim and the step variance from the whole grid's flags and changes (a few bytes a
 /// cell), so they do not depend on where the seams fall.
@@ -508,16 +569,16 @@ fn measure(
     frame: &Frame,
     r: Footprint,
     spacing: f64,
-    piece_cells: usize,
+    parts: Pieces,
     solids: Solids,
     piece: &dyn Fn(Cells, bool) -> Result<Piece>,
 ) -> Result<EventVolume> {
     let cells = Cells::new(&r, spacing);
-    let bands = cells.bands(piece_cells);
-    let whole = bands.len() == 1;
-    let mut covered = Vec::with_capacity(cells.len());
-    let mut inside = Vec::with_capacity(cells.len());
-    let mut dw = Vec::with_capacity(cells.len());
+    let whole = parts.len() == 1;
+    // Each part's cells put in their place in the whole grid (row-major).
+    let mut covered = vec![false; cells.len()];
+    let mut inside = vec![false; cells.len()];
+    let mut dw = vec![None; cells.len()];
     // Sums that start from the first band's value (a sum from 0.0 would turn −0.0 into 0.0).
     let add = |s: &mut Option<f64>, x: f64| *s = Some(s.map_or(x, |s| s + x));
     let (mut gain, mut loss, mut v1, mut v2) = (None, None, None, None);
@@ -529,8 +590,8 @@ fn measure(
         }
         m
     };
-    for rows in bands {
-        let c = cells.band(rows);
+    for (cols, rows) in parts {
+        let c = cells.part(cols.clone(), rows.clone());
         let p = piece(c, whole)?;
         if let Some([top1, top2]) = p.tops {
             covered_by_both(&p.region, &top1, &top2)?;
@@ -549,9 +610,15 @@ fn measure(
             used[k] += p.used[k];
             region_points[k] += p.region_points[k];
         }
-        covered.extend_from_slice(&p.region.covered);
-        inside.extend_from_slice(&p.region.inside);
-        dw.extend(p.dw);
+        let mut dws = p.dw.into_iter();
+        for (j, row) in rows.enumerate() {
+            for (i, col) in cols.clone().enumerate() {
+                let (from, to) = (c.index(i, j), cells.index(col, row));
+                covered[to] = p.region.covered[from];
+                inside[to] = p.region.inside[from];
+                dw[to] = dws.next().flatten();
+            }
+        }
     }
     let region = Region::new(cells, covered, &inside);
     if region.is_empty() {

@@ -12,6 +12,8 @@
 //! The volume is then the exact integral of the two surfaces' difference over the union of the
 //! region's cells ([`crate::volume::solid::clipped_top`]); `coverage` is the covered share of R.
 
+use std::ops::Range;
+
 use super::boundary;
 use super::frame::Footprint;
 use rayon::prelude::*;
@@ -25,6 +27,13 @@ pub const COVER_RADIUS: f64 = 2.0;
 
 /// Most cells per event: beyond this the cells grow (a 1-km footprint at 0.1 m spacing).
 pub const MAX_CELLS: usize = 4_000_000;
+
+/// Which way a grid is cut into bands ([`Cells::bands`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Cut {
+    Rows,
+    Columns,
+}
 
 /// A grid of `nu × nv` cells that tiles the footprint `r` exactly.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -75,31 +84,43 @@ impl Cells {
         }
     }
 
-    /// The rows `rows` of the grid as a grid of their own: the same columns, the same lines
-    /// (a band's first and last lines are the grid's), so bands side by side share their seams
-    /// exactly and a band's cells are a run of the grid's, row for row.
-    pub fn band(&self, rows: std::ops::Range<usize>) -> Cells {
-        if rows == (0..self.nv) {
+    /// The cells of columns `cols` and rows `rows` as a grid of their own: the same lines (a
+    /// part's first and last lines are the grid's), so parts side by side share their seams
+    /// exactly.
+    pub fn part(&self, cols: Range<usize>, rows: Range<usize>) -> Cells {
+        if cols == (0..self.nu) && rows == (0..self.nv) {
             return *self;
         }
         Cells {
             r: Footprint {
+                u0: self.u(cols.start),
+                u1: self.u(cols.end),
                 v0: self.v(rows.start),
                 v1: self.v(rows.end),
-                ..self.r
             },
-            nu: self.nu,
+            nu: cols.len(),
             nv: rows.len(),
         }
     }
 
-    /// Bands of whole rows of at most `most` cells each (one row at least), as even as the rows
-    /// allow, in order.
-    pub fn bands(&self, most: usize) -> Vec<std::ops::Range<usize>> {
-        let rows = (most / self.nu).max(1);
-        let n = self.nv.div_ceil(rows);
+    /// Bands of whole rows (or whole columns) of at most `most` cells each (one row or column
+    /// at least), as even as they allow, in order: (columns, rows) of each. One band, the
+    /// whole grid, when it has at most `most` cells.
+    pub fn bands(&self, most: usize, cut: Cut) -> Vec<(Range<usize>, Range<usize>)> {
+        let (along, across) = match cut {
+            Cut::Rows => (self.nv, self.nu),
+            Cut::Columns => (self.nu, self.nv),
+        };
+        let per = (most / across).max(1);
+        let n = along.div_ceil(per);
         (0..n)
-            .map(|k| k * self.nv / n..(k + 1) * self.nv / n)
+            .map(|k| {
+                let band = k * along / n..(k + 1) * along / n;
+                match cut {
+                    Cut::Rows => (0..self.nu, band),
+                    Cut::Columns => (band, 0..self.nv),
+                }
+            })
             .collect()
     }
 
