@@ -14,15 +14,20 @@ use crate::store::UnitWriter;
 use crate::volume::Mesh;
 
 /// One epoch's solid in parts: its vertices' and its faces' PLY bodies.
-pub struct Parts {
+struct Parts {
     vertices: (PathBuf, BufWriter<File>),
     faces: (PathBuf, BufWriter<File>),
     n_vertices: u64,
     n_faces: u64,
 }
 
-/// The solids of event `id`, before and after (`units::volumes::mesh_files`).
-pub enum EventSolids {
+/// The solids of one event, before and after (`units::volumes::mesh_files`).
+pub struct EventSolids {
+    id: u32,
+    state: State,
+}
+
+enum State {
     /// One piece: its pair, once closed.
     Held(Option<[Mesh; 2]>),
     /// Several: what is appended so far.
@@ -33,7 +38,10 @@ impl EventSolids {
     /// For event `id`, measured in one piece or in several (`pieced`).
     pub fn new(out: &mut UnitWriter, id: u32, pieced: bool) -> Result<EventSolids> {
         if !pieced {
-            return Ok(EventSolids::Held(None));
+            return Ok(EventSolids {
+                id,
+                state: State::Held(None),
+            });
         }
         let [b, a] = super::volumes::mesh_files(id);
         let open = |out: &mut UnitWriter, name: String| -> Result<(PathBuf, BufWriter<File>)> {
@@ -49,23 +57,23 @@ impl EventSolids {
                 n_faces: 0,
             })
         };
-        Ok(EventSolids::Parts(Box::new([
-            parts(out, &b)?,
-            parts(out, &a)?,
-        ])))
+        Ok(EventSolids {
+            id,
+            state: State::Parts(Box::new([parts(out, &b)?, parts(out, &a)?])),
+        })
     }
 
     /// One piece's pair.
     pub fn push(&mut self, solids: [Mesh; 2]) -> Result<()> {
-        match self {
-            EventSolids::Held(held) => {
+        match &mut self.state {
+            State::Held(held) => {
                 if held.replace(solids).is_some() {
                     return Err(Error::Internal(
                         "an event measured in one piece sent a second pair of solids".into(),
                     ));
                 }
             }
-            EventSolids::Parts(parts) => {
+            State::Parts(parts) => {
                 for (p, m) in parts.iter_mut().zip(&solids) {
                     let (path, w) = &mut p.vertices;
                     mesh_ply::write_vertices(w, &m.vertices)
@@ -81,14 +89,15 @@ impl EventSolids {
         Ok(())
     }
 
-    /// Write the two files into `out` (event `id`'s), and remove the temporary ones.
-    pub fn finish(self, out: &mut UnitWriter, id: u32) -> Result<()> {
-        let names = super::volumes::mesh_files(id);
-        match self {
-            EventSolids::Held(None) => Err(Error::Internal(format!(
-                "event {id}: a volume without solids"
+    /// Write the two files into `out`, and remove the temporary ones.
+    pub fn finish(self, out: &mut UnitWriter) -> Result<()> {
+        let names = super::volumes::mesh_files(self.id);
+        match self.state {
+            State::Held(None) => Err(Error::Internal(format!(
+                "event {}: a volume without solids",
+                self.id
             ))),
-            EventSolids::Held(Some(pair)) => {
+            State::Held(Some(pair)) => {
                 for (name, solid) in names.iter().zip(&pair) {
                     super::write_streamed(out, name, |mut w| {
                         mesh_ply::write_ply_to(&mut w, solid)
@@ -96,7 +105,7 @@ impl EventSolids {
                 }
                 Ok(())
             }
-            EventSolids::Parts(parts) => {
+            State::Parts(parts) => {
                 for (name, p) in names.iter().zip(*parts) {
                     let (vertices, faces) = (flushed(p.vertices)?, flushed(p.faces)?);
                     super::write_streamed(out, name, |mut w| {
@@ -117,7 +126,7 @@ impl EventSolids {
 
     /// Remove what was written (an event whose volume failed has no solids).
     pub fn discard(self) -> Result<()> {
-        if let EventSolids::Parts(parts) = self {
+        if let State::Parts(parts) = self.state {
             for p in *parts {
                 for body in [p.vertices, p.faces] {
                     let path = flushed(body)?;
@@ -176,7 +185,7 @@ mod tests {
         for d in [0.0, 2.0, 4.0] {
             pieced.push([tetra(d), tetra(d + 10.0)]).unwrap();
         }
-        pieced.finish(&mut out, 7).unwrap();
+        pieced.finish(&mut out).unwrap();
         let mut whole = EventSolids::new(&mut out, 8, false).unwrap();
         whole.push([tetra(0.0), tetra(1.0)]).unwrap();
         assert!(
@@ -185,7 +194,7 @@ mod tests {
         );
         let mut held = EventSolids::new(&mut out, 9, false).unwrap();
         held.push([tetra(0.0), tetra(1.0)]).unwrap();
-        held.finish(&mut out, 9).unwrap();
+        held.finish(&mut out).unwrap();
         let mut failed = EventSolids::new(&mut out, 10, true).unwrap();
         failed.push([tetra(0.0), tetra(1.0)]).unwrap();
         failed.discard().unwrap();

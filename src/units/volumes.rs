@@ -688,7 +688,7 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
             // durable (a sync and a read-back per file cost 2 × 1028 of each at 120M).
             if let Some(solids) = solids {
                 if m.meshes {
-                    solids.finish(out, m.id)?;
+                    solids.finish(out)?;
                 } else {
                     solids.discard()?;
                 }

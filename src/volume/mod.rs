@@ -323,7 +323,8 @@ pub fn event_volume_in(
     let gathered = r.grown(3.0 * spacing);
     let piece = |c: Cells, whole: bool| -> Result<Piece> {
         // A band takes the points a wall test of its own points needs, and triangulates those
-        // within 3 spacings of it (as a whole event does of its footprint).
+        // within `BAND_MARGIN_SPACINGS` of it (a whole event those 3 spacings around its
+        // footprint, all that was gathered).
         let band = meet(&c.r.grown(BAND_MARGIN_SPACINGS * spacing), &gathered);
         let keep = if whole {
             gathered
@@ -423,12 +424,7 @@ pub fn event_volume_from_surfaces(
     )
 }
 
-/// The pieces of an event's grid (columns, rows of each), and the most points (both epochs) one
-/// of them takes from `points`: one piece when the grid has at most `piece_cells` cells, else
-/// bands of whole rows or of whole columns, whichever takes fewer points into its fullest band
-/// (rows on a tie). A band takes every point that projects into it grown by the wall test's
-/// reach, so a wall seen edge-on (a cliff face under a debris fan's box, most of the points
-/// gathered) falls into one band of rows but across every band of columns, or the reverse.
+/// The pieces of an event's grid: the columns and rows of each.
 pub type Pieces = Vec<(std::ops::Range<usize>, std::ops::Range<usize>)>;
 
 /// How an event's grid is cut into pieces.
@@ -440,7 +436,13 @@ pub enum Cutting {
     Along(usize, Cut),
 }
 
-/// [`Pieces`] of the event of box `obb` from its gathered `points`.
+/// The [`Pieces`] of the event of box `obb`, and the most points (both epochs) one of them takes
+/// from its gathered `points`: one piece when the grid has at most the cutting's cells, else
+/// bands of whole rows or of whole columns ([`Cutting::Fewest`]: whichever takes fewer points
+/// into its fullest band, rows on a tie). A band takes every point that projects into it grown
+/// by the wall test's reach, so a wall seen edge-on (a cliff face under a debris fan's box, most
+/// of the points gathered) falls into one band of rows but across every band of columns, or the
+/// reverse. Nothing per point is held: the points are put in the frame again for each way.
 pub fn pieces(
     obb: &Obb,
     margin: f64,
@@ -460,13 +462,13 @@ pub fn pieces(
         );
     }
     let reach = WALL_REACH_SPACINGS * spacing;
-    let local: Vec<[f64; 2]> = points
-        .iter()
-        .flat_map(|p| p.iter())
-        .map(|p| frame.to_local(p))
-        .filter(|l| gathered.contains(l[0], l[1]))
-        .map(|l| [l[0], l[1]])
-        .collect();
+    let local = || {
+        points
+            .iter()
+            .flat_map(|p| p.iter())
+            .map(|p| frame.to_local(p))
+            .filter(|l| gathered.contains(l[0], l[1]))
+    };
     let count = |cut: Cut| {
         let bands = cells.bands(piece_cells, cut);
         // Each band's reach along the cut's axis: [start − reach, end + reach]; across it a band
@@ -487,7 +489,7 @@ pub fn pieces(
             })
             .collect();
         let mut taken = vec![0usize; bands.len()];
-        for l in &local {
+        for l in local() {
             let x = l[axis];
             // The reaches rise with the band: the first that does not end before x, then on.
             let first = reaches.partition_point(|b| b[1] < x);
@@ -610,13 +612,12 @@ fn measure(
             used[k] += p.used[k];
             region_points[k] += p.region_points[k];
         }
-        let mut dws = p.dw.into_iter();
         for (j, row) in rows.enumerate() {
             for (i, col) in cols.clone().enumerate() {
                 let (from, to) = (c.index(i, j), cells.index(col, row));
                 covered[to] = p.region.covered[from];
                 inside[to] = p.region.inside[from];
-                dw[to] = dws.next().flatten();
+                dw[to] = p.dw[from];
             }
         }
     }
