@@ -65,7 +65,7 @@ fn event_need(boxes: &[SearchBox], points: [&[Point3]; 2], margin: f64, spacing:
     boxes
         .iter()
         .map(|(_, _, o)| {
-            let cells = volume::region::Cells::new(&volume::Footprint::of_obb(o, margin), spacing);
+            let cells = volume::grid(o, margin, spacing);
             let piece = cells.len().min(volume::PIECE_CELLS) as u64;
             let taken = volume::pieces(o, margin, points, spacing, CUTTING).1;
             piece * BYTES_PER_CELL
@@ -609,8 +609,7 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
                 }
                 let id = e.id;
                 let owned = |x: &Point3| ownership.owner(x) == Some(id);
-                let cells =
-                    volume::region::Cells::new(&volume::Footprint::of_obb(&e.obb, margin), spacing);
+                let cells = volume::grid(&e.obb, margin, spacing);
                 let pieced = cells.len() > volume::PIECE_CELLS;
                 let sink = solids.insert(super::solids::EventSolids::new(out, id, pieced)?);
                 let mut send = |pair: [volume::Mesh; 2]| sink.push(pair);

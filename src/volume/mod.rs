@@ -424,6 +424,12 @@ pub fn event_volume_from_surfaces(
     )
 }
 
+/// The grid of cells of the event of box `obb`: its footprint (the box grown by `margin`) in
+/// cells of about one `spacing`, the grid every piece and the whole region are cells of.
+pub fn grid(obb: &Obb, margin: f64, spacing: f64) -> Cells {
+    Cells::new(&Footprint::of_obb(obb, margin), spacing)
+}
+
 /// The pieces of an event's grid: the columns and rows of each.
 pub type Pieces = Vec<(std::ops::Range<usize>, std::ops::Range<usize>)>;
 
@@ -452,9 +458,8 @@ pub fn pieces(
 ) -> (Pieces, usize) {
     let (Cutting::Fewest(piece_cells) | Cutting::Along(piece_cells, _)) = cutting;
     let frame = Frame::of_obb(obb);
-    let r = Footprint::of_obb(obb, margin);
-    let gathered = r.grown(3.0 * spacing);
-    let cells = Cells::new(&r, spacing);
+    let cells = grid(obb, margin, spacing);
+    let gathered = cells.r.grown(3.0 * spacing);
     if cells.len() <= piece_cells {
         return (
             vec![(0..cells.nu, 0..cells.nv)],
