@@ -46,11 +46,24 @@ pub struct Measured {
     /// With a class filter on a LAS/LAZ file: its points per class and those left out (from the
     /// same pass).
     pub classes: Option<ClassCounts>,
+    /// The file's header, as its reader gave it.
+    pub info: io::CloudInfo,
 }
 
 /// Measure the point spacing of the cloud at `path` over the points of the classes `classes`
 /// keeps (those a comparison uses).
 pub fn measure(path: &Path, classes: Option<&Classes>) -> Result<Measured> {
+    measure_keeping(path, classes, &mut |_| {})
+}
+
+/// [`measure`], handing `keep` every point the pass over the whole file delivers, in the order
+/// the reader delivers them (for [`io::replay`]: the tiling then need not decode the file again).
+/// When this returns `Ok`, `keep` has seen them all, once.
+pub fn measure_keeping(
+    path: &Path,
+    classes: Option<&Classes>,
+    keep: &mut dyn FnMut(&[Point3]),
+) -> Result<Measured> {
     let mut reader = io::open_with(path, classes)?;
     let info = reader.info().clone();
     let no_spacing = || {
@@ -63,6 +76,7 @@ pub fn measure(path: &Path, classes: Option<&Classes>) -> Result<Measured> {
         let mut all = Vec::with_capacity(info.point_count as usize);
         let mut buf = Vec::new();
         while reader.fill(&mut buf, 1 << 16)? > 0 {
+            keep(&buf);
             all.extend_from_slice(&buf);
         }
         let mut grid = DensityGrid::new(&info.bounds);
@@ -83,6 +97,7 @@ pub fn measure(path: &Path, classes: Option<&Classes>) -> Result<Measured> {
             spacing,
             density: grid,
             classes: reader.class_counts(),
+            info,
         });
     }
     drop(reader);
@@ -95,7 +110,7 @@ pub fn measure(path: &Path, classes: Option<&Classes>) -> Result<Measured> {
     // The first pass reads the whole file, whatever the window holds, for the density grid and
     // the class counts.
     let mut whole = (DensityGrid::new(&b), None);
-    let mut counting = Some(&mut whole);
+    let mut counting = Some((&mut whole, keep));
     for _ in 0..12 {
         let pts = window(
             path,
@@ -135,6 +150,7 @@ pub fn measure(path: &Path, classes: Option<&Classes>) -> Result<Measured> {
                     spacing,
                     density,
                     classes,
+                    info,
                 });
             }
         }
@@ -189,9 +205,16 @@ fn footprint_area(b: &Bounds) -> f64 {
     (e[0] * e[1]).max(1e-12)
 }
 
+/// What the pass over the whole file fills: the density grid and class counts, and the keeper
+/// of its points.
+type Whole<'a, 'k> = (
+    &'a mut (DensityGrid, Option<ClassCounts>),
+    &'a mut (dyn FnMut(&[Point3]) + 'k),
+);
+
 /// The points within the XY window, or None when more than `cap` fall in it; every point of
-/// the file counted into `whole`'s grid when given (then the whole file is read, and its class
-/// counts recorded there).
+/// the file counted into `whole`'s grid and handed to its keeper when given (then the whole file
+/// is read, and its class counts recorded there).
 fn window(
     path: &Path,
     classes: Option<&Classes>,
@@ -199,15 +222,16 @@ fn window(
     cy: f64,
     half: f64,
     cap: usize,
-    mut whole: Option<&mut (DensityGrid, Option<ClassCounts>)>,
+    mut whole: Option<Whole<'_, '_>>,
 ) -> Result<Option<Vec<Point3>>> {
     let mut reader = io::open_with(path, classes)?;
     let mut buf = Vec::new();
     let mut out = Vec::new();
     let mut over = false;
     while reader.fill(&mut buf, 1 << 16)? > 0 {
-        if let Some((g, _)) = whole.as_deref_mut() {
+        if let Some(((g, _), keep)) = whole.as_mut() {
             g.add(&buf);
+            keep(&buf);
         }
         if over {
             continue;
@@ -226,7 +250,7 @@ fn window(
             return Ok(None);
         }
     }
-    if let Some((_, c)) = whole {
+    if let Some(((_, c), _)) = whole {
         *c = reader.class_counts();
     }
     Ok((!over).then_some(out))

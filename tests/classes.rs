@@ -313,3 +313,110 @@ fn info_lists_the_classes_and_what_a_comparison_leaves_out() {
     assert_eq!(v[0]["classes"]["left_out"], left_out as u64);
     assert_eq!(v[0]["classes"]["classified"], true);
 }
+
+/// The spacing pass keeps what it decodes (`io::replay`), and the file's later readers in this
+/// process read that copy: the same points in the same order, bit for bit, the same header and
+/// class counts as decoding the file, for a cloud measured whole (3,000 points, LAZ) and one
+/// measured in a window (450,000 points, more than `sampling::WHOLE`). Only the same filter
+/// reads the copy; a damaged copy is an error naming it, after which the file is decoded
+/// again; a file changed since is decoded; the copy is removed with its `Replay`.
+#[test]
+fn a_file_decoded_once_reads_back_from_its_copy_as_it_decodes() {
+    use std::io::{Read, Seek, Write};
+    use talus::io::replay::Recorder;
+    let dir = common::tempdir();
+    // Kept as f64 triples (no transform given), and as the LAS integers (the file's transform).
+    for (n, laz, quantised) in [(3_000, true, false), (450_000, false, true)] {
+        assert!(laz || n as u64 > talus::sampling::WHOLE);
+        let path = dir
+            .path()
+            .join(format!("r{n}.{}", if laz { "laz" } else { "las" }));
+        write_las(&path, 6, laz, &classified_points(n));
+        let keep = Classes::default();
+        let (decoded, counts) = read(&path, Some(&keep));
+        let info = io::open(&path).unwrap().info().clone();
+        let copy = dir.path().join(format!("copy{n}"));
+        let transform = info.transform.filter(|_| quantised);
+        let mut recorder = Recorder::create(&path, Some(&keep), transform, copy.clone());
+        let measured =
+            talus::sampling::measure_keeping(&path, Some(&keep), &mut |p| recorder.push(p))
+                .unwrap();
+        let replay = recorder
+            .finish(&measured.info, measured.classes.clone())
+            .expect("a copy");
+        assert_eq!(replay.file(), copy.as_path());
+        assert_eq!(
+            std::fs::metadata(&copy).unwrap().len(),
+            if quantised { 12 } else { 24 } * decoded.len() as u64,
+            "{n}: the copy holds every point kept, once"
+        );
+        // Read through the copy: the same bits, counts and header.
+        let mut r = io::open_with(&path, Some(&keep)).unwrap();
+        assert_eq!(r.info().point_count, info.point_count);
+        assert_eq!(r.info().bounds, info.bounds);
+        assert_eq!(r.info().transform, info.transform);
+        let (mut again, mut buf) = (Vec::new(), Vec::new());
+        while r.fill(&mut buf, 7_777).unwrap() > 0 {
+            again.extend_from_slice(&buf);
+        }
+        assert_eq!(r.left_out(), counts.as_ref().unwrap().left_out());
+        assert_eq!(r.class_counts(), counts);
+        let bits =
+            |v: &[Point3]| -> Vec<[u64; 3]> { v.iter().map(|p| p.map(f64::to_bits)).collect() };
+        assert_eq!(bits(&again), bits(&decoded), "{n}: replayed as decoded");
+        // That was the copy: damaged, it is an error naming it (another filter decodes the file).
+        let mut f = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .open(&copy)
+            .unwrap();
+        let mut byte = [0u8; 1];
+        f.seek(std::io::SeekFrom::Start(100)).unwrap();
+        f.read_exact(&mut byte).unwrap();
+        f.seek(std::io::SeekFrom::Start(100)).unwrap();
+        f.write_all(&[byte[0] ^ 0x10]).unwrap();
+        drop(f);
+        assert_eq!(read(&path, Some(&Classes::all())).0.len(), n);
+        let mut r = io::open_with(&path, Some(&keep)).unwrap();
+        let err = loop {
+            match r.fill(&mut buf, 1 << 16) {
+                Ok(0) => panic!("{n}: a damaged copy read back without an error"),
+                Ok(_) => continue,
+                Err(e) => break e,
+            }
+        };
+        let text = err.to_string();
+        assert!(
+            text.contains(&copy.display().to_string()) && text.contains("checksum"),
+            "{text}"
+        );
+        assert_eq!(err.exit_code(), 1, "{text}");
+        // Given up: the file is decoded again.
+        assert_eq!(bits(&read(&path, Some(&keep)).0), bits(&decoded));
+        drop(replay);
+        assert!(!copy.exists(), "{n}: the copy is removed with its Replay");
+    }
+    // A file changed after its copy was made is decoded, not replayed.
+    let path = dir.path().join("changed.laz");
+    write_las(&path, 6, true, &classified_points(500));
+    let copy = dir.path().join("copy-changed");
+    let mut recorder = Recorder::create(&path, None, None, copy.clone());
+    talus::sampling::measure_keeping(&path, None, &mut |p| recorder.push(p)).unwrap();
+    let info = io::open(&path).unwrap().info().clone();
+    let replay = recorder.finish(&info, None).expect("a copy");
+    std::thread::sleep(std::time::Duration::from_millis(20));
+    write_las(&path, 6, true, &classified_points(700));
+    assert_eq!(read(&path, None).0.len(), 700);
+    drop(replay);
+    // Integers that would not give the points back (a coarser scale than the file's) give the
+    // copy up.
+    let coarse = info.transform.map(|t| t.map(|[s, o]| [10.0 * s, o]));
+    let mut recorder = Recorder::create(&path, None, coarse, dir.path().join("copy-coarse"));
+    talus::sampling::measure_keeping(&path, None, &mut |p| recorder.push(p)).unwrap();
+    assert!(recorder.finish(&info, None).is_none());
+    assert!(!dir.path().join("copy-coarse").exists());
+    // A copy that cannot be written is given up: nothing is kept, nothing fails.
+    let mut recorder = Recorder::create(&path, None, None, dir.path().join("no/such/dir/copy"));
+    talus::sampling::measure_keeping(&path, None, &mut |p| recorder.push(p)).unwrap();
+    assert!(recorder.finish(&info, None).is_none());
+}

@@ -106,13 +106,15 @@ pub fn campaign(opts: &CampaignOptions) -> Result<Option<Done>> {
         &given,
     )?;
     let (store, created) = open_store(&opts.out, opts.resume, opts.force)?;
+    let mut decoded = None;
     let result = run_planned(
         &store,
         opts.force,
         &crate::units::campaign::is_output,
         &opts.executor,
-        |store| plan(store, opts, &user, &epochs, &files),
+        |store| plan(store, opts, &user, &epochs, &files, &mut decoded),
     );
+    drop(decoded);
     let Some(marker) = forget_if_input_error(result, created, &opts.out)? else {
         return Ok(None);
     };
@@ -132,13 +134,20 @@ fn plan(
     user: &UserParams,
     epochs: &[epochs::Epoch],
     files: &[SurveyFiles],
+    decoded: &mut Option<crate::io::replay::Replay>,
 ) -> Result<Plan> {
     // One parameter set: from the first survey, which an appended survey does not change.
     let sampling::Measured {
         spacing,
         density: density_grid,
         ..
-    } = sampling::measure(&files[0].first().path, Some(&user.classes()?))?;
+    } = super::compare::measure_spacing(
+        store,
+        &files[0].first().path,
+        user,
+        &opts.executor,
+        decoded,
+    )?;
     let params = Params::resolve(user, spacing.effective_spacing)?;
     let surveys = epochs
         .iter()

@@ -140,13 +140,49 @@ pub(super) fn stable_areas(
     crate::plan::StableAreas::read(path, key, surveys).map(Some)
 }
 
-/// Plan the comparison of `opts` in `store`.
-fn plan(store: &Store, opts: &CompareOptions, user: &UserParams, inputs: &Inputs) -> Result<Plan> {
+/// The spacing of the survey file `path` read with `user`'s classes ([`sampling::measure`]).
+/// When the units run in this process, the points the pass decodes are kept in `decoded`
+/// ([`io::replay`]) until it is dropped: the survey's tiling reads them instead of decoding the
+/// file a second time.
+pub(super) fn measure_spacing(
+    store: &Store,
+    path: &Path,
+    user: &UserParams,
+    executor: &crate::exec::Executor,
+    decoded: &mut Option<io::replay::Replay>,
+) -> Result<sampling::Measured> {
+    let classes = user.classes()?;
+    if !matches!(executor, crate::exec::Executor::Local) {
+        return sampling::measure(path, Some(&classes));
+    }
+    let transform = io::open(path)?.info().transform;
+    let copy = store.scratch_path("decoded");
+    let mut keep = io::replay::Recorder::create(path, Some(&classes), transform, copy);
+    let measured = sampling::measure_keeping(path, Some(&classes), &mut |p| keep.push(p))?;
+    *decoded = keep.finish(&measured.info, measured.classes.clone());
+    Ok(measured)
+}
+
+/// Plan the comparison of `opts` in `store`; the before survey's decoded points kept in
+/// `decoded` ([`measure_spacing`]).
+fn plan(
+    store: &Store,
+    opts: &CompareOptions,
+    user: &UserParams,
+    inputs: &Inputs,
+    decoded: &mut Option<io::replay::Replay>,
+) -> Result<Plan> {
     let sampling::Measured {
         spacing,
         density: density_grid,
         ..
-    } = sampling::measure(&inputs.before.first().path, Some(&user.classes()?))?;
+    } = measure_spacing(
+        store,
+        &inputs.before.first().path,
+        user,
+        &opts.executor,
+        decoded,
+    )?;
     crate::progress::trace(|| "spacing measured".into());
     let params = Params::resolve(user, spacing.effective_spacing)?;
     let surveys = vec![
@@ -336,9 +372,11 @@ pub fn compare(opts: &CompareOptions) -> Result<Option<Summary>> {
     );
     check_out_dir(&opts.out, opts.resume, opts.force, &is_output, &given)?;
     let (store, created) = open_store(&opts.out, opts.resume, opts.force)?;
+    let mut decoded = None;
     let result = run_planned(&store, opts.force, &is_output, &opts.executor, |store| {
-        plan(store, opts, &user, &inputs)
+        plan(store, opts, &user, &inputs, &mut decoded)
     });
+    drop(decoded);
     let Some(marker) = forget_if_input_error(result, created, &opts.out)? else {
         return Ok(None);
     };

@@ -13,6 +13,7 @@ pub mod las;
 pub mod las_out;
 pub mod mesh_ply;
 pub mod ply;
+pub mod replay;
 pub mod result_table;
 pub mod text;
 
@@ -149,8 +150,12 @@ pub fn open(path: &Path) -> Result<Box<dyn PointReader>> {
 }
 
 /// [`open`], delivering from a LAS/LAZ file only the points of the classes `classes` keeps
-/// (text and PLY have no classes: every point).
+/// (text and PLY have no classes: every point). A file this process already decoded whole with
+/// the same filter and kept ([`replay`]) is read from that copy.
 pub fn open_with(path: &Path, classes: Option<&classes::Classes>) -> Result<Box<dyn PointReader>> {
+    if let Some(r) = replay::reader(path, classes)? {
+        return Ok(Box::new(r));
+    }
     let mut prefix = [0u8; 7];
     let n = read_prefix(path, &mut prefix)?;
     let prefix = &prefix[..n];

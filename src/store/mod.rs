@@ -147,4 +147,10 @@ impl Store {
     fn tmp(&self) -> PathBuf {
         self.work.join("tmp")
     }
+
+    /// A fresh path in `.talus/tmp` whose name starts with `what`, for a scratch file of this
+    /// process: the caller removes it; [`Store::gc`] does once this process is gone.
+    pub fn scratch_path(&self, what: &str) -> PathBuf {
+        fsops::tmp_name(&self.tmp(), what)
+    }
 }
