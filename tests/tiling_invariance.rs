@@ -76,6 +76,53 @@ fn tiled_runs_equal_the_whole_cloud_run() {
     }
 }
 
+/// A run that starts anew keeps the points its spacing pass decodes and tiles the before survey
+/// from that copy (`io::replay`); a resumed run decodes the file again. Both give the same tile
+/// files and the same outputs, byte for byte, and the copy is gone when the run ends.
+#[test]
+fn tiling_from_the_decoded_copy_equals_decoding_again() {
+    let tmp = common::tempdir();
+    let (before, after) = cliff(&tmp.path().join("scene"), 120_000);
+    let base = ["--core-spacing", "0.25", "--tile-size", "10"];
+    let kept = tmp.path().join("kept");
+    compare(&before, &after, &kept, &base);
+    let scratch: Vec<_> = std::fs::read_dir(kept.join(".talus/tmp"))
+        .unwrap()
+        .collect();
+    assert!(scratch.is_empty(), "left in .talus/tmp: {scratch:?}");
+    let decoded = tmp.path().join("decoded");
+    compare(
+        &before,
+        &after,
+        &decoded,
+        &[&base[..], &["--resume"]].concat(),
+    );
+    assert_same_outputs(&kept, &decoded);
+    // The tilings themselves: every tile file of every tiling unit.
+    let tiles = |d: &Path| -> Vec<(String, Vec<u8>)> {
+        let mut v = Vec::new();
+        for unit in std::fs::read_dir(d.join(".talus/units/tiling")).unwrap() {
+            let unit = unit.unwrap().path();
+            for f in std::fs::read_dir(&unit).unwrap() {
+                let f = f.unwrap().path();
+                if f.extension().is_some_and(|e| e == "tile") {
+                    let name = format!(
+                        "{}/{}",
+                        unit.file_name().unwrap().to_string_lossy(),
+                        f.file_name().unwrap().to_string_lossy()
+                    );
+                    v.push((name, std::fs::read(&f).unwrap()));
+                }
+            }
+        }
+        v.sort();
+        v
+    };
+    let (a, b) = (tiles(&kept), tiles(&decoded));
+    assert!(a.len() > 4, "{} tile files", a.len());
+    assert!(a == b, "the tile files differ");
+}
+
 /// The sum of `key` over the records of the M3C2 units in `dir`'s store.
 fn m3c2_meta_sum(dir: &Path, key: &str) -> u64 {
     let units = dir.join(".talus/units/m3c2");

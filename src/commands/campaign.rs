@@ -145,8 +145,7 @@ fn plan(
         store,
         &files[0].first().path,
         user,
-        &opts.executor,
-        decoded,
+        super::compare::keeps_decoded(opts.resume, &opts.executor).then_some(decoded),
     )?;
     let params = Params::resolve(user, spacing.effective_spacing)?;
     let surveys = epochs

@@ -141,26 +141,32 @@ pub(super) fn stable_areas(
 }
 
 /// The spacing of the survey file `path` read with `user`'s classes ([`sampling::measure`]).
-/// When the units run in this process, the points the pass decodes are kept in `decoded`
+/// With `decoded` (see [`keeps_decoded`]), the points the pass decodes are kept there
 /// ([`io::replay`]) until it is dropped: the survey's tiling reads them instead of decoding the
 /// file a second time.
 pub(super) fn measure_spacing(
     store: &Store,
     path: &Path,
     user: &UserParams,
-    executor: &crate::exec::Executor,
-    decoded: &mut Option<io::replay::Replay>,
+    decoded: Option<&mut Option<io::replay::Replay>>,
 ) -> Result<sampling::Measured> {
     let classes = user.classes()?;
-    if !matches!(executor, crate::exec::Executor::Local) {
+    let Some(decoded) = decoded else {
         return sampling::measure(path, Some(&classes));
-    }
+    };
     let transform = io::open(path)?.info().transform;
     let copy = store.scratch_path("decoded");
     let mut keep = io::replay::Recorder::create(path, Some(&classes), transform, copy);
     let measured = sampling::measure_keeping(path, Some(&classes), &mut |p| keep.push(p))?;
     *decoded = keep.finish(&measured.info, measured.classes.clone());
     Ok(measured)
+}
+
+/// Whether a run keeps the points its spacing pass decodes for its tiling: when the units run in
+/// this process (a Slurm worker would decode the file itself), and the run starts anew (a
+/// resumed run has most likely tiled the survey already: the copy would be written for nothing).
+pub(super) fn keeps_decoded(resume: bool, executor: &crate::exec::Executor) -> bool {
+    !resume && matches!(executor, crate::exec::Executor::Local)
 }
 
 /// Plan the comparison of `opts` in `store`; the before survey's decoded points kept in
@@ -180,8 +186,7 @@ fn plan(
         store,
         &inputs.before.first().path,
         user,
-        &opts.executor,
-        decoded,
+        keeps_decoded(opts.resume, &opts.executor).then_some(decoded),
     )?;
     crate::progress::trace(|| "spacing measured".into());
     let params = Params::resolve(user, spacing.effective_spacing)?;
