@@ -33,7 +33,7 @@ use crate::error::{Error, Result};
 #[derive(Clone, Copy)]
 enum Layout {
     /// The LAS record's integers, given back through these transforms (`las`'s, as the reader).
-    Quantised([las::Transform; 3]),
+    Quantised([las::Transform; 3], [f64; 3]),
     /// The `f64` values.
     Raw,
 }
@@ -41,7 +41,10 @@ enum Layout {
 impl Layout {
     fn of(transform: Option<[[f64; 2]; 3]>) -> Layout {
         match transform {
-            Some(t) => Layout::Quantised(t.map(|[scale, offset]| las::Transform { scale, offset })),
+            Some(t) => Layout::Quantised(
+                t.map(|[scale, offset]| las::Transform { scale, offset }),
+                t.map(|[scale, _]| 1.0 / scale),
+            ),
             None => Layout::Raw,
         }
     }
@@ -49,7 +52,7 @@ impl Layout {
     /// Bytes of one point.
     fn bytes(self) -> usize {
         match self {
-            Layout::Quantised(_) => 12,
+            Layout::Quantised(..) => 12,
             Layout::Raw => 24,
         }
     }
@@ -57,14 +60,15 @@ impl Layout {
     /// Append `p`'s bytes to `out`; false when its integers would not give it back exactly.
     fn put(self, p: &Point3, out: &mut Vec<u8>) -> bool {
         match self {
-            Layout::Quantised(t) => {
+            Layout::Quantised(t, inverse) => {
                 for k in 0..3 {
-                    // The integer nearest; whether it gives the value back is checked below.
-                    let n = ((p[k] - t[k].offset) / t[k].scale).round();
-                    if !(n >= i32::MIN as f64 && n <= i32::MAX as f64) {
+                    // The integer nearest (or next to it: whether it gives the value back is
+                    // checked below), rounded by a cast (`f64::round` is a call to libm).
+                    let y = (p[k] - t[k].offset) * inverse[k];
+                    let n = (y + 0.5f64.copysign(y)) as i64;
+                    let Ok(n) = i32::try_from(n) else {
                         return false;
-                    }
-                    let n = n as i32;
+                    };
                     if t[k].direct(n).to_bits() != p[k].to_bits() {
                         return false;
                     }
@@ -83,7 +87,7 @@ impl Layout {
     /// The point of `b` (its [`Layout::bytes`] bytes).
     fn get(self, b: &[u8]) -> Point3 {
         match self {
-            Layout::Quantised(t) => {
+            Layout::Quantised(t, _) => {
                 let n = |k: usize| i32::from_le_bytes([b[k], b[k + 1], b[k + 2], b[k + 3]]);
                 [t[0].direct(n(0)), t[1].direct(n(4)), t[2].direct(n(8))]
             }
