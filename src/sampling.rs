@@ -15,6 +15,10 @@ use crate::io::classes::{ClassCounts, Classes};
 use crate::io::{self, Bounds, Point3};
 use crate::spatial::{DensityGrid, Index};
 
+/// The version of what [`measure`] returns for a file: a store's cached measurements of another
+/// version are measured again (`Store::cached_spacing`). Change it with the measurement.
+pub const METHOD: u32 = 1;
+
 /// Clouds up to this many points are measured whole.
 pub const WHOLE: u64 = 400_000;
 /// Points a window aims for.

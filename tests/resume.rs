@@ -181,3 +181,71 @@ fn a_changed_parameter_or_input_redoes_exactly_what_depends_on_it() {
     compare(&before, &after, &fresh2, &m3c2_params);
     assert_same_outputs(&fresh2, &dir);
 }
+
+/// A resumed run takes the spacing its store measured on the same file (`Store::cached_spacing`:
+/// by content key, class filter and the measurement's version) instead of decoding the before
+/// survey again; a fresh run measures and caches it. Seen on disk: an entry's count of measured
+/// points, changed by hand, is what the resumed run's plan says; an entry of another version,
+/// another filter or one that does not read is measured again.
+#[test]
+fn a_resumed_run_takes_the_spacing_its_store_measured() {
+    let tmp = common::tempdir();
+    let (before, after) = cliff(&tmp.path().join("scene"), 100_000);
+    let dir = tmp.path().join("run");
+    compare(&before, &after, &dir, ARGS);
+    let cache = dir.join(".talus/cache");
+    let entries = || -> Vec<std::path::PathBuf> {
+        let mut v: Vec<_> = std::fs::read_dir(&cache)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| {
+                p.file_name()
+                    .unwrap()
+                    .to_string_lossy()
+                    .starts_with("spacing-")
+            })
+            .collect();
+        v.sort();
+        v
+    };
+    let [entry] = entries().try_into().expect("one spacing entry after a run");
+    let read = |p: &Path| -> serde_json::Value {
+        serde_json::from_slice(&std::fs::read(p).unwrap()).unwrap()
+    };
+    let planned = || read(&dir.join(".talus/plan.json"))["spacing"].clone();
+    let measured = planned();
+    assert_eq!(read(&entry)["spacing"], measured);
+    let resume = |extra: &[&str]| {
+        let out = run_compare(
+            &before,
+            &after,
+            &dir,
+            &[ARGS, &["--resume"], extra].concat(),
+        );
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    };
+    let tamper = |edit: &dyn Fn(&mut serde_json::Value)| {
+        let mut e = read(&entry);
+        edit(&mut e);
+        std::fs::write(&entry, serde_json::to_vec(&e).unwrap()).unwrap();
+    };
+    // Taken as it is.
+    tamper(&|e| e["spacing"]["measured_points"] = 12345.into());
+    resume(&[]);
+    assert_eq!(planned()["measured_points"], 12345);
+    // Another version of the measurement, garbage: measured again (and cached again).
+    tamper(&|e| e["method"] = 999.into());
+    resume(&[]);
+    assert_eq!(planned(), measured);
+    assert_eq!(read(&entry)["spacing"], measured);
+    std::fs::write(&entry, b"{ not json").unwrap();
+    resume(&[]);
+    assert_eq!(planned(), measured);
+    // Another class filter is another entry.
+    resume(&["--classes", "all"]);
+    assert_eq!(entries().len(), 2);
+}

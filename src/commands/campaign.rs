@@ -16,7 +16,6 @@ use crate::error::{Error, Result};
 use crate::params::{Params, UserParams};
 use crate::plan::inputs::SurveyFiles;
 use crate::plan::{Layout, Pair, Plan, PLAN_VERSION};
-use crate::sampling;
 use crate::store::Store;
 
 /// Everything `campaign` needs.
@@ -137,11 +136,7 @@ fn plan(
     decoded: &mut Option<crate::io::replay::Replay>,
 ) -> Result<Plan> {
     // One parameter set: from the first survey, which an appended survey does not change.
-    let sampling::Measured {
-        spacing,
-        density: density_grid,
-        ..
-    } = super::compare::measure_spacing(
+    let (spacing, density_grid) = super::compare::measure_spacing(
         store,
         &files[0].first().path,
         user,

@@ -140,26 +140,38 @@ pub(super) fn stable_areas(
     crate::plan::StableAreas::read(path, key, surveys).map(Some)
 }
 
-/// The spacing of the survey file `path` read with `user`'s classes ([`sampling::measure`]).
-/// With `decoded` (see [`keeps_decoded`]), the points the pass decodes are kept there
-/// ([`io::replay`]) until it is dropped: the survey's tiling reads them instead of decoding the
-/// file a second time.
+/// The spacing and density grid of the survey file `path` read with `user`'s classes
+/// ([`sampling::measure`]). With `decoded` (see [`keeps_decoded`]), the points the pass decodes
+/// are kept there ([`io::replay`]) until it is dropped: the survey's tiling reads them instead of
+/// decoding the file a second time. Without, a measurement this store cached for the file's
+/// content is taken as it is (`Store::cached_spacing`): a resumed run does not decode the file
+/// for it again.
 pub(super) fn measure_spacing(
     store: &Store,
     path: &Path,
     user: &UserParams,
     decoded: Option<&mut Option<io::replay::Replay>>,
-) -> Result<sampling::Measured> {
+) -> Result<(sampling::Spacing, crate::spatial::DensityGrid)> {
     let classes = user.classes()?;
-    let Some(decoded) = decoded else {
-        return sampling::measure(path, Some(&classes));
+    let (key, filter) = (store.content_key(path)?, classes.to_string());
+    let measured = match decoded {
+        None => {
+            if let Some(cached) = store.cached_spacing(&key, &filter) {
+                return Ok(cached);
+            }
+            sampling::measure(path, Some(&classes))?
+        }
+        Some(decoded) => {
+            let transform = io::open(path)?.info().transform;
+            let copy = store.scratch_path("decoded");
+            let mut keep = io::replay::Recorder::create(path, Some(&classes), transform, copy);
+            let measured = sampling::measure_keeping(path, Some(&classes), &mut |p| keep.push(p))?;
+            *decoded = keep.finish(&measured.info, measured.classes.clone());
+            measured
+        }
     };
-    let transform = io::open(path)?.info().transform;
-    let copy = store.scratch_path("decoded");
-    let mut keep = io::replay::Recorder::create(path, Some(&classes), transform, copy);
-    let measured = sampling::measure_keeping(path, Some(&classes), &mut |p| keep.push(p))?;
-    *decoded = keep.finish(&measured.info, measured.classes.clone());
-    Ok(measured)
+    store.cache_spacing(&key, &filter, &measured.spacing, &measured.density);
+    Ok((measured.spacing, measured.density))
 }
 
 /// Whether a run keeps the points its spacing pass decodes for its tiling: when the units run in
@@ -178,11 +190,7 @@ fn plan(
     inputs: &Inputs,
     decoded: &mut Option<io::replay::Replay>,
 ) -> Result<Plan> {
-    let sampling::Measured {
-        spacing,
-        density: density_grid,
-        ..
-    } = measure_spacing(
+    let (spacing, density_grid) = measure_spacing(
         store,
         &inputs.before.first().path,
         user,

@@ -12,7 +12,7 @@ use crate::geom::{Bounds, Point3};
 pub const CELLS: usize = 512;
 
 /// Points per XY cell.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct DensityGrid {
     origin: [f64; 2],
     cell: f64,

@@ -23,6 +23,7 @@ mod content_key;
 mod fsops;
 mod gc;
 mod lock;
+mod measured;
 mod owner_file;
 mod process;
 mod publish;
