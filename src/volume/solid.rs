@@ -28,6 +28,7 @@
 //!   the region (2 triangles per square).
 
 use rustc_hash::FxHashMap as HashMap;
+use smallvec::SmallVec;
 
 use super::boundary;
 use super::frame::Footprint;
@@ -112,31 +113,11 @@ impl Side {
 /// A vertex of a clipped polygon: its label, position, and the line of the edge to the next.
 type Corner3 = (Label, [f64; 3], Carrier);
 
-/// A triangle clipped by a cell's four sides has at most 3 + 4 corners (each side adds at most
-/// one): held in place, not allocated for each triangle and cell it overlaps.
-#[derive(Clone, Copy)]
-struct Polygon {
-    n: usize,
-    corners: [Corner3; 8],
-}
-
-impl Polygon {
-    fn new() -> Polygon {
-        Polygon {
-            n: 0,
-            corners: [(Label::Vertex(0), [0.0; 3], Carrier::Line(Line::U(0))); 8],
-        }
-    }
-
-    fn push(&mut self, c: Corner3) {
-        self.corners[self.n] = c;
-        self.n += 1;
-    }
-
-    fn corners(&self) -> &[Corner3] {
-        &self.corners[..self.n]
-    }
-}
+/// A triangle clipped by a cell's four sides has at most 3 + 4 corners (each side of a convex
+/// polygon adds at most one): held in place, not allocated for each triangle and cell it
+/// overlaps. Rounding can leave a clipped polygon a hair from convex, so more corners are not
+/// impossible: they go to the heap instead of past the end.
+type Polygon = SmallVec<[Corner3; 8]>;
 
 /// Top surface: the triangles of `tin_vertices`/`tin_faces` (counter-clockwise in (u, v))
 /// clipped to the cells of `region` (Sutherland & Hodgman 1974, one cell at a time). The integral
@@ -229,23 +210,23 @@ pub fn clipped_top(tin_vertices: &[[f64; 3]], tin_faces: &[[u32; 3]], region: &R
                         lower: false,
                     },
                 ];
-                let mut poly = Polygon::new();
-                for k in 0..3 {
-                    poly.push((
-                        Label::Vertex(f[k]),
-                        pts[k],
-                        Carrier::Edge(f[k], f[(k + 1) % 3]),
-                    ));
-                }
+                let mut poly: Polygon = (0..3)
+                    .map(|k| {
+                        (
+                            Label::Vertex(f[k]),
+                            pts[k],
+                            Carrier::Edge(f[k], f[(k + 1) % 3]),
+                        )
+                    })
+                    .collect();
                 for side in &sides {
-                    if poly.corners().iter().all(|p| side.inside(&p.1)) {
+                    if poly.iter().all(|p| side.inside(&p.1)) {
                         continue;
                     }
                     let mut out = Polygon::new();
-                    let corners = poly.corners();
-                    for n in 0..corners.len() {
-                        let (pl, pp, pc) = corners[n];
-                        let (_, qp, _) = corners[(n + 1) % corners.len()];
+                    for n in 0..poly.len() {
+                        let (pl, pp, pc) = poly[n];
+                        let (_, qp, _) = poly[(n + 1) % poly.len()];
                         let (pin, qin) = (side.inside(&pp), side.inside(&qp));
                         let cut = || -> (Label, [f64; 3]) {
                             match pc {
@@ -281,18 +262,18 @@ pub fn clipped_top(tin_vertices: &[[f64; 3]], tin_faces: &[[u32; 3]], region: &R
                         }
                     }
                     poly = out;
-                    if poly.n < 3 {
+                    if poly.len() < 3 {
                         break;
                     }
                 }
-                if poly.n < 3 {
+                if poly.len() < 3 {
                     continue;
                 }
-                let mut ids = [0u32; 8];
-                for (id, &(l, p, _)) in ids.iter_mut().zip(poly.corners()) {
-                    *id = id_of(l, p, &mut top);
-                }
-                for k in 1..poly.n - 1 {
+                let ids: SmallVec<[u32; 8]> = poly
+                    .iter()
+                    .map(|&(l, p, _)| id_of(l, p, &mut top))
+                    .collect();
+                for k in 1..ids.len() - 1 {
                     let tri = [ids[0], ids[k], ids[k + 1]];
                     if tri[0] != tri[1] && tri[1] != tri[2] && tri[0] != tri[2] {
                         top.faces.push(tri);
