@@ -126,7 +126,7 @@ impl Source {
 
 /// A finished copy: where it is and what the reader told about the file.
 #[derive(Clone)]
-struct Copy {
+struct Recorded {
     source: Source,
     file: PathBuf,
     layout: Layout,
@@ -137,14 +137,14 @@ struct Copy {
 }
 
 /// The copies of this process.
-static COPIES: Mutex<Vec<Copy>> = Mutex::new(Vec::new());
+static COPIES: Mutex<Vec<Recorded>> = Mutex::new(Vec::new());
 
-fn copies() -> std::sync::MutexGuard<'static, Vec<Copy>> {
+fn copies() -> std::sync::MutexGuard<'static, Vec<Recorded>> {
     COPIES.lock().unwrap_or_else(|e| e.into_inner())
 }
 
 /// The copy of `path` read with `classes`, when this process recorded one of the file as it is.
-fn find(path: &Path, classes: Option<&Classes>) -> Option<Copy> {
+fn find(path: &Path, classes: Option<&Classes>) -> Option<Recorded> {
     let source = Source::of(path, classes)?;
     copies().iter().find(|c| c.source == source).cloned()
 }
@@ -239,7 +239,7 @@ impl Recorder {
             let _ = std::fs::remove_file(&self.file);
             return None;
         }
-        let copy = Copy {
+        let copy = Recorded {
             source,
             file: std::mem::take(&mut self.file),
             layout: self.layout,
@@ -280,7 +280,7 @@ impl Drop for Replay {
 
 /// Reads a copy back: the points, header and class counts the file's own reader gave.
 pub struct ReplayReader {
-    copy: Copy,
+    copy: Recorded,
     file: BufReader<File>,
     bytes: Vec<u8>,
     read: u64,
