@@ -138,7 +138,7 @@ fn plan(
     // One parameter set: from the first survey, which an appended survey does not change.
     let (spacing, density_grid) = super::compare::measure_spacing(
         store,
-        &files[0].first().path,
+        files[0].first(),
         user,
         super::compare::keeps_decoded(opts.resume, &opts.executor).then_some(decoded),
     )?;

@@ -140,19 +140,19 @@ pub(super) fn stable_areas(
     crate::plan::StableAreas::read(path, key, surveys).map(Some)
 }
 
-/// The spacing and density grid of the survey file `path` read with `user`'s classes
-/// ([`sampling::measure`]). With `decoded` (see [`keeps_decoded`]), the points the pass decodes
-/// are kept there ([`io::replay`]) until it is dropped: the survey's tiling reads them instead of
-/// decoding the file a second time. Without, a measurement this store cached for the file's
+/// The spacing and density grid of the survey file `file` (its header as the inputs read it)
+/// read with `user`'s classes ([`sampling::measure`]). With `decoded` (see [`keeps_decoded`]),
+/// the points the pass decodes are kept there ([`io::replay`]) until it is dropped: the survey's
+/// tiling reads them instead of decoding the file a second time. Without, a measurement this store cached for the file's
 /// content is taken as it is (`Store::cached_spacing`): a resumed run does not decode the file
 /// for it again.
 pub(super) fn measure_spacing(
     store: &Store,
-    path: &Path,
+    file: &io::CloudInfo,
     user: &UserParams,
     decoded: Option<&mut Option<io::replay::Replay>>,
 ) -> Result<(sampling::Spacing, crate::spatial::DensityGrid)> {
-    let classes = user.classes()?;
+    let (path, classes) = (file.path.as_path(), user.classes()?);
     let (key, filter) = (store.content_key(path)?, classes.to_string());
     let measured = match decoded {
         None => {
@@ -162,9 +162,10 @@ pub(super) fn measure_spacing(
             sampling::measure(path, Some(&classes))?
         }
         Some(decoded) => {
-            let transform = io::open(path)?.info().transform;
+            // The header read when the inputs were opened gives the transform: opening the file
+            // again would start a decoder for nothing.
             let copy = store.scratch_path("decoded");
-            let mut keep = io::replay::Recorder::create(path, Some(&classes), transform, copy);
+            let mut keep = io::replay::Recorder::create(path, Some(&classes), file.transform, copy);
             let measured = sampling::measure_keeping(path, Some(&classes), &mut |p| keep.push(p))?;
             *decoded = keep.finish(&measured.info, measured.classes.clone());
             measured
@@ -192,7 +193,7 @@ fn plan(
 ) -> Result<Plan> {
     let (spacing, density_grid) = measure_spacing(
         store,
-        &inputs.before.first().path,
+        inputs.before.first(),
         user,
         keeps_decoded(opts.resume, &opts.executor).then_some(decoded),
     )?;
