@@ -1164,3 +1164,113 @@ fn pieces_measure_the_whole_at(
     }
     assert!(most >= 10, "{case}: {most} bands at most");
 }
+
+/// A surface of `w` × `h` metres sampled at about `spacing`, with change in patches of both
+/// signs (some long enough to cross many pieces), and noise.
+fn patchy_change(rng: &mut Rng, w: f64, h: f64, spacing: f64) -> (Vec<[f64; 3]>, Vec<f64>) {
+    let n = (w * h / (spacing * spacing)) as usize;
+    let (mut pts, mut d) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    for _ in 0..n {
+        let (x, y) = (rng.range(0.0, w), rng.range(0.0, h));
+        // Gain along a band winding along y, loss in blobs, nothing elsewhere but noise.
+        let band = (x - w / 2.0 - 3.0 * (y / 7.0).sin()).abs() < 1.5;
+        let blob = ((x / 9.0).sin() * (y / 11.0).cos()) > 0.6;
+        let v = if band {
+            0.4
+        } else if blob {
+            -0.3
+        } else {
+            0.0
+        } + 0.05 * rng.gauss();
+        pts.push([x, y, 0.2 * (x / 5.0).sin() + 0.01 * rng.gauss()]);
+        d.push(v);
+    }
+    (pts, d)
+}
+
+/// The events unit's smoothing and clustering of the whole pair held at once: each point's
+/// smoothed distance and cluster, the clusters numbered by their smallest member.
+fn whole_pair_events(
+    pts: &[[f64; 3]],
+    d: &[f64],
+    s: &talus::events::pieces::Settings,
+) -> (Vec<f64>, Vec<u32>) {
+    use talus::events::blocks::{cluster, smooth, Blocks};
+    let blocks = Blocks::new(pts, s.reach.max(s.eps));
+    let smoothed = smooth(pts, d, s.k, s.sigma, s.reach, &blocks).unwrap();
+    let mut label = vec![0u32; pts.len()];
+    for (k, kind) in [Kind::Gain, Kind::Loss].into_iter().enumerate() {
+        let l = cluster(
+            pts,
+            &|i| kind.matches(smoothed[i]),
+            s.eps,
+            s.min_pts,
+            &blocks,
+        )
+        .unwrap();
+        for i in 0..pts.len() {
+            if l[i] > 0 {
+                label[i] = (l[i] << 1) | k as u32;
+            }
+        }
+    }
+    let mut number = std::collections::HashMap::new();
+    for l in label.iter_mut().filter(|l| **l > 0) {
+        let next = number.len() as u32 + 1;
+        *l = *number.entry(*l).or_insert(next);
+    }
+    (smoothed, label)
+}
+
+/// A pair's events found a piece of space at a time (`events::pieces`, for a change larger than
+/// the budget holds) are the whole pair's to the bit: the smoothed distances and every point's
+/// cluster, with pieces of whole x columns and, for a strip too narrow for them, cut along y.
+#[test]
+fn events_in_pieces_are_the_whole_pairs() {
+    use talus::events::pieces::{in_pieces, plan, Columns, Settings};
+    let s = Settings {
+        k: 12,
+        sigma: 0.3,
+        reach: 1.5,
+        eps: 0.6,
+        min_pts: 6,
+    };
+    let mut rng = Rng::new(21);
+    for (w, h) in [(160.0, 40.0), (14.0, 220.0)] {
+        let (pts, d) = patchy_change(&mut rng, w, h, 0.25);
+        let (smoothed, label) = whole_pair_events(&pts, &d, &s);
+        let clusters = *label.iter().max().unwrap();
+        assert!(clusters >= 4, "{clusters} clusters in {w} × {h}");
+        let floor = in_pieces(&pts, &d, &s, 0).unwrap_err();
+        assert!(floor < pts.len() as u64 / 3, "{floor} of {}", pts.len());
+        // The pieces: at the smallest cap, columns cut along y; at three times it, the wide
+        // scene's are slabs of whole x columns, the strip's still cut along y.
+        let columns = Columns::new(pts[0], s.reach.max(s.eps));
+        let mut counts = std::collections::BTreeMap::new();
+        for p in &pts {
+            *counts.entry(columns.of(p)).or_insert(0u64) += 1;
+        }
+        let ys = [
+            counts.keys().map(|c| c[1]).min().unwrap(),
+            counts.keys().map(|c| c[1]).max().unwrap(),
+        ];
+        let cut = |cap: u64| {
+            let pieces = plan(&counts, cap).unwrap();
+            assert!(pieces.len() >= 4, "{} pieces in {w} × {h}", pieces.len());
+            pieces.iter().any(|p| p.y != ys)
+        };
+        assert!(cut(floor), "{w} × {h}");
+        assert_eq!(cut(3 * floor), w < h, "{w} × {h}");
+        for cap in [floor, floor * 3 / 2, 3 * floor, u64::MAX] {
+            let (ps, pl) = in_pieces(&pts, &d, &s, cap).unwrap();
+            for i in 0..pts.len() {
+                assert_eq!(
+                    ps[i].to_bits(),
+                    smoothed[i].to_bits(),
+                    "{w} × {h}, cap {cap}, {i}"
+                );
+            }
+            assert_eq!(pl, label, "{w} × {h}, cap {cap}");
+        }
+    }
+}

@@ -231,3 +231,67 @@ fn results_merged_in_rounds_equal_the_whole_cloud_run() {
         assert_eq!(without_budget(&whole), without_budget(&tiled));
     }
 }
+
+/// An events unit whose kept core points are more than the budget holds at once smooths and
+/// clusters them a piece of space at a time (`events::pieces`), joining the clusters that cross
+/// pieces: every output is the bytes of the run that held them at once. `TALUS_EVENTS_HELD`
+/// lowers what a unit holds to a few thousand kept points, so that a small scene (a 2M-point
+/// `synth large`: 8,443 kept points, 9 events spread over 200 m) takes 2 and then 16 pieces.
+#[test]
+fn events_in_pieces_equal_the_events_held_at_once() {
+    let tmp = common::tempdir();
+    let scene = tmp.path().join("scene");
+    let synth = common::run(&[
+        "synth",
+        "large",
+        "--points",
+        "2000000",
+        "--out",
+        scene.to_str().unwrap(),
+    ]);
+    assert!(
+        synth.status.success(),
+        "{}",
+        String::from_utf8_lossy(&synth.stderr)
+    );
+    let (before, after) = (scene.join("before.laz"), scene.join("after.laz"));
+    let meta = |d: &Path| {
+        let unit = unit_dir(d, "events", "pair-");
+        let record: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(unit.join("record.json")).unwrap()).unwrap();
+        (
+            record["meta"]["kept"].as_u64().unwrap(),
+            record["meta"]["pieces"].as_u64().unwrap(),
+        )
+    };
+    let held = tmp.path().join("held");
+    compare(&before, &after, &held, &[]);
+    let (kept, pieces) = meta(&held);
+    assert_eq!(pieces, 0, "held at once");
+    assert!(kept > 5000, "{kept} kept core points");
+    for (most, least_pieces) in [(kept - 500, 2), (3000, 8)] {
+        let out = tmp.path().join(format!("held-{most}"));
+        let o = common::talus()
+            .env("TALUS_EVENTS_HELD", most.to_string())
+            .args([
+                "compare",
+                before.to_str().unwrap(),
+                after.to_str().unwrap(),
+                "--out",
+            ])
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let (k, pieces) = meta(&out);
+        assert_eq!(k, kept);
+        assert!(pieces >= least_pieces, "{pieces} pieces holding {most}");
+        assert_same_outputs(&held, &out);
+        // The unit's scratch files are gone with it.
+        let unit = unit_dir(&out, "events", "pair-");
+        for f in std::fs::read_dir(&unit).unwrap() {
+            let name = f.unwrap().file_name().into_string().unwrap();
+            assert!(!name.ends_with(".tmp"), "{name} left in the events unit");
+        }
+    }
+}

@@ -31,6 +31,23 @@ pub const SMOOTH_REACH_SIGMAS: f64 = 5.0;
 /// hold 9 times.
 const SIDE_IN_REACHES: f64 = 4.0;
 
+/// The side of the blocks that reach `reach`.
+pub fn side_for(reach: f64) -> f64 {
+    if reach > 0.0 && reach.is_finite() {
+        SIDE_IN_REACHES * reach
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// The block holding `p`, of side `side` anchored at `origin`.
+pub fn block_of(p: &Point3, origin: &Point3, side: f64) -> [i64; 3] {
+    std::array::from_fn(|k| ((p[k] - origin[k]) / side).floor() as i64)
+}
+
+/// Which blocks (by their place in the grid of blocks) a pass looks at.
+pub type Chosen<'a> = dyn Fn([i64; 3]) -> bool + Sync + 'a;
+
 /// Points cut into cubic blocks, each seen with every point within a reach of it.
 pub struct Blocks {
     reach: f64,
@@ -46,17 +63,16 @@ impl Blocks {
     /// `points` in blocks seen with every point within `reach` of them, anchored at the first
     /// point. Fewer than 2³² points.
     pub fn new(points: &[Point3], reach: f64) -> Blocks {
+        Self::anchored(points, reach, origin_of(points))
+    }
+
+    /// [`Blocks::new`] anchored at `origin`: a part of a larger set of points (a piece of a
+    /// pair's, `super::pieces`) cut along the very planes the whole set's blocks are, so that
+    /// each of its blocks that holds all its surroundings sees what the whole set's does.
+    pub fn anchored(points: &[Point3], reach: f64, origin: Point3) -> Blocks {
         assert!(points.len() <= u32::MAX as usize, "{} points", points.len());
-        let side = if reach > 0.0 && reach.is_finite() {
-            SIDE_IN_REACHES * reach
-        } else {
-            f64::INFINITY
-        };
-        let origin = origin_of(points);
-        let block = |i: u32| -> [i64; 3] {
-            let p = &points[i as usize];
-            std::array::from_fn(|k| ((p[k] - origin[k]) / side).floor() as i64)
-        };
+        let side = side_for(reach);
+        let block = |i: u32| block_of(&points[i as usize], &origin, side);
         let mut order: Vec<u32> = (0..points.len() as u32).collect();
         order.par_sort_unstable_by(|&a, &b| block(a).cmp(&block(b)).then(a.cmp(&b)));
         let mut starts: Vec<([i64; 3], u32)> = Vec::new();
@@ -88,6 +104,11 @@ impl Blocks {
     /// True when there are no points.
     pub fn is_empty(&self) -> bool {
         self.starts.is_empty()
+    }
+
+    /// Block `b`'s place in the grid of blocks.
+    pub fn coord(&self, b: usize) -> [i64; 3] {
+        self.starts[b].0
     }
 
     /// The points of block `b`, ascending.
@@ -135,11 +156,21 @@ impl Blocks {
     fn each<T: Send>(
         &self,
         f: impl Fn(usize) -> Result<T> + Sync,
+        put: impl FnMut(T),
+    ) -> Result<()> {
+        self.each_chosen(&|_| true, f, put)
+    }
+
+    /// [`Self::each`] over the blocks whose place `chosen` accepts.
+    fn each_chosen<T: Send>(
+        &self,
+        chosen: &Chosen<'_>,
+        f: impl Fn(usize) -> Result<T> + Sync,
         mut put: impl FnMut(T),
     ) -> Result<()> {
-        for start in (0..self.len()).step_by(BATCH) {
-            let batch = start..(start + BATCH).min(self.len());
-            let done: Vec<T> = batch.into_par_iter().map(&f).collect::<Result<_>>()?;
+        let blocks: Vec<usize> = (0..self.len()).filter(|&b| chosen(self.coord(b))).collect();
+        for batch in blocks.chunks(BATCH) {
+            let done: Vec<T> = batch.par_iter().map(|&b| f(b)).collect::<Result<_>>()?;
             done.into_iter().for_each(&mut put);
         }
         Ok(())
@@ -217,6 +248,51 @@ pub fn cluster(
     min_pts: usize,
     blocks: &Blocks,
 ) -> Result<Vec<u32>> {
+    let mut found = cluster_chosen(points, member, eps, min_pts, blocks, &|_| true, &|_| true)?;
+    // Each clustered point's set (its own for a core point, its core neighbour's for a border
+    // one), then the sets numbered by their smallest member.
+    let mut label = vec![0u32; points.len()];
+    for (i, l) in label.iter_mut().enumerate() {
+        if found.core[i] && member(i) {
+            *l = found.sets.find(i) as u32 + 1;
+        }
+    }
+    for &(p, c) in &found.borders {
+        label[p as usize] = found.sets.find(c as usize) as u32 + 1;
+    }
+    drop(found);
+    let mut number: rustc_hash::FxHashMap<u32, u32> = Default::default();
+    for l in label.iter_mut().filter(|l| **l > 0) {
+        let next = number.len() as u32 + 1;
+        *l = *number.entry(*l).or_insert(next);
+    }
+    Ok(label)
+}
+
+/// What DBSCAN found over some blocks ([`cluster_chosen`]).
+pub struct Found {
+    /// The core flag of every point of the deciding blocks (false elsewhere).
+    pub core: Vec<bool>,
+    /// The sets of the core points linked by the linking blocks.
+    pub sets: UnionFind,
+    /// (border point of a linking block, its core neighbour with the smallest index).
+    pub borders: Vec<(u32, u32)>,
+}
+
+/// DBSCAN's two phases over chosen blocks: the core flags of the points of the blocks `decide`
+/// accepts, then the links and border points of those `link` accepts (whose surroundings must
+/// lie in deciding blocks). Over every block, the sets are those of one whole-cloud
+/// [`dbscan::dbscan`]; over part of the blocks of a piece of space whose points are all there
+/// (`super::pieces`), what the whole cloud's clustering finds in that part.
+pub fn cluster_chosen(
+    points: &[Point3],
+    member: &(dyn Fn(usize) -> bool + Sync),
+    eps: f64,
+    min_pts: usize,
+    blocks: &Blocks,
+    decide: &Chosen<'_>,
+    link: &Chosen<'_>,
+) -> Result<Found> {
     assert!(
         eps <= blocks.reach,
         "eps {eps} beyond the blocks' {}",
@@ -236,7 +312,8 @@ pub fn cluster(
     };
     // Phase 1: each block decides the core status of its own members.
     let mut core = vec![false; points.len()];
-    blocks.each(
+    blocks.each_chosen(
+        decide,
         |b| {
             let (ids, p, owned) = members(b);
             let flags = dbscan::core_flags(&p, &owned, eps, min_pts)?;
@@ -254,11 +331,12 @@ pub fn cluster(
             }
         },
     )?;
-    // Phase 2: each block's links through core points, united over the pair's dense indices;
-    // a border point to the core neighbour with the smallest index.
+    // Phase 2: each block's links through core points, united over the dense indices; a border
+    // point to the core neighbour with the smallest index.
     let mut sets = UnionFind::new(points.len());
     let mut borders: Vec<(u32, u32)> = Vec::new();
-    blocks.each(
+    blocks.each_chosen(
+        link,
         |b| {
             let (ids, p, owned) = members(b);
             let c: Vec<bool> = ids.iter().map(|&i| core[i as usize]).collect();
@@ -272,24 +350,11 @@ pub fn cluster(
             borders.extend(links.borders.iter().map(|&(p, c)| (p as u32, c as u32)));
         },
     )?;
-    // Each clustered point's set (its own for a core point, its core neighbour's for a border
-    // one), then the sets numbered by their smallest member.
-    let mut label = vec![0u32; points.len()];
-    for i in 0..points.len() {
-        if core[i] && member(i) {
-            label[i] = sets.find(i) as u32 + 1;
-        }
-    }
-    for (p, c) in borders {
-        label[p as usize] = sets.find(c as usize) as u32 + 1;
-    }
-    drop(sets);
-    let mut number: rustc_hash::FxHashMap<u32, u32> = Default::default();
-    for l in label.iter_mut().filter(|l| **l > 0) {
-        let next = number.len() as u32 + 1;
-        *l = *number.entry(*l).or_insert(next);
-    }
-    Ok(label)
+    Ok(Found {
+        core,
+        sets,
+        borders,
+    })
 }
 
 #[cfg(test)]

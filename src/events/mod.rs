@@ -6,7 +6,8 @@
 //! [`filter`] (keep significant points) → [`smooth`] (normalised Gaussian smoothing of the
 //! distances over the k nearest kept neighbours) → [`dbscan`] (signed DBSCAN, tile-mergeable
 //! through the global [`union_find`]) → [`describe`] (centroid, statistics, PCA box).
-//! [`blocks`] runs smoothing and DBSCAN over a pair's kept points a cube of space at a time.
+//! [`blocks`] runs smoothing and DBSCAN over a pair's kept points a cube of space at a time;
+//! [`pieces`], a piece of space at a time when they are more than the budget holds.
 
 pub mod align;
 pub mod blocks;
@@ -14,6 +15,7 @@ pub mod chain;
 pub mod dbscan;
 pub mod describe;
 pub mod filter;
+pub mod pieces;
 pub mod smooth;
 pub mod stable;
 pub mod union_find;

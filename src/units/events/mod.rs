@@ -29,6 +29,8 @@ use crate::m3c2::orientation::STEEP_NZ;
 use crate::plan::Spec;
 use crate::store::UnitWriter;
 
+mod pieces;
+
 pub const EVENTS: &str = "events.json";
 pub const KEPT: &str = "kept.tile";
 /// The drafts by tile (see [`write_near`]): the index, and the lines it points into.
@@ -96,6 +98,10 @@ pub struct EventsMeta {
     pub events: usize,
     /// Core points kept by the filter.
     pub kept: usize,
+    /// Pieces of space they were smoothed and clustered in, when more than the budget holds at
+    /// once (0: all at once).
+    #[serde(default)]
+    pub pieces: usize,
 }
 
 impl Stage for EventsStage {
@@ -151,77 +157,247 @@ impl Stage for EventsStage {
     }
 }
 
-/// The scratch rows of an events unit: the kept core points' fields that smoothing and
-/// clustering do not use, in key order — LoD, normal (3), spreads (2), beyond reach (1 or 0).
-/// Held on disk meanwhile (the unit holds their keys, positions and distances only), read back
-/// once, for the events' descriptions and for `kept.tile` together.
-const SPILL: &str = "kept_passive.tmp";
-const SPILL_WIDTH: usize = 7;
+/// The scratch rows of an events unit: every kept core point in key order — key (its bits),
+/// position (3), distance, LoD, normal (3), spreads (2), beyond reach (1 or 0). Read back for the
+/// events' descriptions and `kept.tile` together, and, when the kept points are more than the
+/// budget holds, a piece of space at a time ([`pieces`]).
+const SPILL: &str = "kept_rows.tmp";
+const SPILL_WIDTH: usize = 12;
+
+/// A kept core point from its scratch row (its smoothed distance and event not yet known).
+fn from_row(r: &[f64]) -> Kept {
+    Kept {
+        key: r[0].to_bits(),
+        xyz: [r[1], r[2], r[3]],
+        d: r[4],
+        lod: r[5],
+        normal: [r[6], r[7], r[8]],
+        std_dev: [r[9], r[10]],
+        smoothed: f64::NAN,
+        event: 0,
+        beyond: r[11] == 1.0,
+    }
+}
+
+/// The bytes an events unit holds beside its kept points: a frame of `kept.tile` as rows and
+/// columns with its compressed bytes, and the scratch files' buffers.
+const FIXED: u64 = 8 << 20;
 
 /// Run pair `pair`'s events into `out`.
 fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<EventsMeta> {
     let params = super::stable::read(ctx, pair)?.params(ctx.plan);
     let (tau, reg) = (params.threshold.value, params.reg_error.value);
-    // The kept core points' keys, positions and distances; the rest to the scratch rows.
-    let (mut keys, mut pts, mut d) = (Vec::new(), Vec::<Point3>::new(), Vec::new());
+    let settings = events::pieces::Settings {
+        k: params.smooth_k.value as usize,
+        sigma: params.smooth_sigma.value,
+        reach: events::blocks::SMOOTH_REACH_SIGMAS * params.smooth_sigma.value,
+        eps: params.eps.value,
+        min_pts: params.cluster_min_points.value as usize,
+    };
+    // Every kept core point to the scratch rows; their keys, positions and distances held too
+    // while the pool could hold what the events of all of them need, else counted by column.
+    let limit = room(ctx);
+    let mut held = Some((Vec::new(), Vec::<Point3>::new(), Vec::new()));
+    let mut columns: Option<(events::pieces::Columns, Counts)> = None;
     let mut spill = super::scratch::RowsWriter::create(out, SPILL, SPILL_WIDTH)?;
     let merging = ctx.reserve(
         super::merged::pair_merge_need(ctx.plan),
         "the merge of the pair's tiles",
     )?;
     let mut merged = Merged::new(ctx, pair)?;
+    let mut n = 0u64;
     while let Some(k) = merged.next_result()? {
         let r = k.r.with_registration(reg);
         // A core point beyond the user's reach takes part with the distance the walk found: the
         // change is there, and the event it belongs to says it is incomplete.
-        if events::filter::is_kept(r.distance, r.uncertainty, tau) {
+        if !events::filter::is_kept(r.distance, r.uncertainty, tau) {
+            continue;
+        }
+        n += 1;
+        let beyond = r.reach == crate::m3c2::Reach::Beyond;
+        let [nx, ny, nz] = r.normal;
+        let [x, y, z] = k.xyz;
+        spill.push(&[
+            f64::from_bits(k.key),
+            x,
+            y,
+            z,
+            r.distance,
+            r.uncertainty,
+            nx,
+            ny,
+            nz,
+            r.std_dev1,
+            r.std_dev2,
+            f64::from(u8::from(beyond)),
+        ])?;
+        if let Some((keys, pts, d)) = held.as_mut() {
             keys.push(k.key);
             pts.push(k.xyz);
             d.push(r.distance);
-            let beyond = r.reach == crate::m3c2::Reach::Beyond;
-            let [nx, ny, nz] = r.normal;
-            spill.push(&[
-                r.uncertainty,
-                nx,
-                ny,
-                nz,
-                r.std_dev1,
-                r.std_dev2,
-                f64::from(u8::from(beyond)),
-            ])?;
+            if n * BYTES_PER_KEPT + FIXED > limit {
+                // More than the pool holds at once: a piece of space at a time.
+                let c = events::pieces::Columns::new(pts[0], settings.reach.max(settings.eps));
+                let mut counts = Counts::new();
+                for p in pts.iter() {
+                    *counts.entry(c.of(p)).or_insert(0) += 1;
+                }
+                columns = Some((c, counts));
+                held = None;
+            }
+        } else if let Some((c, counts)) = columns.as_mut() {
+            *counts.entry(c.of(&k.xyz)).or_insert(0) += 1;
         }
     }
     drop(merged);
     let spill = spill.finish()?;
     // Given back before the next reservation: a unit waits only while it holds none.
     drop(merging);
+    let found = match (held, columns) {
+        (Some((keys, pts, d)), _) => whole(ctx, &keys, pts, d, &settings)?,
+        (None, Some((c, counts))) => pieces::found(ctx, out, &spill, c, &counts, &settings)?,
+        (None, None) => unreachable!("kept points neither held nor counted"),
+    };
+    let n = n as usize;
+    // One pass over the scratch rows, in kept order: every kept core point to `kept.tile`, a
+    // frame at a time; the clustered points' LoDs and normals added up for their clusters (each
+    // in its members' order, never held), and how many of each cluster's points lie beyond reach.
+    let clusters = found.kinds.len();
+    let mut sums = vec![events::describe::Sums::default(); clusters];
+    let mut beyond = vec![0usize; clusters];
+    let mut rows = Vec::with_capacity(KEPT_FRAME.min(n));
+    let mut file = KeptWriter::new(out)?;
+    let mut scratch = spill.reader()?;
+    let mut result = found.results.reader()?;
+    for _ in 0..n {
+        let mut k = from_row(scratch.next_row()?);
+        (k.smoothed, k.event) = result.next()?;
+        if let Some(c) = k.event.checked_sub(1) {
+            let c = c as usize;
+            sums[c].add(k.lod, &k.normal);
+            beyond[c] += usize::from(k.beyond);
+        }
+        rows.push(k);
+        if rows.len() == KEPT_FRAME {
+            file.append(&rows)?;
+            rows.clear();
+        }
+    }
+    // The last frame, or the one empty frame when nothing is kept.
+    if !rows.is_empty() || n == 0 {
+        file.append(&rows)?;
+    }
+    drop((rows, scratch, result));
+    file.finish(out)?;
+    let mut drafts = Vec::new();
+    let mut describe = |c: usize, p: &[Point3], dist: &[f64]| {
+        let id = c as u32 + 1;
+        let kind = found.kinds[c];
+        if let Some(e) =
+            events::describe::describe_with(id, kind, p, dist, &sums[c], params.core_spacing.value)
+        {
+            let candidates = candidate_boxes(&e, p);
+            drafts.push(Draft {
+                event: e,
+                candidates,
+                beyond_reach: beyond[c],
+            });
+        }
+    };
+    match found.members {
+        Members::Held {
+            pts, d, members, ..
+        } => {
+            for (c, m) in members.iter().enumerate() {
+                let p: Vec<Point3> = m.iter().map(|&i| pts[i as usize]).collect();
+                let dist: Vec<f64> = m.iter().map(|&i| d[i as usize]).collect();
+                describe(c, &p, &dist);
+            }
+        }
+        Members::Counted { members, .. } => {
+            pieces::describe(ctx, &spill, &found.results, &members, &mut describe)?
+        }
+    }
+    found.results.remove()?;
+    spill.remove()?;
+    (ctx.progress)(drafts.len() as u64);
+    write_near(out, &drafts, &params, &ctx.plan.layout.grid()?)?;
+    super::write_json(out, EVENTS, &drafts)?;
+    Ok(EventsMeta {
+        events: drafts.len(),
+        kept: n,
+        pieces: found.pieces,
+    })
+}
+
+/// The bytes an events unit may hold its kept points in: the pool's, or, where
+/// `TALUS_EVENTS_HELD` says a number of kept points (for tests that take small scenes through
+/// the pieces), what that many need.
+fn room(ctx: &Ctx) -> u64 {
+    let limit = ctx.pool.limit();
+    match std::env::var("TALUS_EVENTS_HELD").map(|v| v.parse::<u64>()) {
+        Ok(Ok(n)) => limit.min(n * BYTES_PER_KEPT + FIXED),
+        _ => limit,
+    }
+}
+
+/// Kept core points by column ([`events::pieces::Columns`]).
+type Counts = std::collections::BTreeMap<[i64; 2], u64>;
+
+/// The events of a pair's kept points: every kept point's smoothed distance and event, and the
+/// events' kinds and members, in the order of their smallest key.
+struct Found<'a> {
+    /// Pieces of space the kept points were taken in (0: held at once).
+    pieces: usize,
+    results: pieces::Results,
+    kinds: Vec<Kind>,
+    members: Members<'a>,
+}
+
+/// The members of each event.
+enum Members<'a> {
+    /// Held with every kept point's position and distance (a lifetime for the reservation).
+    Held {
+        pts: Vec<Point3>,
+        d: Vec<f64>,
+        members: Vec<Vec<u32>>,
+        _held: crate::memory::Reservation<'a>,
+    },
+    /// Only counted: read again from the scratch rows, a batch of events at a time (the
+    /// reservation of the pieces held until they are described).
+    Counted {
+        members: Vec<u64>,
+        _held: crate::memory::Reservation<'a>,
+    },
+}
+
+/// The events of a pair's kept points held at once (what the pool holds; 80 bytes each).
+fn whole<'a>(
+    ctx: &'a Ctx,
+    keys: &[u64],
+    pts: Vec<Point3>,
+    d: Vec<f64>,
+    s: &events::pieces::Settings,
+) -> Result<Found<'a>> {
     let n = keys.len();
     // The kept points are known only once streamed (40 bytes each, held unreserved meanwhile:
     // half of what the unit then needs, under the merge's reservation given back just before).
-    let _held = ctx.reserve(
-        n as u64 * BYTES_PER_KEPT + (8 << 20),
+    let held = ctx.reserve(
+        n as u64 * BYTES_PER_KEPT + FIXED,
         &format!("the events of {n} kept core points"),
     )?;
     // Cubes of space holding every neighbourhood that smoothing and clustering look at, a
     // block with the 26 around it held at a time (`events::blocks`).
-    let reach = events::blocks::SMOOTH_REACH_SIGMAS * params.smooth_sigma.value;
-    let blocks = events::blocks::Blocks::new(&pts, reach.max(params.eps.value));
-    let smoothed = events::blocks::smooth(
-        &pts,
-        &d,
-        params.smooth_k.value as usize,
-        params.smooth_sigma.value,
-        reach,
-        &blocks,
-    )?;
+    let blocks = events::blocks::Blocks::new(&pts, s.reach.max(s.eps));
+    let smoothed = events::blocks::smooth(&pts, &d, s.k, s.sigma, s.reach, &blocks)?;
     // Signed clusters, each sign on its own; members in ascending order of kept index.
     let mut clusters: Vec<(u64, Kind, Vec<u32>)> = Vec::new();
     for kind in [Kind::Gain, Kind::Loss] {
         let labels = events::blocks::cluster(
             &pts,
             &|i| kind.matches(smoothed[i]),
-            params.eps.value,
-            params.cluster_min_points.value as usize,
+            s.eps,
+            s.min_pts,
             &blocks,
         )?;
         let mut members: Vec<Vec<u32>> = Vec::new();
@@ -245,72 +421,18 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<EventsMeta> {
             event[i as usize] = c as u32 + 1;
         }
     }
-    // One pass over the scratch rows, in kept order: every kept core point to `kept.tile`, a
-    // frame at a time; the clustered points' LoDs and normals added up for their clusters (each
-    // in its members' order, never held), and how many of each cluster's points lie beyond reach.
-    let mut sums = vec![events::describe::Sums::default(); clusters.len()];
-    let mut beyond = vec![0usize; clusters.len()];
-    let mut rows = Vec::with_capacity(KEPT_FRAME.min(n));
-    let mut file = KeptWriter::new(out)?;
-    let mut passive = spill.reader()?;
-    for i in 0..n {
-        let p = passive.next_row()?;
-        let k = Kept {
-            key: keys[i],
-            xyz: pts[i],
-            d: d[i],
-            lod: p[0],
-            normal: [p[1], p[2], p[3]],
-            std_dev: [p[4], p[5]],
-            smoothed: smoothed[i],
-            event: event[i],
-            beyond: p[6] == 1.0,
-        };
-        if let Some(c) = k.event.checked_sub(1) {
-            let c = c as usize;
-            sums[c].add(k.lod, &k.normal);
-            beyond[c] += usize::from(k.beyond);
-        }
-        rows.push(k);
-        if rows.len() == KEPT_FRAME {
-            file.append(&rows)?;
-            rows.clear();
-        }
-    }
-    // The last frame, or the one empty frame when nothing is kept.
-    if !rows.is_empty() || n == 0 {
-        file.append(&rows)?;
-    }
-    drop((rows, passive));
-    file.finish(out)?;
-    spill.remove()?;
-    let mut drafts = Vec::new();
-    for (c, (_, kind, members)) in clusters.iter().enumerate() {
-        let id = c as u32 + 1;
-        let p: Vec<Point3> = members.iter().map(|&i| pts[i as usize]).collect();
-        let dist: Vec<f64> = members.iter().map(|&i| d[i as usize]).collect();
-        if let Some(e) = events::describe::describe_with(
-            id,
-            *kind,
-            &p,
-            &dist,
-            &sums[c],
-            params.core_spacing.value,
-        ) {
-            let candidates = candidate_boxes(&e, &p);
-            drafts.push(Draft {
-                event: e,
-                candidates,
-                beyond_reach: beyond[c],
-            });
-        }
-    }
-    (ctx.progress)(drafts.len() as u64);
-    write_near(out, &drafts, &params, &ctx.plan.layout.grid()?)?;
-    super::write_json(out, EVENTS, &drafts)?;
-    Ok(EventsMeta {
-        events: drafts.len(),
-        kept: n,
+    let results = pieces::Results::Held { smoothed, event };
+    let (kinds, members) = clusters.into_iter().map(|(_, k, m)| (k, m)).unzip();
+    Ok(Found {
+        pieces: 0,
+        results,
+        kinds,
+        members: Members::Held {
+            pts,
+            d,
+            members,
+            _held: held,
+        },
     })
 }
 
