@@ -84,7 +84,7 @@ impl Piece {
 }
 
 /// Points in the columns a piece owning `p` loads.
-fn load(counts: &BTreeMap<[i64; 2], u64>, p: &Piece) -> u64 {
+pub fn load(counts: &BTreeMap<[i64; 2], u64>, p: &Piece) -> u64 {
     let g = p.grown(HALO_COLUMNS);
     counts
         .range([g.x[0], i64::MIN]..=[g.x[1], i64::MAX])
@@ -239,10 +239,19 @@ pub fn label_piece(
 }
 
 /// The pieces' labels joined into the pair's clusters.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub struct Stitch {
     kinds: Vec<Kind>,
-    sets: Option<UnionFind>,
+    sets: UnionFind,
+}
+
+impl Default for Stitch {
+    fn default() -> Self {
+        Stitch {
+            kinds: Vec::new(),
+            sets: UnionFind::new(0),
+        }
+    }
 }
 
 impl Stitch {
@@ -250,6 +259,7 @@ impl Stitch {
     pub fn add(&mut self, kinds: &[Kind]) -> u32 {
         let offset = self.kinds.len() as u32;
         self.kinds.extend_from_slice(kinds);
+        self.sets.grow(self.kinds.len());
         offset
     }
 
@@ -265,18 +275,12 @@ impl Stitch {
 
     /// Two of the pair's labels (1..) name one cluster.
     pub fn join(&mut self, a: u32, b: u32) {
-        let n = self.kinds.len();
-        let sets = self.sets.get_or_insert_with(|| UnionFind::new(n));
-        sets.union(a as usize - 1, b as usize - 1);
+        self.sets.union(a as usize - 1, b as usize - 1);
     }
 
     /// The cluster of label `l` (1..): the smallest label joined to it, and its kind.
     pub fn cluster(&mut self, l: u32) -> (u32, Kind) {
-        let n = self.kinds.len();
-        let root = self
-            .sets
-            .get_or_insert_with(|| UnionFind::new(n))
-            .find(l as usize - 1);
+        let root = self.sets.find(l as usize - 1);
         (root as u32 + 1, self.kinds[root])
     }
 }

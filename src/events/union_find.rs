@@ -18,6 +18,13 @@ impl UnionFind {
         }
     }
 
+    /// Add singletons until there are `n` elements (fewer: nothing).
+    pub fn grow(&mut self, n: usize) {
+        assert!(n <= u32::MAX as usize, "union-find over {n} elements");
+        let len = self.parent.len() as u32;
+        self.parent.extend(len..n as u32);
+    }
+
     /// Number of elements.
     pub fn len(&self) -> usize {
         self.parent.len()
@@ -66,5 +73,10 @@ mod tests {
         assert_eq!(uf.find(3), 3);
         uf.union(1, 4);
         assert_eq!(uf.find(2), 0);
+        // Grown: the new elements are singletons, the old sets kept.
+        uf.grow(8);
+        assert_eq!((uf.len(), uf.find(6), uf.find(7), uf.find(5)), (8, 6, 7, 0));
+        uf.union(7, 3);
+        assert_eq!(uf.find(7), 3);
     }
 }

@@ -314,7 +314,9 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<EventsMeta> {
                 describe(c, &p, &dist);
             }
         }
-        Members::Counted { members, .. } => {
+        Members::Counted { members, held } => {
+            // Given back: each batch of events reserves what it holds.
+            drop(held);
             pieces::describe(ctx, &spill, &found.results, &members, &mut describe)?
         }
     }
@@ -364,10 +366,10 @@ enum Members<'a> {
         _held: crate::memory::Reservation<'a>,
     },
     /// Only counted: read again from the scratch rows, a batch of events at a time (the
-    /// reservation of the pieces held until they are described).
+    /// pieces' reservation held through the writing of `kept.tile`).
     Counted {
         members: Vec<u64>,
-        _held: crate::memory::Reservation<'a>,
+        held: crate::memory::Reservation<'a>,
     },
 }
 

@@ -149,8 +149,14 @@ pub(super) fn found<'a>(
             )));
         }
     };
+    // What the fullest piece loads, not the whole pool: other units may run beside it.
+    let fullest = plan
+        .iter()
+        .map(|p| pieces::load(counts, p))
+        .max()
+        .unwrap_or(0);
     let held = ctx.reserve(
-        limit,
+        fullest * BYTES_PER_KEPT + overhead,
         &format!("the events of {n} kept core points, in pieces"),
     )?;
     crate::progress::trace(|| format!("events: {n} kept core points in {} pieces", plan.len()));
@@ -243,18 +249,19 @@ pub(super) fn found<'a>(
         pieces: plan.len(),
         results: Results::File { path, event },
         kinds,
-        members: Members::Counted {
-            members,
-            _held: held,
-        },
+        members: Members::Counted { members, held },
     })
 }
+
+/// Bytes a member of an event being described takes: its position and distance.
+const BYTES_PER_MEMBER: u64 = 32;
 
 /// Describes event `c` (0..) from its members' positions and distances.
 pub(super) type Describe<'a> = dyn FnMut(usize, &[Point3], &[f64]) + 'a;
 
-/// Describe the events whose members `counts` counts, a batch of events at a time, their
-/// members read from the scratch rows in kept order: `describe(event index, positions,
+/// Describe the events whose members `counts` counts, a batch of events at a time (each batch
+/// reserving what it holds; the caller holds no reservation), their members read from the
+/// scratch rows in kept order: `describe(event index, positions,
 /// distances)` in event order.
 pub(super) fn describe(
     ctx: &Ctx,
@@ -263,8 +270,6 @@ pub(super) fn describe(
     counts: &[u64],
     describe: &mut Describe<'_>,
 ) -> Result<()> {
-    // A member held is its position and distance, in two vectors.
-    const BYTES_PER_MEMBER: u64 = 32;
     let room = super::room(ctx).saturating_sub(FIXED) / BYTES_PER_MEMBER;
     let mut first = 0;
     while first < counts.len() {
@@ -282,6 +287,13 @@ pub(super) fn describe(
                 &format!("describing an event of {} kept core points", counts[first]),
             )?;
         }
+        let _held = ctx.reserve(
+            batch * BYTES_PER_MEMBER + FIXED,
+            &format!(
+                "describing {} events of {batch} kept core points",
+                end - first
+            ),
+        )?;
         let mut p: Vec<Vec<Point3>> = vec![Vec::new(); end - first];
         let mut dist: Vec<Vec<f64>> = vec![Vec::new(); end - first];
         let (mut rows, mut result) = (spill.reader()?, results.reader()?);
