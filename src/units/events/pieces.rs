@@ -1,5 +1,6 @@
 //! An events unit's kept core points a piece of space at a time (`events::pieces`), when they
-//! are more than the pool holds at once: the pieces read from the unit's scratch rows, each
+//! are more than the pool holds at once: the pieces handed their points from the unit's scratch
+//! rows (one pass for every [`GROUP`] pieces, each piece's into a file of its own), each
 //! piece's smoothed distances and labels written in place to a results file, the labels joined,
 //! and the events described a batch at a time. What is held is bounded by the cap a piece
 //! loads, the columns' counts, and a few bytes a label (which grow with the events, as the
@@ -25,6 +26,10 @@ const RESULTS: &str = "kept_results.tmp";
 const SHARED: &str = "kept_shared.tmp";
 /// Bytes a result takes in [`RESULTS`].
 const RESULT: u64 = 12;
+
+/// Pieces handed their points by one pass over the scratch rows (a writer's buffer each, within
+/// [`FIXED`]).
+const GROUP: usize = 8;
 
 /// Bytes a column's count takes held (a B-tree entry with its share of the nodes).
 const BYTES_PER_COLUMN: u64 = 64;
@@ -170,34 +175,55 @@ pub(super) fn found<'a>(
         .map_err(|e| Error::output(&path, e))?;
     let mut shared = RowsWriter::create(out, SHARED, 2)?;
     let mut stitch = Stitch::default();
-    for piece in &plan {
-        // The piece's points, in kept order.
-        let (mut ids, mut pts, mut d) = (Vec::new(), Vec::new(), Vec::new());
+    for group in plan.chunks(GROUP) {
+        // One pass over the scratch rows hands each piece of the group its points (kept order)
+        // in a file of its own: a pass for each piece made the time grow as the pieces times
+        // the kept points, i.e. with the square of the change at a given budget.
+        let mut loads = group
+            .iter()
+            .enumerate()
+            .map(|(k, _)| RowsWriter::create(out, &format!("kept_piece{k}.tmp"), 5))
+            .collect::<Result<Vec<_>>>()?;
         let mut rows = spill.reader()?;
         for i in 0..n {
             let r = rows.next_row()?;
-            let p = [r[1], r[2], r[3]];
-            if piece.loads(columns.of(&p)) {
-                ids.push(i);
-                pts.push(p);
-                d.push(r[4]);
+            let c = columns.of(&[r[1], r[2], r[3]]);
+            for (load, piece) in loads.iter_mut().zip(group) {
+                if piece.loads(c) {
+                    // The index as f64: exact below 2^53 kept points.
+                    load.push(&[i as f64, r[1], r[2], r[3], r[4]])?;
+                }
             }
         }
-        let Labelled {
-            owned,
-            shared: theirs,
-            kinds,
-        } = pieces::label_piece(&pts, &d, piece, &columns, s)?;
-        let offset = stitch.add(&kinds);
-        let named = |l: u32| if l > 0 { l + offset } else { 0 };
-        for (at, v, l) in owned {
-            let i = ids[at as usize];
-            results
-                .write_all_at(&encode(v, named(l)), i * RESULT)
-                .map_err(|e| Error::output(&path, e))?;
-        }
-        for (at, l) in theirs {
-            shared.push(&[ids[at as usize] as f64, f64::from(named(l))])?;
+        drop(rows);
+        for (load, piece) in loads.into_iter().zip(group) {
+            let load = load.finish()?;
+            let (mut ids, mut pts, mut d) = (Vec::new(), Vec::new(), Vec::new());
+            let mut rows = load.reader()?;
+            for _ in 0..load.len() {
+                let r = rows.next_row()?;
+                ids.push(r[0] as u64);
+                pts.push([r[1], r[2], r[3]]);
+                d.push(r[4]);
+            }
+            drop(rows);
+            load.remove()?;
+            let Labelled {
+                owned,
+                shared: theirs,
+                kinds,
+            } = pieces::label_piece(&pts, &d, piece, &columns, s)?;
+            let offset = stitch.add(&kinds);
+            let named = |l: u32| if l > 0 { l + offset } else { 0 };
+            for (at, v, l) in owned {
+                let i = ids[at as usize];
+                results
+                    .write_all_at(&encode(v, named(l)), i * RESULT)
+                    .map_err(|e| Error::output(&path, e))?;
+            }
+            for (at, l) in theirs {
+                shared.push(&[ids[at as usize] as f64, f64::from(named(l))])?;
+            }
         }
     }
     // The labels a piece gave the core points of its halo, joined to their owners'.
