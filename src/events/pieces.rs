@@ -239,19 +239,10 @@ pub fn label_piece(
 }
 
 /// The pieces' labels joined into the pair's clusters.
-#[derive(Debug)]
+#[derive(Debug, Default)]
 pub struct Stitch {
     kinds: Vec<Kind>,
     sets: UnionFind,
-}
-
-impl Default for Stitch {
-    fn default() -> Self {
-        Stitch {
-            kinds: Vec::new(),
-            sets: UnionFind::new(0),
-        }
-    }
 }
 
 impl Stitch {

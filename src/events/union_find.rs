@@ -4,7 +4,7 @@
 
 /// Union-find over dense indices `0..n` (n < 2³²: four bytes an element, as the events unit
 /// holds one over a pair's kept core points).
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct UnionFind {
     parent: Vec<u32>,
 }
@@ -12,10 +12,9 @@ pub struct UnionFind {
 impl UnionFind {
     /// `n` singleton sets.
     pub fn new(n: usize) -> Self {
-        assert!(n <= u32::MAX as usize, "union-find over {n} elements");
-        UnionFind {
-            parent: (0..n as u32).collect(),
-        }
+        let mut sets = UnionFind::default();
+        sets.grow(n);
+        sets
     }
 
     /// Add singletons until there are `n` elements (fewer: nothing).

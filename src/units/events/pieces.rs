@@ -179,10 +179,8 @@ pub(super) fn found<'a>(
         // One pass over the scratch rows hands each piece of the group its points (kept order)
         // in a file of its own: a pass for each piece made the time grow as the pieces times
         // the kept points, i.e. with the square of the change at a given budget.
-        let mut loads = group
-            .iter()
-            .enumerate()
-            .map(|(k, _)| RowsWriter::create(out, &format!("kept_piece{k}.tmp"), 5))
+        let mut loads = (0..group.len())
+            .map(|k| RowsWriter::create(out, &format!("kept_piece{k}.tmp"), 5))
             .collect::<Result<Vec<_>>>()?;
         let mut rows = spill.reader()?;
         for i in 0..n {
