@@ -30,13 +30,16 @@ use crate::volume::{self, uncertainty, EventVolume};
 pub const FILE: &str = "volumes.json";
 
 /// Resident bytes per cell of one piece of an event's volume (`volume::PIECE_CELLS` at most)
-/// while it is computed: the two tops clipped to the cells (each TIN triangle cut into a piece per
-/// cell it crosses: several vertices and faces a cell), their labels' tables while they are
-/// built, the solids grown from them with the sort of their edges, the piece's grids. The cost
-/// follows the cells (about one per point spacing squared of the footprint), not the points.
-/// Measured on the cliff's three large events with `--threads 1` (VmHWM reset before each,
-/// [`BYTES_PER_POINT`] a point taken off), each then in one piece: 617, 926 and 807 bytes a cell
-/// (95 k, 22.5 k and 51 k cells). Before large blocks were mapped on their own
+/// while it is computed: the two tops clipped to the cells, their labels' tables while they are
+/// built, the solids grown from them with the sort of their edges, the piece's grids and the
+/// heights asked on them (`volume::Lattice`: at most 4 sub-cells a cell for each surface,
+/// 64 bytes). The cost follows the cells (about one per point spacing squared of the
+/// footprint), not the points. Measured on the cliff's three large events with `--threads 1`
+/// (VmHWM reset before each, [`BYTES_PER_POINT`] a point taken off), each then in one piece:
+/// 617, 926 and 807 bytes a cell (95 k, 22.5 k and 51 k cells), when every TIN triangle was cut
+/// into a piece per cell it crosses; since only the triangles the region's edge passes through
+/// are cut (`volume::solid::clipped_top`) the tops hold about a quarter of the faces, so this
+/// is now an upper bound. Before large blocks were mapped on their own
 /// (`memory::MMAP_THRESHOLD`) the same events measured 1,360, 1,025 and 1,460.
 pub const BYTES_PER_CELL: u64 = 1024;
 

@@ -48,7 +48,7 @@ pub use ownership::{Claim, Ownership};
 pub use region::{Cells, Cut, OpenRim, Polygon, Region};
 pub use solid::check_watertight;
 pub use solid::Mesh;
-pub use surface::{Surface, Tin};
+pub use surface::{Lattice, Surface, Tin};
 pub use user_mesh::UserMesh;
 
 use rayon::prelude::*;
@@ -244,20 +244,20 @@ fn region_of(
     owned: Owned,
 ) -> Region {
     let (nu, nv) = (cells.nu, cells.nv);
-    // Nodes covered by both surfaces, row by row in parallel.
-    let nodes: Vec<bool> = (0..=nv)
-        .into_par_iter()
-        .flat_map_iter(|j| {
-            (0..=nu).map(move |i| {
-                let (u, v) = (cells.u(i), cells.v(j));
-                before.height_at(u, v).is_some() && after.height_at(u, v).is_some()
-            })
-        })
-        .collect();
-    let node = |i: usize, j: usize| nodes[j * (nu + 1) + i];
+    // Nodes covered by both surfaces; the before surface's heights at the centres.
+    let (nodes, centres) = (Lattice::nodes(&cells), Lattice::centres(&cells));
+    let ((h1, h2), hc) = rayon::join(
+        || rayon::join(|| before.heights_on(&nodes), || after.heights_on(&nodes)),
+        || before.heights_on(&centres),
+    );
+    let node = |i: usize, j: usize| {
+        let k = j * (nu + 1) + i;
+        h1[k].is_finite() && h2[k].is_finite()
+    };
     let flags: Vec<(bool, bool)> = (0..nv)
         .into_par_iter()
         .flat_map_iter(|j| {
+            let (node, hc) = (&node, &hc);
             (0..nu).map(move |i| {
                 let c = cells.centre(i, j);
                 let covered = node(i, j)
@@ -265,10 +265,8 @@ fn region_of(
                     && node(i, j + 1)
                     && node(i + 1, j + 1)
                     && cell_covered(c);
-                let own = covered
-                    && before
-                        .height_at(c[0], c[1])
-                        .is_some_and(|w| owned(&frame.to_global(&[c[0], c[1], w])));
+                let w = hc[cells.index(i, j)];
+                let own = covered && w.is_finite() && owned(&frame.to_global(&[c[0], c[1], w]));
                 (covered, own)
             })
         })
@@ -674,8 +672,14 @@ fn change_of(
     s2: &dyn Surface,
     spacing: f64,
 ) -> (Vec<Option<f64>>, f64, f64) {
-    let change = |u: f64, v: f64| Some(s2.height_at(u, v)? - s1.height_at(u, v)?);
-    let dw = region.cell_changes(&change);
+    let centres = Lattice::centres(&region.cells);
+    let (h1, h2) = rayon::join(|| s1.heights_on(&centres), || s2.heights_on(&centres));
+    let dw = (0..region.cells.len())
+        .map(|k| {
+            let d = h2[k] - h1[k];
+            (region.covered[k] && d.is_finite()).then_some(d)
+        })
+        .collect();
     // Gross terms (reported, not part of V) by the midpoint rule on sub-cells of about
     // spacing/2 (a step is misplaced by at most half a sub-cell).
     let (gain, loss) = gross(s1, s2, region, spacing / 2.0);
@@ -686,38 +690,37 @@ fn change_of(
 /// most `sub` a side.
 fn gross(s1: &dyn Surface, s2: &dyn Surface, region: &Region, sub: f64) -> (f64, f64) {
     let c = &region.cells;
-    let du = (c.r.u1 - c.r.u0) / c.nu as f64;
-    let dv = (c.r.v1 - c.r.v0) / c.nv as f64;
+    let (du, dv) = c.pitch();
     let k = ((du.max(dv) / sub).ceil() as usize).clamp(1, 8);
     let w = c.cell_area() / (k * k) as f64;
-    // Rows in parallel, then summed in row order: rayon's `reduce` would add the floats in an
-    // order that depends on the thread count and on work stealing.
-    let rows: Vec<(f64, f64)> = (0..c.nv)
-        .into_par_iter()
-        .map(|j| {
+    // The sub-cells' heights a band of rows at a time, at most 4 per cell of the piece for each
+    // surface (what the piece's cells reserve covers them, [`crate::units::volumes`]); each
+    // row's sum in order, then the rows' in order (a parallel `reduce` would add the floats in an
+    // order that depends on the thread count).
+    let band = (4 * c.nv / (k * k)).max(1);
+    let mut rows: Vec<(f64, f64)> = Vec::with_capacity(c.nv);
+    for j0 in (0..c.nv).step_by(band) {
+        let j1 = (j0 + band).min(c.nv);
+        let l = Lattice::within(c, k, j0..j1);
+        let (h1, h2) = rayon::join(|| s1.heights_on(&l), || s2.heights_on(&l));
+        rows.extend((j0..j1).map(|j| {
             let (mut g, mut l) = (0.0, 0.0);
-            for i in 0..c.nu {
-                if !region.contains(i, j) {
-                    continue;
-                }
+            for i in (0..c.nu).filter(|&i| region.contains(i, j)) {
                 for b in 0..k {
-                    let v = c.v(j) + dv * (b as f64 + 0.5) / k as f64;
+                    let row = ((j - j0) * k + b) * c.nu * k;
                     for a in 0..k {
-                        let u = c.u(i) + du * (a as f64 + 0.5) / k as f64;
-                        if let (Some(h1), Some(h2)) = (s1.height_at(u, v), s2.height_at(u, v)) {
-                            let d = h2 - h1;
-                            if d > 0.0 {
-                                g += d;
-                            } else {
-                                l += d;
-                            }
+                        let d = h2[row + i * k + a] - h1[row + i * k + a];
+                        if d > 0.0 {
+                            g += d;
+                        } else if d < 0.0 {
+                            l += d;
                         }
                     }
                 }
             }
             (g, l)
-        })
-        .collect();
+        }));
+    }
     let (g, l) = rows.iter().fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
     (g * w, l * w)
 }

@@ -147,6 +147,14 @@ impl Cells {
         ]
     }
 
+    /// A cell's sides (du, dv).
+    pub fn pitch(&self) -> (f64, f64) {
+        (
+            (self.r.u1 - self.r.u0) / self.nu as f64,
+            (self.r.v1 - self.r.v0) / self.nv as f64,
+        )
+    }
+
     /// Area of one cell.
     pub fn cell_area(&self) -> f64 {
         self.r.area() / self.len() as f64
