@@ -49,11 +49,14 @@ pub fn smallest_eigenvector(c: &[f64; 6]) -> Option<(Point3, f64)> {
     if trace.is_nan() || trace <= 0.0 || !trace.is_finite() {
         return None;
     }
-    if let Some((v, lmin)) = smallest_closed_form(c) {
-        return Some((v, lmin.max(0.0) / trace));
-    }
+    let (v, lmin) = smallest_closed_form(c).or_else(|| smallest_iterative(c))?;
+    Some((v, lmin.max(0.0) / trace))
+}
+
+/// The smallest eigenpair by nalgebra's iterative solver, the eigenvector normalised.
+fn smallest_iterative(c: &[f64; 6]) -> Option<(Point3, f64)> {
     let eig = SymmetricEigen::new(symmetric(c));
-    let (imin, lmin) = eig
+    let (imin, &lmin) = eig
         .eigenvalues
         .iter()
         .enumerate()
@@ -64,7 +67,7 @@ pub fn smallest_eigenvector(c: &[f64; 6]) -> Option<(Point3, f64)> {
         return None;
     }
     let v = v / norm;
-    Some(([v.x, v.y, v.z], (lmin.max(0.0)) / trace))
+    Some(([v.x, v.y, v.z], lmin))
 }
 
 /// The smallest eigenvalue of a symmetric 3×3 matrix (upper triangle xx xy xz yy yz zz) and its
@@ -96,30 +99,23 @@ pub fn smallest_closed_form(c: &[f64; 6]) -> Option<(Point3, f64)> {
         return None;
     }
     let rows = [
-        [a00 - lmin, a01, a02],
-        [a01, a11 - lmin, a12],
-        [a02, a12, a22 - lmin],
+        Vector3::new(a00 - lmin, a01, a02),
+        Vector3::new(a01, a11 - lmin, a12),
+        Vector3::new(a02, a12, a22 - lmin),
     ];
-    let cross = |a: [f64; 3], b: [f64; 3]| {
-        [
-            a[1] * b[2] - a[2] * b[1],
-            a[2] * b[0] - a[0] * b[2],
-            a[0] * b[1] - a[1] * b[0],
-        ]
-    };
-    let norm2 = |v: &[f64; 3]| v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
     let v = [
-        cross(rows[0], rows[1]),
-        cross(rows[0], rows[2]),
-        cross(rows[1], rows[2]),
+        rows[0].cross(&rows[1]),
+        rows[0].cross(&rows[2]),
+        rows[1].cross(&rows[2]),
     ]
     .into_iter()
-    .max_by(|a, b| norm2(a).total_cmp(&norm2(b)))?;
-    let n = norm2(&v).sqrt();
+    .max_by(|a, b| a.norm_squared().total_cmp(&b.norm_squared()))?;
+    let n = v.norm();
     if n.is_nan() || n <= 0.0 {
         return None;
     }
-    Some((v.map(|x| x / n), lmin))
+    let v = v / n;
+    Some(([v.x, v.y, v.z], lmin))
 }
 
 #[cfg(test)]
