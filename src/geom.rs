@@ -29,6 +29,14 @@ impl Bounds {
             max: [f64::NEG_INFINITY; 3],
         }
     }
+    /// The bounds of `points`.
+    pub fn of<'a>(points: impl IntoIterator<Item = &'a Point3>) -> Self {
+        let mut b = Bounds::empty();
+        for p in points {
+            b.grow(p);
+        }
+        b
+    }
     /// Extend to contain `p`.
     pub fn grow(&mut self, p: &Point3) {
         for ((lo, hi), &v) in self.min.iter_mut().zip(&mut self.max).zip(p) {

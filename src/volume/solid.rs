@@ -32,8 +32,9 @@ use smallvec::SmallVec;
 
 use super::boundary;
 use super::frame::Footprint;
-use super::region::Region;
+use super::region::{Cells, Region};
 use super::surface::Surface;
+use crate::geom::Bounds;
 
 /// A triangle mesh (local or global coordinates, counter-clockwise = outward).
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -119,6 +120,47 @@ type Corner3 = (Label, [f64; 3], Carrier);
 /// impossible: they go to the heap instead of past the end.
 type Polygon = SmallVec<[Corner3; 8]>;
 
+/// Each vertex of a top by its label: TIN vertices and grid nodes in tables by their index (4
+/// bytes each), only the crossings in a hash map (a map of every label was most of a large
+/// event's peak: 20-byte keys in a table that doubles).
+struct Ids {
+    vertices: Vec<u32>,
+    nodes: Vec<u32>,
+    /// Nodes a row (nu + 1).
+    row: usize,
+    crossings: HashMap<(u32, u32, Line), u32>,
+}
+
+impl Ids {
+    const NONE: u32 = u32::MAX;
+
+    fn new(tin_vertices: usize, cells: &Cells) -> Ids {
+        Ids {
+            vertices: vec![Ids::NONE; tin_vertices],
+            nodes: vec![Ids::NONE; (cells.nu + 1) * (cells.nv + 1)],
+            row: cells.nu + 1,
+            crossings: HashMap::default(),
+        }
+    }
+
+    /// The id of the vertex labelled `label`, added to `top` at `pos` the first time.
+    fn id(&mut self, label: Label, pos: [f64; 3], top: &mut Mesh) -> u32 {
+        let mut add = || {
+            top.vertices.push(pos);
+            (top.vertices.len() - 1) as u32
+        };
+        let slot = match label {
+            Label::Vertex(a) => &mut self.vertices[a as usize],
+            Label::Node(i, j) => &mut self.nodes[j as usize * self.row + i as usize],
+            Label::Cross(a, b, l) => return *self.crossings.entry((a, b, l)).or_insert_with(add),
+        };
+        if *slot == Ids::NONE {
+            *slot = add();
+        }
+        *slot
+    }
+}
+
 /// Top surface: the triangles of `tin_vertices`/`tin_faces` (counter-clockwise in (u, v))
 /// clipped to the cells of `region` (Sutherland & Hodgman 1974, one cell at a time). The integral
 /// of the result is the exact integral of the TIN over the region. Returns local vertices and
@@ -145,46 +187,18 @@ fn clip_top(
     whole: bool,
 ) -> Mesh {
     let cells = &region.cells;
-    // Each vertex's id by its label: TIN vertices and grid nodes in tables by their index (4
-    // bytes each), only the crossings in a hash map (a map of every label was most of a large
-    // event's peak: 20-byte keys in a table that doubles).
-    const NONE: u32 = u32::MAX;
-    let mut vertex_ids = vec![NONE; tin_vertices.len()];
-    let mut node_ids = vec![NONE; (cells.nu + 1) * (cells.nv + 1)];
-    let mut crossings: HashMap<(u32, u32, Line), u32> = HashMap::default();
+    let mut ids = Ids::new(tin_vertices.len(), cells);
     let mut top = Mesh::default();
-    let id_of = |vertex_ids: &mut Vec<u32>,
-                 node_ids: &mut Vec<u32>,
-                 crossings: &mut HashMap<(u32, u32, Line), u32>,
-                 label: Label,
-                 pos: [f64; 3],
-                 top: &mut Mesh|
-     -> u32 {
-        let mut add = || {
-            top.vertices.push(pos);
-            (top.vertices.len() - 1) as u32
-        };
-        let slot = match label {
-            Label::Vertex(a) => &mut vertex_ids[a as usize],
-            Label::Node(i, j) => &mut node_ids[j as usize * (cells.nu + 1) + i as usize],
-            Label::Cross(a, b, l) => return *crossings.entry((a, b, l)).or_insert_with(add),
-        };
-        if *slot == NONE {
-            *slot = add();
-        }
-        *slot
-    };
     // A hair (relative to a cell) by which a triangle's box is grown before it is called whole,
     // so that rounding in the cell lookup cannot leave a sliver of it in a cell outside.
     let hair = 1e-9 * (cells.r.u1 - cells.r.u0).max(cells.r.v1 - cells.r.v0);
-    let is_whole = |pts: &[[f64; 3]; 3]| -> bool {
-        let lo = |k: usize| pts.iter().map(|p| p[k]).fold(f64::INFINITY, f64::min) - hair;
-        let hi = |k: usize| pts.iter().map(|p| p[k]).fold(f64::NEG_INFINITY, f64::max) + hair;
+    let is_whole = |b: &Bounds| -> bool {
+        let (lo, hi) = (b.min.map(|x| x - hair), b.max.map(|x| x + hair));
         let r = &cells.r;
-        if lo(0) < r.u0 || hi(0) > r.u1 || lo(1) < r.v0 || hi(1) > r.v1 {
+        if lo[0] < r.u0 || hi[0] > r.u1 || lo[1] < r.v0 || hi[1] > r.v1 {
             return false;
         }
-        let (iu, iv) = cells.overlapping(lo(0), hi(0), lo(1), hi(1));
+        let (iu, iv) = cells.overlapping(lo[0], hi[0], lo[1], hi[1]);
         iv.into_iter()
             .all(|j| iu.clone().all(|i| region.contains(i, j)))
     };
@@ -219,13 +233,12 @@ fn clip_top(
     let mut whole_faces = Vec::new();
     for f in tin_faces {
         let pts = f.map(|i| tin_vertices[i as usize]);
-        if whole && is_whole(&pts) {
+        let b = Bounds::of(&pts);
+        if whole && is_whole(&b) {
             whole_faces.push(*f);
             continue;
         }
-        let lo = |k: usize| pts.iter().map(|p| p[k]).fold(f64::INFINITY, f64::min);
-        let hi = |k: usize| pts.iter().map(|p| p[k]).fold(f64::NEG_INFINITY, f64::max);
-        let (iu, iv) = cells.overlapping(lo(0), hi(0), lo(1), hi(1));
+        let (iu, iv) = cells.overlapping(b.min[0], b.max[0], b.min[1], b.max[1]);
         for j in iv {
             for i in iu.clone() {
                 if !region.contains(i, j) {
@@ -318,16 +331,7 @@ fn clip_top(
                 }
                 let ids: SmallVec<[u32; 8]> = poly
                     .iter()
-                    .map(|&(l, p, _)| {
-                        id_of(
-                            &mut vertex_ids,
-                            &mut node_ids,
-                            &mut crossings,
-                            l,
-                            p,
-                            &mut top,
-                        )
-                    })
+                    .map(|&(l, p, _)| ids.id(l, p, &mut top))
                     .collect();
                 for k in 1..ids.len() - 1 {
                     let tri = [ids[0], ids[k], ids[k + 1]];
@@ -344,15 +348,8 @@ fn clip_top(
         let mut cut = false;
         for k in 0..3 {
             let (a, b) = (f[k], f[(k + 1) % 3]);
-            ring.push(id_of(
-                &mut vertex_ids,
-                &mut node_ids,
-                &mut crossings,
-                Label::Vertex(a),
-                tin_vertices[a as usize],
-                &mut top,
-            ));
-            if crossings.is_empty() {
+            ring.push(ids.id(Label::Vertex(a), tin_vertices[a as usize], &mut top));
+            if ids.crossings.is_empty() {
                 continue;
             }
             let (lo, hi) = (a.min(b), a.max(b));
@@ -372,7 +369,7 @@ fn clip_top(
                         .map(|j| Line::V(j as u32)),
                 );
             for l in lines {
-                if let Some(&id) = crossings.get(&(lo, hi, l)) {
+                if let Some(&id) = ids.crossings.get(&(lo, hi, l)) {
                     let p = top.vertices[id as usize];
                     // Position along a → b.
                     let t = (p[0] - pa[0]) * (pb[0] - pa[0]) + (p[1] - pa[1]) * (pb[1] - pa[1]);

@@ -20,6 +20,7 @@ use spade::{
 
 use super::region::Cells;
 use crate::error::{Error, Result};
+use crate::geom::Bounds;
 
 /// A surface that gives a height along the frame's w axis at (u, v).
 pub trait Surface: Sync {
@@ -313,18 +314,11 @@ impl Surface for Tin {
                 let d = v.data();
                 (v.fix().index(), [d.p.x, d.p.y, d.w])
             });
-            let (umin, umax) = (
-                t.iter().map(|x| x.1[0]).fold(f64::INFINITY, f64::min),
-                t.iter().map(|x| x.1[0]).fold(f64::NEG_INFINITY, f64::max),
-            );
-            let (vmin, vmax) = (
-                t.iter().map(|x| x.1[1]).fold(f64::INFINITY, f64::min),
-                t.iter().map(|x| x.1[1]).fold(f64::NEG_INFINITY, f64::max),
-            );
+            let b = Bounds::of(t.iter().map(|x| &x.1));
             let l = lattice;
             let (Some((i0, i1)), Some((j0, j1))) = (
-                Lattice::span(umin, umax, l.u0, l.du, l.nu),
-                Lattice::span(vmin, vmax, l.v0, l.dv, l.nv),
+                Lattice::span(b.min[0], b.max[0], l.u0, l.du, l.nu),
+                Lattice::span(b.min[1], b.max[1], l.v0, l.dv, l.nv),
             ) else {
                 continue;
             };
