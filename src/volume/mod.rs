@@ -242,13 +242,19 @@ fn region_of(
     after: &dyn Surface,
     cell_covered: &(dyn Fn([f64; 2]) -> bool + Sync),
     owned: Owned,
-) -> Region {
+) -> (Region, [Vec<f64>; 2]) {
     let (nu, nv) = (cells.nu, cells.nv);
-    // Nodes covered by both surfaces; the before surface's heights at the centres.
+    // Nodes covered by both surfaces; both surfaces' heights at the centres (the before one's
+    // place the cell's owner; both give the change, `change_of`).
     let (nodes, centres) = (Lattice::nodes(&cells), Lattice::centres(&cells));
-    let ((h1, h2), hc) = rayon::join(
+    let ((h1, h2), (c1, c2)) = rayon::join(
         || rayon::join(|| before.heights_on(&nodes), || after.heights_on(&nodes)),
-        || before.heights_on(&centres),
+        || {
+            rayon::join(
+                || before.heights_on(&centres),
+                || after.heights_on(&centres),
+            )
+        },
     );
     let node = |i: usize, j: usize| {
         let k = j * (nu + 1) + i;
@@ -257,7 +263,7 @@ fn region_of(
     let flags: Vec<(bool, bool)> = (0..nv)
         .into_par_iter()
         .flat_map_iter(|j| {
-            let (node, hc) = (&node, &hc);
+            let (node, c1) = (&node, &c1);
             (0..nu).map(move |i| {
                 let c = cells.centre(i, j);
                 let covered = node(i, j)
@@ -265,7 +271,7 @@ fn region_of(
                     && node(i, j + 1)
                     && node(i + 1, j + 1)
                     && cell_covered(c);
-                let w = hc[cells.index(i, j)];
+                let w = c1[cells.index(i, j)];
                 let own = covered && w.is_finite() && owned(&frame.to_global(&[c[0], c[1], w]));
                 (covered, own)
             })
@@ -273,7 +279,7 @@ fn region_of(
         .collect();
     let covered = flags.iter().map(|f| f.0).collect();
     let own: Vec<bool> = flags.iter().map(|f| f.1).collect();
-    Region::new(cells, covered, &own)
+    (Region::new(cells, covered, &own), [c1, c2])
 }
 
 /// Volume change of one event from the two epochs' points around it (global coordinates;
@@ -344,7 +350,7 @@ pub fn event_volume_in(
         let (cov1, cov2) = (uv(&local1), uv(&local2));
         let near_points =
             |q: [f64; 2]| cov1.covers(q[0], q[1], radius) && cov2.covers(q[0], q[1], radius);
-        let region = region_of(&frame, c, &tin1, &tin2, &near_points, owned);
+        let (region, centres) = region_of(&frame, c, &tin1, &tin2, &near_points, owned);
         let inside = |l: &Vec<[f64; 3]>| {
             l.iter()
                 .filter(|p| {
@@ -362,7 +368,7 @@ pub fn event_volume_in(
         // What needs both triangulations first; then each top is clipped from its own, which is
         // given back as soon as it is: a large event's peak was both triangulations beside both
         // tops (≈ 2.2 KB per region cell on the cliff's debris fan).
-        let change = change_of(&region, &tin1, &tin2, spacing);
+        let change = change_of(&region, &centres, &tin1, &tin2, spacing);
         drop((cov1, cov2));
         let top = |tin: Tin| {
             let (v, f) = tin.mesh();
@@ -399,7 +405,7 @@ pub fn event_volume_from_surfaces(
         before.height_at(c[0], c[1]).is_some() && after.height_at(c[0], c[1]).is_some()
     };
     let piece = |c: Cells, _whole: bool| -> Result<Piece> {
-        let region = region_of(&frame, c, before, after, &both, owned);
+        let (region, centres) = region_of(&frame, c, before, after, &both, owned);
         let tops = if region.is_empty() {
             None
         } else {
@@ -408,7 +414,7 @@ pub fn event_volume_from_surfaces(
             let top2 = solid::grid_top(after, &region, 2).ok_or_else(none)?;
             Some([top1, top2])
         };
-        let change = change_of(&region, before, after, spacing);
+        let change = change_of(&region, &centres, before, after, spacing);
         Ok(Piece::new(region, change, tops))
     };
     let cells = Cells::new(&r, spacing);
@@ -665,21 +671,16 @@ fn covered_by_both(region: &Region, top1: &Mesh, top2: &Mesh) -> Result<()> {
 }
 
 /// What the two surfaces say of the change over the region beyond the solids: the difference at
-/// each cell's centre, and the gross gain and loss.
+/// each cell's centre (from their heights there, `centres`, as [`region_of`] found them), and the
+/// gross gain and loss.
 fn change_of(
     region: &Region,
+    centres: &[Vec<f64>; 2],
     s1: &dyn Surface,
     s2: &dyn Surface,
     spacing: f64,
 ) -> (Vec<Option<f64>>, f64, f64) {
-    let centres = Lattice::centres(&region.cells);
-    let (h1, h2) = rayon::join(|| s1.heights_on(&centres), || s2.heights_on(&centres));
-    let dw = (0..region.cells.len())
-        .map(|k| {
-            let d = h2[k] - h1[k];
-            (region.covered[k] && d.is_finite()).then_some(d)
-        })
-        .collect();
+    let dw = region.cell_changes(&centres[0], &centres[1]);
     // Gross terms (reported, not part of V) by the midpoint rule on sub-cells of about
     // spacing/2 (a step is misplaced by at most half a sub-cell).
     let (gain, loss) = gross(s1, s2, region, spacing / 2.0);

@@ -16,7 +16,6 @@ use std::ops::Range;
 
 use super::boundary;
 use super::frame::Footprint;
-use rayon::prelude::*;
 
 /// A cell is covered by an epoch when one of its points lies within this many point spacings of
 /// the cell's centre. For points on a grid of spacing s the farthest a location can be from its
@@ -257,23 +256,14 @@ impl Region {
 }
 
 impl Region {
-    /// The surfaces' difference `change(u, v)` at the centre of every covered cell (None
-    /// elsewhere), row-major: evaluated once for the open rim and the step variance.
-    pub fn cell_changes(
-        &self,
-        change: &(dyn Fn(f64, f64) -> Option<f64> + Sync),
-    ) -> Vec<Option<f64>> {
-        let c = &self.cells;
-        (0..c.nv)
-            .into_par_iter()
-            .flat_map_iter(|j| {
-                (0..c.nu).map(move |i| {
-                    if !self.covered[c.index(i, j)] {
-                        return None;
-                    }
-                    let [u, v] = c.centre(i, j);
-                    change(u, v)
-                })
+    /// The surfaces' difference at the centre of every covered cell (None elsewhere), row-major,
+    /// from their heights `before` and `after` at the centres (`surface::Lattice::centres`, NaN
+    /// where a surface has none): evaluated once for the open rim and the step variance.
+    pub fn cell_changes(&self, before: &[f64], after: &[f64]) -> Vec<Option<f64>> {
+        (0..self.cells.len())
+            .map(|k| {
+                let d = after[k] - before[k];
+                (self.covered[k] && d.is_finite()).then_some(d)
             })
             .collect()
     }

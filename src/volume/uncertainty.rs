@@ -174,12 +174,21 @@ mod tests {
     fn a_step_carries_its_sampling_variance_and_a_plane_none() {
         let (side, s, h) = (4.0, 0.1, 0.7);
         let region = square(side, s);
-        let step = |u: f64, _v: f64| Some(if u < 2.05 { 0.0 } else { -h });
+        // The after surface's heights at the cells' centres over a flat before surface.
+        let c = region.cells;
+        let at_centres = |f: &dyn Fn(f64, f64) -> f64| -> Vec<f64> {
+            (0..c.nv)
+                .flat_map(|j| (0..c.nu).map(move |i| c.centre(i, j)))
+                .map(|[u, v]| f(u, v))
+                .collect()
+        };
+        let flat = vec![0.0; c.len()];
+        let step = at_centres(&|u, _v| if u < 2.05 { 0.0 } else { -h });
         let want = (side / s) * h * h * s.powi(4) / 12.0;
-        let got = region.step_variance(&region.cell_changes(&step), s);
+        let got = region.step_variance(&region.cell_changes(&flat, &step), s);
         assert!((got - want).abs() < 1e-9 * want, "{got} vs {want}");
-        let plane = |u: f64, v: f64| Some(0.3 * u - 0.2 * v + 1.0);
-        assert!(region.step_variance(&region.cell_changes(&plane), s) < 1e-12 * want);
+        let plane = at_centres(&|u, v| 0.3 * u - 0.2 * v + 1.0);
+        assert!(region.step_variance(&region.cell_changes(&flat, &plane), s) < 1e-12 * want);
     }
 
     #[test]
