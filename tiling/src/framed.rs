@@ -27,15 +27,12 @@ use std::path::{Path, PathBuf};
 
 use crate::atomic::{publish, tmp_path};
 use crate::error::{Error, Result};
-use crate::tile_file::{self, Bounds3, Column, ColumnData, FileDigest, TileColumns, WriteOptions};
+use crate::tile_file::{self, Bounds3, FileDigest, Frame, TileColumns, WriteOptions};
 
 /// The format version of framed tile files.
 pub const VERSION: u32 = 2;
 /// Bytes of the header.
 pub const HEADER_LEN: usize = 84;
-/// Frames decoded at once when a tile is read (in parallel; the decoded frames are held until
-/// they are appended to the tile's columns).
-const DECODE_GROUP: usize = 8;
 
 /// A framed tile file being written at `path` (through `<path>.tmp` until [`Framed::finish`]).
 #[derive(Debug)]
@@ -203,86 +200,58 @@ fn frames<'a>(bytes: &'a [u8], h: &Header) -> Result<Vec<&'a [u8]>, String> {
     Ok(out)
 }
 
-/// Decode and verify a whole framed tile held in memory: its frames (in parallel, a group at
-/// a time), appended in order.
+/// Decode and verify a whole framed tile held in memory: every frame checked, then each decoded
+/// (in parallel) straight into its range of the tile's columns.
 pub(crate) fn decode(bytes: &[u8]) -> Result<TileColumns, String> {
     use rayon::prelude::*;
     let h = parse_header(bytes)?;
-    let n = usize::try_from(h.point_count).map_err(|_| "point count too large")?;
-    let mut out: Option<TileColumns> = None;
-    for group in frames(bytes, &h)?.chunks(DECODE_GROUP) {
-        let decoded: Vec<Result<TileColumns, String>> =
-            group.par_iter().map(|f| tile_file::decode(f)).collect();
-        for frame in decoded {
-            let frame = frame?;
-            match &mut out {
-                None => {
-                    let mut first = with_capacity(&frame, n);
-                    append(&mut first, frame)?;
-                    out = Some(first);
-                }
-                Some(cols) => append(cols, frame)?,
-            }
-        }
+    let frames: Vec<Frame> = frames(bytes, &h)?
+        .into_par_iter()
+        .map(Frame::check)
+        .collect::<Result<_, _>>()?;
+    let first = frames.first().ok_or("a framed tile without a frame")?;
+    if !frames.iter().all(|f| f.same_columns(first)) {
+        return Err("frames hold different columns".into());
     }
-    let cols = out.ok_or("a framed tile without a frame")?;
-    if cols.len() as u64 != h.point_count {
+    let n: usize = frames.iter().map(Frame::len).sum();
+    if n as u64 != h.point_count {
         return Err(format!(
-            "frames hold {} points, the header says {}",
-            cols.len(),
+            "frames hold {n} points, the header says {}",
             h.point_count
         ));
     }
-    Ok(cols)
-}
-
-/// Empty columns shaped like `frame`'s, with room for `n` points.
-fn with_capacity(frame: &TileColumns, n: usize) -> TileColumns {
-    TileColumns {
-        x: Vec::with_capacity(n),
-        y: Vec::with_capacity(n),
-        z: Vec::with_capacity(n),
-        extra: frame
-            .extra
-            .iter()
-            .map(|c| Column {
-                name: c.name.clone(),
-                data: match c.data {
-                    ColumnData::F64(_) => ColumnData::F64(Vec::with_capacity(n)),
-                    ColumnData::U32(_) => ColumnData::U32(Vec::with_capacity(n)),
-                    ColumnData::U8(_) => ColumnData::U8(Vec::with_capacity(n)),
-                },
-            })
-            .collect(),
+    let mut out = first.empty_columns(n);
+    let mut rest = out.slices();
+    let mut parts = Vec::with_capacity(frames.len());
+    for f in &frames {
+        let (part, tail) = rest.split_at(f.len());
+        parts.push(part);
+        rest = tail;
     }
-}
-
-/// Append `frame` to `cols`; its columns must be `cols`'s, in the same order and kinds.
-fn append(cols: &mut TileColumns, frame: TileColumns) -> Result<(), String> {
-    if frame.extra.len() != cols.extra.len() {
-        return Err("frames hold different columns".into());
-    }
-    cols.x.extend_from_slice(&frame.x);
-    cols.y.extend_from_slice(&frame.y);
-    cols.z.extend_from_slice(&frame.z);
-    for (c, f) in cols.extra.iter_mut().zip(frame.extra) {
-        if c.name != f.name {
-            return Err("frames hold different columns".into());
-        }
-        match (&mut c.data, f.data) {
-            (ColumnData::F64(a), ColumnData::F64(b)) => a.extend_from_slice(&b),
-            (ColumnData::U32(a), ColumnData::U32(b)) => a.extend_from_slice(&b),
-            (ColumnData::U8(a), ColumnData::U8(b)) => a.extend_from_slice(&b),
-            _ => return Err(format!("column {:?} changes kind between frames", c.name)),
-        }
-    }
-    Ok(())
+    (frames.par_iter().zip(parts)).try_for_each(|(f, mut part)| f.decode_into(&mut part))?;
+    Ok(out)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::tile_file::{read_tile, read_tile_header, Quantisation};
+    use crate::tile_file::{read_tile, read_tile_header, Column, ColumnData, Quantisation};
+
+    /// `frame`'s points after `cols`'s (the reference the decoding is checked against).
+    fn append(cols: &mut TileColumns, frame: TileColumns) -> Result<(), String> {
+        cols.x.extend_from_slice(&frame.x);
+        cols.y.extend_from_slice(&frame.y);
+        cols.z.extend_from_slice(&frame.z);
+        for (c, f) in cols.extra.iter_mut().zip(frame.extra) {
+            match (&mut c.data, f.data) {
+                (ColumnData::F64(a), ColumnData::F64(b)) => a.extend_from_slice(&b),
+                (ColumnData::U32(a), ColumnData::U32(b)) => a.extend_from_slice(&b),
+                (ColumnData::U8(a), ColumnData::U8(b)) => a.extend_from_slice(&b),
+                _ => return Err(format!("column {:?} changes kind", c.name)),
+            }
+        }
+        Ok(())
+    }
 
     fn frame(start: usize, n: usize) -> TileColumns {
         let f =
@@ -295,6 +264,71 @@ mod tests {
                 name: "owned".into(),
                 data: ColumnData::U8((start..start + n).map(|i| (i % 3 == 0) as u8).collect()),
             }],
+        }
+    }
+
+    /// Frames stored differently (coordinates quantised in some, raw where off the lattice; f64,
+    /// u32 and u8 extra columns) are each decoded into their place: the tile reads back as the
+    /// frames' points in order. Frames with different columns are damage.
+    #[test]
+    fn frames_stored_differently_read_back_in_place() {
+        let dir = tempfile::tempdir().unwrap();
+        let opts = WriteOptions {
+            quantise: Some(Quantisation {
+                scale: [0.001; 3],
+                offset: [0.0; 3],
+            }),
+            ..WriteOptions::default()
+        };
+        let with_extras = |start: usize, n: usize, off_lattice: bool| {
+            let mut f = frame(start, n);
+            if off_lattice {
+                f.x.iter_mut().for_each(|x| *x += 1e-7);
+            }
+            f.extra.push(Column {
+                name: "id".into(),
+                data: ColumnData::U32(
+                    (start..start + n)
+                        .map(|i| (i * 2_654_435_761) as u32)
+                        .collect(),
+                ),
+            });
+            f.extra.push(Column {
+                name: "d".into(),
+                data: ColumnData::F64((start..start + n).map(|i| (i as f64).sin()).collect()),
+            });
+            f
+        };
+        let path = dir.path().join("t.tile");
+        let mut w = Framed::new(&path);
+        let mut all: Option<TileColumns> = None;
+        let mut start = 0;
+        for (n, off) in [
+            (700, false),
+            (1300, true),
+            (1, false),
+            (900, true),
+            (64, false),
+        ] {
+            let f = with_extras(start, n, off);
+            w.append(&f, &opts).unwrap();
+            match &mut all {
+                None => all = Some(f),
+                Some(a) => append(a, f).unwrap(),
+            }
+            start += n;
+        }
+        w.finish().unwrap();
+        assert_eq!(read_tile(&path).unwrap(), all.unwrap());
+
+        let mixed = dir.path().join("m.tile");
+        let mut w = Framed::new(&mixed);
+        w.append(&with_extras(0, 100, false), &opts).unwrap();
+        w.append(&frame(100, 100), &opts).unwrap();
+        w.finish().unwrap();
+        match read_tile(&mixed) {
+            Err(Error::Corrupt { reason, .. }) => assert!(reason.contains("different columns")),
+            other => panic!("{other:?}"),
         }
     }
 
@@ -318,9 +352,10 @@ mod tests {
             let f = frame(start, n);
             w.append(&f, &opts).unwrap();
             if start == 0 {
-                all = with_capacity(&f, 0);
+                all = f;
+            } else {
+                append(&mut all, f).unwrap();
             }
-            append(&mut all, f).unwrap();
             start += n;
         }
         assert!(!path.exists(), "nothing under the final name before finish");

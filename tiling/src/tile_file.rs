@@ -731,22 +731,29 @@ fn u32_bytes(values: &[u32], base: u32, shuffle: bool) -> Vec<u8> {
     out
 }
 
-/// The `n` u32 values of `raw` (little-endian, shuffled or not; see [`u32_bytes`]).
-fn u32_values(raw: &[u8], n: usize, shuffled: bool) -> Vec<u32> {
+/// The `n` u32 values of `raw` (little-endian, shuffled or not; see [`u32_bytes`]), each
+/// through `f`, into `out`.
+fn u32_values_into<T>(raw: &[u8], n: usize, shuffled: bool, out: &mut [T], f: impl Fn(u32) -> T) {
     if shuffled {
         let (p0, rest) = raw.split_at(n);
         let (p1, rest) = rest.split_at(n);
         let (p2, p3) = rest.split_at(n);
-        p0.iter()
-            .zip(p1)
-            .zip(p2)
-            .zip(p3)
-            .map(|(((a, b), c), d)| u32::from_le_bytes([*a, *b, *c, *d]))
-            .collect()
+        for ((((o, a), b), c), d) in out.iter_mut().zip(p0).zip(p1).zip(p2).zip(p3) {
+            *o = f(u32::from_le_bytes([*a, *b, *c, *d]));
+        }
     } else {
-        raw.chunks_exact(4)
-            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-            .collect()
+        for (o, b) in out.iter_mut().zip(raw.chunks_exact(4)) {
+            *o = f(u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+        }
+    }
+}
+
+/// The type of a kind's values: 8 for f64 (stored raw or quantised), 4 for u32, 1 for u8.
+fn value_width(kind: u8) -> usize {
+    match kind {
+        KIND_F64 | KIND_QUANT => 8,
+        KIND_U32 => 4,
+        _ => 1,
     }
 }
 
@@ -942,71 +949,225 @@ fn parse_header(bytes: &[u8]) -> Result<Header, String> {
 
 /// Decode and verify a whole tile file held in memory.
 pub(crate) fn decode(bytes: &[u8]) -> Result<TileColumns, String> {
-    let h = parse_header(bytes)?;
-    let total = (h.header_len as u64).checked_add(h.payload_len);
-    match total {
-        Some(t) if t == bytes.len() as u64 => {}
-        Some(t) if t > bytes.len() as u64 => return Err("file is truncated".into()),
-        _ => return Err("file is longer than its header says".into()),
-    }
-    let payload = &bytes[h.header_len..];
-    if crc32fast::hash(payload) != h.payload_crc {
-        return Err("payload checksum mismatch".into());
-    }
-    let n = usize::try_from(h.point_count).map_err(|_| "point count too large")?;
-    let mut pos = 0usize;
-    let mut out = TileColumns::default();
-    for (i, spec) in h.columns.iter().enumerate() {
-        let len = usize::try_from(spec.stored_len).map_err(|_| "column too large")?;
-        let end = pos
-            .checked_add(len)
-            .filter(|&e| e <= payload.len())
-            .ok_or("column lengths exceed the payload")?;
-        let width = kind_width(spec.kind);
-        let raw_len = n.checked_mul(width).ok_or("point count too large")?;
-        let raw = decompress(&payload[pos..end], raw_len)
-            .map_err(|e| format!("column {:?}: zstd: {e}", spec.name))?;
-        pos = end;
-        if raw.len() != raw_len {
-            return Err(format!(
-                "column {:?} holds {} bytes, expected {raw_len}",
-                spec.name,
-                raw.len()
-            ));
+    let frame = Frame::check(bytes)?;
+    let mut out = frame.empty_columns(frame.len());
+    frame.decode_into(&mut out.slices())?;
+    Ok(out)
+}
+
+/// A version-1 encoding whose header and payload checksum were verified: its columns can be
+/// decoded straight into their place in a larger tile ([`Frame::decode_into`]; a framed tile's
+/// frames go each into its own range of the tile's columns, with no copy in between).
+pub(crate) struct Frame<'a> {
+    h: Header,
+    payload: &'a [u8],
+    len: usize,
+}
+
+impl<'a> Frame<'a> {
+    /// Parse and verify `bytes`, one whole encoding.
+    pub(crate) fn check(bytes: &'a [u8]) -> Result<Frame<'a>, String> {
+        let h = parse_header(bytes)?;
+        let total = (h.header_len as u64).checked_add(h.payload_len);
+        match total {
+            Some(t) if t == bytes.len() as u64 => {}
+            Some(t) if t > bytes.len() as u64 => return Err("file is truncated".into()),
+            _ => return Err("file is longer than its header says".into()),
         }
-        let shuffled = spec.flags & FLAG_SHUFFLE != 0 && width > 1;
-        let data = match (spec.kind, spec.quant) {
-            (KIND_QUANT, Some((scale, offset, base))) => ColumnData::F64(
-                u32_values(&raw, n, shuffled)
-                    .into_iter()
-                    .map(|d| scale * ((base + i64::from(d)) as f64) + offset)
-                    .collect(),
-            ),
-            (KIND_F64, _) => ColumnData::F64(
-                (0..n)
-                    .map(|i| f64::from_le_bytes(value_bytes(&raw, n, i, shuffled)))
-                    .collect(),
-            ),
-            (KIND_U32, _) => ColumnData::U32(u32_values(&raw, n, shuffled)),
-            _ => ColumnData::U8(raw),
+        let payload = &bytes[h.header_len..];
+        if crc32fast::hash(payload) != h.payload_crc {
+            return Err("payload checksum mismatch".into());
+        }
+        let len = usize::try_from(h.point_count).map_err(|_| "point count too large")?;
+        for spec in &h.columns[..3] {
+            if !matches!(spec.kind, KIND_F64 | KIND_QUANT) {
+                return Err("coordinate column is not f64".into());
+            }
+        }
+        Ok(Frame { h, payload, len })
+    }
+
+    /// Points held.
+    pub(crate) fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Whether `other` holds the same columns (names and value types, in order).
+    pub(crate) fn same_columns(&self, other: &Frame) -> bool {
+        let shape = |f: &Frame| -> Vec<(String, usize)> {
+            (f.h.columns.iter())
+                .map(|c| (c.name.clone(), value_width(c.kind)))
+                .collect()
         };
-        match (i, data) {
-            (0..=2, ColumnData::F64(v)) => match i {
-                0 => out.x = v,
-                1 => out.y = v,
-                _ => out.z = v,
-            },
-            (0..=2, _) => return Err("coordinate column is not f64".into()),
-            (_, data) => out.extra.push(Column {
+        shape(self) == shape(other)
+    }
+
+    /// Columns of this frame's names and types, `n` values each (zeroed: a large block comes
+    /// from the system as zero pages, touched only when decoded into).
+    pub(crate) fn empty_columns(&self, n: usize) -> TileColumns {
+        let mut out = TileColumns {
+            x: vec![0.0; n],
+            y: vec![0.0; n],
+            z: vec![0.0; n],
+            extra: Vec::new(),
+        };
+        for spec in &self.h.columns[3..] {
+            let data = match value_width(spec.kind) {
+                8 => ColumnData::F64(vec![0.0; n]),
+                4 => ColumnData::U32(vec![0; n]),
+                _ => ColumnData::U8(vec![0; n]),
+            };
+            out.extra.push(Column {
                 name: spec.name.clone(),
                 data,
-            }),
+            });
+        }
+        out
+    }
+
+    /// Decode every column into `out`, whose columns are this frame's ([`Frame::empty_columns`])
+    /// and hold exactly [`Frame::len`] values each.
+    pub(crate) fn decode_into(&self, out: &mut ColumnSlices) -> Result<(), String> {
+        let (h, payload, n) = (&self.h, self.payload, self.len);
+        if out.x.len() != n || out.extra.len() + 3 != h.columns.len() {
+            return Err("a frame does not fit the columns it is decoded into".into());
+        }
+        let mut pos = 0usize;
+        for (i, spec) in h.columns.iter().enumerate() {
+            let len = usize::try_from(spec.stored_len).map_err(|_| "column too large")?;
+            let end = pos
+                .checked_add(len)
+                .filter(|&e| e <= payload.len())
+                .ok_or("column lengths exceed the payload")?;
+            let width = kind_width(spec.kind);
+            let raw_len = n.checked_mul(width).ok_or("point count too large")?;
+            let raw = decompress(&payload[pos..end], raw_len)
+                .map_err(|e| format!("column {:?}: zstd: {e}", spec.name))?;
+            pos = end;
+            if raw.len() != raw_len {
+                return Err(format!(
+                    "column {:?} holds {} bytes, expected {raw_len}",
+                    spec.name,
+                    raw.len()
+                ));
+            }
+            let shuffled = spec.flags & FLAG_SHUFFLE != 0 && width > 1;
+            let dest = match i {
+                0 => SliceMut::F64(&mut *out.x),
+                1 => SliceMut::F64(&mut *out.y),
+                2 => SliceMut::F64(&mut *out.z),
+                _ => out.extra[i - 3].reborrow(),
+            };
+            match (spec.kind, spec.quant, dest) {
+                (KIND_QUANT, Some((scale, offset, base)), SliceMut::F64(d)) => {
+                    u32_values_into(&raw, n, shuffled, d, |q| {
+                        scale * ((base + i64::from(q)) as f64) + offset
+                    })
+                }
+                (KIND_F64, _, SliceMut::F64(d)) => {
+                    for (k, v) in d.iter_mut().enumerate() {
+                        *v = f64::from_le_bytes(value_bytes(&raw, n, k, shuffled));
+                    }
+                }
+                (KIND_U32, _, SliceMut::U32(d)) => u32_values_into(&raw, n, shuffled, d, |q| q),
+                (KIND_U8, _, SliceMut::U8(d)) => d.copy_from_slice(&raw),
+                _ => {
+                    return Err(format!(
+                        "column {:?} changes kind between frames",
+                        spec.name
+                    ))
+                }
+            }
+        }
+        if pos != payload.len() {
+            return Err("payload has bytes no column claims".into());
+        }
+        Ok(())
+    }
+}
+
+/// Mutable views of a tile's columns (or of one range of them): where a frame is decoded.
+pub(crate) struct ColumnSlices<'a> {
+    pub(crate) x: &'a mut [f64],
+    pub(crate) y: &'a mut [f64],
+    pub(crate) z: &'a mut [f64],
+    pub(crate) extra: Vec<SliceMut<'a>>,
+}
+
+impl<'a> ColumnSlices<'a> {
+    /// The first `n` values of every column, and the rest.
+    pub(crate) fn split_at(self, n: usize) -> (ColumnSlices<'a>, ColumnSlices<'a>) {
+        let (x0, x1) = self.x.split_at_mut(n);
+        let (y0, y1) = self.y.split_at_mut(n);
+        let (z0, z1) = self.z.split_at_mut(n);
+        let (e0, e1) = self.extra.into_iter().map(|c| c.split_at(n)).unzip();
+        (
+            ColumnSlices {
+                x: x0,
+                y: y0,
+                z: z0,
+                extra: e0,
+            },
+            ColumnSlices {
+                x: x1,
+                y: y1,
+                z: z1,
+                extra: e1,
+            },
+        )
+    }
+}
+
+/// One extra column's values, mutable.
+pub(crate) enum SliceMut<'a> {
+    F64(&'a mut [f64]),
+    U32(&'a mut [u32]),
+    U8(&'a mut [u8]),
+}
+
+impl<'a> SliceMut<'a> {
+    fn reborrow(&mut self) -> SliceMut<'_> {
+        match self {
+            SliceMut::F64(v) => SliceMut::F64(v),
+            SliceMut::U32(v) => SliceMut::U32(v),
+            SliceMut::U8(v) => SliceMut::U8(v),
         }
     }
-    if pos != payload.len() {
-        return Err("payload has bytes no column claims".into());
+
+    fn split_at(self, n: usize) -> (SliceMut<'a>, SliceMut<'a>) {
+        match self {
+            SliceMut::F64(v) => {
+                let (a, b) = v.split_at_mut(n);
+                (SliceMut::F64(a), SliceMut::F64(b))
+            }
+            SliceMut::U32(v) => {
+                let (a, b) = v.split_at_mut(n);
+                (SliceMut::U32(a), SliceMut::U32(b))
+            }
+            SliceMut::U8(v) => {
+                let (a, b) = v.split_at_mut(n);
+                (SliceMut::U8(a), SliceMut::U8(b))
+            }
+        }
     }
-    Ok(out)
+}
+
+impl TileColumns {
+    /// Mutable views of every column.
+    pub(crate) fn slices(&mut self) -> ColumnSlices<'_> {
+        ColumnSlices {
+            x: &mut self.x,
+            y: &mut self.y,
+            z: &mut self.z,
+            extra: (self.extra.iter_mut())
+                .map(|c| match &mut c.data {
+                    ColumnData::F64(v) => SliceMut::F64(v),
+                    ColumnData::U32(v) => SliceMut::U32(v),
+                    ColumnData::U8(v) => SliceMut::U8(v),
+                })
+                .collect(),
+        }
+    }
 }
 
 #[cfg(test)]
