@@ -205,10 +205,14 @@ fn frames<'a>(bytes: &'a [u8], h: &Header) -> Result<Vec<&'a [u8]>, String> {
 pub(crate) fn decode(bytes: &[u8]) -> Result<TileColumns, String> {
     use rayon::prelude::*;
     let h = parse_header(bytes)?;
-    let frames: Vec<Frame> = frames(bytes, &h)?
-        .into_par_iter()
-        .map(Frame::check)
-        .collect::<Result<_, _>>()?;
+    // Checked in parallel, the first damaged frame reported (rayon's own collect into a Result
+    // would report any one of several).
+    let checked: Vec<Result<Frame, String>> = (frames(bytes, &h)?.into_par_iter().enumerate())
+        .map(|(k, f)| Frame::check(f).map_err(|e| format!("frame {k}: {e}")))
+        .collect();
+    let frames = checked
+        .into_iter()
+        .collect::<Result<Vec<Frame>, String>>()?;
     let first = frames.first().ok_or("a framed tile without a frame")?;
     if !frames.iter().all(|f| f.same_columns(first)) {
         return Err("frames hold different columns".into());
@@ -228,7 +232,10 @@ pub(crate) fn decode(bytes: &[u8]) -> Result<TileColumns, String> {
         parts.push(part);
         rest = tail;
     }
-    (frames.par_iter().zip(parts)).try_for_each(|(f, mut part)| f.decode_into(&mut part))?;
+    let decoded: Vec<Result<(), String>> = (frames.par_iter().zip(parts))
+        .map(|(f, mut part)| f.decode_into(&mut part))
+        .collect();
+    decoded.into_iter().collect::<Result<(), String>>()?;
     Ok(out)
 }
 
@@ -320,6 +327,27 @@ mod tests {
         }
         w.finish().unwrap();
         assert_eq!(read_tile(&path).unwrap(), all.unwrap());
+
+        // Two damaged frames (a byte of the payload of the second and of the fourth): the
+        // first of them is named, every time.
+        let mut damaged = std::fs::read(&path).unwrap();
+        let mut starts = vec![HEADER_LEN];
+        while *starts.last().unwrap() < damaged.len() {
+            let at = *starts.last().unwrap();
+            starts.push(at + tile_file::encoded_len(&damaged[at..]).unwrap());
+        }
+        damaged[starts[2] - 10] ^= 0x40;
+        damaged[starts[4] - 10] ^= 0x40;
+        let twice = dir.path().join("twice.tile");
+        std::fs::write(&twice, &damaged).unwrap();
+        for _ in 0..20 {
+            match read_tile(&twice) {
+                Err(Error::Corrupt { reason, .. }) => {
+                    assert!(reason.starts_with("frame 1:"), "{reason}")
+                }
+                other => panic!("{other:?}"),
+            }
+        }
 
         let mixed = dir.path().join("m.tile");
         let mut w = Framed::new(&mixed);
