@@ -232,9 +232,10 @@ fn epoch_tins(
     Ok([before, after])
 }
 
-/// The region over `cells`: cells whose four corners both surfaces cover (`surface_covers` at a
-/// node, per epoch), that pass `cell_covered` (e.g. a point of each epoch near the centre), and
-/// whose location (the centre on the before surface, global) is `owned`.
+/// The region over `cells`: cells whose four corners and centre both surfaces cover (a TIN's
+/// hull is convex, so its corners imply its centre; a user's mesh may have a hole there), that
+/// pass `cell_covered` (e.g. a point of each epoch near the centre), and whose location (the
+/// centre on the before surface, global) is `owned`.
 fn region_of(
     frame: &Frame,
     cells: Cells,
@@ -263,16 +264,17 @@ fn region_of(
     let flags: Vec<(bool, bool)> = (0..nv)
         .into_par_iter()
         .flat_map_iter(|j| {
-            let (node, c1) = (&node, &c1);
+            let (node, c1, c2) = (&node, &c1, &c2);
             (0..nu).map(move |i| {
-                let c = cells.centre(i, j);
+                let (c, k) = (cells.centre(i, j), cells.index(i, j));
                 let covered = node(i, j)
                     && node(i + 1, j)
                     && node(i, j + 1)
                     && node(i + 1, j + 1)
+                    && c1[k].is_finite()
+                    && c2[k].is_finite()
                     && cell_covered(c);
-                let w = c1[cells.index(i, j)];
-                let own = covered && w.is_finite() && owned(&frame.to_global(&[c[0], c[1], w]));
+                let own = covered && owned(&frame.to_global(&[c[0], c[1], c1[k]]));
                 (covered, own)
             })
         })
@@ -401,11 +403,8 @@ pub fn event_volume_from_surfaces(
     check_params(obb, margin, spacing)?;
     let frame = Frame::of_obb(obb);
     let r = Footprint::of_obb(obb, margin);
-    let both = |c: [f64; 2]| {
-        before.height_at(c[0], c[1]).is_some() && after.height_at(c[0], c[1]).is_some()
-    };
     let piece = |c: Cells, _whole: bool| -> Result<Piece> {
-        let (region, centres) = region_of(&frame, c, before, after, &both, owned);
+        let (region, centres) = region_of(&frame, c, before, after, &|_| true, owned);
         let tops = if region.is_empty() {
             None
         } else {
