@@ -994,12 +994,10 @@ impl<'a> Frame<'a> {
 
     /// Whether `other` holds the same columns (names and value types, in order).
     pub(crate) fn same_columns(&self, other: &Frame) -> bool {
-        let shape = |f: &Frame| -> Vec<(String, usize)> {
-            (f.h.columns.iter())
-                .map(|c| (c.name.clone(), value_width(c.kind)))
-                .collect()
-        };
-        shape(self) == shape(other)
+        let (a, b) = (&self.h.columns, &other.h.columns);
+        a.len() == b.len()
+            && (a.iter().zip(b))
+                .all(|(a, b)| a.name == b.name && value_width(a.kind) == value_width(b.kind))
     }
 
     /// Columns of this frame's names and types, `n` values each (zeroed: a large block comes
