@@ -48,7 +48,7 @@ fi
 python3 - "${runs[@]}" <<'PY'
 import re, sys
 units = {"MiB": 2**20, "GiB": 2**30}
-stages = ["tiling", "normals and M3C2", "merging tiles", "stable ground", "events", "volumes", "outputs"]
+stages = ["tiling", "normals and M3C2", "merging tiles", "stable ground", "events", "m3c2.laz", "volumes", "outputs"]
 print(f"| scene | --memory | " + " | ".join(stages) + " | process peak | peak / budget | wall |")
 print("|---|---|" + "---|" * len(stages) + "---|---|---|")
 worst = 0.0

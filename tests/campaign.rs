@@ -246,7 +246,7 @@ fn appending_a_survey_computes_only_what_it_adds() {
     ok(&campaign(&s[..5], &dir, &[]));
     let five = t.elapsed();
     let kinds = [
-        "tiling", "cores", "m3c2", "stable", "events", "volumes", "outputs",
+        "tiling", "cores", "m3c2", "stable", "events", "points", "volumes", "outputs",
     ];
     let before: BTreeMap<&str, _> = kinds.iter().map(|k| (*k, unit_times(&dir, k))).collect();
     let t = Instant::now();
@@ -268,6 +268,7 @@ fn appending_a_survey_computes_only_what_it_adds() {
     assert_eq!(added("tiling"), 1);
     assert_eq!(added("cores"), 0);
     assert_eq!(added("outputs"), 1);
+    assert_eq!(added("points"), 1);
     assert_eq!(added("m3c2"), before["m3c2"].len() / 4);
     eprintln!(
         "five surveys {:.1} s; the sixth appended {:.1} s",

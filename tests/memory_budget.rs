@@ -114,15 +114,15 @@ fn a_dense_tile_in_the_later_survey_is_refused_before_any_m3c2_unit() {
 
 #[test]
 fn a_merge_of_too_many_tiles_is_refused_before_anything_runs() {
-    // 100 tiles of 10 × 10: the outputs unit's merge holds a chunk of each tile's results at once,
-    // more than a 160 MiB budget's pool beside the writers.
+    // 100 tiles of 10 × 10: the points unit's merge (m3c2.laz) holds a chunk of each run's
+    // results at once, more than a 160 MiB budget's pool beside the LAZ writer.
     let dir = tempdir();
     let (b, a) = planes(dir.path(), 13, 20_000, 100.0, 100.0);
     let out = dir.path().join("out");
     let err = refused(&b, &a, &out, &["--memory", "160MiB", "--tile-size", "10"]);
     assert!(
         err.contains(
-            "--memory 160 MiB is too small: writing the pair's outputs, merging the results of its"
+            "--memory 160 MiB is too small: writing the pair's m3c2.laz, merging the results of its"
         ),
         "{err}"
     );

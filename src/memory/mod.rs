@@ -28,8 +28,8 @@ pub const BASE: u64 = 16 << 20;
 /// headers): measured peak minus the sum of reservations on the 5.2M-point cliff at 300 MiB.
 pub const SLACK: f64 = 0.05;
 
-/// The smallest budget: the one whose pool holds the outputs unit and the stable ground's fixed
-/// sample, the largest needs that do not depend on the data (a tiling unit's need is a share of
+/// The smallest budget: the one whose pool holds the points unit (m3c2.laz) and the stable
+/// ground's fixed sample, the largest needs that do not depend on the data (a tiling unit's need is a share of
 /// the budget; see `units::tiling::need`).
 pub const MIN_BUDGET: u64 = 160 << 20;
 
@@ -139,7 +139,14 @@ mod tests {
     #[test]
     fn the_smallest_budget_holds_the_fixed_needs() {
         let pool = pool_bytes(MIN_BUDGET);
-        assert!(crate::units::outputs::need(1) <= pool, "outputs do not fit");
+        assert!(
+            crate::units::outputs::points::need(1) <= pool,
+            "m3c2.laz does not fit"
+        );
+        assert!(
+            crate::units::outputs::NEED <= pool,
+            "the outputs do not fit"
+        );
         // The stable ground's fixed sample, beside the largest merge a later stage holds.
         let stable =
             crate::units::stable::need(crate::units::stable::SAMPLES, crate::units::merged::FAN_IN);

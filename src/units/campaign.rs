@@ -310,7 +310,6 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<CampaignMeta> {
     super::write_bytes(out, "magnitude_frequency.csv", mf.as_bytes())?;
     // timeseries.laz.
     let points = write_timeseries(ctx, out, cores, &crs_info)?;
-    (ctx.progress)(points);
     // report.html.
     let report = Report {
         title: format!(
@@ -372,6 +371,7 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<CampaignMeta> {
     let text = serde_json::to_vec_pretty(&summary).map_err(|e| Error::Internal(e.to_string()))?;
     super::write_bytes(out, MARKER, &text)?;
     publish.extend(FILES.iter().map(|&f| Publish::of(plan, unit, f, f.into())));
+    (ctx.progress)(publish.len() as u64);
     Ok(CampaignMeta {
         publish,
         events: events.len(),

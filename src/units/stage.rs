@@ -190,6 +190,7 @@ pub fn default_stages() -> Vec<&'static dyn Registered> {
         entry::<merged::MergedStage>(),
         entry::<stable::StableStage>(),
         entry::<events::EventsStage>(),
+        entry::<outputs::points::PointsStage>(),
         entry::<volumes::VolumesStage>(),
         entry::<outputs::OutputsStage>(),
         entry::<campaign::CampaignStage>(),
@@ -312,6 +313,30 @@ impl Planner<'_> {
             Some(i) => i,
             None => self.plan.push(spec, label, key_parts, deps),
         }
+    }
+
+    /// Add pair `pair`'s unit of `kind`, keyed by `version`, the pair's two surveys (as the plan
+    /// holds them: files, counts, bounds) and `cores` (the core points' key).
+    pub fn add_pair(
+        &mut self,
+        kind: &'static str,
+        pair: usize,
+        version: &str,
+        cores: &str,
+        deps: Vec<usize>,
+    ) -> usize {
+        let (b, a) = (self.plan.pairs[pair].before, self.plan.pairs[pair].after);
+        let inputs: Vec<String> = [b, a]
+            .iter()
+            .map(|&s| serde_json::to_string(&self.plan.surveys[s]).unwrap_or_default())
+            .collect();
+        let label = self.plan.pairs[pair].label.clone();
+        self.add(
+            Spec::pair(kind, pair),
+            &label,
+            &[version, &inputs[0], &inputs[1], cores],
+            deps,
+        )
     }
 
     /// The units holding pair `pair`'s M3C2 results: its M3C2 units, and its merged runs when

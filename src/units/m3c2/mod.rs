@@ -4,13 +4,14 @@
 //! key order (a k-way merge over the tiles), so everything downstream is the same whatever the
 //! tiling.
 
-use std::cmp::Reverse;
-use std::collections::BinaryHeap;
 use std::path::PathBuf;
 
 use talus_tiling::{Column, ColumnData, TileColumns, TileId};
 
 pub mod fit;
+mod merge;
+
+pub use merge::{merge_need, Merged};
 
 use super::cores::{ThinnedStage, UserCoresStage};
 use super::stage::{Line, Planner, Scope, Stage, Total};
@@ -474,104 +475,4 @@ pub fn pair_count(ctx: &Ctx, pair: usize) -> Result<u64> {
         n += ctx.meta::<M3c2Stage>(u)?.core_points;
     }
     Ok(n)
-}
-
-/// Chunks decoded ahead, over all tiles of a merge: a merge of few tiles decodes several of a
-/// tile's chunks at once, in parallel (a one-tile pair's results were read on one core while the
-/// other waited); a merge of many holds one chunk per tile, as a merge must.
-const LOOKAHEAD: usize = 8;
-
-/// Chunks a merge of `tiles` tiles decodes ahead per tile.
-fn ahead(tiles: usize) -> usize {
-    (LOOKAHEAD / tiles.max(1)).max(1)
-}
-
-/// Resident bytes of a [`Merged`] over `tiles` inputs (tiles, or the runs of
-/// `super::merged`: [`super::merged::merge_inputs`]): the other tiles' chunks (one each, a few
-/// when the tiles are few) while one tile reads its next ones: its last chunk, the new chunks and
-/// their files' decoded columns (about as large again). A stage that merges reserves it: a layout
-/// of many small tiles (a low budget, a dense site) costs the merge a chunk for each.
-pub fn merge_need(tiles: usize) -> u64 {
-    let chunk = (CHUNK_ROWS * std::mem::size_of::<KeyedResult>()) as u64;
-    let a = ahead(tiles) as u64;
-    ((tiles.max(1) as u64 - 1) * a + 1 + 2 * a) * chunk
-}
-
-/// A pair's M3C2 results in global key order: a k-way merge holding one chunk per tile (a few
-/// when the tiles are few, see `LOOKAHEAD`).
-pub struct Merged {
-    tiles: Vec<Vec<PathBuf>>,
-    /// Per tile: the loaded chunk, position in it, next chunk number, chunks decoded ahead.
-    cursors: Vec<Cursor>,
-    heap: BinaryHeap<Reverse<(u64, usize)>>,
-    ahead: usize,
-}
-
-#[derive(Default)]
-struct Cursor {
-    chunk: Vec<KeyedResult>,
-    pos: usize,
-    next: usize,
-    decoded: std::collections::VecDeque<Vec<KeyedResult>>,
-}
-
-impl Merged {
-    pub fn new(ctx: &Ctx, pair: usize) -> Result<Self> {
-        Self::of_runs(pair_chunks(ctx, pair)?)
-    }
-
-    /// The merge of `tiles`: each a sorted run of chunk files.
-    pub fn of_runs(tiles: Vec<Vec<PathBuf>>) -> Result<Self> {
-        let mut m = Merged {
-            cursors: (0..tiles.len()).map(|_| Cursor::default()).collect(),
-            ahead: ahead(tiles.len()),
-            tiles,
-            heap: BinaryHeap::new(),
-        };
-        for t in 0..m.tiles.len() {
-            m.advance_chunk(t)?;
-        }
-        Ok(m)
-    }
-
-    fn advance_chunk(&mut self, t: usize) -> Result<()> {
-        let files = &self.tiles[t];
-        let c = &mut self.cursors[t];
-        while c.pos >= c.chunk.len() && (c.next < files.len() || !c.decoded.is_empty()) {
-            if c.decoded.is_empty() {
-                use rayon::prelude::*;
-                let end = (c.next + self.ahead).min(files.len());
-                let read: Vec<Result<Vec<KeyedResult>>> = files[c.next..end]
-                    .par_iter()
-                    .map(|f| read_chunk(f))
-                    .collect();
-                for r in read {
-                    c.decoded.push_back(r?);
-                }
-                c.next = end;
-            }
-            c.chunk = c.decoded.pop_front().unwrap_or_default();
-            c.pos = 0;
-        }
-        if c.pos < c.chunk.len() {
-            self.heap.push(Reverse((c.chunk[c.pos].key, t)));
-        }
-        Ok(())
-    }
-
-    /// The next result in key order.
-    pub fn next_result(&mut self) -> Result<Option<KeyedResult>> {
-        let Some(Reverse((_, t))) = self.heap.pop() else {
-            return Ok(None);
-        };
-        let c = &mut self.cursors[t];
-        let r = c.chunk[c.pos];
-        c.pos += 1;
-        if c.pos < c.chunk.len() {
-            self.heap.push(Reverse((c.chunk[c.pos].key, t)));
-        } else {
-            self.advance_chunk(t)?;
-        }
-        Ok(Some(r))
-    }
 }

@@ -3,6 +3,8 @@
 
 use std::borrow::Cow;
 
+use serde::{Deserialize, Serialize};
+
 use crate::error::Result;
 use crate::io::las_out::{CoordinateGrid, ExtraDim, ExtraType, ResultWriter};
 use crate::io::Crs;
@@ -81,6 +83,7 @@ pub const M3C2_DIMS: &[ExtraDim] = &[
 ];
 
 /// Counts of what m3c2.laz holds.
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Written {
     pub core_points: u64,
     pub computed: u64,

@@ -5,6 +5,7 @@
 //! record's `publish` list says which file goes where).
 
 pub mod laz;
+pub mod points;
 pub mod tables;
 pub mod view;
 
@@ -22,13 +23,13 @@ use super::Ctx;
 use crate::error::{Error, Result};
 use crate::events::stable::Stable;
 use crate::events::{Event, Kind};
-use crate::io::las_out::CoordinateGrid;
 use crate::io::{self, Bounds};
 use crate::params::Params;
 use crate::plan::Spec;
 use crate::sampling::Spacing;
 use crate::store::UnitWriter;
 use crate::volume::uncertainty::VolumeUncertainty;
+use points::{PointsMeta, PointsStage};
 
 /// The file that completes a published set (written last, removed first).
 pub const MARKER: &str = "summary.json";
@@ -456,16 +457,11 @@ impl Publish {
     }
 }
 
-/// Resident bytes of an outputs unit beside its merge: the LAZ writer's chunk and buffers, the
-/// viewer's terrain sample, the events' records (measured: 110–125 MiB on the 5.2M-point cliff
-/// with 15 tiles, of which the merge's about 18).
-pub const FIXED: u64 = 112 << 20;
-
-/// Resident bytes of an outputs unit whose merge holds `inputs` inputs
-/// (`merged::merge_inputs`).
-pub fn need(inputs: usize) -> u64 {
-    FIXED + super::m3c2::merge_need(inputs)
-}
+/// Resident bytes of an outputs unit: the events' records and tables, the view (m3c2.laz and the
+/// terrain sample are the points unit's, `points::need`). The outputs unit's share of the
+/// 110–125 MiB measured on the 5.2M-point cliff when both were one unit, kept whole: the records
+/// of its events are what it holds.
+pub const NEED: u64 = points::FIXED;
 
 /// A pair's outputs, ready to publish.
 pub struct OutputsStage;
@@ -484,15 +480,14 @@ impl Stage for OutputsStage {
     const SCOPE: Scope = Scope::Pair;
     const LINE: Line = Line {
         name: "outputs",
-        counts: "core points",
+        counts: "files",
         total: Total::Unknown,
     };
     type Meta = OutputsMeta;
 
-    /// One per pair, over every unit of the pair but the tilings. Its need grows with the tile
-    /// count (the merge holds a chunk of every tile's results), so it is checked here.
+    /// One per pair, after its points unit (m3c2.laz, terrain.bin), stable ground, events and
+    /// volumes.
     fn plan(p: &mut Planner) -> Result<()> {
-        let tiles = p.plan.layout.len();
         let core_unit = p
             .find(&Spec::run(UserCoresStage::KIND))
             .or_else(|| p.find(&Spec::survey(ThinnedStage::KIND, 0)));
@@ -505,40 +500,15 @@ impl Stage for OutputsStage {
             p.plan.params.vegetation.value
         );
         for pair in 0..p.plan.pairs.len() {
-            let whose = match p.plan.pairs.len() {
-                1 => "the pair's".to_string(),
-                _ => format!("pair {}'s", p.plan.pairs[pair].label),
-            };
-            crate::memory::refuse_unless_fits(
-                need(super::merged::merge_inputs(p.plan)),
-                p.plan.params.memory_bytes.value,
-                &format!(
-                    "writing {whose} outputs, merging the results of its {tiles} tiles{}",
-                    if super::merged::in_rounds(p.plan) {
-                        " (in rounds)"
-                    } else {
-                        ""
-                    }
-                ),
-            )?;
-            let (b, a) = (p.plan.pairs[pair].before, p.plan.pairs[pair].after);
-            let mut deps = vec![p.the(&Spec::pair(StableStage::KIND, pair))?];
-            deps.extend(p.pair_results(pair));
+            let mut deps = vec![
+                p.the(&Spec::pair(StableStage::KIND, pair))?,
+                p.the(&Spec::pair(PointsStage::KIND, pair))?,
+            ];
             if let Some(e) = p.find(&Spec::pair(EventsStage::KIND, pair)) {
                 deps.push(e);
                 deps.extend(p.of_pair(VolumesStage::KIND, pair));
             }
-            let inputs: Vec<String> = [b, a]
-                .iter()
-                .map(|&s| serde_json::to_string(&p.plan.surveys[s]).unwrap_or_default())
-                .collect();
-            let label = p.plan.pairs[pair].label.clone();
-            p.add(
-                Spec::pair(Self::KIND, pair),
-                &label,
-                &[&version, &inputs[0], &inputs[1], cores],
-                deps,
-            );
+            p.add_pair(Self::KIND, pair, &version, cores, deps);
         }
         Ok(())
     }
@@ -563,16 +533,12 @@ fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<Outp
     let ground = super::stable::read(ctx, pair)?;
     let params = ground.params(plan);
     let grid = plan.layout.grid()?;
-    let _held = ctx.reserve(
-        need(super::merged::merge_inputs(plan)),
-        "writing the outputs (and the merge of the pair's tiles)",
-    )?;
+    let _held = ctx.reserve(NEED, "writing the outputs")?;
     // Events with their volumes, in id order.
-    let (records, kept, mesh_sources) = if plan.m3c2_only {
-        (Vec::new(), None, Vec::new())
+    let (records, mesh_sources) = if plan.m3c2_only {
+        (Vec::new(), Vec::new())
     } else {
         let drafts = super::events::read_drafts(ctx, pair)?;
-        let kept = super::events::KeptFrames::open(ctx, pair)?;
         let mut measured: HashMap<u32, (Measured, usize)> = HashMap::default();
         for t in grid.tiles() {
             let v = ctx.unit(&Spec::tile(VolumesStage::KIND, pair, t))?;
@@ -590,56 +556,16 @@ fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<Outp
             sources.push((d.event.id, v, m.meshes));
             records.push(EventRecord::new(d.event, m));
         }
-        (records, Some(kept), sources)
+        (records, sources)
     };
-    let kept_count = kept.as_ref().map_or(0, |k| k.count());
-    // The kept core points beside the results, both in key order.
-    let mut kept = super::events::KeptByKey::new(kept);
-    // m3c2.laz and the viewer's terrain, in one pass over the results.
-    let total = super::m3c2::pair_count(ctx, pair)?;
-    let mut terrain = view::TerrainSample::new(total, plan.layout.anchor);
-    // Core points are C1 points or the user's: the finest coordinate quantum of the file they
-    // come from keeps them exact.
-    let scales: Vec<[f64; 3]> = [
-        bs.scale,
-        plan.core_points.as_ref().and_then(|_| core_scale(ctx)),
-    ]
-    .into_iter()
-    .flatten()
-    .collect();
+    // m3c2.laz and terrain.bin, from the pair's points unit.
+    let points_unit = ctx.unit(&Spec::pair(PointsStage::KIND, pair))?;
+    let PointsMeta {
+        written,
+        terrain,
+        kept: kept_count,
+    } = ctx.meta::<PointsStage>(points_unit)?;
     let crs = io::open(&bs.files[0].path)?.info().crs.clone();
-    // The pair's own inputs (not the campaign's union: a survey added later must not change a
-    // finished pair's file).
-    let mut extent = Bounds::union(&[bs.bounds, plan.surveys[p.after].bounds]);
-    if let Some(c) = &plan.core_points {
-        if let Ok(r) = io::open(&c.path) {
-            extent.grow(&r.info().bounds.min);
-            extent.grow(&r.info().bounds.max);
-        }
-    }
-    // A campaign's core points come from its first survey.
-    for u in plan.of_kind(ThinnedStage::KIND) {
-        if let Some(survey) = plan.units[u].spec.survey {
-            extent.grow(&plan.surveys[survey].bounds.min);
-            extent.grow(&plan.surveys[survey].bounds.max);
-        }
-    }
-    let mut merged = super::m3c2::Merged::new(ctx, pair)?;
-    let written = laz::write_m3c2_laz(
-        out,
-        &mut merged,
-        total,
-        params.reg_error.value,
-        &crs,
-        CoordinateGrid::for_extent(extent.min, extent.max, &scales),
-        &mut |k| {
-            Ok(kept
-                .get(k)?
-                .map_or((f64::NAN, 0), |k| (k.smoothed, k.event)))
-        },
-        &mut |k| terrain.push(k),
-    )?;
-    (ctx.progress)(written.core_points);
     let mut publish = Vec::new();
     let mut meshes = Vec::new();
     for &(id, v, has) in &mesh_sources {
@@ -662,7 +588,7 @@ fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<Outp
         tables::write_tables(out, &records, &crs)?;
         tables::write_regions(out, &records, &crs)?;
     }
-    terrain.write(out, &crs, &meshes)?;
+    view::write_view(out, &crs, &terrain, &meshes)?;
     let summary = summarize(
         ctx,
         unit,
@@ -671,12 +597,17 @@ fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<Outp
         ground.stable,
         &records,
         &written,
-        kept_count as usize,
+        kept_count,
     )?;
     let text = serde_json::to_string_pretty(&summary)
         .map_err(|e| Error::Internal(format!("summary: {e}")))?;
     super::write_bytes(out, MARKER, text.as_bytes())?;
-    let mut files = vec!["m3c2.laz", "view.json", "terrain.bin", MARKER];
+    publish.extend(
+        points::FILES
+            .iter()
+            .map(|&f| Publish::of(plan, points_unit, f, f.into())),
+    );
+    let mut files = vec!["view.json", MARKER];
     if !plan.m3c2_only {
         files.extend(["events.geojson", "events.csv", "event_regions.geojson"]);
     }
@@ -685,16 +616,11 @@ fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<Outp
             .into_iter()
             .map(|f| Publish::of(plan, unit, f, f.into())),
     );
+    (ctx.progress)(publish.len() as u64);
     Ok(OutputsMeta {
         publish,
         core_points: written.core_points,
     })
-}
-
-/// The LAS scale of the user's core-point file, if it has one.
-fn core_scale(ctx: &Ctx) -> Option<[f64; 3]> {
-    let c = ctx.plan.core_points.as_ref()?;
-    io::open(&c.path).ok()?.info().scale
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -706,7 +632,7 @@ fn summarize(
     stable: Option<Stable>,
     records: &[EventRecord],
     written: &laz::Written,
-    kept: usize,
+    kept: u64,
 ) -> Result<Summary> {
     let plan = ctx.plan;
     let p = &plan.pairs[pair];
@@ -803,7 +729,7 @@ fn summarize(
         core_points: written.core_points,
         computed_points: written.computed,
         significant_points: written.significant,
-        kept_points: kept as u64,
+        kept_points: kept,
         events: records.len(),
         gain_events: records
             .iter()

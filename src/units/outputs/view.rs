@@ -2,7 +2,7 @@
 //! to at most [`MAX_TERRAIN_POINTS`] whatever the input size, as float32 offsets from a local
 //! origin (UTM-sized values would jitter in float32), with their M3C2 distance.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 use crate::io::{Crs, Point3};
@@ -69,13 +69,8 @@ impl TerrainSample {
         self.seen += 1;
     }
 
-    /// Write terrain.bin and view.json.
-    pub fn write(
-        self,
-        out: &mut UnitWriter,
-        crs: &Crs,
-        meshes: &[(u32, EventMeshes)],
-    ) -> Result<()> {
+    /// Write terrain.bin; what view.json says of it.
+    pub fn write(self, out: &mut UnitWriter) -> Result<Terrain> {
         let TerrainSample {
             origin,
             pos,
@@ -96,7 +91,7 @@ impl TerrainSample {
         drop(pos);
         // The colour range from the distances themselves (written already): no copy of them.
         dist.retain(|d| d.is_finite());
-        let range = if dist.is_empty() {
+        let distance_range = if dist.is_empty() {
             [0.0, 0.0]
         } else {
             let mut q = |f: f64| {
@@ -105,21 +100,45 @@ impl TerrainSample {
             };
             [q(0.02), q(0.98)]
         };
-        let view = ViewJson {
-            version: 1,
-            crs: crs.describe(),
-            units: "m",
+        Ok(Terrain {
             origin,
             points,
-            distance_range: range,
-            terrain: "terrain.bin",
-            meshes: meshes
-                .iter()
-                .map(|(id, m)| (id.to_string(), m.clone()))
-                .collect(),
-        };
-        let text =
-            serde_json::to_string_pretty(&view).map_err(|e| Error::Internal(e.to_string()))?;
-        write_bytes(out, "view.json", text.as_bytes())
+            distance_range,
+        })
     }
+}
+
+/// What view.json says of terrain.bin.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Terrain {
+    /// The local origin the float32 offsets are from.
+    pub origin: Point3,
+    pub points: usize,
+    /// The 2nd and 98th percentiles of the sample's distances (the viewer's colour range).
+    pub distance_range: [f64; 2],
+}
+
+/// Write view.json: the terrain sample `terrain` (published beside it as terrain.bin) and the
+/// events' meshes.
+pub fn write_view(
+    out: &mut UnitWriter,
+    crs: &Crs,
+    terrain: &Terrain,
+    meshes: &[(u32, EventMeshes)],
+) -> Result<()> {
+    let view = ViewJson {
+        version: 1,
+        crs: crs.describe(),
+        units: "m",
+        origin: terrain.origin,
+        points: terrain.points,
+        distance_range: terrain.distance_range,
+        terrain: "terrain.bin",
+        meshes: meshes
+            .iter()
+            .map(|(id, m)| (id.to_string(), m.clone()))
+            .collect(),
+    };
+    let text = serde_json::to_string_pretty(&view).map_err(|e| Error::Internal(e.to_string()))?;
+    write_bytes(out, "view.json", text.as_bytes())
 }

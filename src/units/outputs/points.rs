@@ -1,0 +1,177 @@
+//! A points unit: a pair's m3c2.laz and the viewer's terrain sample (terrain.bin), in one pass
+//! over the pair's results in key order. The outputs unit publishes both from here.
+//!
+//! A unit of its own because it needs the events (each core point's smoothed distance and event
+//! id) but not their volumes: it runs beside the volumes units instead of after them. Writing
+//! m3c2.laz is LAZ encoding for the most part (≈ 30 of its ≈ 43 CPU-s on the 120M-point pair),
+//! the volumes are triangulations and solids; neither alone kept both cores busy.
+
+use serde::{Deserialize, Serialize};
+
+use super::laz::{self, Written};
+use super::view::{Terrain, TerrainSample};
+use crate::error::Result;
+use crate::io::las_out::CoordinateGrid;
+use crate::io::{self, Bounds};
+use crate::plan::Spec;
+use crate::store::UnitWriter;
+use crate::units::cores::{ThinnedStage, UserCoresStage};
+use crate::units::events::{EventsStage, KeptByKey, KeptFrames};
+use crate::units::stable::StableStage;
+use crate::units::stage::{Line, Planner, Scope, Stage, Total};
+use crate::units::Ctx;
+
+/// Resident bytes of a points unit beside its merge: the LAZ writer's batches and the LAZ
+/// compressor's chunks, the viewer's terrain sample (at most 2M points, 16 B each), the kept core
+/// points' frames (measured with the outputs it was part of: 110–125 MiB on the 5.2M-point cliff
+/// with 15 tiles, of which the merge's about 18).
+pub const FIXED: u64 = 112 << 20;
+
+/// Resident bytes of a points unit whose merge holds `inputs` inputs
+/// (`merged::merge_inputs`).
+pub fn need(inputs: usize) -> u64 {
+    FIXED + crate::units::m3c2::merge_need(inputs)
+}
+
+/// A pair's m3c2.laz and terrain sample.
+pub struct PointsStage;
+
+/// What a points unit records.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct PointsMeta {
+    /// What m3c2.laz holds.
+    pub written: Written,
+    /// The terrain sample in terrain.bin.
+    pub terrain: Terrain,
+    /// Core points in the pair's events' kept set (the significance filter's survivors).
+    pub kept: u64,
+}
+
+/// The files of a points unit.
+pub const FILES: [&str; 2] = ["m3c2.laz", "terrain.bin"];
+
+impl Stage for PointsStage {
+    const KIND: &'static str = "points";
+    const SCOPE: Scope = Scope::Pair;
+    const LINE: Line = Line {
+        name: "m3c2.laz",
+        counts: "core points",
+        total: Total::Unknown,
+    };
+    type Meta = PointsMeta;
+
+    /// One per pair, over the pair's stable ground, results and events. Its need grows with the
+    /// tile count (the merge holds a chunk of every tile's results, or of every run), so it is
+    /// checked here.
+    fn plan(p: &mut Planner) -> Result<()> {
+        let tiles = p.plan.layout.len();
+        let core_unit = p
+            .find(&Spec::run(UserCoresStage::KIND))
+            .or_else(|| p.find(&Spec::survey(ThinnedStage::KIND, 0)));
+        let cores = crate::units::m3c2::cores_key(core_unit);
+        let version = format!("{}|{}", env!("CARGO_PKG_VERSION"), p.plan.m3c2_only);
+        for pair in 0..p.plan.pairs.len() {
+            let whose = match p.plan.pairs.len() {
+                1 => "the pair's".to_string(),
+                _ => format!("pair {}'s", p.plan.pairs[pair].label),
+            };
+            crate::memory::refuse_unless_fits(
+                need(crate::units::merged::merge_inputs(p.plan)),
+                p.plan.params.memory_bytes.value,
+                &format!(
+                    "writing {whose} m3c2.laz, merging the results of its {tiles} tiles{}",
+                    if crate::units::merged::in_rounds(p.plan) {
+                        " (in rounds)"
+                    } else {
+                        ""
+                    }
+                ),
+            )?;
+            let mut deps = vec![p.the(&Spec::pair(StableStage::KIND, pair))?];
+            deps.extend(p.pair_results(pair));
+            deps.extend(p.find(&Spec::pair(EventsStage::KIND, pair)));
+            p.add_pair(Self::KIND, pair, &version, cores, deps);
+        }
+        Ok(())
+    }
+
+    fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<PointsMeta> {
+        run(ctx, ctx.pair(unit)?, out)
+    }
+}
+
+/// Write pair `pair`'s m3c2.laz and terrain sample into `out`.
+fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<PointsMeta> {
+    let plan = ctx.plan;
+    let p = &plan.pairs[pair];
+    let bs = &plan.surveys[p.before];
+    let ground = crate::units::stable::read(ctx, pair)?;
+    let params = ground.params(plan);
+    let _held = ctx.reserve(
+        need(crate::units::merged::merge_inputs(plan)),
+        "writing m3c2.laz (and the merge of the pair's tiles)",
+    )?;
+    let kept = match plan.m3c2_only {
+        true => None,
+        false => Some(KeptFrames::open(ctx, pair)?),
+    };
+    let kept_count = kept.as_ref().map_or(0, |k| k.count());
+    // The kept core points beside the results, both in key order.
+    let mut kept = KeptByKey::new(kept);
+    let total = crate::units::m3c2::pair_count(ctx, pair)?;
+    let mut terrain = TerrainSample::new(total, plan.layout.anchor);
+    // Core points are C1 points or the user's: the finest coordinate quantum of the file they
+    // come from keeps them exact.
+    let scales: Vec<[f64; 3]> = [
+        bs.scale,
+        plan.core_points.as_ref().and_then(|_| core_scale(ctx)),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
+    let crs = io::open(&bs.files[0].path)?.info().crs.clone();
+    // The pair's own inputs (not the campaign's union: a survey added later must not change a
+    // finished pair's file).
+    let mut extent = Bounds::union(&[bs.bounds, plan.surveys[p.after].bounds]);
+    if let Some(c) = &plan.core_points {
+        if let Ok(r) = io::open(&c.path) {
+            extent.grow(&r.info().bounds.min);
+            extent.grow(&r.info().bounds.max);
+        }
+    }
+    // A campaign's core points come from its first survey.
+    for u in plan.of_kind(ThinnedStage::KIND) {
+        if let Some(survey) = plan.units[u].spec.survey {
+            extent.grow(&plan.surveys[survey].bounds.min);
+            extent.grow(&plan.surveys[survey].bounds.max);
+        }
+    }
+    let mut merged = crate::units::m3c2::Merged::new(ctx, pair)?;
+    let written = laz::write_m3c2_laz(
+        out,
+        &mut merged,
+        total,
+        params.reg_error.value,
+        &crs,
+        CoordinateGrid::for_extent(extent.min, extent.max, &scales),
+        &mut |k| {
+            Ok(kept
+                .get(k)?
+                .map_or((f64::NAN, 0), |k| (k.smoothed, k.event)))
+        },
+        &mut |k| terrain.push(k),
+    )?;
+    (ctx.progress)(written.core_points);
+    let terrain = terrain.write(out)?;
+    Ok(PointsMeta {
+        written,
+        terrain,
+        kept: kept_count,
+    })
+}
+
+/// The LAS scale of the user's core-point file, if it has one.
+fn core_scale(ctx: &Ctx) -> Option<[f64; 3]> {
+    let c = ctx.plan.core_points.as_ref()?;
+    io::open(&c.path).ok()?.info().scale
+}
