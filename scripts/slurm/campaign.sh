@@ -87,8 +87,8 @@ sed 's/^/  /' "$work/slurm.jobs"
 sed 's/^/  /' "$work/slurm.err"
 [[ $rc == 0 ]] || fail "the Slurm run exited $rc"
 # One array per registered stage that has units here (tiling, align, aligned, thinned, m3c2,
-# stable, events, volumes, outputs, campaign) and the publishing job.
-[[ "$(wc -l <"$work/slurm.jobs")" == 11 ]] || fail "expected 11 arrays (10 stages and the publishing job)"
+# stable, events, points, volumes, outputs, campaign) and the publishing job.
+[[ "$(wc -l <"$work/slurm.jobs")" == 12 ]] || fail "expected 12 arrays (11 stages and the publishing job)"
 echo "Slurm run: $((SECONDS - t0)) s"
 same_as_local slurm
 
