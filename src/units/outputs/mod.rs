@@ -1,8 +1,8 @@
 //! An outputs unit: a pair's result files (SPEC.md §2), written into the unit like any other and
-//! published into DIR as one set by the executor (`store::Store::publish`): m3c2.laz,
-//! events.geojson, event_regions.geojson, events.csv, view.json, terrain.bin and summary.json
-//! here; the meshes stay in the volumes units that wrote them and are published from there (the
-//! record's `publish` list says which file goes where).
+//! published into DIR as one set by the executor (`store::Store::publish`): events.geojson,
+//! event_regions.geojson, events.csv, view.json and summary.json here; m3c2.laz and terrain.bin
+//! stay in the pair's points unit ([`points`]) and the meshes in the volumes units that wrote
+//! them, and are published from there (the record's `publish` list says which file goes where).
 
 pub mod laz;
 pub mod points;
@@ -457,10 +457,10 @@ impl Publish {
     }
 }
 
-/// Resident bytes of an outputs unit: the events' records and tables, the view (m3c2.laz and the
-/// terrain sample are the points unit's, `points::need`). The outputs unit's share of the
-/// 110–125 MiB measured on the 5.2M-point cliff when both were one unit, kept whole: the records
-/// of its events are what it holds.
+/// Resident bytes of an outputs unit: the events' records, their tables and the view (m3c2.laz
+/// and the terrain sample are the points unit's, `points::need`). Measured: the process's peak
+/// while it ran 38–43 MiB on the 120M-point pair (1,028 events, the process's base included);
+/// reserved as what the unit reserved before m3c2.laz moved out, which the smallest budget holds.
 pub const NEED: u64 = points::FIXED;
 
 /// A pair's outputs, ready to publish.
