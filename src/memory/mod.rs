@@ -29,8 +29,8 @@ pub const BASE: u64 = 16 << 20;
 pub const SLACK: f64 = 0.05;
 
 /// The smallest budget: the one whose pool holds the points unit (m3c2.laz) and the stable
-/// ground's fixed sample, the largest needs that do not depend on the data (a tiling unit's need is a share of
-/// the budget; see `units::tiling::need`).
+/// ground's fixed sample, the largest needs that do not depend on the data (a tiling unit's need
+/// is a share of the budget; see `units::tiling::need`).
 pub const MIN_BUDGET: u64 = 160 << 20;
 
 /// The pool of a budget of `budget` bytes: what is left after [`BASE`] and [`SLACK`].

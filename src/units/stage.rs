@@ -315,16 +315,23 @@ impl Planner<'_> {
         }
     }
 
+    /// The unit the pairs' core points come from: the user's core points, or a campaign's
+    /// thinned first survey (None: each M3C2 unit thins its tile of the before survey).
+    pub fn core_unit(&self) -> Option<usize> {
+        self.find(&Spec::run(super::cores::UserCoresStage::KIND))
+            .or_else(|| self.find(&Spec::survey(super::cores::ThinnedStage::KIND, 0)))
+    }
+
     /// Add pair `pair`'s unit of `kind`, keyed by `version`, the pair's two surveys (as the plan
-    /// holds them: files, counts, bounds) and `cores` (the core points' key).
+    /// holds them: files, counts, bounds) and where its core points come from.
     pub fn add_pair(
         &mut self,
         kind: &'static str,
         pair: usize,
         version: &str,
-        cores: &str,
         deps: Vec<usize>,
     ) -> usize {
+        let cores = super::m3c2::cores_key(self.core_unit());
         let (b, a) = (self.plan.pairs[pair].before, self.plan.pairs[pair].after);
         let inputs: Vec<String> = [b, a]
             .iter()

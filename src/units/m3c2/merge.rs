@@ -60,17 +60,9 @@ struct Cursor {
     left: usize,
 }
 
-/// When a run needs its next chunk: `(later, key, run)` — at once (`later` false: its current
-/// chunk is empty), else once the merge hands out `key`, its current chunk's last. Ordered as the
-/// merge reaches these moments (ties, all at once, by run, as the caller takes them).
-type Due = Reverse<(bool, u64, usize)>;
-
-fn due(run: usize, chunk: &[KeyedResult]) -> Due {
-    match chunk.last() {
-        Some(r) => Reverse((true, r.key, run)),
-        None => Reverse((false, 0, run)),
-    }
-}
+/// When a run needs its next chunk: once the merge hands out `key`, its current chunk's last.
+/// Ordered as the merge reaches these moments.
+type Due = Reverse<(u64, usize)>;
 
 impl Merged {
     pub fn new(ctx: &super::Ctx, pair: usize) -> Result<Self> {
@@ -80,36 +72,45 @@ impl Merged {
     /// The merge of `runs`: each a sorted run of chunk files.
     pub fn of_runs(runs: Vec<Vec<PathBuf>>) -> Result<Self> {
         use rayon::prelude::*;
-        // The first chunk of every run, in parallel; the rest from the reader.
-        let first: Vec<Vec<KeyedResult>> = runs
+        // The first non-empty chunk of every run, in parallel, and how many files it took; the
+        // rest from the reader.
+        let first: Vec<(Vec<KeyedResult>, usize)> = runs
             .par_iter()
-            .map(|files| files.first().map_or(Ok(Vec::new()), |f| read_chunk(f)))
+            .map(|files| {
+                for (k, f) in files.iter().enumerate() {
+                    let chunk = read_chunk(f)?;
+                    if !chunk.is_empty() {
+                        return Ok((chunk, k + 1));
+                    }
+                }
+                Ok((Vec::new(), files.len()))
+            })
             .collect::<Vec<_>>()
             .into_iter()
             .collect::<Result<_>>()?;
         let mut todo = BinaryHeap::new();
         let mut rest: Vec<VecDeque<PathBuf>> = Vec::with_capacity(runs.len());
-        for (r, files) in runs.into_iter().enumerate() {
-            let files: VecDeque<PathBuf> = files.into_iter().skip(1).collect();
-            if !files.is_empty() {
-                todo.push(due(r, &first[r]));
-            }
-            rest.push(files);
-        }
         let mut m = Merged {
-            cursors: first
-                .into_iter()
-                .zip(&rest)
-                .map(|(chunk, files)| Cursor {
-                    chunk,
-                    pos: 0,
-                    left: files.len(),
-                })
-                .collect(),
+            cursors: Vec::with_capacity(runs.len()),
             heap: BinaryHeap::new(),
             chunks: None,
             reader: None,
         };
+        for (r, (files, (chunk, used))) in runs.into_iter().zip(first).enumerate() {
+            let files: VecDeque<PathBuf> = files.into_iter().skip(used).collect();
+            if let (Some(head), Some(last)) = (chunk.first(), chunk.last()) {
+                m.heap.push(Reverse((head.key, r)));
+                if !files.is_empty() {
+                    todo.push(Reverse((last.key, r)));
+                }
+            }
+            m.cursors.push(Cursor {
+                chunk,
+                pos: 0,
+                left: files.len(),
+            });
+            rest.push(files);
+        }
         if !todo.is_empty() {
             // The reader holds one decoded chunk until the merge takes it (a queue of none for
             // many runs: a rendezvous), so it is at most `ahead` chunks ahead.
@@ -120,13 +121,6 @@ impl Merged {
                 .map_err(|e| Error::Internal(format!("the merge's reader thread: {e}")))?;
             m.chunks = Some(chunks);
             m.reader = Some(reader);
-        }
-        for r in 0..m.cursors.len() {
-            if m.cursors[r].chunk.is_empty() {
-                m.next_chunk(r)?;
-            } else {
-                m.heap.push(Reverse((m.cursors[r].chunk[0].key, r)));
-            }
         }
         Ok(m)
     }
@@ -196,7 +190,7 @@ fn read_ahead(
     mut todo: BinaryHeap<Due>,
     send: crossbeam_channel::Sender<Decoded>,
 ) {
-    while let Some(Reverse((later, key, r))) = todo.pop() {
+    while let Some(Reverse((key, r))) = todo.pop() {
         let Some(file) = rest[r].pop_front() else {
             continue;
         };
@@ -209,11 +203,9 @@ fn read_ahead(
         };
         if !rest[r].is_empty() {
             // An empty chunk is passed over at the moment it is received: the run needs its
-            // next one at that same moment, before any other run's.
-            todo.push(match chunk.last() {
-                Some(_) => due(r, &chunk),
-                None => Reverse((later, key, r)),
-            });
+            // next one at that same moment (`key` was the least due; keys are unique).
+            let due = chunk.last().map_or(key, |last| last.key);
+            todo.push(Reverse((due, r)));
         }
         if send.send(Ok((r, chunk))).is_err() {
             return;

@@ -83,9 +83,7 @@ impl Stage for M3c2Stage {
             p.plan.params.m3c2(),
             p.plan.params.core_spacing.value
         );
-        let core_unit = p
-            .find(&Spec::run(UserCoresStage::KIND))
-            .or_else(|| p.find(&Spec::survey(ThinnedStage::KIND, 0)));
+        let core_unit = p.core_unit();
         let cores = cores_key(core_unit);
         for pair in 0..p.plan.pairs.len() {
             fit::check_planned(p.plan, pair)?;

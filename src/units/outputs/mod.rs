@@ -14,7 +14,6 @@ use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
 
-use super::cores::{ThinnedStage, UserCoresStage};
 use super::events::EventsStage;
 use super::stable::StableStage;
 use super::stage::{registry, Line, Planner, Publishes, Scope, Stage, Total};
@@ -488,10 +487,6 @@ impl Stage for OutputsStage {
     /// One per pair, after its points unit (m3c2.laz, terrain.bin), stable ground, events and
     /// volumes.
     fn plan(p: &mut Planner) -> Result<()> {
-        let core_unit = p
-            .find(&Spec::run(UserCoresStage::KIND))
-            .or_else(|| p.find(&Spec::survey(ThinnedStage::KIND, 0)));
-        let cores = super::m3c2::cores_key(core_unit);
         // The vegetation mode decides what the totals count.
         let version = format!(
             "{}|{}|vegetation {}",
@@ -508,7 +503,7 @@ impl Stage for OutputsStage {
                 deps.push(e);
                 deps.extend(p.of_pair(VolumesStage::KIND, pair));
             }
-            p.add_pair(Self::KIND, pair, &version, cores, deps);
+            p.add_pair(Self::KIND, pair, &version, deps);
         }
         Ok(())
     }

@@ -15,7 +15,7 @@ use crate::io::las_out::CoordinateGrid;
 use crate::io::{self, Bounds};
 use crate::plan::Spec;
 use crate::store::UnitWriter;
-use crate::units::cores::{ThinnedStage, UserCoresStage};
+use crate::units::cores::ThinnedStage;
 use crate::units::events::{EventsStage, KeptByKey, KeptFrames};
 use crate::units::stable::StableStage;
 use crate::units::stage::{Line, Planner, Scope, Stage, Total};
@@ -65,10 +65,6 @@ impl Stage for PointsStage {
     /// checked here.
     fn plan(p: &mut Planner) -> Result<()> {
         let tiles = p.plan.layout.len();
-        let core_unit = p
-            .find(&Spec::run(UserCoresStage::KIND))
-            .or_else(|| p.find(&Spec::survey(ThinnedStage::KIND, 0)));
-        let cores = crate::units::m3c2::cores_key(core_unit);
         let version = format!("{}|{}", env!("CARGO_PKG_VERSION"), p.plan.m3c2_only);
         for pair in 0..p.plan.pairs.len() {
             let whose = match p.plan.pairs.len() {
@@ -90,7 +86,7 @@ impl Stage for PointsStage {
             let mut deps = vec![p.the(&Spec::pair(StableStage::KIND, pair))?];
             deps.extend(p.pair_results(pair));
             deps.extend(p.find(&Spec::pair(EventsStage::KIND, pair)));
-            p.add_pair(Self::KIND, pair, &version, cores, deps);
+            p.add_pair(Self::KIND, pair, &version, deps);
         }
         Ok(())
     }
@@ -120,24 +116,25 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<PointsMeta> {
     let mut kept = KeptByKey::new(kept);
     let total = crate::units::m3c2::pair_count(ctx, pair)?;
     let mut terrain = TerrainSample::new(total, plan.layout.anchor);
+    // The user's core-point file, when there is one, opened once for its scale and bounds.
+    let user_cores = plan
+        .core_points
+        .as_ref()
+        .and_then(|c| io::open(&c.path).ok())
+        .map(|r| r.info().clone());
     // Core points are C1 points or the user's: the finest coordinate quantum of the file they
     // come from keeps them exact.
-    let scales: Vec<[f64; 3]> = [
-        bs.scale,
-        plan.core_points.as_ref().and_then(|_| core_scale(ctx)),
-    ]
-    .into_iter()
-    .flatten()
-    .collect();
+    let scales: Vec<[f64; 3]> = [bs.scale, user_cores.as_ref().and_then(|i| i.scale)]
+        .into_iter()
+        .flatten()
+        .collect();
     let crs = io::open(&bs.files[0].path)?.info().crs.clone();
     // The pair's own inputs (not the campaign's union: a survey added later must not change a
     // finished pair's file).
     let mut extent = Bounds::union(&[bs.bounds, plan.surveys[p.after].bounds]);
-    if let Some(c) = &plan.core_points {
-        if let Ok(r) = io::open(&c.path) {
-            extent.grow(&r.info().bounds.min);
-            extent.grow(&r.info().bounds.max);
-        }
+    if let Some(i) = &user_cores {
+        extent.grow(&i.bounds.min);
+        extent.grow(&i.bounds.max);
     }
     // A campaign's core points come from its first survey.
     for u in plan.of_kind(ThinnedStage::KIND) {
@@ -168,10 +165,4 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<PointsMeta> {
         terrain,
         kept: kept_count,
     })
-}
-
-/// The LAS scale of the user's core-point file, if it has one.
-fn core_scale(ctx: &Ctx) -> Option<[f64; 3]> {
-    let c = ctx.plan.core_points.as_ref()?;
-    io::open(&c.path).ok()?.info().scale
 }
