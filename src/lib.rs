@@ -36,4 +36,8 @@ pub mod synth;
 pub mod units;
 pub mod volume;
 
+/// Large blocks on huge pages (see `memory::large`).
+#[global_allocator]
+static ALLOCATOR: memory::large::Allocator = memory::large::Allocator;
+
 pub use error::{Error, Result};

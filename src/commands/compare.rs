@@ -437,11 +437,15 @@ pub fn run_planned(
     }
     let plan = plan(store)?;
     plan.save(&plan_path(store))?;
+    // Every unit gone from the store at once; their files deleted beside the run (a tile file's
+    // unlink blocks for milliseconds), at the latest before publishing.
+    let mut trash = Vec::new();
     if force {
         for i in 0..plan.units.len() {
-            store.invalidate(&unit_ref(&plan, i))?;
+            trash.extend(store.invalidate_later(&unit_ref(&plan, i))?);
         }
     }
+    let sweep = crate::store::Sweep::start(trash);
     crate::progress::trace(|| "plan saved".into());
     if let crate::exec::Executor::Slurm(opts) = executor {
         return crate::exec::slurm::run(store, &plan, opts, &command, lock, ours);
@@ -453,6 +457,7 @@ pub fn run_planned(
     let slots = plan.params.threads.value.min(2);
     pool.install(|| crate::exec::run(store, &plan, slots, "run"))?;
     crate::progress::trace(|| "executed".into());
+    drop(sweep);
     let marker = crate::exec::publish::publish_and_gc(store, &plan, ours)?;
     crate::progress::trace(|| "published".into());
     drop(lock);

@@ -28,7 +28,7 @@
 use crate::geom::Point3;
 use rayon::prelude::*;
 
-use crate::spatial::Index;
+use crate::spatial::Pairs;
 
 /// Residuals beyond this many robust standard deviations are not stable ground.
 pub const KEEP_SIGMAS: f64 = 2.5;
@@ -335,13 +335,15 @@ fn fit_variogram(samples: &[Sample], keep: &[usize], t: &Point3, spacing: f64) -
             lo * lo
         })
         .collect();
+    // The bin of a squared lag: the edges it reaches, counted without a branch (a binary search
+    // mispredicts on random lags).
     let bin = |h2: f64| -> Option<usize> {
-        let k = edges.partition_point(|&e| e <= h2);
+        let k: usize = edges.iter().map(|&e| usize::from(e <= h2)).sum();
         (k > 0 && k <= bins).then(|| k - 1)
     };
-    let index = Index::new(&pts, pts[0]);
     let step = (n / ANCHORS).max(1);
     let reach = 8.0 * h0;
+    let near_pairs = Pairs::new(&pts, reach);
     let anchors: Vec<usize> = (0..n).step_by(step).collect();
     // The pairs are summed in parts of fixed size, in parallel, and the parts added in order:
     // the same sums whatever the number of threads.
@@ -354,13 +356,9 @@ fn fit_variogram(samples: &[Sample], keep: &[usize], t: &Point3, spacing: f64) -
         .par_chunks(512)
         .map(|chunk| {
             let mut lags = Lags::new(bins);
+            let mut found = Vec::new();
             for &a in chunk {
-                let q = index.to_local(&pts[a]);
-                index.for_each_within(&q, reach, |b, h2| {
-                    if b > a {
-                        part(&mut lags, a, b, h2);
-                    }
-                });
+                near_pairs.after(a, &mut found, |b, h2| part(&mut lags, a, b, h2));
             }
             lags
         })

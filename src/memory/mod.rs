@@ -12,8 +12,10 @@
 //! peak stacks on top of them. Two remedies, both measured on the 5.2M-point cliff
 //! (benches/memory.sh): at most [`ARENAS`] arenas, and every free page handed back
 //! (`malloc_trim`) after each unit. A third, measured on the 120M-point pair: large blocks
-//! always mapped on their own ([`MMAP_THRESHOLD`]).
+//! always mapped on their own ([`MMAP_THRESHOLD`]), by the process's allocator ([`large`]),
+//! on transparent huge pages where they span them.
 
+pub mod large;
 pub mod pool;
 
 pub use pool::{Pool, Reservation};

@@ -30,6 +30,24 @@ fn band_shift(columns: usize) -> u32 {
     shift
 }
 
+/// Sort a column's points by height: by insertion for the few points a column usually holds
+/// (faster there than the library's general sort), by the library's sort for many.
+fn sort_by_height(col: &mut [Point3]) {
+    if col.len() > 32 {
+        col.sort_unstable_by(|a, b| a[2].total_cmp(&b[2]));
+        return;
+    }
+    for i in 1..col.len() {
+        let p = col[i];
+        let mut j = i;
+        while j > 0 && col[j - 1][2].total_cmp(&p[2]).is_gt() {
+            col[j] = col[j - 1];
+            j -= 1;
+        }
+        col[j] = p;
+    }
+}
+
 /// The exact cylinder test every cylinder query makes: the projection t of `p − q` on the unit
 /// axis `n`, and whether |t| ≤ `h` and |p − q|² − t² ≤ `r2` (no branch: the verdicts follow no
 /// pattern a predictor could learn).
@@ -116,9 +134,9 @@ impl Columns {
         // A counting sort by column whose scatter stays in cache: a tile's points come in file
         // order, which on a scanner's or a random sample's file is all over the tile, and one
         // scatter straight into the columns missed the cache at nearly every point (it was a
-        // third of building the index). Points go first into bands of consecutive columns (few
-        // enough that every band's write position stays cached), then each band, now small, is
-        // permuted into its columns in place.
+        // third of building the index). Points go first, with their columns, into bands of
+        // consecutive columns (few enough that every band's write position stays cached); then
+        // each band, now small, is placed into its columns through a copy that stays in cache.
         let columns = dims[0] * dims[1];
         assert!(columns < u32::MAX as usize, "{columns} columns");
         let column: Vec<u32> = (0..n)
@@ -136,47 +154,39 @@ impl Columns {
         let bands = columns.div_ceil(1 << shift);
         let mut next: Vec<usize> = (0..bands).map(|b| index.starts[b << shift]).collect();
         let mut sorted = vec![[0.0; 3]; n];
+        let mut banded = vec![0u32; n];
         for (p, &c) in (0..n).map(local).zip(&column) {
             let b = c as usize >> shift;
             sorted[next[b]] = p;
+            banded[next[b]] = c;
             next[b] += 1;
         }
         drop(column);
-        let mut offsets = Vec::with_capacity(1 << shift);
+        // Each band into its columns: copied out (it is small), then placed back by column.
+        let (mut points, mut cols, mut at) = (Vec::new(), Vec::new(), Vec::new());
         for b in 0..bands {
             let (c0, c1) = (b << shift, ((b + 1) << shift).min(columns));
-            index.permute_band(&mut sorted, c0, c1, &mut offsets);
+            let (s0, s1) = (index.starts[c0], index.starts[c1]);
+            points.clear();
+            points.extend_from_slice(&sorted[s0..s1]);
+            cols.clear();
+            cols.extend_from_slice(&banded[s0..s1]);
+            at.clear();
+            at.extend_from_slice(&index.starts[c0..c1]);
+            for (&p, &c) in points.iter().zip(&cols) {
+                let k = c as usize - c0;
+                sorted[at[k]] = p;
+                at[k] += 1;
+            }
         }
+        drop(banded);
         // Each column by height. Points of equal height may come in any order: no query's
         // result depends on the order it visits points in (exact sums, see `m3c2::moments`).
         for w in index.starts.windows(2) {
-            sorted[w[0]..w[1]].sort_unstable_by(|a, b| a[2].total_cmp(&b[2]));
+            sort_by_height(&mut sorted[w[0]..w[1]]);
         }
         index.points = sorted;
         index
-    }
-
-    /// Move the points of the band of columns `c0..c1` (all in `sorted`, in the band's range,
-    /// in any order) into their columns, in place (American flag sort: every point is carried
-    /// straight to the next free place of its column).
-    fn permute_band(&self, sorted: &mut [Point3], c0: usize, c1: usize, next: &mut Vec<usize>) {
-        next.clear();
-        next.extend_from_slice(&self.starts[c0..c1]);
-        for k in 0..c1 - c0 {
-            let end = self.starts[c0 + k + 1];
-            while next[k] < end {
-                let mut carry = sorted[next[k]];
-                let mut d = self.column_of(carry[0], carry[1]) - c0;
-                while d != k {
-                    let slot = next[d];
-                    next[d] += 1;
-                    std::mem::swap(&mut carry, &mut sorted[slot]);
-                    d = self.column_of(carry[0], carry[1]) - c0;
-                }
-                sorted[next[k]] = carry;
-                next[k] += 1;
-            }
-        }
     }
 
     /// Number of indexed points.

@@ -7,6 +7,7 @@
 //!   at every core point: a sphere (normals) and a cylinder along an arbitrary axis.
 //! - [`BoxIndex`]: which of many xy boxes contain a point (events' search boxes and claims).
 //! - [`DensityGrid`]: points per XY cell of a survey, and its densest square (tile sizes).
+//! - [`Pairs`]: the pairs of points within a distance (the stable ground's variogram).
 //! - [`Tubes`]: which of many long thin cylinders hold a point (M3C2's walk across tiles).
 //! - [`areas::Areas`]: the user's stable areas (`--stable`), polygons and point-in-polygon.
 
@@ -15,10 +16,12 @@ mod boxes;
 mod columns;
 mod density;
 mod kdtree;
+mod pairs;
 mod tubes;
 
 pub use boxes::BoxIndex;
 pub use columns::{in_cylinder, Columns};
 pub use density::DensityGrid;
 pub use kdtree::{median_nn_distance, Index};
+pub use pairs::Pairs;
 pub use tubes::Tubes;

@@ -34,6 +34,39 @@ pub fn sync_file(path: &Path) -> Result<()> {
         .map_err(out_err(path))
 }
 
+/// [`sync_file`] of every path, a few at once: each fsync waits for the disk, and the file
+/// system commits concurrent ones together (13 result chunks of a unit took 13 ms one after the
+/// other).
+pub fn sync_files(paths: &[PathBuf]) -> Result<()> {
+    const AT_ONCE: usize = 8;
+    if paths.len() < 2 {
+        return paths.iter().try_for_each(|p| sync_file(p));
+    }
+    let threads = paths.len().min(AT_ONCE);
+    std::thread::scope(|s| {
+        let each: Vec<_> = (0..threads)
+            .map(|t| {
+                s.spawn(move || {
+                    paths
+                        .iter()
+                        .skip(t)
+                        .step_by(threads)
+                        .try_for_each(|p| sync_file(p))
+                })
+            })
+            .collect();
+        // Every thread joined, then the first error in thread order.
+        let joined: Vec<Result<()>> = each
+            .into_iter()
+            .map(|h| {
+                h.join()
+                    .unwrap_or_else(|_| Err(Error::Internal("a file sync panicked".into())))
+            })
+            .collect();
+        joined.into_iter().collect()
+    })
+}
+
 /// A fresh temporary path in `tmp` whose name starts with `what` (for a reader of the directory)
 /// and ends with a unique owner suffix (for [`gc`](super::Store::gc)).
 pub fn tmp_name(tmp: &Path, what: &str) -> PathBuf {
@@ -104,15 +137,49 @@ pub fn remove_any(path: &Path) -> Result<()> {
 /// or nothing), then deleting it there. If the deletion is cut short, what is left is a trash
 /// directory in `tmp` that gc clears. Returns false when `path` did not exist.
 pub fn trash(tmp: &Path, path: &Path) -> Result<bool> {
+    match move_to_trash(tmp, path)? {
+        Some(dest) => remove_any(&dest).map(|()| true),
+        None => Ok(false),
+    }
+}
+
+/// The first half of [`trash`]: `path` renamed into `tmp` (durably), where it is left for the
+/// caller to delete (or gc to clear). The trash directory's path, None when `path` did not exist.
+pub fn move_to_trash(tmp: &Path, path: &Path) -> Result<Option<PathBuf>> {
     let dest = tmp_name(tmp, "trash");
     match fs::rename(path, &dest) {
         Ok(()) => {}
-        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(false),
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(None),
         Err(e) => return Err(Error::output(path, e)),
     }
     sync_dir(parent(path))?;
-    remove_any(&dest)?;
-    Ok(true)
+    Ok(Some(dest))
+}
+
+/// Trash directories ([`move_to_trash`]) deleted on a thread of their own while the caller goes
+/// on; dropping it waits for the deletion. What a failed or interrupted deletion leaves is a trash
+/// directory in `tmp/`, which gc clears.
+pub struct Sweep(Option<std::thread::JoinHandle<()>>);
+
+impl Sweep {
+    pub fn start(trash: Vec<PathBuf>) -> Self {
+        if trash.is_empty() {
+            return Sweep(None);
+        }
+        Sweep(Some(std::thread::spawn(move || {
+            for t in trash {
+                let _ = remove_any(&t);
+            }
+        })))
+    }
+}
+
+impl Drop for Sweep {
+    fn drop(&mut self) {
+        if let Some(t) = self.0.take() {
+            let _ = t.join();
+        }
+    }
 }
 
 /// The latest modification time of `path` or anything below it (a sign of life of a writer).

@@ -50,7 +50,7 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 pub use claim::{Claim, ClaimInfo};
-pub use fsops::crc_and_size;
+pub use fsops::{crc_and_size, Sweep};
 pub use gc::GcReport;
 pub use lock::{Lock, LockInfo};
 pub use owner_file::Owner;

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use crate::error::{Error, Result};
 
-use super::fsops::{crc_and_size, trash};
+use super::fsops::{crc_and_size, move_to_trash, trash};
 use super::record::Record;
 use super::unit_ref::UnitRef;
 use super::Store;
@@ -78,5 +78,13 @@ impl Store {
     pub fn invalidate(&self, unit: &UnitRef) -> Result<()> {
         let dir = self.unit_dir(unit)?;
         trash(&self.tmp(), &dir).map(|_| ())
+    }
+
+    /// [`Store::invalidate`] without the deletion: the unit is gone from the store at once and
+    /// its files wait in `tmp/` at the path returned (None: there was no such unit), for the
+    /// caller to delete while other work goes on (unlinking a large tile file blocks for
+    /// milliseconds), or for gc.
+    pub fn invalidate_later(&self, unit: &UnitRef) -> Result<Option<PathBuf>> {
+        move_to_trash(&self.tmp(), &self.unit_dir(unit)?)
     }
 }

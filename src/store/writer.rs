@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
 
-use super::fsops::{crc_and_size, out_err, remove_any, sync_dir, sync_file, tmp_name, trash};
+use super::fsops::{crc_and_size, out_err, remove_any, sync_dir, sync_files, tmp_name, trash};
 use super::process;
 use super::record::{Record, RecordFile, RECORD_FILE};
 use super::unit_ref::{check_rel_path, UnitRef};
@@ -109,9 +109,12 @@ impl UnitWriter {
                 self.dir.join(stray).display()
             )));
         }
-        for f in &files {
-            sync_file(&self.dir.join(&f.name))?;
-        }
+        sync_files(
+            &files
+                .iter()
+                .map(|f| self.dir.join(&f.name))
+                .collect::<Vec<_>>(),
+        )?;
         let record = Record {
             unit: self.unit.clone(),
             files,
