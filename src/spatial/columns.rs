@@ -11,6 +11,7 @@
 //! scan is short; on a cliff the height bound skips the rest of the face. The final test is exact,
 //! so the grid only decides which points are tested, never which are accepted.
 
+use super::grid::XyGrid;
 use crate::geom::Point3;
 
 /// At most this many columns per point: a sparse cloud over a wide extent gets wider columns
@@ -28,24 +29,6 @@ fn band_shift(columns: usize) -> u32 {
         shift += 1;
     }
     shift
-}
-
-/// Sort a column's points by height: by insertion for the few points a column usually holds
-/// (faster there than the library's general sort), by the library's sort for many.
-fn sort_by_height(col: &mut [Point3]) {
-    if col.len() > 32 {
-        col.sort_unstable_by(|a, b| a[2].total_cmp(&b[2]));
-        return;
-    }
-    for i in 1..col.len() {
-        let p = col[i];
-        let mut j = i;
-        while j > 0 && col[j - 1][2].total_cmp(&p[2]).is_gt() {
-            col[j] = col[j - 1];
-            j -= 1;
-        }
-        col[j] = p;
-    }
 }
 
 /// The exact cylinder test every cylinder query makes: the projection t of `p − q` on the unit
@@ -92,41 +75,13 @@ impl Columns {
             let p = point(i);
             [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]]
         };
-        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-        for p in (0..n).map(local) {
-            for a in 0..2 {
-                // Comparisons a NaN fails (it is ignored) rather than `f64::min`, whose NaN rule
-                // costs a branch per value.
-                lo[a] = if p[a] < lo[a] { p[a] } else { lo[a] };
-                hi[a] = if p[a] > hi[a] { p[a] } else { hi[a] };
-            }
-        }
-        if n == 0 {
-            lo = [0.0; 2];
-            hi = [0.0; 2];
-        }
-        let span = [hi[0] - lo[0], hi[1] - lo[1]];
-        let budget = (MAX_COLUMNS_PER_POINT * n).max(1) as f64;
-        // No narrower than a billionth of the extent (nor subnormal): the growth below must be
-        // able to move it.
-        let mut cell = cell.max(1e-9 * span[0].max(span[1])).max(f64::MIN_POSITIVE);
-        let columns = |c: f64| (span[0] / c + 1.0) * (span[1] / c + 1.0);
-        if columns(cell) > budget {
-            // Solve (w/c + 1)(h/c + 1) ≈ budget for c, then nudge up until it fits.
-            cell = ((span[0] * span[1]) / budget).sqrt().max(cell);
-            while columns(cell) > budget {
-                cell *= 1.25;
-            }
-        }
-        let dims = [
-            (span[0] / cell).floor() as usize + 1,
-            (span[1] / cell).floor() as usize + 1,
-        ];
+        let XyGrid { corner, cell, dims } =
+            XyGrid::fit((0..n).map(local), cell, MAX_COLUMNS_PER_POINT * n);
         let mut index = Columns {
             origin,
             cell,
             inverse: 1.0 / cell,
-            corner: lo,
+            corner,
             dims,
             starts: vec![0; dims[0] * dims[1] + 1],
             points: Vec::new(),
@@ -183,7 +138,7 @@ impl Columns {
         // Each column by height. Points of equal height may come in any order: no query's
         // result depends on the order it visits points in (exact sums, see `m3c2::moments`).
         for w in index.starts.windows(2) {
-            sort_by_height(&mut sorted[w[0]..w[1]]);
+            sorted[w[0]..w[1]].sort_unstable_by(|a, b| a[2].total_cmp(&b[2]));
         }
         index.points = sorted;
         index

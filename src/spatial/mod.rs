@@ -15,6 +15,7 @@ pub mod areas;
 mod boxes;
 mod columns;
 mod density;
+mod grid;
 mod kdtree;
 mod pairs;
 mod tubes;

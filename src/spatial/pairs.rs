@@ -7,6 +7,7 @@
 //! spacings (millions of pairs); a kd-tree's radius query spent ≈ 16 ns a pair there, a scan of
 //! the three runs ≈ 2 ns a candidate, about three candidates a pair.
 
+use super::grid::XyGrid;
 use crate::geom::Point3;
 
 /// Points bucketed by xy cell, with their positions in the caller's slice.
@@ -35,32 +36,14 @@ impl Pairs {
             .iter()
             .map(|p| [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]])
             .collect();
-        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-        for p in &local {
-            for a in 0..2 {
-                lo[a] = lo[a].min(p[a]);
-                hi[a] = hi[a].max(p[a]);
-            }
-        }
-        if local.is_empty() {
-            (lo, hi) = ([0.0; 2], [0.0; 2]);
-        }
         // Cells no narrower than the reach (partners then lie in the neighbouring cells), and
-        // not many more cells than points (sparse points over a wide extent).
-        let span = [hi[0] - lo[0], hi[1] - lo[1]];
-        let most = (2 * local.len() + 16) as f64;
-        let mut cell = reach
-            .max(1e-9 * span[0].max(span[1]))
-            .max(f64::MIN_POSITIVE);
-        let cells = |c: f64| (span[0] / c + 1.0) * (span[1] / c + 1.0);
-        while cells(cell) > most {
-            cell *= 1.5;
-        }
-        let dims = [(span[0] / cell) as usize + 1, (span[1] / cell) as usize + 1];
+        // not many more cells than points.
+        let XyGrid { corner, cell, dims } =
+            XyGrid::fit(local.iter().copied(), reach, 2 * local.len() + 16);
         let mut pairs = Pairs {
             reach2: reach * reach,
             cell,
-            corner: lo,
+            corner,
             dims,
             starts: vec![0; dims[0] * dims[1] + 1],
             points: Vec::with_capacity(local.len()),
@@ -107,8 +90,10 @@ impl Pairs {
                 self.starts[j * self.dims[0] + i0] as usize,
                 self.starts[j * self.dims[0] + i1 + 1] as usize,
             );
-            found.clear();
-            found.resize(e - s, (0, 0.0));
+            // Room for every candidate of the run (what lies past the partners is stale).
+            if found.len() < e - s {
+                found.resize(e - s, (0, 0.0));
+            }
             // Every candidate written, kept by advancing only when it is a partner: no branch
             // on a verdict that follows no pattern.
             let mut kept = 0;

@@ -180,9 +180,7 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<M3c2Meta> {
         .filter(|&i| results[i].r.reach == Reach::Pending)
         .collect();
     let mut along = 0;
-    let tiles = if pending.is_empty() {
-        Some((before, after))
-    } else {
+    if !pending.is_empty() {
         let wanted: Vec<KeyedResult> = pending.iter().map(|&i| results[i]).collect();
         let [b, a] = gather_along(
             ctx,
@@ -199,11 +197,8 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<M3c2Meta> {
         for (&i, r) in pending.iter().zip(done) {
             results[i] = r;
         }
-        None
-    };
-    // The tile's points freed (unmapped: milliseconds for a large tile) beside the encoding.
-    let (chunks, ()) = rayon::join(|| write_chunks(out, &results), || drop(tiles));
-    let chunks = chunks?;
+    }
+    let chunks = write_chunks(out, &results)?;
     (ctx.progress)(points);
     let count = |reach: Reach| results.iter().filter(|k| k.r.reach == reach).count();
     Ok(M3c2Meta {
