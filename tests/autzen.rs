@@ -1,5 +1,5 @@
 //! Peer test: M3C2 on PDAL's autzen BMX pair against CloudCompare's qM3C2 output
-//! (../shared/data/autzen-bmx, parameters from its README).
+//! (tests/data/autzen-bmx, parameters from its README).
 
 mod common;
 
@@ -28,9 +28,7 @@ fn read_cc(path: &std::path::Path) -> (Vec<String>, Vec<Vec<f64>>) {
 
 #[test]
 fn autzen_agrees_with_cloudcompare() {
-    let Some(dir) = common::shared_data("autzen-bmx") else {
-        return;
-    };
+    let dir = common::data("autzen-bmx");
     let out = common::tempdir();
     let res = out.path().join("res");
     let cc = dir.join("autzen-bmx-cc.txt");

@@ -379,9 +379,7 @@ fn probe(good: &Path, other: &Path, plan: Plan) {
 
 #[test]
 fn damaged_las_files_are_read_or_refused_cleanly() {
-    let Some(dir) = common::shared_data("autzen-bmx") else {
-        return;
-    };
+    let dir = common::data("autzen-bmx");
     probe(
         &dir.join("autzen-bmx-2010.las"),
         &dir.join("autzen-bmx-2023.las"),
@@ -396,9 +394,7 @@ fn damaged_las_files_are_read_or_refused_cleanly() {
 
 #[test]
 fn damaged_laz_files_are_read_or_refused_cleanly() {
-    let Some(dir) = common::shared_data("st-leonards") else {
-        return;
-    };
+    let dir = common::data("st-leonards");
     probe(
         &dir.join("leo_20190731_dsm_resampled_1m.laz"),
         &dir.join("leo_20190328_dsm_resampled_1m.laz"),

@@ -17,20 +17,9 @@ use common::laspy::{laspy_python, laspy_read};
 // ---------------------------------------------------------------------------------------------
 // helpers
 
-/// The shared data folder (`<ancestor>/shared/data`), or `None` with a message.
-fn data_dir() -> Option<PathBuf> {
-    if let Ok(d) = std::env::var("TALUS_DATA") {
-        return Some(PathBuf::from(d));
-    }
-    let here = Path::new(env!("CARGO_MANIFEST_DIR"));
-    for a in here.ancestors() {
-        let d = a.join("shared/data");
-        if d.join("autzen-bmx").is_dir() {
-            return Some(d);
-        }
-    }
-    eprintln!("SKIPPED: shared/data not found (set TALUS_DATA)");
-    None
+/// The real data folder (tests/data).
+fn data_dir() -> PathBuf {
+    common::data(".")
 }
 
 fn f64s(v: &serde_json::Value) -> Vec<f64> {
@@ -145,7 +134,7 @@ fn write_file(path: &Path, bytes: &[u8]) {
 
 #[test]
 fn autzen_las_matches_laspy_and_las_rs() {
-    let Some(data) = data_dir() else { return };
+    let data = data_dir();
     for (name, count) in [
         ("autzen-bmx-2010.las", 829u64),
         ("autzen-bmx-2023.las", 687),
@@ -195,7 +184,7 @@ fn autzen_las_matches_laspy_and_las_rs() {
 
 #[test]
 fn st_leonards_laz_matches_laspy_with_epsg() {
-    let Some(data) = data_dir() else { return };
+    let data = data_dir();
     let dir = data.join("st-leonards");
     let mut files: Vec<_> = std::fs::read_dir(&dir)
         .expect("st-leonards")
@@ -234,7 +223,7 @@ fn st_leonards_laz_matches_laspy_with_epsg() {
 
 #[test]
 fn cloudcompare_text_reads_103_core_points_of_the_2010_cloud() {
-    let Some(data) = data_dir() else { return };
+    let data = data_dir();
     let path = data.join("autzen-bmx/autzen-bmx-cc.txt");
     let (info, pts) = read_small_chunks(&path);
     assert_eq!(info.format, CloudFormat::Text);
@@ -534,7 +523,7 @@ fn layered_laz_coordinates_equal_a_full_decode() {
 
 #[test]
 fn laz_round_trip_through_result_writer() {
-    let Some(data) = data_dir() else { return };
+    let data = data_dir();
     let src = data.join("autzen-bmx/autzen-bmx-2010.las");
     let (info, pts) = io::read_all(&src).expect("read");
     let dir = tempfile::tempdir().expect("tempdir");
@@ -593,7 +582,7 @@ fn not_a_point_cloud() {
 
 #[test]
 fn truncated_las_is_found_up_front() {
-    let Some(data) = data_dir() else { return };
+    let data = data_dir();
     let src = data.join("autzen-bmx/autzen-bmx-2010.las");
     let bytes = std::fs::read(&src).expect("read");
     let dir = tempfile::tempdir().expect("tempdir");
@@ -605,7 +594,7 @@ fn truncated_las_is_found_up_front() {
 
 #[test]
 fn truncated_laz_is_a_read_error() {
-    let Some(data) = data_dir() else { return };
+    let data = data_dir();
     let src = data.join("st-leonards/leo_20180606_dsm_resampled_1m.laz");
     let bytes = std::fs::read(&src).expect("read");
     let dir = tempfile::tempdir().expect("tempdir");

@@ -1,4 +1,4 @@
-//! Real data is the judge: the St Leonards beach campaign (../shared/data/st-leonards, six UAV
+//! Real data is the judge: the St Leonards beach campaign (tests/data/st-leonards, six UAV
 //! surveys 2018–2019 on a 1 m grid, water and vegetation edges included), its five consecutive
 //! pairs compared with default parameters, every event's volume against a DEM of difference
 //! written here (tests/common/dod.rs: both epochs' TINs sampled in z on a 0.25 m grid, only the
@@ -97,10 +97,9 @@ fn pair_with(before: &Path, after: &Path, out: &Path, extra: &[&str]) -> PairRes
     }
 }
 
-/// The shared St Leonards folder and its six surveys in date order (None: not beside the
-/// checkout).
-fn campaign() -> Option<(std::path::PathBuf, Vec<std::path::PathBuf>)> {
-    let dir = common::shared_data("st-leonards")?;
+/// The St Leonards folder and its six surveys in date order.
+fn campaign() -> (std::path::PathBuf, Vec<std::path::PathBuf>) {
+    let dir = common::data("st-leonards");
     let mut surveys: Vec<_> = std::fs::read_dir(&dir)
         .unwrap()
         .map(|e| e.unwrap().path())
@@ -108,7 +107,7 @@ fn campaign() -> Option<(std::path::PathBuf, Vec<std::path::PathBuf>)> {
         .collect();
     surveys.sort();
     assert_eq!(surveys.len(), 6, "six surveys in {}", dir.display());
-    Some((dir, surveys))
+    (dir, surveys)
 }
 
 fn quantile(sorted: &[f64], q: f64) -> f64 {
@@ -117,9 +116,7 @@ fn quantile(sorted: &[f64], q: f64) -> f64 {
 
 #[test]
 fn event_volumes_agree_with_a_dem_of_difference_on_the_st_leonards_campaign() {
-    let Some((_, surveys)) = campaign() else {
-        return;
-    };
+    let (_, surveys) = campaign();
     let tmp = common::tempdir();
     let results: Vec<PairResult> = surveys
         .windows(2)
@@ -184,9 +181,7 @@ fn event_volumes_agree_with_a_dem_of_difference_on_the_st_leonards_campaign() {
 /// DoD agreement as for the defaults (median ≤ 5 %, 90th percentile ≤ 20 %).
 #[test]
 fn the_owners_stable_transects_give_a_level_of_detection_their_spread_supports() {
-    let Some((dir, surveys)) = campaign() else {
-        return;
-    };
+    let (dir, surveys) = campaign();
     let transects = dir.join("stable_transects.geojson");
     // The transects as DoD polygons (an id per feature for `regions`).
     let mut t = read_json(&transects);

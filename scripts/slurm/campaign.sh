@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The Slurm executor against a real Slurm (issue 12): on a one-node cluster (up.sh: installs
 # Debian's slurmctld, slurmd, slurm-client and munge when missing), the St Leonards campaign
-# (../shared/data/st-leonards, six surveys):
+# (tests/data/st-leonards, six surveys):
 #   1. a local run (`talus campaign ...`), the reference;
 #   2. `--executor slurm --wait`: every output compared with the local run's, byte for byte
 #      (same_outputs.py: all of DIR but .talus/, the run's own timings blanked);
@@ -30,8 +30,8 @@ fail() {
 }
 section() { echo; echo "== $*"; }
 
-data="$repo/../shared/data/st-leonards"
-[[ -d "$data" ]] || fail "no St Leonards data at $data (see ../shared/data/README.md)"
+data="$repo/tests/data/st-leonards"
+[[ -d "$data" ]] || fail "no St Leonards data at $data (see tests/data/README.md)"
 mapfile -t surveys < <(ls "$data"/*.laz)
 [[ ${#surveys[@]} == 6 ]] || fail "expected 6 surveys in $data, found ${#surveys[@]}"
 

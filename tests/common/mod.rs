@@ -80,19 +80,16 @@ pub fn tempdir() -> tempfile::TempDir {
 }
 
 /// The shared data folder, or None (tests that need it then say so and skip).
-pub fn shared_data(sub: &str) -> Option<PathBuf> {
+pub fn data(sub: &str) -> PathBuf {
     let p = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/data")
+        .join("tests/data")
         .join(sub);
-    if p.exists() {
-        Some(p)
-    } else {
-        eprintln!(
-            "SKIPPED: {} is missing (the shared data folder is not beside the checkout)",
-            p.display()
-        );
-        None
-    }
+    assert!(
+        p.is_dir(),
+        "{} is missing: the real data the tests use travels in tests/data (see its README)",
+        p.display()
+    );
+    p
 }
 pub mod dod;
 pub mod laspy;

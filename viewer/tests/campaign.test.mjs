@@ -2,7 +2,7 @@
 // `talus campaign` over its surveys, served by `talus view DIR --port 0` (the viewer built into
 // the binary). The pair selector, the time slider and the campaign table switch pairs; events of
 // one pair or of all, coloured by kind, pair or track; value labels never overlap. With the St
-// Leonards surveys (../shared/data/st-leonards) also a campaign of their first two, a pair of 49
+// Leonards surveys (tests/data/st-leonards) also a campaign of their first two, a pair of 49
 // events. Expected values are read from the campaign's files, never from the viewer.
 //
 // TALUS_BIN: the talus binary (default target/debug/talus). Screenshots: viewer/tests/out/.
@@ -22,7 +22,7 @@ const HERE = dirname(fileURLToPath(import.meta.url));
 const REPO = resolve(HERE, '..', '..');
 const OUT = join(HERE, 'out');
 const TALUS = process.env.TALUS_BIN || join(process.env.CARGO_TARGET_DIR || join(REPO, 'target'), 'debug', 'talus');
-const LEO = resolve(REPO, '..', 'shared', 'data', 'st-leonards');
+const LEO = resolve(REPO, 'tests', 'data', 'st-leonards');
 const run = promisify(execFile);
 
 let tmp;
@@ -108,9 +108,9 @@ before(async () => {
   assert.equal(files.length, 4);
   const jobs = [run(TALUS, ['campaign', ...files, '--out', join(tmp, 'synth')])];
   // Its first two surveys: the pair with the most events (49), at a third of the campaign's time.
-  const leoFiles = existsSync(LEO) ? readdirSync(LEO).filter((f) => f.endsWith('.laz')).sort().slice(0, 2).map((f) => join(LEO, f)) : [];
-  if (leoFiles.length) jobs.push(run(TALUS, ['campaign', ...leoFiles, '--out', join(tmp, 'leo')]));
-  else console.log(`# ${LEO} is missing: the St Leonards campaign is not viewed`);
+  const leoFiles = readdirSync(LEO).filter((f) => f.endsWith('.laz')).sort().slice(0, 2).map((f) => join(LEO, f));
+  assert.equal(leoFiles.length, 2, `the St Leonards surveys in ${LEO}`);
+  jobs.push(run(TALUS, ['campaign', ...leoFiles, '--out', join(tmp, 'leo')]));
   await Promise.all(jobs);
   synth = campaignFiles(join(tmp, 'synth'));
   synth.url = await serve(synth.dir);
@@ -308,7 +308,7 @@ test('value labels never overlap: the crowded ones wait for hover or selection',
   await page.close();
 });
 
-test('St Leonards: a 49-event pair has readable labels', { skip: !existsSync(LEO) && `${LEO} is missing` }, async () => {
+test('St Leonards: a 49-event pair has readable labels', async () => {
   const page = await newPage(leo.url);
   await page.goto(leo.url);
   const first = leo.table[0];
