@@ -308,7 +308,7 @@ struct CampaignArgs {
 #[derive(Args)]
 struct SynthArgs {
     /// hill | cube | spheres | cubes | cliff | deposit | hole | events | stable | large | dense | beach |
-    /// campaign
+    /// vegetation | face | face-vertical | campaign
     scene: String,
     /// Directory to write the epochs (before.laz, after.laz; a campaign's survey_*.laz) and
     /// truth.json into.

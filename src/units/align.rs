@@ -188,7 +188,12 @@ fn sample(ctx: &Ctx, onto: usize, s: usize) -> Result<(Vec<Sample>, usize)> {
     super::m3c2::fit::check_tiled(plan, &pair_points)?;
     let counts = [m0.tile_points, ms.tile_points];
     let grid = plan.layout.grid()?;
-    let params = plan.params.m3c2();
+    // The fit is the same whichever way each normal points (a distance and its normal turn
+    // together: d = n·(t + ω × c) either way), so the sample needs no orientation field.
+    let params = crate::m3c2::M3c2Params {
+        orientation: crate::m3c2::Orientation::Up,
+        ..plan.params.m3c2()
+    };
     let (b, a) = (&plan.surveys[onto].bounds, &plan.surveys[s].bounds);
     let wins = windows(plan);
     let areas = plan.stable_areas.as_ref().map(|a| &a.areas);
@@ -281,6 +286,7 @@ fn sample(ctx: &Ctx, onto: usize, s: usize) -> Result<(Vec<Sample>, usize)> {
             Some(&cores),
             &params,
             &extent,
+            None,
         );
         computed += results.len();
         keyed.extend(

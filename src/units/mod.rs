@@ -20,6 +20,7 @@ pub mod cores;
 pub mod events;
 pub mod m3c2;
 pub mod merged;
+pub mod orient;
 pub mod outputs;
 pub mod scratch;
 pub mod solids;

@@ -93,3 +93,4 @@ pub fn data(sub: &str) -> PathBuf {
 }
 pub mod dod;
 pub mod laspy;
+pub mod scan;
