@@ -150,9 +150,11 @@ struct ParamArgs {
     #[arg(long)]
     orientation: Option<String>,
     /// Align the later survey onto the earlier (a campaign's onto its first) by a rigid
-    /// transform fitted on the stable ground: auto (applied when significant and well
-    /// constrained, else reported) | off (default: auto).
-    #[arg(long, value_name = "auto|off")]
+    /// transform fitted on the stable ground: auto (applied when significant, well constrained,
+    /// confirmed on held-out ground and a plausible misregistration: at most 1 m and 0.5°; a
+    /// larger one stops the run with what to do) | on (applied whatever its size, up to 100 m
+    /// and 20°) | off (default: auto).
+    #[arg(long, value_name = "auto|on|off")]
     align: Option<String>,
     /// Vegetation, recognised from the LAS classes and, for unclassified points, from its
     /// volumetric scatter: flag (its events are listed but left out of totals and tracks) |

@@ -889,7 +889,11 @@ fn a_moving_beach_below_a_sea_wall_with_and_without_stable_areas() {
         let s: Value =
             serde_json::from_str(&std::fs::read_to_string(res.join("summary.json")).unwrap())
                 .unwrap();
-        let source = if extra.is_empty() { "auto" } else { "areas" };
+        let source = if extra.is_empty() {
+            "automatic"
+        } else {
+            "user"
+        };
         assert_eq!(s["stable"]["source"], source);
         tau.push(s["parameters"]["threshold"]["value"].as_f64().unwrap());
     }

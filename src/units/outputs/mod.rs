@@ -145,6 +145,10 @@ pub struct Summary {
     pub parameters: Params,
     /// Noise and registration error measured on the stable ground (None: too little of it).
     pub stable: Option<Stable>,
+    /// With `--stable`: what the user's areas held (points inside, with a distance) and whether
+    /// the stable ground is theirs (else why not, and what was used instead).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stable_areas: Option<crate::events::stable::AreasUse>,
     pub tiles: usize,
     pub tile_size: f64,
     pub core_points: u64,
@@ -366,6 +370,13 @@ pub struct AlignmentSummary {
     /// The least share, over the directions fitted, of what the core points tell of that
     /// direction that comes from ground the fit leaves at rest (applied only from 0.5).
     pub at_rest_share: f64,
+    /// The share of its predicted change the held-out blocks of stable ground confirm (applied
+    /// only from 0.5; null where too little could be held out).
+    pub confirmed_share: Option<f64>,
+    /// The largest displacement it gives a point of the stable ground (m).
+    pub largest_shift_m: f64,
+    /// Only the vertical was fitted: the stable ground does not see both tilts.
+    pub vertical_only: bool,
     /// The surveys the transform passes through, from this one to the first (0): `[k, 0]` for
     /// a fit onto the first, longer for a chain through predecessors.
     pub route: Vec<usize>,
@@ -388,6 +399,9 @@ impl AlignmentSummary {
             stable_points: a.stable_points,
             residual_m: a.residual_m,
             at_rest_share: a.at_rest_share,
+            confirmed_share: a.confirmed_share,
+            largest_shift_m: a.largest_shift_m,
+            vertical_only: a.vertical_only,
             route: r.surveys.clone(),
             reason: a.reason.clone(),
         }
@@ -490,10 +504,29 @@ impl Summary {
             );
         }
         line + &format!("; {} tile(s)", self.tiles)
+            + &self.areas_line()
             + &self.vegetation_line()
             + &self.reach_line()
             + &self.alignment_line()
             + &self.classes_line()
+    }
+
+    /// What the one line says of the user's stable areas when they did not give the stable
+    /// ground: never dropped in silence.
+    fn areas_line(&self) -> String {
+        match &self.stable_areas {
+            Some(a) if !a.used => format!(
+                "; the stable areas {} held {} points with a distance: too few, {}",
+                a.file.display(),
+                a.with_distance,
+                if self.stable.is_some() {
+                    "the automatic stable ground was used"
+                } else {
+                    "and no automatic stable ground either: the threshold is the point spacing's"
+                }
+            ),
+            _ => String::new(),
+        }
     }
 
     /// What the one line says of vegetation events, when there are any.
@@ -556,7 +589,11 @@ impl Summary {
                 a.rotation_deg,
                 a.residual_m
             ),
-            Some(a) if a.reason.contains("directions") || a.reason.contains("stable") => {
+            // Refused for a reason the user should hear (not merely too small to matter).
+            Some(a)
+                if !a.reason.contains("within its own uncertainty")
+                    && !a.reason.contains("moves the stable surface by") =>
+            {
                 format!("; alignment {}", a.reason)
             }
             _ => String::new(),
@@ -732,7 +769,7 @@ fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<Outp
         unit,
         pair,
         params,
-        ground.stable,
+        (ground.stable, ground.areas),
         &records,
         &written,
         kept_count,
@@ -767,7 +804,7 @@ fn summarize(
     unit: usize,
     pair: usize,
     params: Params,
-    stable: Option<Stable>,
+    (stable, stable_areas): (Option<Stable>, Option<crate::events::stable::AreasUse>),
     records: &[EventRecord],
     written: &laz::Written,
     kept: u64,
@@ -862,6 +899,7 @@ fn summarize(
         spacing: plan.spacing.clone(),
         parameters: params,
         stable,
+        stable_areas,
         tiles: plan.layout.len(),
         tile_size: plan.layout.tile_size,
         core_points: written.core_points,
