@@ -845,6 +845,64 @@ fn a_slow_landslide_is_not_taken_for_a_misregistration() {
     );
 }
 
+/// Issue 43, item 4: stable areas that see only part of the motion. The cliff shifted 8 cm along
+/// its face and turned 0.1° about the vertical; the user's stable areas are flat rectangles on
+/// the plateau and the beach (ground that truly does not change), which see the vertical and the
+/// tilts but neither horizontal shift nor the turn. The rest must not be left in silently: every
+/// planted event within 2 % and inside its interval ([`judge`]), as without `--stable`.
+#[test]
+fn flat_stable_areas_on_a_turned_cliff_leave_nothing_hidden() {
+    let dir = common::tempdir();
+    let data = dir.path().join("data");
+    let truth = synth(
+        "cliff",
+        &["--shift", "0.08,0,0", "--turn", "0,0,0.1"],
+        &data,
+    );
+    // The plateau (y 5000003..5000008) and the beach (y 4999982..4999992) along the face.
+    let rect = |y0: f64, y1: f64| {
+        serde_json::json!({"type": "Feature", "properties": {}, "geometry": {"type": "Polygon",
+            "coordinates": [[[500005.0, y0], [500055.0, y0], [500055.0, y1], [500005.0, y1], [500005.0, y0]]]}})
+    };
+    let areas = serde_json::json!({"type": "FeatureCollection",
+        "features": [rect(4999982.0, 4999992.0), rect(5000003.0, 5000008.0)]});
+    let stable = dir.path().join("stable.geojson");
+    std::fs::write(&stable, areas.to_string()).unwrap();
+    let res = dir.path().join("res");
+    let found = compare_with(
+        &data.join("before.laz"),
+        &data.join("after.laz"),
+        &res,
+        &["--stable", stable.to_str().unwrap()],
+    );
+    judge("cliff turned, flat stable areas", &planted(&truth), &found);
+    let summary: Value =
+        serde_json::from_slice(&std::fs::read(res.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["stable"]["source"], "user", "{}", summary["stable"]);
+}
+
+/// Issue 43, item 4: a survey off by 2.6 m (another datum, a georeferencing error) is no
+/// misregistration to align quietly and no change: the run stops (exit 2) naming the survey and
+/// what to do; with `--align on` it is aligned and every planted event is within 2 %.
+#[test]
+fn a_survey_off_by_metres_is_refused_by_default_and_aligned_when_asked() {
+    let dir = common::tempdir();
+    let data = dir.path().join("data");
+    let truth = synth("cliff", &["--shift", "1.5,-2.0,0.8"], &data);
+    let (b, a) = (data.join("before.laz"), data.join("after.laz"));
+    let o = common::run_compare(&b, &a, &dir.path().join("auto"), &[]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("after.laz") && err.contains("--align on"),
+        "{err}"
+    );
+    assert!(!dir.path().join("auto").join("events.geojson").exists());
+    let res = dir.path().join("on");
+    let found = compare_with(&b, &a, &res, &["--align", "on"]);
+    judge("cliff off by 2.6 m, --align on", &planted(&truth), &found);
+}
+
 /// Issue "Stable ground the user knows", item 3: a beach where most of the sand moved (60 cos²
 /// bumps and dents of 0.1 to 1 m over 6 m cells: 73 % of the beach) below a sea wall and a road
 /// that did not, with a pothole (−0.32 m³, 8 cm deep) and a heap (+0.21 m³, 10 cm) on the road

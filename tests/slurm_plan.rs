@@ -111,7 +111,7 @@ fn plan_only_writes_the_scripts_and_submits_nothing() {
     let submit = std::fs::read_to_string(sub.join("submit.sh")).unwrap();
     assert!(
         submit.contains(
-            r#"sbatch --parsable "--dependency=afterok:$j3" -p long '--comment=a b' 04-m3c2.sh"#
+            r#"sbatch --parsable "--dependency=afterok:$j4" -p long '--comment=a b' 05-m3c2.sh"#
         ),
         "{submit}"
     );

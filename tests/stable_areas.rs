@@ -38,9 +38,10 @@ const STABLE: [[f64; 4]; 2] = [
 ];
 
 /// Polygons over unchanged beach and plateau: summary.json says `stable.source` = user, names
-/// the file, and counts as stable at least 90 % of the core points inside (the robust fit may
-/// leave out a few) and no more; σ_d is the automatic one's within 25 %; the events are the same
-/// ones with the same volumes within 1 %.
+/// the file, measures every point of the before survey inside (more than the core points
+/// there) and counts as stable at least 90 % of those with a distance (the robust fit may leave
+/// out a few) and no more; σ_d is the automatic one's within 25 %; the events are the same ones
+/// with the same volumes within 1 %.
 #[test]
 fn polygons_over_stable_ground_are_the_stable_ground() {
     let tmp = common::tempdir();
@@ -60,7 +61,7 @@ fn polygons_over_stable_ground_are_the_stable_ground() {
         json_file(&auto.join("summary.json")),
         json_file(&mine.join("summary.json")),
     );
-    assert_eq!(sa["stable"]["source"], "auto");
+    assert_eq!(sa["stable"]["source"], "automatic");
     assert_eq!(sm["stable"]["source"], "user");
     assert!(sm["stable"]["file"]
         .as_str()
@@ -71,10 +72,17 @@ fn polygons_over_stable_ground_are_the_stable_ground() {
     let polys = talus::spatial::areas::Areas::read(&areas).unwrap();
     let inside = pts.iter().filter(|p| polys.contains(p[0], p[1])).count();
     let stable = sm["stable"]["stable_points"].as_u64().unwrap() as usize;
+    let used = &sm["stable_areas"];
+    assert_eq!(used["used"], true, "{used}");
+    let measured = used["with_distance"].as_u64().unwrap() as usize;
     assert!(inside > 500, "{inside} core points inside");
     assert!(
-        stable <= inside && stable as f64 >= 0.9 * inside as f64,
-        "{stable} stable of {inside} inside"
+        measured > 2 * inside,
+        "{measured} points measured, {inside} core points inside"
+    );
+    assert!(
+        stable <= measured && stable as f64 >= 0.9 * measured as f64,
+        "{stable} stable of {measured} measured inside"
     );
     let sigma = |s: &Value| s["stable"]["sigma_d"].as_f64().unwrap();
     assert!(

@@ -157,54 +157,81 @@ fn in_spatial_order<T: Send + Copy + Default>(
     out
 }
 
+/// The normals at a set of core points.
+pub struct Normals {
+    /// Oriented unit normals (NaN where undefined).
+    pub normal: Vec<Point3>,
+    /// Whether the data decides each one's sign ([`CoreResult::sign_known`]).
+    pub known: Vec<bool>,
+    /// Whether each one's neighbourhood is a surface (its smallest eigenvalue at most
+    /// [`field::FLAT`] of the three): only a surface's normal is walked beyond the window
+    /// ([`reach`]; a post or a spike has no normal to follow).
+    pub surface: Vec<bool>,
+}
+
 /// Normals at `cores` (local frame of `before`), oriented as `params.orientation` says (`auto`
-/// by `field`, the survey's orientation field near the cores, in their frame), and whether each
-/// one's sign is known.
+/// by `field`, the survey's orientation field near the cores, in their frame).
 pub fn normals(
     before: &Columns,
     cores: &[Point3],
     params: &M3c2Params,
     field: Option<&field::Field>,
-) -> (Vec<Point3>, Vec<bool>) {
-    let mut normals: Vec<Point3> = in_spatial_order(cores, params.normal_radius, |i| {
+) -> Normals {
+    let fitted: Vec<(Point3, f64)> = in_spatial_order(cores, params.normal_radius, |i| {
         normals::normal_at(before, &cores[i], params.normal_radius)
-            .map(|(n, _)| n)
-            .unwrap_or([f64::NAN; 3])
+            .unwrap_or(([f64::NAN; 3], f64::NAN))
     });
+    let mut normal: Vec<Point3> = fitted.iter().map(|f| f.0).collect();
+    let surface = fitted.iter().map(|f| f.1 <= field::FLAT).collect();
     let known = orientation::orient(
         cores,
-        &mut normals,
+        &mut normal,
         before.origin(),
         params.orientation,
         field,
     );
-    (normals, known)
+    Normals {
+        normal,
+        known,
+        surface,
+    }
 }
 
-/// M3C2 at each core point, given its oriented normal. `before` and `after` must share the local
-/// frame of `cores`, and hold every point of `extent.held`. Work is split over rayon's pool; the
-/// result does not depend on the thread count (each core point is computed alone, with exact
-/// sums).
+/// M3C2 at each core point, given its oriented normal and whether its neighbourhood is a
+/// surface (`surface`: only those are walked beyond the window). `before` and `after` must share
+/// the local frame of `cores`, and hold every point of `extent.held`. Work is split over rayon's
+/// pool; the result does not depend on the thread count (each core point is computed alone,
+/// with exact sums).
 pub fn distances(
     before: &Columns,
     after: &Columns,
     cores: &[Point3],
     normals: &[Point3],
+    surface: &[bool],
     params: &M3c2Params,
     extent: &Extent,
 ) -> Vec<CoreResult> {
     debug_assert_eq!(before.origin(), after.origin());
     in_spatial_order(cores, params.cyl_radius.max(params.normal_radius), |i| {
-        core_result(before, after, &cores[i], &normals[i], params, extent)
+        core_result(
+            before,
+            after,
+            &cores[i],
+            &normals[i],
+            surface[i],
+            params,
+            extent,
+        )
     })
 }
 
-/// M3C2 at one core point `q` with oriented normal `n`.
+/// M3C2 at one core point `q` with oriented normal `n` (of a surface, or not: `surface`).
 fn core_result(
     before: &Columns,
     after: &Columns,
     q: &Point3,
     n: &Point3,
+    surface: bool,
     params: &M3c2Params,
     extent: &Extent,
 ) -> CoreResult {
@@ -238,7 +265,9 @@ fn core_result(
             return result(c1, c2, n, Reach::Window);
         }
         // One epoch in the window, none of the other: walk on along the axis.
-        let walking = params.walk != Walk::Off;
+        // A post or a spike (no surface at the normal's scale) has no normal to follow: walked,
+        // its axis ran 195 m across St Leonards' beach to a dune.
+        let walking = params.walk != Walk::Off && surface;
         let present = match (c1.count, c2.count) {
             (k, 0) if k >= need && walking => Some((0, p1.range(), span1)),
             (0, k) if k >= need && walking => Some((1, p2.range(), span2)),

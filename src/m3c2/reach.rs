@@ -19,7 +19,8 @@
 //!   among it: a surface both epochs hold at one place did not move (the far wall again, seen
 //!   through a hole of the missing epoch);
 //! - the group must cross the axis: spread far along it ([`ALONG`]), it is a surface running
-//!   beside the axis (the side of a block), not one displaced along it;
+//!   beside the axis (the side of a block), not one displaced along it; and it must hold the few
+//!   points that show a surface's lie (a stray point metres away is none);
 //! - beyond the displaced surface lies what lay beyond the present one: the next surface met
 //!   further on must be the present epoch's (alone or shared). A second surface of the missing
 //!   epoch alone makes the first the near side of something only that epoch holds: a block
@@ -306,8 +307,9 @@ fn one_way(
         m.add(dir * s, true);
     }
     let (mean, var) = m.mean_var();
-    if var.sqrt() > ALONG * axis.r {
-        // Spread far along the axis: a surface running beside it (the side of a block), not one
+    if m.count() < super::normals::MIN_NORMAL_POINTS as u64 || var.sqrt() > ALONG * axis.r {
+        // Fewer points than show a surface's lie (a stray point metres away is no surface), or
+        // spread far along the axis: a surface running beside it (the side of a block), not one
         // crossing it.
         return OneWay::Nothing;
     }

@@ -79,12 +79,20 @@ pub fn compute(
         return Vec::new();
     }
     let local: Vec<Point3> = keyed.iter().map(|(_, p)| b.to_local(p)).collect();
-    let (normals, known) = super::normals(&b, &local, params, field);
-    let results = super::distances(&b, &a, &local, &normals, params, &extent.local(&anchor));
+    let n = super::normals(&b, &local, params, field);
+    let results = super::distances(
+        &b,
+        &a,
+        &local,
+        &n.normal,
+        &n.surface,
+        params,
+        &extent.local(&anchor),
+    );
     let mut out: Vec<KeyedResult> = keyed
         .iter()
         .zip(results)
-        .zip(known)
+        .zip(n.known)
         .map(|((&(key, xyz), r), sign_known)| KeyedResult {
             key,
             xyz,
@@ -115,7 +123,16 @@ pub fn distances_along(
     let local: Vec<Point3> = pending.iter().map(|k| b.to_local(&k.xyz)).collect();
     let normals: Vec<Point3> = pending.iter().map(|k| k.r.normal).collect();
     let whole = Extent::whole(extent.data_min, extent.data_max).local(&anchor);
-    let results = super::distances(&b, &a, &local, &normals, params, &whole);
+    // Only a surface's core point walks: every pending one is.
+    let results = super::distances(
+        &b,
+        &a,
+        &local,
+        &normals,
+        &vec![true; normals.len()],
+        params,
+        &whole,
+    );
     pending
         .iter()
         .zip(results)

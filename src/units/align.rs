@@ -86,13 +86,15 @@ impl Stage for AlignStage {
 
     fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<AlignMeta> {
         let s = ctx.survey(unit)?;
-        let (onto_first, mut sampled) = fit_onto(ctx, 0, s)?;
+        let (onto_first, mut sampled) = fit_onto(ctx, 0, s, false)?;
         gross(ctx, 0, s, &onto_first)?;
-        // Through the predecessor only where the direct fit is not known: a known direct fit
-        // (applied, or too small to matter) is the route (`events::chain`).
+        // Through the predecessor unless the direct fit is known to be too small to matter: the
+        // route is then the identity (`events::chain`), and a survey that needs no alignment
+        // (most of a permanent scanner's) costs one sample, not two.
+        let nothing = onto_first.determined && !onto_first.applied;
         let onto_previous = match predecessor(&later_surveys(ctx.plan), s) {
-            Some(prev) if !onto_first.determined => {
-                let (a, n) = fit_onto(ctx, prev, s)?;
+            Some(prev) if !nothing => {
+                let (a, n) = fit_onto(ctx, prev, s, true)?;
                 sampled += n;
                 gross(ctx, prev, s, &a)?;
                 Some(a)
@@ -117,11 +119,17 @@ impl Stage for AlignStage {
 /// The fit of survey `s` onto survey `onto`, and how many points it computed. With the user's
 /// stable areas, on every point inside them; where their ground leaves directions free (flat
 /// areas see no horizontal shift, no turn about the vertical), those are fitted on the rest of
-/// the surveys' stable ground ([`crate::events::align::complete`]).
-fn fit_onto(ctx: &Ctx, onto: usize, s: usize) -> Result<(Alignment, usize)> {
+/// the surveys' stable ground ([`crate::events::align::complete`]). Onto a predecessor that is
+/// itself misregistered (`link`), the plausible offset is that of two misregistrations
+/// ([`Limits::between`]).
+fn fit_onto(ctx: &Ctx, onto: usize, s: usize, link: bool) -> Result<(Alignment, usize)> {
     let plan = ctx.plan;
     let spacing = plan.params.core_spacing.value;
-    let limits = plan.params.align_limits();
+    let limits = if link {
+        plan.params.align_limits().between()
+    } else {
+        plan.params.align_limits()
+    };
     let windows = Region::Windows(windows(plan));
     let Some(areas) = &plan.stable_areas else {
         let (samples, n) = sample_of(ctx, onto, s, &windows, Picks::Cores(1))?;
@@ -168,6 +176,12 @@ fn gross(ctx: &Ctx, onto: usize, s: usize, a: &Alignment) -> Result<()> {
     }
     let (later, earlier) = (&ctx.plan.surveys[s], &ctx.plan.surveys[onto]);
     let t = a.translation;
+    // Onto the first survey, one misregistration; onto an aligned predecessor, two.
+    let limits = if onto == 0 {
+        Limits::PLAUSIBLE
+    } else {
+        Limits::PLAUSIBLE.between()
+    };
     Err(crate::error::Error::input(
         &later.arg,
         format!(
@@ -184,8 +198,8 @@ fn gross(ctx: &Ctx, onto: usize, s: usize, a: &Alignment) -> Result<()> {
             a.rotation_deg(),
             a.stable_points,
             a.residual_m,
-            Limits::PLAUSIBLE.shift_m,
-            Limits::PLAUSIBLE.turn_deg
+            limits.shift_m,
+            limits.turn_deg
         ),
     ))
 }

@@ -194,9 +194,16 @@ async function main() {
 
   // --- camera moves -----------------------------------------------------------------------------
   const tanHalf = Math.tan(THREE.MathUtils.degToRad(camera.fov) / 2);
+  // A steep face (its mean normal more than 45° from the vertical: a face scanned alone) is
+  // looked at along that normal, not down on from the south.
+  const facing = Array.isArray(view.facing) && view.facing.length === 3 && view.facing.every(Number.isFinite)
+    ? new THREE.Vector3().fromArray(view.facing).normalize()
+    : null;
+  const steep = facing !== null && facing.z < Math.SQRT1_2;
   function homePose() {
-    // From the south, 40° above the horizon, the whole scene in view.
-    const dir = new THREE.Vector3(0, -1, 0.85).normalize();
+    // From the south, 40° above the horizon, the whole scene in view; a steep face from the
+    // front.
+    const dir = steep ? facing.clone() : new THREE.Vector3(0, -1, 0.85).normalize();
     const dist = (diag / 2 / tanHalf) * 0.95;
     return { target: centre.clone(), position: centre.clone().addScaledVector(dir, dist) };
   }

@@ -44,3 +44,16 @@ export function stopServer(child) {
   if (!child?.pid) return;
   try { process.kill(-child.pid, 'SIGTERM'); } catch { /* already gone */ }
 }
+
+/**
+ * Serve the result `dir` with `talus view` and open it in a fresh browser whose profile lives
+ * in `tmp`: { server, context, page } once the viewer is ready (or has failed).
+ */
+export async function openResult(talus, dir, cwd, tmp) {
+  const { child, url } = await serveTalus(talus, dir, cwd);
+  const context = await launchBrowser(`${tmp}/profile`);
+  const page = context.pages()[0] || (await context.newPage());
+  await page.goto(url);
+  await page.waitForFunction(() => window.__talus && (window.__talus.ready || window.__talus.error), null, { timeout: 120_000 });
+  return { server: child, context, page };
+}

@@ -92,6 +92,15 @@ impl Limits {
         shift_m: 100.0,
         turn_deg: 20.0,
     };
+
+    /// The limits between two surveys each within these of a third (a campaign's survey and its
+    /// predecessor, both off the first): their offsets add up to twice.
+    pub fn between(&self) -> Limits {
+        Limits {
+            shift_m: 2.0 * self.shift_m,
+            turn_deg: 2.0 * self.turn_deg,
+        }
+    }
 }
 /// A direction of the scaled normal matrix whose eigenvalue is below this is not constrained:
 /// its standard error, σ/√λ at the stable ground's radius, would be more than half the noise of

@@ -28,6 +28,7 @@ struct ViewJson<'a> {
     origin: Point3,
     points: usize,
     distance_range: [f64; 2],
+    facing: Point3,
     terrain: &'a str,
     meshes: std::collections::BTreeMap<String, EventMeshes>,
 }
@@ -40,6 +41,8 @@ pub struct TerrainSample {
     seen: u64,
     pos: Vec<f32>,
     dist: Vec<f32>,
+    /// The sum of the sample's oriented normals (of known sign).
+    normals: Point3,
 }
 
 impl TerrainSample {
@@ -55,6 +58,7 @@ impl TerrainSample {
             seen: 0,
             pos: Vec::with_capacity(3 * n),
             dist: Vec::with_capacity(n),
+            normals: [0.0; 3],
         }
     }
 
@@ -65,6 +69,10 @@ impl TerrainSample {
             self.pos
                 .extend(k.xyz.iter().zip(&o).map(|(x, o)| (x - o) as f32));
             self.dist.push(k.r.measured() as f32);
+            let n = k.r.normal;
+            if k.r.sign_known && n.iter().all(|v| v.is_finite()) {
+                (0..3).for_each(|i| self.normals[i] += n[i]);
+            }
         }
         self.seen += 1;
     }
@@ -75,6 +83,7 @@ impl TerrainSample {
             origin,
             pos,
             mut dist,
+            normals,
             ..
         } = self;
         // Streamed, a run of values at a time (a byte copy would be as large as the terrain).
@@ -100,10 +109,17 @@ impl TerrainSample {
             };
             [q(0.02), q(0.98)]
         };
+        let len = normals.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let facing = if len > 0.0 {
+            normals.map(|v| v / len)
+        } else {
+            [0.0, 0.0, 1.0]
+        };
         Ok(Terrain {
             origin,
             points,
             distance_range,
+            facing,
         })
     }
 }
@@ -116,6 +132,14 @@ pub struct Terrain {
     pub points: usize,
     /// The 2nd and 98th percentiles of the sample's distances (the viewer's colour range).
     pub distance_range: [f64; 2],
+    /// The direction the surface faces: the mean of its oriented normals (of known sign),
+    /// normalised; up where there is none. The viewer looks at a steep face along it.
+    #[serde(default = "up")]
+    pub facing: Point3,
+}
+
+fn up() -> Point3 {
+    [0.0, 0.0, 1.0]
 }
 
 /// Write view.json: the terrain sample `terrain` (published beside it as terrain.bin) and the
@@ -133,6 +157,7 @@ pub fn write_view(
         origin: terrain.origin,
         points: terrain.points,
         distance_range: terrain.distance_range,
+        facing: terrain.facing,
         terrain: "terrain.bin",
         meshes: meshes
             .iter()
