@@ -430,7 +430,7 @@ pub fn run_planned(
 ) -> Result<Option<PathBuf>> {
     let command = std::env::args().collect::<Vec<_>>().join(" ");
     let lock = store.lock("run", &command)?;
-    store.recover()?;
+    store.recover(ours)?;
     // Jobs of an earlier submission still queued or running would compute beside this run.
     if !matches!(executor, crate::exec::Executor::Local) || force {
         crate::exec::slurm::check_idle(store)?;
