@@ -79,7 +79,9 @@ impl UserParams {
     /// Read a TOML config file whose top-level tables or arrays named in `sections` are not
     /// parameters (a campaign's `[[epoch]]` entries): they are returned apart, unparsed.
     pub fn from_toml_file_with(path: &Path, sections: &[&str]) -> Result<(Self, toml::Table)> {
-        let text = std::fs::read_to_string(path)
+        // A regular file only: a FIFO would block, `<(…)` is read once (`io::open_file`).
+        let mut text = String::new();
+        std::io::Read::read_to_string(&mut crate::io::open_file(path)?, &mut text)
             .map_err(|e| Error::input(path, format!("cannot read config: {e}")))?;
         let bad = |e: toml::de::Error| {
             let line = e.span().map_or(String::new(), |s| {

@@ -979,3 +979,89 @@ fn status_finishes_a_publish_cut_short() {
         String::from_utf8_lossy(&o.stdout)
     );
 }
+
+/// Run talus with `args` through `sh -c` (for `<(…)`); killed and failed after 30 s.
+fn run_shell_with_deadline(script: &str) -> std::process::Output {
+    let mut child = std::process::Command::new("bash")
+        .args(["-c", script])
+        .env("TALUS", env!("CARGO_BIN_EXE_talus"))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let t = std::time::Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if t.elapsed() > std::time::Duration::from_secs(30) {
+            let _ = child.kill();
+            panic!("{script}: still running after 30 s (waiting on a FIFO?)");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    child.wait_with_output().unwrap()
+}
+
+/// Issue 44, item 3: an input that is not a regular file — a FIFO with no writer (which hung
+/// `info` and `compare`), a process substitution of a valid LAS (which gave "signature is not
+/// 'LASF': [0, 0, 0, 0]"), a FIFO as the config or a mesh — is refused at once, naming it.
+#[test]
+fn inputs_that_are_not_regular_files_are_refused_at_once() {
+    let c = Case::new();
+    let fifo = c.p("fifo.las");
+    let made = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+    assert_eq!(unsafe { libc::mkfifo(made.as_ptr(), 0o600) }, 0);
+    let (good1, good2, out) = (c.p("good1.las"), c.p("good2.las"), c.out());
+    let (f, g1, g2, o) = (
+        fifo.display(),
+        good1.display(),
+        good2.display(),
+        out.display(),
+    );
+    for (script, names) in [
+        (format!("\"$TALUS\" info {f}"), f.to_string()),
+        (
+            format!("\"$TALUS\" compare {f} {g2} --out {o}"),
+            f.to_string(),
+        ),
+        (
+            format!("\"$TALUS\" compare {g1} {f} --out {o}"),
+            f.to_string(),
+        ),
+        (
+            format!("\"$TALUS\" compare {g1} {g2} --out {o} --config {f}"),
+            f.to_string(),
+        ),
+        (
+            format!("\"$TALUS\" compare {g1} {g2} --out {o} --before-mesh {f} --after-mesh {f}"),
+            f.to_string(),
+        ),
+        (format!("\"$TALUS\" info <(cat {g1})"), "/dev/fd/".into()),
+        (
+            format!("\"$TALUS\" compare <(cat {g1}) {g2} --out {o}"),
+            "/dev/fd/".into(),
+        ),
+    ] {
+        let out_ = run_shell_with_deadline(&script);
+        let err = String::from_utf8_lossy(&out_.stderr);
+        assert_eq!(out_.status.code(), Some(2), "{script}: {err}");
+        assert!(
+            err.contains(&names) && err.contains("not a regular file"),
+            "{script}: {err}"
+        );
+        assert!(!out.exists(), "{script}: {} left behind", out.display());
+    }
+    // A folder survey holding a FIFO among its clouds: named, not skipped in silence.
+    let folder = c.p("tiles");
+    std::fs::create_dir(&folder).unwrap();
+    std::fs::copy(&good1, folder.join("a.las")).unwrap();
+    std::fs::rename(&fifo, folder.join("b.las")).unwrap();
+    let o = run_shell_with_deadline(&format!(
+        "\"$TALUS\" compare {} {g2} --out {o}",
+        folder.display()
+    ));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("b.las") && err.contains("not a regular file"),
+        "{err}"
+    );
+}

@@ -78,8 +78,10 @@ fn check_inputs(opts: &CompareOptions, user: &UserParams) -> Result<Inputs> {
         _ => {}
     }
     for mesh in [&opts.before_mesh, &opts.after_mesh].into_iter().flatten() {
-        if !mesh.is_file() {
-            return Err(Error::input(mesh, "no such mesh file"));
+        match std::fs::metadata(mesh) {
+            Err(_) => return Err(Error::input(mesh, "no such mesh file")),
+            Ok(m) if !m.is_file() => return Err(io::not_regular(mesh)),
+            Ok(_) => {}
         }
     }
     // Validate the user's values before measuring anything.
