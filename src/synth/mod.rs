@@ -26,6 +26,7 @@
 
 pub mod campaign;
 mod output;
+pub mod owned;
 mod plants;
 pub(crate) mod rng;
 mod sampling;
@@ -390,13 +391,19 @@ fn chunks_of(
 /// when `opts.laz` is false) and `truth.json`, each written atomically. Returns the truth.
 pub fn synth(kind: SceneKind, opts: &SynthOptions, out_dir: &Path) -> Result<Truth> {
     let r = resolve(kind, opts)?;
-    std::fs::create_dir_all(out_dir).map_err(|e| Error::output(out_dir, e))?;
-    let model = SceneModel::new(kind, r.points[0], opts.seed);
     let ext = if opts.laz { "laz" } else { "las" };
     let names = [
         PathBuf::from(format!("before.{ext}")),
         PathBuf::from(format!("after.{ext}")),
     ];
+    // Only files synth wrote there itself are replaced (`owned`).
+    let written: Vec<String> = names
+        .iter()
+        .map(|n| n.display().to_string())
+        .chain(["truth.json".to_string()])
+        .collect();
+    owned::take(out_dir, &written)?;
+    let model = SceneModel::new(kind, r.points[0], opts.seed);
     let mut written = [0u64; 2];
     let turn_z = turn_height(&model, &r, opts);
     // Scenes without plants are ground, as before; a scene with plants is unclassified unless
