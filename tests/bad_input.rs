@@ -1065,3 +1065,162 @@ fn inputs_that_are_not_regular_files_are_refused_at_once() {
         "{err}"
     );
 }
+
+/// Issue 44, item 5: messages that were not true. `info` on a file of 2 or 3 points said
+/// "fewer than two" and failed; now it describes the file and says why no spacing is measured.
+/// Coordinates near 1e295 gave exit 1 "internal error: point spacing inf is not positive"
+/// without the file, and messages printed 300-digit numbers. Two distinct positions over 829
+/// rows were accepted as AFTER (refused as BEFORE, as "fewer than two"). `status` of a file
+/// said "cannot write".
+#[test]
+fn degenerate_inputs_are_described_truly() {
+    let c = Case::new();
+    let p = plane(7, 3, 0.0);
+    for n in [2, 3] {
+        let f = c.p(&format!("few{n}.xyz"));
+        common::write_text(&f, "x,y,z\n", &p[..n]);
+        let o = common::run(&["info", f.to_str().unwrap()]);
+        let text = String::from_utf8_lossy(&o.stdout);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert!(
+            text.contains(&format!("points         {n}"))
+                && text.contains(&format!(
+                    "not measurable: {n} point(s); it needs at least 11 distinct positions"
+                )),
+            "{text}"
+        );
+    }
+    // Coordinates near 1e295.
+    let mut r = Rng::new(8);
+    let huge: Vec<Point3> = (0..500)
+        .map(|_| {
+            [
+                1e295 * (1.0 + r.uniform() * 1e-12),
+                1e295 * (1.0 + r.uniform() * 1e-12),
+                0.0,
+            ]
+        })
+        .collect();
+    let f = c.p("huge.xyz");
+    let text: String = huge
+        .iter()
+        .map(|q| format!("{:e},{:e},{}\n", q[0], q[1], r.uniform()))
+        .collect();
+    std::fs::write(&f, text).unwrap();
+    let o = common::run(&["info", f.to_str().unwrap()]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(out.contains("coordinates as large as 1.000e295"), "{out}");
+    assert!(out.lines().all(|l| l.len() < 400), "{out}");
+    c.fails(
+        &f,
+        &f,
+        &[],
+        &["huge.xyz", "coordinates as large as 1.000e295"],
+    );
+    let o = common::run_compare(&c.p("good1.las"), &f, &c.out(), &[]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("do not overlap") && err.contains("1.000e295"),
+        "{err}"
+    );
+    assert!(err.len() < 400, "a number of hundreds of digits: {err}");
+    // Two distinct positions over 829 rows, refused either way and with the truth.
+    let twice: Vec<Point3> = (0..829).map(|i| p[i % 2]).collect();
+    let f = c.p("two_places.xyz");
+    common::write_text(&f, "x,y,z\n", &twice);
+    for (before, after) in [(&f, &c.p("good1.las")), (&c.p("good1.las"), &f)] {
+        let o = common::run_compare(before, after, &c.out(), &[]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{err}");
+        let last = err.trim().lines().last().unwrap();
+        assert!(
+            last.contains("two_places.xyz")
+                && last.contains("829 points at only 2 distinct position(s)"),
+            "{err}"
+        );
+        assert!(!c.out().exists());
+    }
+    // `status` of a file.
+    let o = common::run(&["status", c.p("good1.las").to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("good1.las: is a file, not a directory"),
+        "{err}"
+    );
+    assert!(!err.contains("cannot write"), "{err}");
+}
+
+/// Issue 44, item 5: a plain run into a folder that is not empty is told what works — it
+/// advised "--resume or --force" where both refuse (files of the user's named like talus
+/// outputs), and gave the loser of two runs started at once that advice instead of "in use by
+/// another talus run".
+#[test]
+fn a_plain_run_into_a_used_folder_is_told_what_works() {
+    let c = Case::new();
+    let (g1, g2) = (c.p("good1.las"), c.p("good2.las"));
+    let dir = c.p("d");
+    let run = |extra: &[&str]| common::run_compare(&g1, &g2, &dir, extra);
+    let refused = |o: &std::process::Output, needles: &[&str], not: &[&str]| {
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{err}");
+        for n in needles {
+            assert!(err.contains(n), "'{n}' not in: {err}");
+        }
+        for n in not {
+            assert!(!err.contains(n), "'{n}' in: {err}");
+        }
+    };
+    // The user's own file named like an output: neither flag would do.
+    std::fs::create_dir(&dir).unwrap();
+    std::fs::write(dir.join("events.csv"), "mine").unwrap();
+    refused(
+        &run(&[]),
+        &["events.csv", "not talus's to replace"],
+        &["--resume"],
+    );
+    for flag in ["--resume", "--force"] {
+        refused(&run(&[flag]), &["not talus's to replace"], &[]);
+    }
+    // Other files of the user's: --force writes beside them.
+    std::fs::remove_file(dir.join("events.csv")).unwrap();
+    std::fs::write(dir.join("notes.txt"), "mine").unwrap();
+    refused(&run(&[]), &["holds no talus run", "--force"], &["--resume"]);
+    let o = run(&["--force"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(
+        std::fs::read_to_string(dir.join("notes.txt")).unwrap(),
+        "mine"
+    );
+    // A finished run: either flag.
+    refused(
+        &run(&[]),
+        &["holds a talus run", "--resume", "--force"],
+        &[],
+    );
+    // A run holding DIR (as the loser of two runs started at once finds it).
+    let lock = serde_json::json!({
+        "pid": std::process::id(),
+        "host": std::fs::read_to_string("/proc/sys/kernel/hostname").unwrap().trim(),
+        "started": 0,
+        "token": "t",
+        "run": "run",
+        "command": "talus compare (the other run)",
+    });
+    std::fs::write(dir.join(".talus/lock"), lock.to_string()).unwrap();
+    for extra in [&[][..], &["--resume"], &["--force"]] {
+        refused(
+            &run(extra),
+            &["in use by another talus run", "the other run"],
+            &["use --resume"],
+        );
+    }
+    std::fs::remove_file(dir.join(".talus/lock")).unwrap();
+    // A fresh DIR holding only the work area of a run that stopped before it planned.
+    let fresh = c.p("fresh");
+    std::fs::create_dir_all(fresh.join(".talus/units")).unwrap();
+    let o = common::run_compare(&g1, &g2, &fresh, &[]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}

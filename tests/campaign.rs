@@ -867,3 +867,74 @@ fn forty_one_surveys_every_planted_event_within_5_percent() {
     assert!(median <= 0.01, "median |error| {:.2} %", 100.0 * median);
     assert!(fails.is_empty(), "{}", fails.join("\n"));
 }
+
+/// Issue 44, item 5: a campaign's refusals say what is wrong — two `[[epoch]]` entries with one
+/// label (were "surveyed on one date"), a label that is another survey's date label, the same
+/// file given twice (was "two surveys of one date"), an impossible date in a name (was "no date
+/// in the name").
+#[test]
+fn campaign_refusals_say_what_is_wrong() {
+    let tmp = common::tempdir();
+    let d = tmp.path();
+    let (x, y) = (common::OFFSET[0], common::OFFSET[1]);
+    for name in [
+        "a_20200101.las",
+        "b_20200401.las",
+        "e_20210230.las",
+        "u1.las",
+        "u2.las",
+    ] {
+        cloud(&d.join(name), x, y, None);
+    }
+    let out = d.join("out");
+    let p = |n: &str| d.join(n);
+    let o = campaign(&[p("a_20200101.las"), p("e_20210230.las")], &out, &[]);
+    refused(
+        &o,
+        &p("e_20210230.las"),
+        "20210230 (2021-02 has 28 days), is not a date",
+        &out,
+    );
+    let o = campaign(
+        &[
+            p("a_20200101.las"),
+            p("b_20200401.las"),
+            p("a_20200101.las"),
+        ],
+        &out,
+        &[],
+    );
+    refused(&o, &p("a_20200101.las"), "given twice", &out);
+    let cfg = d.join("campaign.toml");
+    let entry = |f: &str, date: &str, label: &str| {
+        format!(
+            "[[epoch]]\npath = \"{}\"\ndate = \"{date}\"\nlabel = \"{label}\"\n",
+            p(f).display()
+        )
+    };
+    std::fs::write(
+        &cfg,
+        entry("u1.las", "2020-02-01", "x") + &entry("u2.las", "2020-03-01", "x"),
+    )
+    .unwrap();
+    let args = ["--config", cfg.to_str().unwrap()];
+    let o = campaign(
+        &[p("a_20200101.las"), p("u1.las"), p("u2.las")],
+        &out,
+        &args,
+    );
+    refused(&o, &cfg, "label 'x' names two surveys", &out);
+    assert!(!String::from_utf8_lossy(&o.stderr).contains("surveyed on"));
+    std::fs::write(
+        &cfg,
+        entry("u1.las", "2020-02-01", "20200101") + &entry("u2.las", "2020-03-01", "y"),
+    )
+    .unwrap();
+    let o = campaign(
+        &[p("a_20200101.las"), p("u1.las"), p("u2.las")],
+        &out,
+        &args,
+    );
+    refused(&o, &cfg, "label '20200101'", &out);
+    assert!(String::from_utf8_lossy(&o.stderr).contains("a_20200101.las's label (its date"));
+}

@@ -104,7 +104,12 @@ pub fn campaign(opts: &CampaignOptions) -> Result<Option<Done>> {
         &crate::units::campaign::is_output,
         &given,
     )?;
-    let (store, created) = open_store(&opts.out, opts.resume, opts.force)?;
+    let (store, created) = open_store(
+        &opts.out,
+        opts.resume,
+        opts.force,
+        &crate::units::campaign::is_output,
+    )?;
     let mut decoded = None;
     let result = run_planned(
         &store,

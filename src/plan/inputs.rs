@@ -157,7 +157,8 @@ impl SurveyFiles {
                 format!(
                     "all points coincide or lie on one vertical line (x {}, y {}): a survey \
                      must cover an area",
-                    b.min[0], b.min[1]
+                    crate::geom::show(b.min[0]),
+                    crate::geom::show(b.min[1])
                 ),
             ));
         }
