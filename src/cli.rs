@@ -200,25 +200,33 @@ struct ExecArgs {
     /// (slurm) Write the plan and the sbatch scripts into DIR/.talus/slurm/N, submit nothing.
     #[arg(long)]
     plan_only: bool,
-    /// (slurm) Tiles per array task in the tile stages (M3C2, volumes).
-    #[arg(long, default_value_t = 1, value_name = "N")]
-    tiles_per_task: usize,
+    /// (slurm) Tiles per array task in the tile stages (M3C2, volumes) (default: 1).
+    #[arg(long, value_name = "N")]
+    tiles_per_task: Option<usize>,
 }
 
 impl ExecArgs {
     fn executor(&self) -> crate::Result<crate::exec::Executor> {
+        // Refused whatever the executor (it was ignored locally, 0 and all).
+        if self.tiles_per_task == Some(0) {
+            return Err(crate::Error::Usage(
+                "--tiles-per-task: must be at least 1".into(),
+            ));
+        }
         if self.executor == "local" {
             if self.wait || self.slurm_args.is_some() || self.plan_only {
                 return Err(crate::Error::Usage(
                     "--wait, --slurm-args and --plan-only go with --executor slurm".into(),
                 ));
             }
+            if self.tiles_per_task.is_some() {
+                return Err(crate::Error::Usage(
+                    "--tiles-per-task goes with --executor slurm (a local run takes every tile \
+                     as it comes)"
+                        .into(),
+                ));
+            }
             return Ok(crate::exec::Executor::Local);
-        }
-        if self.tiles_per_task == 0 {
-            return Err(crate::Error::Usage(
-                "--tiles-per-task: must be at least 1".into(),
-            ));
         }
         if self.wait && self.plan_only {
             return Err(crate::Error::Usage(
@@ -230,7 +238,7 @@ impl ExecArgs {
             args: crate::exec::slurm::split_args(self.slurm_args.as_deref().unwrap_or(""))?,
             wait: self.wait,
             plan_only: self.plan_only,
-            tiles_per_task: self.tiles_per_task,
+            tiles_per_task: self.tiles_per_task.unwrap_or(1),
         }))
     }
 }

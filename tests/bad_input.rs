@@ -1224,3 +1224,59 @@ fn a_plain_run_into_a_used_folder_is_told_what_works() {
     let o = common::run_compare(&g1, &g2, &fresh, &[]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 }
+
+/// Issue 44, item 6: nonsense accepted in silence is refused, naming the flag: `--min-points 0`
+/// (acted as 1), `--core-spacing 1e-6` (every point a core point, and the derived DBSCAN
+/// radius joins none: no event could form), `--tiles-per-task` with a local run (0 and all,
+/// ignored), `synth --classified` on a scene without plants (did nothing).
+#[test]
+fn nonsense_parameters_are_refused() {
+    let c = Case::new();
+    c.fails_on_good(
+        &["--min-points", "0"],
+        &["--min-points: must be at least 1"],
+    );
+    c.fails_on_good(
+        &["--core-spacing", "1e-6"],
+        &[
+            "--core-spacing",
+            "every point would be a core point",
+            "no event could form",
+        ],
+    );
+    c.fails_on_good(
+        &["--tiles-per-task", "0"],
+        &["--tiles-per-task: must be at least 1"],
+    );
+    c.fails_on_good(
+        &["--tiles-per-task", "2"],
+        &["--tiles-per-task goes with --executor slurm"],
+    );
+    // A fine core spacing with --eps given is the user's choice.
+    let o = common::run_compare(
+        &c.p("good1.las"),
+        &c.p("good2.las"),
+        &c.out(),
+        &["--core-spacing", "0.05", "--eps", "0.6"],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let scene = c.p("scene");
+    for (args, needle) in [
+        (
+            vec!["synth", "cliff", "--classified"],
+            "synth cliff: --classified is for",
+        ),
+        (
+            vec!["synth", "campaign", "--classified"],
+            "--classified for the vegetation scene",
+        ),
+    ] {
+        let mut args = args;
+        args.extend(["--out", scene.to_str().unwrap()]);
+        let o = common::run(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{err}");
+        assert!(err.contains(needle), "{err}");
+        assert!(!scene.exists(), "{args:?} wrote {}", scene.display());
+    }
+}

@@ -358,3 +358,32 @@ fn removed_vegetation_leaves_the_real_change() {
         );
     }
 }
+
+/// Issue 44, item 6: `--vegetation remove` on a cliff without plants drops points (edges and
+/// creases of the rock look scattered too) and so shifts the totals; the run says how many of
+/// each survey and by what rule, the counts those of summary.json.
+#[test]
+fn removing_vegetation_says_what_it_removed_and_why() {
+    let tmp = common::tempdir();
+    let (before, after) = common::synth_cliff(tmp.path(), 20_000);
+    let out = tmp.path().join("out");
+    let o = common::run_compare(&before, &after, &out, &["--vegetation", "remove"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    let summary = json_file(&out.join("summary.json"));
+    let removed = &summary["vegetation_removed"];
+    let (b, a) = (removed[0].as_u64().unwrap(), removed[1].as_u64().unwrap());
+    assert!(b > 0 && a > 0, "{removed}");
+    let note = err
+        .lines()
+        .find(|l| l.starts_with("talus: --vegetation remove left out"))
+        .unwrap_or_else(|| panic!("no note: {err}"));
+    for needle in [
+        format!("{b} of 20000 points"),
+        format!("{a} of 20000 points"),
+        "not planar in balls of 4 and 8 point spacings".into(),
+        "edges and creases of the terrain".into(),
+    ] {
+        assert!(note.contains(&needle), "'{needle}' not in: {note}");
+    }
+}

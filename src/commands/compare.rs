@@ -209,6 +209,7 @@ fn plan(
     )?;
     crate::progress::trace(|| "spacing measured".into());
     let params = Params::resolve(user, spacing.effective_spacing)?;
+    params.check_core_spacing(user)?;
     let surveys = vec![
         survey(store, "before", &inputs.before)?,
         survey(store, "after", &inputs.after)?,
@@ -457,10 +458,21 @@ pub fn compare(opts: &CompareOptions) -> Result<Option<Summary>> {
     let Some(marker) = forget_if_input_error(result, created, &opts.out)? else {
         return Ok(None);
     };
+    say_removed_vegetation(&store)?;
     let text = std::fs::read(&marker).map_err(|e| Error::output(&marker, e))?;
     serde_json::from_slice(&text)
         .map(Some)
         .map_err(|e| Error::Internal(format!("summary.json: {e}")))
+}
+
+/// Tell what `--vegetation remove` took out of the surveys of the run just published
+/// (`super::removed`).
+pub fn say_removed_vegetation(store: &Store) -> Result<()> {
+    let plan = Plan::load(&plan_path(store))?;
+    if let Some(note) = super::removed::vegetation(store, &plan)? {
+        eprintln!("talus: {note}");
+    }
+    Ok(())
 }
 
 /// After a failed run in a DIR it created: remove DIR again when the failure is the input's

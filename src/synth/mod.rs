@@ -402,8 +402,16 @@ pub fn synth(kind: SceneKind, opts: &SynthOptions, out_dir: &Path) -> Result<Tru
         .map(|n| n.display().to_string())
         .chain(["truth.json".to_string()])
         .collect();
-    owned::take(out_dir, &written)?;
     let model = SceneModel::new(kind, r.points[0], opts.seed);
+    if opts.classified && !model.has_plants() {
+        // It was accepted and did nothing: the scene's points are ground, class 2, either way.
+        return Err(Error::Usage(format!(
+            "synth {}: --classified is for a scene with plants (vegetation): this one's points \
+             are all ground, class 2, already",
+            kind.name()
+        )));
+    }
+    owned::take(out_dir, &written)?;
     let mut written = [0u64; 2];
     let turn_z = turn_height(&model, &r, opts);
     // Scenes without plants are ground, as before; a scene with plants is unclassified unless
