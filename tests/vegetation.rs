@@ -288,10 +288,31 @@ fn a_campaign_keeps_vegetation_out_of_tracks_and_the_fit() {
         veg.len()
     );
     assert!(veg.len() >= 10, "both pairs' plants flagged");
+    // In no track: null (it was 0, which the viewer counted as one more track than the
+    // command line's): the tracks the files hold are summary.json's.
     assert!(
-        veg.iter().all(|p| p["track_id"] == 0),
+        veg.iter().all(|p| p["track_id"].is_null()),
         "vegetation in a track"
     );
+    let tracks: std::collections::BTreeSet<u64> = events
+        .iter()
+        .filter_map(|p| p["track_id"].as_u64())
+        .collect();
+    let summary = json_file(&out.join("summary.json"));
+    assert_eq!(tracks.len() as u64, summary["tracks"].as_u64().unwrap());
+    assert!(!tracks.contains(&0));
+    // events.csv likewise: an empty track_id (the 4th column, before any quoted text).
+    let csv = std::fs::read_to_string(out.join("events.csv")).unwrap();
+    assert_eq!(
+        csv.lines().next().unwrap().split(',').nth(3),
+        Some("track_id")
+    );
+    let untracked = csv
+        .lines()
+        .skip(1)
+        .filter(|r| r.split(',').nth(3) == Some(""))
+        .count();
+    assert_eq!(untracked, veg.len());
     // The fit's values: significant events that count, of both consecutive pairs.
     let counted = events
         .iter()
