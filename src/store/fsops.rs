@@ -214,7 +214,7 @@ pub fn sorted_names(dir: &Path) -> Result<Vec<String>> {
 }
 
 /// Open a file of the store, or one talus published into DIR, for reading: never through a
-/// symbolic link, and only a regular file. A result folder may come from anyone (shared on a
+/// symbolic link, and only a regular file (else `InvalidData`). A result folder may come from anyone (shared on a
 /// cluster, sent as an archive): a link planted in it must not make talus read elsewhere, and a
 /// FIFO must not block a reader forever (it is opened without blocking, then refused).
 pub fn open_store_file(path: &Path) -> io::Result<File> {
@@ -225,13 +225,19 @@ pub fn open_store_file(path: &Path) -> io::Result<File> {
         .open(path)
         .map_err(|e| {
             if e.raw_os_error() == Some(libc::ELOOP) {
-                io::Error::other("is a symbolic link (talus follows no link in its work area)")
+                io::Error::new(
+                    io::ErrorKind::InvalidData,
+                    "is a symbolic link (talus follows no link in its work area)",
+                )
             } else {
                 e
             }
         })?;
     if !f.metadata()?.is_file() {
-        return Err(io::Error::other("not a regular file"));
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidData,
+            "not a regular file",
+        ));
     }
     Ok(f)
 }

@@ -399,5 +399,18 @@ fn links_planted_in_the_work_area_are_refused() {
     let e = s.claim("run", &unit("m3c2", "x-1"), "t").unwrap_err();
     assert!(e.to_string().contains("symbolic link"), "{e}");
     assert!(s.claim_holder("run", &unit("m3c2", "x-1")).is_none());
+    std::fs::remove_file(s.work().join("claims/run")).unwrap();
+    // A claim file planted as a link to a file of the user's (an old one: "stale"): not taken
+    // over (that would move it away and delete it), refused as the folder's problem.
+    std::fs::create_dir_all(s.work().join("claims/run/m3c2")).unwrap();
+    symlink(
+        outside.join("secret.txt"),
+        s.work().join("claims/run/m3c2/x-1"),
+    )
+    .unwrap();
+    let e = s.claim("run", &unit("m3c2", "x-1"), "t").unwrap_err();
+    assert_eq!(e.exit_code(), 2, "{e}");
+    assert!(e.to_string().contains("symbolic link"), "{e}");
+    assert!(!e.to_string().contains("cannot write"), "{e}");
     assert_eq!(tree(&outside), before);
 }

@@ -123,6 +123,10 @@ pub fn acquire(
         let (bytes, mtime) = match read_with_mtime(path) {
             Ok(x) => x,
             Err(e) if e.kind() == io::ErrorKind::NotFound => continue,
+            // A link or a FIFO planted as the owner file: the folder's problem, not the disk's.
+            Err(e) if e.kind() == io::ErrorKind::InvalidData => {
+                return Err(Error::input(path, e.to_string()))
+            }
             Err(e) => return Err(Error::output(path, e)),
         };
         if !stale(&bytes, mtime) {
