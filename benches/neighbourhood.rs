@@ -49,7 +49,7 @@ fn benches(c: &mut Criterion) {
     let cell = m3c2::column_width(&params);
     let b = Columns::new(&before, [50.0, 50.0, 0.0], cell);
     let a = Columns::new(&after, [50.0, 50.0, 0.0], cell);
-    let normals = m3c2::normals(&b, &cores, &params);
+    let (normals, _) = m3c2::normals(&b, &cores, &params, None);
 
     let mut g = c.benchmark_group("neighbourhood");
     g.bench_function("kd-tree sphere r=1.0, 1000 queries", |bench| {

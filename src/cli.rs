@@ -75,8 +75,8 @@ enum Command {
         /// The submission's number (DIR/.talus/slurm/N).
         #[arg(long)]
         submission: u32,
-        /// The stage: tiling, align, aligned, cleared, cores, thinned, m3c2, merged, stable,
-        /// events, points, volumes, outputs, campaign, publish.
+        /// The stage: tiling, align, aligned, cleared, orient, cores, thinned, m3c2, merged,
+        /// stable, events, points, volumes, outputs, campaign, publish.
         #[arg(long)]
         stage: String,
         /// The task (default: SLURM_ARRAY_TASK_ID).
@@ -151,9 +151,11 @@ struct ParamArgs {
     #[arg(long)]
     orientation: Option<String>,
     /// Align the later survey onto the earlier (a campaign's onto its first) by a rigid
-    /// transform fitted on the stable ground: auto (applied when significant and well
-    /// constrained, else reported) | off (default: auto).
-    #[arg(long, value_name = "auto|off")]
+    /// transform fitted on the stable ground: auto (applied when significant, well constrained,
+    /// confirmed on held-out ground and a plausible misregistration: at most 1 m and 0.5°; a
+    /// larger one stops the run with what to do) | on (applied whatever its size, up to 100 m
+    /// and 20°) | off (default: auto).
+    #[arg(long, value_name = "auto|on|off")]
     align: Option<String>,
     /// Vegetation, recognised from the LAS classes and, for unclassified points, from its
     /// volumetric scatter: flag (its events are listed but left out of totals and tracks) |
@@ -317,7 +319,7 @@ struct CampaignArgs {
 #[derive(Args)]
 struct SynthArgs {
     /// hill | cube | spheres | cubes | cliff | deposit | hole | events | stable | large | dense | beach |
-    /// vegetation | campaign
+    /// vegetation | face | face-vertical | campaign
     scene: String,
     /// Directory to write the epochs (before.laz, after.laz; a campaign's survey_*.laz) and
     /// truth.json into.

@@ -47,7 +47,8 @@ pub struct UserParams {
     /// points inside their polygons (default: found in the distances).
     pub stable: Option<PathBuf>,
     pub orientation: Option<String>,
-    /// `auto` (align the later survey on the stable ground when it helps) or `off`.
+    /// `auto` (align the later survey on the stable ground when it is a plausible
+    /// misregistration that holds out of sample), `on` (whatever its size) or `off`.
     pub align: Option<String>,
     /// `keep`, `flag` or `remove` (SPEC.md §4 "Vegetation").
     pub vegetation: Option<String>,
@@ -497,9 +498,9 @@ impl Params {
                 value: "auto".to_string(),
                 source: "default: auto".into(),
             },
-            Some(a @ ("auto" | "off")) => Resolved::user(a.to_string()),
+            Some(a @ ("auto" | "on" | "off")) => Resolved::user(a.to_string()),
             Some(other) => {
-                return Err(user.bad_value("align", format!("auto or off, not '{other}'")));
+                return Err(user.bad_value("align", format!("auto, on or off, not '{other}'")));
             }
         };
         let vegetation = match user.vegetation.as_deref() {
@@ -689,9 +690,20 @@ impl Params {
         Classes::parse(&self.classes.value).unwrap_or_default()
     }
 
-    /// Whether later surveys are aligned onto the first on the stable ground (`--align auto`).
+    /// Whether later surveys are aligned onto the first on the stable ground (`--align auto` or
+    /// `on`).
     pub fn align_enabled(&self) -> bool {
-        self.align.value == "auto"
+        matches!(self.align.value.as_str(), "auto" | "on")
+    }
+
+    /// How far an alignment may move a survey: a plausible misregistration (`auto`), or any the
+    /// stable ground fixes (`on`).
+    pub fn align_limits(&self) -> crate::events::align::Limits {
+        if self.align.value == "on" {
+            crate::events::align::Limits::FORCED
+        } else {
+            crate::events::align::Limits::PLAUSIBLE
+        }
     }
 
     /// How M3C2 treats a cylinder that holds only one epoch ([`crate::m3c2::reach`]): a derived

@@ -32,6 +32,14 @@ struct Case {
     dir: tempfile::TempDir,
 }
 
+/// A stage's line when its units finished (`talus: pass 2: normals and M3C2: ... peak ...`).
+fn finished_stage(l: &str) -> bool {
+    ["talus: pass ", "talus: alignment", "talus: orientation"]
+        .iter()
+        .any(|s| l.starts_with(s))
+        && l.contains(" peak ")
+}
+
 impl Case {
     fn new() -> Self {
         let c = Case {
@@ -53,7 +61,10 @@ impl Case {
         let o = common::run_compare(before, after, &out, extra);
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(2), "stderr: {err}");
-        assert_eq!(err.trim().lines().count(), 1, "not one line: {err}");
+        // One line, but for the lines of stages that finished while another unit met the bad
+        // input (a survey's orientation field, done before the other survey's tiling failed).
+        let lines: Vec<&str> = err.trim().lines().filter(|l| !finished_stage(l)).collect();
+        assert_eq!(lines.len(), 1, "not one line: {err}");
         for n in needles {
             assert!(err.contains(n), "'{n}' not in: {err}");
         }
@@ -75,11 +86,7 @@ impl Case {
         let (last, stages) = lines.split_last().unwrap();
         assert!(last.starts_with("talus: error: "), "{err}");
         for l in stages {
-            assert!(
-                (l.starts_with("talus: pass ") || l.starts_with("talus: alignment"))
-                    && l.contains(" peak "),
-                "{err}"
-            );
+            assert!(finished_stage(l), "{err}");
         }
         for n in needles {
             assert!(last.contains(n), "'{n}' not in: {err}");

@@ -6,7 +6,7 @@ mod common;
 
 use talus::io::result_table;
 
-const NAMES: [(&str, &str); 13] = [
+const NAMES: [(&str, &str); 14] = [
     ("m3c2_distance", "float64"),
     ("m3c2_uncertainty", "float64"),
     ("m3c2_significant", "uint8"),
@@ -20,6 +20,7 @@ const NAMES: [(&str, &str); 13] = [
     ("m3c2_smoothed", "float64"),
     ("event_id", "uint32"),
     ("m3c2_beyond_reach", "uint8"),
+    ("normal_sign_unknown", "uint8"),
 ];
 
 /// `talus synth cube` into `dir/scene`.

@@ -54,8 +54,9 @@ fn refused(b: &Path, a: &Path, out: &Path, extra: &[&str]) -> String {
 
 #[test]
 fn one_tile_beyond_the_budget_is_refused_before_anything_runs() {
-    // 2 × 700k points where the normal radius makes the smallest tile (four halos) wider than
-    // the survey: one tile of 1.4M points, about 140 MiB, beyond the pool of 160 MiB.
+    // 2 × 700k points where the normal radius (30 m: a halo of 30 m) makes the smallest tile
+    // (four halos) wider than the 100 m survey: one tile of 1.4M points, about 140 MiB, beyond
+    // the pool of 160 MiB.
     let dir = tempdir();
     let (b, a) = planes(dir.path(), 11, 700_000, 100.0, 100.0);
     let out = dir.path().join("out");
@@ -63,7 +64,7 @@ fn one_tile_beyond_the_budget_is_refused_before_anything_runs() {
         &b,
         &a,
         &out,
-        &["--memory", "160MiB", "--normal-radius", "10"],
+        &["--memory", "160MiB", "--normal-radius", "30"],
     );
     assert!(
         err.contains("--memory 160 MiB is too small: the pair's one tile (1400000 points"),

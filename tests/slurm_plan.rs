@@ -60,8 +60,8 @@ fn plan_only_writes_the_scripts_and_submits_nothing() {
     assert_eq!(
         stages,
         [
-            "tiling", "align", "aligned", "m3c2", "stable", "events", "points", "volumes",
-            "outputs", "publish"
+            "tiling", "align", "aligned", "orient", "m3c2", "stable", "events", "points",
+            "volumes", "outputs", "publish"
         ],
         "{stdout}"
     );
@@ -97,7 +97,7 @@ fn plan_only_writes_the_scripts_and_submits_nothing() {
     .unwrap();
     assert_eq!(m3c2["tasks"].as_array().unwrap().len(), tiles.div_ceil(2));
 
-    let script = std::fs::read_to_string(sub.join("04-m3c2.sh")).unwrap();
+    let script = std::fs::read_to_string(sub.join("05-m3c2.sh")).unwrap();
     for line in [
         "#!/bin/bash",
         &format!("#SBATCH --array=0-{}", tiles.div_ceil(2) - 1),

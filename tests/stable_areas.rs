@@ -37,7 +37,7 @@ const STABLE: [[f64; 4]; 2] = [
     [500018.0, 5000002.0, 500034.0, 5000009.0],
 ];
 
-/// Polygons over unchanged beach and plateau: summary.json says `stable.source` = areas, names
+/// Polygons over unchanged beach and plateau: summary.json says `stable.source` = user, names
 /// the file, and counts as stable at least 90 % of the core points inside (the robust fit may
 /// leave out a few) and no more; σ_d is the automatic one's within 25 %; the events are the same
 /// ones with the same volumes within 1 %.
@@ -61,7 +61,7 @@ fn polygons_over_stable_ground_are_the_stable_ground() {
         json_file(&mine.join("summary.json")),
     );
     assert_eq!(sa["stable"]["source"], "auto");
-    assert_eq!(sm["stable"]["source"], "areas");
+    assert_eq!(sm["stable"]["source"], "user");
     assert!(sm["stable"]["file"]
         .as_str()
         .unwrap()

@@ -230,10 +230,13 @@ fn integrated_volume(
     let (min, max, sign) = match ev.footprint {
         Footprint::Ground { min, max } => (min, max, 1.0),
         Footprint::Face { min, max } => (min, max, -1.0),
+        // A scanned face's events are integrated in its own frame (`synth::face`'s tests).
+        Footprint::Frame { .. } => panic!("a scanned face's event"),
     };
     let change = |x: f64, y: f64| match ev.footprint {
         Footprint::Ground { .. } => m.height(1, x, y).unwrap() - m.height(0, x, y).unwrap(),
         Footprint::Face { .. } => m.face_depth(1, x, y).unwrap() - m.face_depth(0, x, y).unwrap(),
+        Footprint::Frame { .. } => unreachable!(),
     };
     sign * integrate(min[0] - g, max[0] + g, min[1] - g, max[1] + g, n, |x, y| {
         if keep(x, y) {
@@ -906,7 +909,7 @@ fn events_scene_is_drawn_from_the_seed() {
             .iter()
             .map(|e| match e.footprint {
                 Footprint::Ground { min, max } => (min, max),
-                Footprint::Face { .. } => panic!("a ground event"),
+                Footprint::Face { .. } | Footprint::Frame { .. } => panic!("a ground event"),
             })
             .collect();
         for (i, (a0, a1)) in boxes.iter().enumerate() {
@@ -1062,9 +1065,9 @@ fn campaign_truths_match_numerical_integration() {
                 .partition(|f| matches!(f, Footprint::Ground { .. }));
             let outside = |fs: &[Footprint], x: f64, y: f64| {
                 fs.iter().all(|f| match *f {
-                    Footprint::Ground { min, max } | Footprint::Face { min, max } => {
-                        !in_rect(min, max, 1e-9, x, y)
-                    }
+                    Footprint::Ground { min, max }
+                    | Footprint::Face { min, max }
+                    | Footprint::Frame { min, max } => !in_rect(min, max, 1e-9, x, y),
                 })
             };
             let h = 0.05;
@@ -1172,6 +1175,7 @@ fn campaign_layout_for_every_size() {
             let (min, max, lo, hi) = match e.footprint {
                 Footprint::Ground { min, max } => (min, max, -beach, 0.0),
                 Footprint::Face { min, max } => (min, max, z0, z1),
+                Footprint::Frame { .. } => panic!("a campaign has no scanned face"),
             };
             assert!(
                 min[0] >= x0 + 5.0 - 1e-9 && max[0] <= x1 - 5.0 + 1e-9,
@@ -1207,6 +1211,7 @@ fn campaign_layout_for_every_size() {
                         Footprint::Ground { .. } => {
                             s.height(ep, c[0], c[1]).unwrap() - b.height(bp, c[0], c[1]).unwrap()
                         }
+                        Footprint::Frame { .. } => unreachable!("a campaign has no scanned face"),
                         Footprint::Face { .. } => {
                             b.face_depth(bp, c[0], c[2]).unwrap()
                                 - s.face_depth(ep, c[0], c[2]).unwrap()

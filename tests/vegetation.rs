@@ -186,7 +186,7 @@ fn unclassified_vegetation_is_flagged_and_left_out_of_the_totals() {
         .lines()
         .next()
         .unwrap()
-        .ends_with("volume_note,vegetation_fraction,vegetation"));
+        .ends_with("volume_note,vegetation_fraction,vegetation,sign_known"));
     assert_eq!(
         csv.lines().filter(|l| l.ends_with(",true")).count(),
         flagged.len()

@@ -132,6 +132,13 @@ fn chain(k: usize, link: &Alignment, prev: &Route) -> Route {
             chi2: link.chi2 + p.chi2,
             stable_points: shared,
             at_rest_share: link.at_rest_share.min(p.at_rest_share),
+            confirmed_share: match (link.confirmed_share, p.confirmed_share) {
+                (Some(a), Some(b)) => Some(a.min(b)),
+                (a, b) => a.or(b),
+            },
+            largest_shift_m: link.largest_shift_m + p.largest_shift_m,
+            vertical_only: link.vertical_only && p.vertical_only,
+            gross: false,
             applied,
             determined: true,
             reason,

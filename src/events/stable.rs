@@ -98,16 +98,29 @@ pub struct Stable {
     pub stable_points: usize,
     pub sampled_points: usize,
     pub method: String,
-    /// Where the stable ground came from: `auto` (found in the distances) or `areas` (the core
+    /// Where the stable ground came from: `automatic` (found in the distances) or `user` (the
     /// points inside the user's polygons, `file`).
-    #[serde(default = "auto")]
+    #[serde(default = "automatic")]
     pub source: String,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub file: Option<std::path::PathBuf>,
 }
 
-fn auto() -> String {
-    "auto".into()
+/// What the user's stable areas held for a pair, and whether they gave the stable ground.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct AreasUse {
+    pub file: std::path::PathBuf,
+    /// Points of the before survey inside the polygons that were sampled, and those with a
+    /// distance.
+    pub points_inside: usize,
+    pub with_distance: usize,
+    /// Whether the measurement is theirs (else: the automatic stable ground, and `note` says why).
+    pub used: bool,
+    pub note: Option<String>,
+}
+
+fn automatic() -> String {
+    "automatic".into()
 }
 
 impl Stable {
@@ -189,7 +202,7 @@ pub fn measure(samples: &[Sample], spacing: f64) -> Option<Stable> {
             keep.len(),
             finite.len()
         ),
-        source: auto(),
+        source: automatic(),
         file: None,
     })
 }

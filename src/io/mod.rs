@@ -50,23 +50,18 @@ pub struct Crs {
 }
 
 impl Crs {
-    /// The EPSG code of the CRS: the GeoTIFF keys', else the WKT's own authority (WKT 1: the
-    /// last `AUTHORITY["EPSG","n"]`, the outermost object's; WKT 2: the last `ID["EPSG",n]`).
+    /// The EPSG code of the CRS's horizontal part: the GeoTIFF keys' (3072/2048, horizontal by
+    /// definition), else the WKT's. A compound CRS (`COMPD_CS`, `COMPOUNDCRS`: a projected CRS
+    /// with a vertical one, e.g. NAD83 / Oregon LCC + NAVD88 height) is its horizontal part's
+    /// code, the one polygons in the same map are given in: the first projected or geographic
+    /// element's own authority (WKT 1: the last `AUTHORITY["EPSG","n"]` inside it; WKT 2: the
+    /// last `ID["EPSG",n]`).
     pub fn epsg_code(&self) -> Option<u32> {
         if self.epsg.is_some() {
             return self.epsg;
         }
         let w = self.wkt.as_deref()?;
-        let at = w
-            .rfind("AUTHORITY[\"EPSG\"")
-            .or_else(|| w.rfind("ID[\"EPSG\""))?;
-        let rest = &w[at..];
-        let digits: String = rest[rest.find(',')? + 1..]
-            .chars()
-            .skip_while(|c| !c.is_ascii_digit())
-            .take_while(|c| c.is_ascii_digit())
-            .collect();
-        digits.parse().ok()
+        horizontal_wkt(w).and_then(last_epsg)
     }
 
     /// A short human description: `EPSG:32755`, the WKT's name, or `unknown`.
@@ -85,6 +80,48 @@ impl Crs {
         }
         "unknown".to_string()
     }
+}
+
+/// The horizontal CRS element of WKT `w`: the first projected or geographic element
+/// (`PROJCS`, `GEOGCS`, `PROJCRS`, `GEOGCRS`, `GEODCRS`) with its brackets, or the whole WKT when
+/// it names none.
+fn horizontal_wkt(w: &str) -> Option<&str> {
+    let start = ["PROJCS[", "PROJCRS[", "GEOGCS[", "GEOGCRS[", "GEODCRS["]
+        .iter()
+        .filter_map(|k| w.find(k))
+        .min();
+    let Some(start) = start else {
+        return Some(w);
+    };
+    let mut depth = 0usize;
+    let mut quoted = false;
+    for (i, c) in w[start..].char_indices() {
+        match c {
+            '"' => quoted = !quoted,
+            '[' | '(' if !quoted => depth += 1,
+            ']' | ')' if !quoted => {
+                depth = depth.checked_sub(1)?;
+                if depth == 0 {
+                    return Some(&w[start..=start + i]);
+                }
+            }
+            _ => {}
+        }
+    }
+    Some(&w[start..])
+}
+
+/// The last EPSG authority code in WKT `w` (WKT 1 `AUTHORITY["EPSG","n"]`, WKT 2 `ID["EPSG",n]`):
+/// an element's own authority closes it, after those of the elements inside it.
+fn last_epsg(w: &str) -> Option<u32> {
+    let at = w.rfind("AUTHORITY[\"EPSG\"").max(w.rfind("ID[\"EPSG\""))?;
+    let rest = &w[at..];
+    let digits: String = rest[rest.find(',')? + 1..]
+        .chars()
+        .skip_while(|c| !c.is_ascii_digit())
+        .take_while(|c| c.is_ascii_digit())
+        .collect();
+    digits.parse().ok()
 }
 
 /// What is known about a cloud from its header (or a first scan for formats without one).
@@ -273,4 +310,28 @@ pub fn read_all(path: &Path) -> Result<(CloudInfo, Vec<Point3>)> {
         all.extend_from_slice(&buf);
     }
     Ok((info, all))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Crs;
+
+    fn wkt(w: &str) -> Crs {
+        Crs {
+            wkt: Some(w.into()),
+            ..Crs::default()
+        }
+    }
+
+    #[test]
+    fn a_compound_crs_is_its_horizontal_part() {
+        // The autzen surveys' WKT: NAD83 / Oregon LCC (m) with NAVD88 height in US feet.
+        let autzen = r#"COMPD_CS["NAD83 / Oregon LCC (m) + NAVD88 height (ftUS)",PROJCS["NAD83 / Oregon LCC (m)",GEOGCS["NAD83",DATUM["North_American_Datum_1983",SPHEROID["GRS 1980",6378137,298.257222101],AUTHORITY["EPSG","6269"]],PRIMEM["Greenwich",0],UNIT["degree",0.0174532925199433,AUTHORITY["EPSG","9122"]],AUTHORITY["EPSG","4269"]],PROJECTION["Lambert_Conformal_Conic_2SP"],UNIT["metre",1],AUTHORITY["EPSG","2991"]],VERT_CS["NAVD88 height (ftUS)",VERT_DATUM["North American Vertical Datum 1988",2005],UNIT["US survey foot",0.304800609601219],AUTHORITY["EPSG","6360"]]]"#;
+        assert_eq!(wkt(autzen).epsg_code(), Some(2991));
+        let utm = r#"PROJCS["WGS 84 / UTM zone 33N",GEOGCS["WGS 84",AUTHORITY["EPSG","4326"]],UNIT["metre",1,AUTHORITY["EPSG","9001"]],AUTHORITY["EPSG","32633"]]"#;
+        assert_eq!(wkt(utm).epsg_code(), Some(32633));
+        let wkt2 = r#"COMPOUNDCRS["ETRS89 / UTM 32N + DHHN2016",PROJCRS["ETRS89 / UTM zone 32N",BASEGEOGCRS["ETRS89",ID["EPSG",4258]],ID["EPSG",25832]],VERTCRS["DHHN2016 height",ID["EPSG",7837]],ID["EPSG",9999]]"#;
+        assert_eq!(wkt(wkt2).epsg_code(), Some(25832));
+        assert_eq!(wkt(r#"LOCAL_CS["site"]"#).epsg_code(), None);
+    }
 }

@@ -4,6 +4,7 @@
 
 pub mod core_points;
 pub mod cylinder;
+pub mod field;
 pub mod moments;
 pub mod normals;
 pub mod orientation;
@@ -51,6 +52,11 @@ pub struct CoreResult {
     pub normal: Point3,
     /// Whether the distance needed the walk beyond the window, and what came of it.
     pub reach: Reach,
+    /// Whether the data decides which side of the surface is out here (the normal's sign, and
+    /// so the distance's): false where the orientation field is undecided (a face near vertical
+    /// scanned alone) or no field normal near the core point speaks clearly
+    /// ([`field::Field::orient`]).
+    pub sign_known: bool,
 }
 
 impl Default for CoreResult {
@@ -91,6 +97,7 @@ impl CoreResult {
             count2: 0,
             normal,
             reach: Reach::Window,
+            sign_known: true,
         }
     }
 }
@@ -150,21 +157,28 @@ fn in_spatial_order<T: Send + Copy + Default>(
     out
 }
 
-/// Normals at `cores` (local frame of `before`), oriented as `params.orientation` says.
-pub fn normals(before: &Columns, cores: &[Point3], params: &M3c2Params) -> Vec<Point3> {
+/// Normals at `cores` (local frame of `before`), oriented as `params.orientation` says (`auto`
+/// by `field`, the survey's orientation field near the cores, in their frame), and whether each
+/// one's sign is known.
+pub fn normals(
+    before: &Columns,
+    cores: &[Point3],
+    params: &M3c2Params,
+    field: Option<&field::Field>,
+) -> (Vec<Point3>, Vec<bool>) {
     let mut normals: Vec<Point3> = in_spatial_order(cores, params.normal_radius, |i| {
         normals::normal_at(before, &cores[i], params.normal_radius)
             .map(|(n, _)| n)
             .unwrap_or([f64::NAN; 3])
     });
-    orientation::orient(
+    let known = orientation::orient(
         cores,
         &mut normals,
-        before,
-        params.normal_radius,
+        before.origin(),
         params.orientation,
+        field,
     );
-    normals
+    (normals, known)
 }
 
 /// M3C2 at each core point, given its oriented normal. `before` and `after` must share the local
@@ -286,5 +300,6 @@ fn result(
         count2: c2.count,
         normal: *n,
         reach,
+        sign_known: true,
     }
 }

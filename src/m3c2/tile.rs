@@ -46,7 +46,9 @@ pub struct KeyedResult {
 /// `anchor` with cells of `core_spacing` (keyed by cell), or the user's `cores` (keyed by input
 /// order) — sorted by key. `extent` (global coordinates) holds the data's bounds and the tile's
 /// halo box: a core point whose walk ([`super::reach`]) needs points beyond that box comes back
-/// [`Reach::Pending`](super::Reach::Pending), for [`distances_along`].
+/// [`Reach::Pending`](super::Reach::Pending), for [`distances_along`]. `field` is the before
+/// survey's orientation field near the tile (`auto` orientation).
+#[allow(clippy::too_many_arguments)]
 pub fn compute(
     before: &EpochPoints,
     after: &EpochPoints,
@@ -55,6 +57,7 @@ pub fn compute(
     cores: Option<&[(u64, Point3)]>,
     params: &M3c2Params,
     extent: &Extent,
+    field: Option<&super::field::Field>,
 ) -> Vec<KeyedResult> {
     let cell = super::column_width(params);
     let index = |t: &EpochPoints| Columns::from_fn(t.len(), |i| t.point(i), anchor, cell);
@@ -76,12 +79,17 @@ pub fn compute(
         return Vec::new();
     }
     let local: Vec<Point3> = keyed.iter().map(|(_, p)| b.to_local(p)).collect();
-    let normals = super::normals(&b, &local, params);
+    let (normals, known) = super::normals(&b, &local, params, field);
     let results = super::distances(&b, &a, &local, &normals, params, &extent.local(&anchor));
     let mut out: Vec<KeyedResult> = keyed
         .iter()
         .zip(results)
-        .map(|(&(key, xyz), r)| KeyedResult { key, xyz, r })
+        .zip(known)
+        .map(|((&(key, xyz), r), sign_known)| KeyedResult {
+            key,
+            xyz,
+            r: CoreResult { sign_known, ..r },
+        })
         .collect();
     out.sort_by_key(|k| k.key);
     out
@@ -89,8 +97,8 @@ pub fn compute(
 
 /// M3C2 again at core points whose walk left their tile ([`super::Reach::Pending`]): `before`
 /// and `after` hold every point of each epoch within the cylinder's radius of those core points'
-/// axes, out to the data's bounds (`extent`, global coordinates), and `normals` are the ones the
-/// tile computed. The result is the one a run over the whole surveys gives.
+/// axes, out to the data's bounds (`extent`, global coordinates), and the normals (and whether
+/// their signs are known) are the ones the tile computed. The result is the one a run over the whole surveys gives.
 pub fn distances_along(
     before: &[Point3],
     after: &[Point3],
@@ -111,6 +119,12 @@ pub fn distances_along(
     pending
         .iter()
         .zip(results)
-        .map(|(k, r)| KeyedResult { r, ..*k })
+        .map(|(k, r)| KeyedResult {
+            r: CoreResult {
+                sign_known: k.r.sign_known,
+                ..r
+            },
+            ..*k
+        })
         .collect()
 }

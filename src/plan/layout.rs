@@ -177,16 +177,14 @@ pub fn tile_density(grid: &DensityGrid, held: f64, mean: f64, params: &Params) -
 
 /// The halo of the tile files: how far beyond its square a tile must hold points so that every
 /// neighbourhood a tile's M3C2 unit computes for the core points it owns is the one a whole-cloud
-/// run sees (SPEC.md §3): the normal sphere, the M3C2 cylinder (inside its circumscribed sphere),
-/// and, for `auto` orientation, the top-surface cells 1..4 × normal_radius away (cells of
-/// normal_radius / 2, so a cell reaches another half diagonal, < 0.71 × normal_radius, further).
-/// The DBSCAN `eps` is not in it: the events unit clusters the kept core points with its own
-/// halo, so a changed `eps` must not cut the surveys again.
+/// run sees (SPEC.md §3): the normal sphere and the M3C2 cylinder (inside its circumscribed
+/// sphere). The orientation field's normals fit within it (`units::orient::geometry`). The
+/// DBSCAN `eps` is not in it: the events unit clusters the kept core points with its own halo,
+/// so a changed `eps` must not cut the surveys again.
 pub fn tile_halo(params: &Params) -> f64 {
     let nr = params.normal_radius.value;
     let cyl = (params.cyl_radius.value.powi(2) + params.cyl_halflen.value.powi(2)).sqrt();
-    let orient = 4.0 * nr + 0.5 * nr * std::f64::consts::SQRT_2;
-    nr.max(cyl).max(orient) + 2.0 * params.core_spacing.value
+    nr.max(cyl) + 2.0 * params.core_spacing.value
 }
 
 #[cfg(test)]

@@ -25,6 +25,7 @@
 //! truth of every consecutive pair and of every survey against the first.
 
 pub mod campaign;
+pub mod face;
 mod output;
 pub mod owned;
 mod plants;
@@ -68,11 +69,13 @@ pub enum SceneKind {
     Dense,
     Beach,
     Vegetation,
+    Face,
+    FaceVertical,
 }
 
 impl SceneKind {
     /// All scenes, in the order of their names.
-    pub const ALL: [SceneKind; 13] = [
+    pub const ALL: [SceneKind; 15] = [
         SceneKind::Hill,
         SceneKind::Cube,
         SceneKind::Spheres,
@@ -86,6 +89,8 @@ impl SceneKind {
         SceneKind::Dense,
         SceneKind::Beach,
         SceneKind::Vegetation,
+        SceneKind::Face,
+        SceneKind::FaceVertical,
     ];
 
     /// The scene's name on the command line.
@@ -104,6 +109,8 @@ impl SceneKind {
             SceneKind::Dense => "dense",
             SceneKind::Beach => "beach",
             SceneKind::Vegetation => "vegetation",
+            SceneKind::Face => "face",
+            SceneKind::FaceVertical => "face-vertical",
         }
     }
 
@@ -320,9 +327,10 @@ pub fn epoch_chunks(kind: SceneKind, opts: &SynthOptions, epoch: usize) -> Resul
     }
     let r = resolve(kind, opts)?;
     let model = SceneModel::new(kind, r.points[0], opts.seed);
-    if model.has_plants() {
+    if model.has_plants() || model.scanned.is_some() {
         return Err(Error::Usage(format!(
-            "the {kind} scene's plants are not surfaces: its epochs are what `synth` writes"
+            "the {kind} scene's points are not samples of surface patches (plants, a scanner's \
+             rays): its epochs are what `synth` writes"
         )));
     }
     Ok(chunks_of(
@@ -340,6 +348,9 @@ pub fn epoch_chunks(kind: SceneKind, opts: &SynthOptions, epoch: usize) -> Resul
 fn turn_height(model: &SceneModel, r: &Resolved, opts: &SynthOptions) -> f64 {
     if opts.turn_deg == [0.0; 3] {
         return 0.0;
+    }
+    if let Some(face) = &model.scanned {
+        return face.centre_height();
     }
     let (mut n, mut sum) = (0u64, 0.0);
     for chunk in chunks_of(model, r, opts, 0, 0.0) {
@@ -418,6 +429,30 @@ pub fn synth(kind: SceneKind, opts: &SynthOptions, out_dir: &Path) -> Result<Tru
     // asked for classified.
     let classified = !model.has_plants() || opts.classified;
     for epoch in 0..2 {
+        if let Some(face) = &model.scanned {
+            // A terrestrial scan of a face: delivered unclassified (1), as scans are.
+            let place = placement(&model, opts, epoch, turn_z);
+            let points: Vec<V3> = face
+                .scan(epoch, r.points[epoch], r.noise, opts.seed)
+                .into_iter()
+                .map(|p| place.apply(p))
+                .collect();
+            let n = points.len() as u64;
+            written[epoch] = output::write_epoch(
+                &out_dir.join(&names[epoch]),
+                std::iter::once((points, 1)),
+                ORIGIN,
+                epoch as u16 + 1,
+                opts.laz,
+            )?;
+            if written[epoch] != n {
+                return Err(Error::Internal(format!(
+                    "synth wrote {} points, scanned {n}",
+                    written[epoch]
+                )));
+            }
+            continue;
+        }
         let chunks = chunks_of(&model, &r, opts, epoch, turn_z).behind(model.plants[epoch].clone());
         let density = epoch_points(&model, &r, epoch) as f64 / chunks.area();
         let place = placement(&model, opts, epoch, turn_z);
@@ -472,6 +507,10 @@ pub fn synth(kind: SceneKind, opts: &SynthOptions, out_dir: &Path) -> Result<Tru
             ]
         }),
         creep_m: opts.creep_m,
+        scanner: model
+            .scanned
+            .as_ref()
+            .map(|f| placement(&model, opts, 0, 0.0).apply(f.scanner)),
         crs_epsg: CRS_EPSG,
         crs_wkt: UTM33N_WKT.into(),
         total_gain_m3: events.iter().map(|e| e.volume_m3.max(0.0)).sum(),

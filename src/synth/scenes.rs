@@ -22,8 +22,20 @@ use super::SceneKind;
 /// the face differs. Local coordinates.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Footprint {
-    Ground { min: [f64; 2], max: [f64; 2] },
-    Face { min: [f64; 2], max: [f64; 2] },
+    Ground {
+        min: [f64; 2],
+        max: [f64; 2],
+    },
+    Face {
+        min: [f64; 2],
+        max: [f64; 2],
+    },
+    /// A rectangle of a scanned face's own frame (strike a, up-dip b: [`super::face`]), over
+    /// which its offset out of the face's mean plane differs.
+    Frame {
+        min: [f64; 2],
+        max: [f64; 2],
+    },
 }
 
 /// One change event of a scene in local coordinates, with its closed-form volume.
@@ -159,6 +171,9 @@ pub struct SceneModel {
     pub(crate) summary: String,
     /// Each epoch's plants (`plants`): points that are not surfaces, and the surface they hide.
     pub(crate) plants: [Vec<Plant>; 2],
+    /// A face scanned by a terrestrial scanner (`face`, `face-vertical`): its epochs are rays
+    /// cast from the scanner, not samples of `patches`.
+    pub(crate) scanned: Option<super::face::FaceScene>,
 }
 
 /// Default points per epoch of each scene (about 0.1 m spacing for the small ones; holes are left
@@ -177,6 +192,8 @@ pub(crate) fn default_points(kind: SceneKind) -> u64 {
         SceneKind::Beach => 280_000,
         // The cliff's 3600 m² of surfaces at about 7 cm spacing.
         SceneKind::Vegetation => 750_000,
+        // 2400 m² of face at about 0.1 m spacing seen from 300 m.
+        SceneKind::Face | SceneKind::FaceVertical => 250_000,
     }
 }
 
@@ -233,6 +250,8 @@ impl SceneModel {
             SceneKind::Dense => dense(),
             SceneKind::Beach => beach(),
             SceneKind::Vegetation => vegetation(),
+            SceneKind::Face => face(70.0),
+            SceneKind::FaceVertical => face(90.0),
         }
     }
 
@@ -306,7 +325,29 @@ impl SceneModel {
             centre: [size[0] / 2.0, size[1] / 2.0],
             summary: summary.to_string(),
             plants: [Vec::new(), Vec::new()],
+            scanned: None,
         }
+    }
+}
+
+/// face: a 60 m × 40 m rock face dipping at `dip` degrees, with a ledge, a bay and an
+/// overhang, scanned alone from 300 m (see [`super::face`]).
+fn face(dip: f64) -> SceneModel {
+    let f = super::face::FaceScene::new(dip);
+    SceneModel {
+        patches: [Vec::new(), Vec::new()],
+        scars: [Vec::new(), Vec::new()],
+        face: None,
+        events: f.events(),
+        observed: [1.0; 2],
+        centre: f.centre(),
+        summary: format!(
+            "a {dip}° rock face with a ledge, a bay and an overhang, scanned alone by a \
+             terrestrial scanner 300 m away; rockfall scars, debris on the ledge and a toppling \
+             block"
+        ),
+        plants: [Vec::new(), Vec::new()],
+        scanned: Some(f),
     }
 }
 
@@ -599,6 +640,7 @@ impl CliffFrame {
             centre: [self.width / 2.0, (self.plateau - self.beach) / 2.0],
             summary: summary.into(),
             plants: [Vec::new(), Vec::new()],
+            scanned: None,
         }
     }
 }

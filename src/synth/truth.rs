@@ -64,6 +64,10 @@ pub struct Truth {
     /// and 1 of its place: not a change of the planted events, nor rigid. Absent: none.
     #[serde(default, skip_serializing_if = "is_zero_f64")]
     pub creep_m: f64,
+    /// Where the terrestrial scanner stood (global coordinates) for a scanned scene (`face`,
+    /// `face-vertical`); absent for the others.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scanner: Option<[f64; 3]>,
     /// EPSG code of the CRS written in both files.
     pub crs_epsg: u32,
     /// The OGC WKT (version 1) written in both files' WKT CRS VLR.

@@ -8,15 +8,14 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::sample::{Picks, Region};
 use super::stage::{Line, Planner, Scope, Stage, Total};
 use super::tiling::TilingStage;
-use super::{read_tile_near, Ctx, TilePoints};
+use super::Ctx;
 use crate::error::Result;
-use crate::events::align::{fit, Alignment};
+use crate::events::align::{find, Alignment, Ground, Limits};
 use crate::events::chain::Fits;
-use crate::events::stable::{measure, select, Sample};
-use crate::m3c2::tile::{compute, EpochPoints};
-use crate::m3c2::{Extent, Reach};
+use crate::events::stable::Sample;
 use crate::plan::Spec;
 use crate::spatial::areas::Areas;
 use crate::store::UnitWriter;
@@ -64,10 +63,13 @@ impl Stage for AlignStage {
             return Ok(());
         }
         let key = format!(
-            "{:?}|{}|{WINDOWS}|chained|{}",
+            "{:?}|{}|{WINDOWS}|chained|{}|align {} {:?}|holdout {}",
             p.plan.params.m3c2(),
             p.plan.params.core_spacing.value,
-            super::stable::areas_key(p.plan)
+            super::stable::areas_key(p.plan),
+            p.plan.params.align.value,
+            p.plan.params.align_limits(),
+            crate::events::align::holdout::BLOCKS
         );
         let first = p.the(&Spec::survey(TilingStage::KIND, 0))?;
         let later = later_surveys(p.plan);
@@ -84,16 +86,18 @@ impl Stage for AlignStage {
 
     fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<AlignMeta> {
         let s = ctx.survey(unit)?;
-        let spacing = ctx.plan.params.core_spacing.value;
-        let (samples, mut sampled) = sample(ctx, 0, s)?;
-        let onto_first = align(&samples, spacing);
+        let (onto_first, mut sampled) = fit_onto(ctx, 0, s)?;
+        gross(ctx, 0, s, &onto_first)?;
+        // Through the predecessor only where the direct fit is not known: a known direct fit
+        // (applied, or too small to matter) is the route (`events::chain`).
         let onto_previous = match predecessor(&later_surveys(ctx.plan), s) {
-            Some(prev) => {
-                let (samples, n) = sample(ctx, prev, s)?;
+            Some(prev) if !onto_first.determined => {
+                let (a, n) = fit_onto(ctx, prev, s)?;
                 sampled += n;
-                Some(align(&samples, spacing))
+                gross(ctx, prev, s, &a)?;
+                Some(a)
             }
-            None => None,
+            _ => None,
         };
         (ctx.progress)(sampled as u64);
         let meta = AlignMeta {
@@ -108,6 +112,82 @@ impl Stage for AlignStage {
         super::write_json(out, FILE, &fits)?;
         Ok(meta)
     }
+}
+
+/// The fit of survey `s` onto survey `onto`, and how many points it computed. With the user's
+/// stable areas, on every point inside them; where their ground leaves directions free (flat
+/// areas see no horizontal shift, no turn about the vertical), those are fitted on the rest of
+/// the surveys' stable ground ([`crate::events::align::complete`]).
+fn fit_onto(ctx: &Ctx, onto: usize, s: usize) -> Result<(Alignment, usize)> {
+    let plan = ctx.plan;
+    let spacing = plan.params.core_spacing.value;
+    let limits = plan.params.align_limits();
+    let windows = Region::Windows(windows(plan));
+    let Some(areas) = &plan.stable_areas else {
+        let (samples, n) = sample_of(ctx, onto, s, &windows, Picks::Cores(1))?;
+        return Ok((find(&samples, spacing, &limits, Ground::Automatic), n));
+    };
+    let (inside, mut n) = sample_of(
+        ctx,
+        onto,
+        s,
+        &Region::Areas(&areas.areas),
+        Picks::Points(points_one_in(plan, onto, &areas.areas)),
+    )?;
+    let user = find(&inside, spacing, &limits, Ground::User);
+    if user.constrained >= 6 || !user.determined {
+        return Ok((user, n));
+    }
+    let (rest, m) = sample_of(ctx, onto, s, &windows, Picks::Cores(1))?;
+    n += m;
+    Ok((
+        crate::events::align::complete(&user, &inside, &rest, spacing, &limits),
+        n,
+    ))
+}
+
+/// One point in how many of survey `onto`'s inside `areas` the sample takes: about
+/// [`SAMPLE_CORES`] however large the areas (the survey holds about its points × the share of
+/// its footprint the areas' boxes cover).
+fn points_one_in(plan: &crate::plan::Plan, onto: usize, areas: &Areas) -> u64 {
+    let sv = &plan.surveys[onto];
+    let b = &sv.bounds;
+    areas.one_in(
+        [b.min[0], b.min[1], b.max[0], b.max[1]],
+        sv.points as f64,
+        SAMPLE_CORES as u64,
+    )
+}
+
+/// A gross misregistration of survey `s` onto survey `onto` stops the run (exit 2), naming the
+/// survey, how far off it is and what to do: a comparison of surveys metres apart measures
+/// their offset, not the terrain's change.
+fn gross(ctx: &Ctx, onto: usize, s: usize, a: &Alignment) -> Result<()> {
+    if !a.gross {
+        return Ok(());
+    }
+    let (later, earlier) = (&ctx.plan.surveys[s], &ctx.plan.surveys[onto]);
+    let t = a.translation;
+    Err(crate::error::Error::input(
+        &later.arg,
+        format!(
+            "it lies up to {:.2} m from {} (shift {:+.3}, {:+.3}, {:+.3} m, turn {:.3}°: a rigid \
+             fit on {} core points of their common ground, residual {:.3} m, confirmed on \
+             held-out ground), more than a registration error leaves ({} m, {}°): check both \
+             surveys' CRS and georeferencing; --align on removes the offset, --align off \
+             compares the surveys as delivered",
+            a.largest_shift_m,
+            earlier.arg.display(),
+            t[0],
+            t[1],
+            t[2],
+            a.rotation_deg(),
+            a.stable_points,
+            a.residual_m,
+            Limits::PLAUSIBLE.shift_m,
+            Limits::PLAUSIBLE.turn_deg
+        ),
+    ))
 }
 
 /// The survey before `s` when it is aligned too (so that `s` may reach the first through it):
@@ -130,30 +210,13 @@ pub fn later_surveys(plan: &crate::plan::Plan) -> Vec<usize> {
     s
 }
 
-/// The fit over `samples`: their stable ground, its noise, the rigid transform.
-pub fn align(samples: &[Sample], spacing: f64) -> Alignment {
-    let Some(sel) = select(samples) else {
-        return Alignment::none(format!(
-            "not applied: no stable ground among the {} core points sampled",
-            samples.len()
-        ));
-    };
-    let sigma_d = measure(samples, spacing).map_or(f64::NAN, |m| m.sigma_d);
-    fit(samples, &sel.keep, &sel.finite, sigma_d)
-}
-
 /// The windows the fit samples, [x0, y0, x1, y1]: a [`WINDOWS`] × [`WINDOWS`] lattice over the
 /// first survey's footprint, each a square centred in its cell, sized to hold about
 /// [`SAMPLE_CORES`] core points in all (never more than its cell). They depend on the first
 /// survey and the core spacing only, not on the tiles, so the sample — and the fit — is the same
 /// whatever the tile layout.
 ///
-/// With the user's stable areas, the fit is on their ground alone: the windows are the polygons'
-/// boxes, and only the core points inside the polygons are sampled ([`sample`]).
 fn windows(plan: &crate::plan::Plan) -> Vec<[f64; 4]> {
-    if let Some(a) = &plan.stable_areas {
-        return a.areas.boxes();
-    }
     let b = &plan.surveys[0].bounds;
     let c = plan.params.core_spacing.value;
     let n = WINDOWS as f64;
@@ -171,158 +234,26 @@ fn windows(plan: &crate::plan::Plan) -> Vec<[f64; 4]> {
     out
 }
 
-/// M3C2 between survey `onto` and survey `s` (their own tilings) at the core points in the
-/// sample's [`windows`]: the samples measured within the cylinder (a walked distance may be
-/// finished in another tile, so it is left out), in core-point key order; and how many were
-/// computed.
-fn sample(ctx: &Ctx, onto: usize, s: usize) -> Result<(Vec<Sample>, usize)> {
-    let plan = ctx.plan;
-    let (t0, ts) = (
+/// M3C2 between survey `onto` and survey `s` (their own tilings) in `region` at `picks`: the
+/// samples (`super::sample`) and how many points were computed. Normals are oriented up: the
+/// fit is the same whichever way each normal points (a distance and its normal turn together:
+/// d = n·(t + ω × c) either way), so the sample needs no orientation field.
+fn sample_of(
+    ctx: &Ctx,
+    onto: usize,
+    s: usize,
+    region: &Region,
+    picks: Picks,
+) -> Result<(Vec<Sample>, usize)> {
+    let tilings = [
         ctx.unit(&Spec::survey(TilingStage::KIND, onto))?,
         ctx.unit(&Spec::survey(TilingStage::KIND, s))?,
-    );
-    let (m0, ms) = (ctx.meta::<TilingStage>(t0)?, ctx.meta::<TilingStage>(ts)?);
-    // The densest tile of the two surveys first, as the M3C2 units check it: a budget that
-    // cannot hold it is refused with the same words, whichever unit meets it first.
-    let pair_points = super::m3c2::fit::pair_tile_points(plan, &m0, &ms)?;
-    super::m3c2::fit::check_tiled(plan, &pair_points)?;
-    let counts = [m0.tile_points, ms.tile_points];
-    let grid = plan.layout.grid()?;
-    let params = plan.params.m3c2();
-    let (b, a) = (&plan.surveys[onto].bounds, &plan.surveys[s].bounds);
-    let wins = windows(plan);
-    let areas = plan.stable_areas.as_ref().map(|a| &a.areas);
-    // With the user's areas: about SAMPLE_CORES of their core points however large the areas
-    // (the first survey's footprint holds about its area / spacing² of them).
-    let thin = areas.map_or(1, |a| {
-        let c = plan.layout.core_spacing;
-        let footprint = (b.max[0] - b.min[0]) * (b.max[1] - b.min[1]) / (c * c);
-        a.one_in(
-            [b.min[0], b.min[1], b.max[0], b.max[1]],
-            footprint,
-            SAMPLE_CORES as u64,
-        )
-    });
-    let inside = |p: &crate::geom::Point3| match areas {
-        Some(a) => a.contains(p[0], p[1]),
-        None => wins
-            .iter()
-            .any(|w| p[0] >= w[0] && p[0] < w[2] && p[1] >= w[1] && p[1] < w[3]),
+    ];
+    let params = crate::m3c2::M3c2Params {
+        orientation: crate::m3c2::Orientation::Up,
+        ..ctx.plan.params.m3c2()
     };
-    // Every point a window's core point uses for its normal (and its orientation's look-ups of
-    // the top surface, up to 4 normal radii away in cells of half a radius) and its cylinder lies
-    // within `reach` of the window: only those points are indexed, and each Window result is the
-    // one the whole tile gives, at a fraction of the indexing.
-    let reach = (params.cyl_radius.powi(2) + params.cyl_halflen.powi(2))
-        .sqrt()
-        .max(5.0 * params.normal_radius)
-        + plan.layout.core_spacing;
-    let mut keyed: Vec<(u64, Sample)> = Vec::new();
-    let mut computed = 0;
-    for tile in grid.tiles() {
-        let sq = grid.square(tile);
-        // The windows meeting the tile, grown by `reach`.
-        let near: Vec<[f64; 4]> = wins
-            .iter()
-            .filter(|w| {
-                w[0] <= sq.max[0] && sq.min[0] <= w[2] && w[1] <= sq.max[1] && sq.min[1] <= w[3]
-            })
-            .map(|w| [w[0] - reach, w[1] - reach, w[2] + reach, w[3] + reach])
-            .collect();
-        let n = counts[0][grid.index(tile)] + counts[1][grid.index(tile)];
-        if near.is_empty() || n == 0 {
-            continue;
-        }
-        let _held = ctx.reserve(
-            super::m3c2::need(n),
-            &format!("aligning: tile {} ({n} points with its halo)", tile.name()),
-        )?;
-        // Only the frames that reach the windows or their neighbourhoods: every point `within`
-        // keeps and every point of a core-point cell `inside` a window (a cell is far smaller
-        // than `reach`) is in them, so the sample is the one the whole tile gives.
-        let reached: Vec<[f64; 4]> = near.iter().chain(&wins).copied().collect();
-        let before = read_tile_near(ctx, t0, tile, &reached)?;
-        let after = read_tile_near(ctx, ts, tile, &reached)?;
-        fn epoch(t: &TilePoints) -> EpochPoints<'_> {
-            EpochPoints {
-                x: &t.x,
-                y: &t.y,
-                z: &t.z,
-                owned: &t.owned,
-            }
-        }
-        let extent = Extent {
-            data_min: std::array::from_fn(|k| b.min[k].min(a.min[k])),
-            data_max: std::array::from_fn(|k| b.max[k].max(a.max[k])),
-            held: super::m3c2::open_box(&grid, tile, plan.layout.halo),
-        };
-        // Every k-th of the tile's core points (C1 thinned on the run's grid, keyed as the M3C2
-        // units key them).
-        let cores: Vec<(u64, crate::geom::Point3)> = crate::m3c2::core_points::thin(
-            before.len(),
-            |i| before.point(i),
-            &plan.layout.anchor,
-            plan.layout.core_spacing,
-            |i| before.owned[i],
-        )
-        .into_iter()
-        .map(|(k, i)| (k, before.point(i)))
-        .filter(|(k, p)| inside(p) && Areas::takes(*k, thin))
-        .collect();
-        if cores.is_empty() {
-            continue;
-        }
-        let (before, after) = (within(&before, &near), within(&after, &near));
-        let results = compute(
-            &epoch(&before),
-            &epoch(&after),
-            plan.layout.anchor,
-            plan.layout.core_spacing,
-            Some(&cores),
-            &params,
-            &extent,
-        );
-        computed += results.len();
-        keyed.extend(
-            results
-                .iter()
-                .filter(|k| k.r.reach == Reach::Window && k.r.measured().is_finite())
-                .map(|k| {
-                    (
-                        k.key,
-                        Sample {
-                            xyz: k.xyz,
-                            normal: k.r.normal,
-                            distance: k.r.measured(),
-                            std_dev: [k.r.std_dev1, k.r.std_dev2],
-                            lod: k.r.uncertainty,
-                        },
-                    )
-                }),
-        );
-        crate::interrupt::check()?;
-    }
-    // Key order: the same whatever order the tiles came in.
-    keyed.sort_by_key(|(k, _)| *k);
-    Ok((keyed.into_iter().map(|(_, s)| s).collect(), computed))
-}
-
-/// The points of `t` inside any of `boxes` ([x0, y0, x1, y1]), in their order.
-fn within(t: &TilePoints, boxes: &[[f64; 4]]) -> TilePoints {
-    let keep: Vec<usize> = (0..t.len())
-        .filter(|&i| {
-            let (x, y) = (t.x[i], t.y[i]);
-            boxes
-                .iter()
-                .any(|b| x >= b[0] && x <= b[2] && y >= b[1] && y <= b[3])
-        })
-        .collect();
-    TilePoints {
-        x: keep.iter().map(|&i| t.x[i]).collect(),
-        y: keep.iter().map(|&i| t.y[i]).collect(),
-        z: keep.iter().map(|&i| t.z[i]).collect(),
-        owned: keep.iter().map(|&i| t.owned[i]).collect(),
-    }
+    super::sample::sample(ctx, tilings, [onto, s], region, picks, &params)
 }
 
 /// The fits of survey `s` (its align unit must be done), if it has them.

@@ -20,7 +20,9 @@ pub mod cores;
 pub mod events;
 pub mod m3c2;
 pub mod merged;
+pub mod orient;
 pub mod outputs;
+pub mod sample;
 pub mod scratch;
 pub mod solids;
 pub mod stable;
@@ -176,7 +178,7 @@ impl Ctx<'_> {
 
     /// The tiling record of unit `u`, which holds a survey's tiles: a tiling, an aligned tiling
     /// that applied, or a cleared one.
-    fn tiling_meta_of(&self, u: usize) -> Result<tiling::TilingMeta> {
+    pub fn tiling_meta_of(&self, u: usize) -> Result<tiling::TilingMeta> {
         match self.plan.units[u].kind() {
             cleared::ClearedStage::KIND => Ok(self.meta::<cleared::ClearedStage>(u)?.tiling),
             aligned::AlignedStage::KIND => self

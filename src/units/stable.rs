@@ -9,7 +9,7 @@ use super::m3c2::{pair_count, Merged};
 use super::stage::{Line, Planner, Scope, Stage, Total};
 use super::Ctx;
 use crate::error::{Error, Result};
-use crate::events::stable::{measure, Sample, Stable};
+use crate::events::stable::{measure, AreasUse, Sample, Stable};
 use crate::params::Params;
 use crate::plan::Spec;
 use crate::spatial::areas::Areas;
@@ -39,6 +39,8 @@ pub const FILE: &str = "stable.json";
 pub struct StableGround {
     /// None: too few stable core points to measure.
     pub stable: Option<Stable>,
+    /// With the user's stable areas: what they held, and whether the measurement is theirs.
+    pub areas: Option<AreasUse>,
 }
 
 impl StableGround {
@@ -68,12 +70,19 @@ impl Stage for StableStage {
     };
     type Meta = StableMeta;
 
-    /// One per pair, over the pair's M3C2 units (and the user's stable areas, by content).
+    /// One per pair, over the pair's M3C2 units (and, with the user's stable areas, by
+    /// content, the units holding its surveys' tiles: their points inside the areas are
+    /// sampled).
     fn plan(p: &mut Planner) -> Result<()> {
-        let samples = SAMPLES.to_string();
+        let samples = format!("{SAMPLES}|areas at every point 1");
         let areas = areas_key(p.plan);
         for pair in 0..p.plan.pairs.len() {
-            let m3c2 = p.pair_results(pair);
+            let mut m3c2 = p.pair_results(pair);
+            if p.plan.stable_areas.is_some() {
+                let (b, a) = (p.plan.pairs[pair].before, p.plan.pairs[pair].after);
+                m3c2.extend(p.survey_tiles(b)?);
+                m3c2.extend(p.survey_tiles(a)?);
+            }
             let label = p.plan.pairs[pair].label.clone();
             p.add(
                 Spec::pair(Self::KIND, pair),
@@ -104,52 +113,34 @@ pub fn areas_key(plan: &crate::plan::Plan) -> String {
         .map_or_else(|| "auto".into(), |a| format!("areas {}", a.file.key))
 }
 
-/// Measure pair `pair`'s stable ground into `out`: on every `step`-th core point, or — with the
-/// user's stable areas — on the core points inside them, every one unless they could hold more
-/// than SAMPLES (the areas may be narrow: transects a few metres wide would lose most of their
-/// points to the pair's step).
+/// Measure pair `pair`'s stable ground into `out`: on every `step`-th core point of its M3C2
+/// results (the automatic stable ground, found in the distances), or — with the user's stable
+/// areas — on every point of the before survey inside them (`super::sample`; one in `n` when
+/// they could hold more than [`SAMPLES`]). Areas that give too little ground to measure are not
+/// dropped in silence: the automatic measurement is used, and `stable.areas` says why.
 fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<StableMeta> {
-    let total = pair_count(ctx, pair)?;
-    let areas = ctx.plan.stable_areas.as_ref().map(|a| &a.areas);
-    // Every step-th core point; with the user's areas, their core points — one in `step`
-    // ([`Areas::one_in`]) when they could hold more than SAMPLES, else every one.
-    let step = match areas {
-        Some(a) => {
-            let e = &ctx.plan.layout.extent;
-            a.one_in(
-                [e.min[0], e.min[1], e.max[0], e.max[1]],
-                total as f64,
-                SAMPLES,
-            )
-        }
-        None => total.div_ceil(SAMPLES).max(1),
+    let plan = ctx.plan;
+    let spacing = plan.params.core_spacing.value;
+    // The user's areas first, while the unit holds nothing else (the sample reserves by tile).
+    let inside = match &plan.stable_areas {
+        Some(a) => Some(areas_sample(ctx, pair, &a.areas)?),
+        None => None,
     };
-    // At most SAMPLES are kept (areas denser than the rest could offer more: the rest is left
-    // out, and the reservation holds).
+    let total = pair_count(ctx, pair)?;
+    let step = total.div_ceil(SAMPLES).max(1);
     let most = total.div_ceil(step).min(SAMPLES);
     let _held = ctx.reserve(
-        need(most, super::merged::merge_inputs(ctx.plan)),
+        need(most, super::merged::merge_inputs(plan)),
         "the stable-ground sample and the merge of the pair's tiles",
     )?;
     let mut samples = Vec::with_capacity(most as usize);
     let mut merged = Merged::new(ctx, pair)?;
     let mut n = 0u64;
-    let need = ctx.plan.params.min_points.value.max(1);
+    let need = plan.params.min_points.value.max(1);
     let mut reached = Reached::default();
-    let (mut inside, mut in_areas) = (0u64, 0u64);
     while let Some(k) = merged.next_result()? {
         reached.add(&k.r, need);
-        let finite = k.r.measured().is_finite();
-        let take = match areas {
-            Some(a) => {
-                let within = a.contains(k.xyz[0], k.xyz[1]);
-                inside += u64::from(within);
-                in_areas += u64::from(within && finite);
-                within && Areas::takes(k.key, step)
-            }
-            None => n.is_multiple_of(step),
-        };
-        if take && finite && (samples.len() as u64) < most {
+        if n.is_multiple_of(step) && k.r.measured().is_finite() && (samples.len() as u64) < most {
             samples.push(Sample {
                 xyz: k.xyz,
                 normal: k.r.normal,
@@ -161,37 +152,93 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<StableMeta> {
         n += 1;
     }
     if reached.distances == 0 {
-        return Err(Error::Epochs(reached.why_none(ctx.plan, pair, n)));
+        return Err(Error::Epochs(reached.why_none(plan, pair, n)));
     }
     (ctx.progress)(samples.len() as u64);
-    if let Some(a) = &ctx.plan.stable_areas {
-        if in_areas == 0 {
-            return Err(Error::input(
-                &a.file.path,
-                format!(
-                    "its polygons hold {inside} of the {n} core points of {}, none with a \
-                     distance: no stable ground to measure (are they where both surveys have \
-                     points?)",
-                    ctx.plan.pair_name(pair)
-                ),
-            ));
+    let automatic = measure(&samples, spacing);
+    let (stable, areas) = match (&plan.stable_areas, inside) {
+        (Some(a), Some((inside, computed))) => {
+            let with_distance = inside.len();
+            if with_distance == 0 {
+                return Err(Error::input(
+                    &a.file.path,
+                    format!(
+                        "its polygons hold {computed} points of the before survey of {}, none \
+                         with a distance: no stable ground to measure (are they where both \
+                         surveys have points?)",
+                        plan.pair_name(pair)
+                    ),
+                ));
+            }
+            let mut use_ = AreasUse {
+                file: a.file.path.clone(),
+                points_inside: computed,
+                with_distance,
+                used: true,
+                note: None,
+            };
+            match measure(&inside, spacing) {
+                Some(mut m) => {
+                    m.source = "user".into();
+                    m.file = Some(a.file.path.clone());
+                    m.method = format!(
+                        "{}; the candidates: the {with_distance} points of the before survey \
+                         inside the stable areas with a distance",
+                        m.method
+                    );
+                    (Some(m), Some(use_))
+                }
+                None => {
+                    use_.used = false;
+                    use_.note = Some(format!(
+                        "the stable areas gave {with_distance} points with a distance, fewer \
+                         than the {} stable points a measurement needs: {}",
+                        crate::events::stable::MIN_STABLE,
+                        if automatic.is_some() {
+                            "the automatic stable ground is used instead"
+                        } else {
+                            "nor is there automatic stable ground: the threshold falls back to \
+                             the point spacing"
+                        }
+                    ));
+                    (automatic, Some(use_))
+                }
+            }
         }
-    }
-    let mut stable = measure(&samples, ctx.plan.params.core_spacing.value);
-    if let (Some(s), Some(a)) = (stable.as_mut(), &ctx.plan.stable_areas) {
-        s.source = "areas".into();
-        s.file = Some(a.file.path.clone());
-        s.method = format!(
-            "{}; the candidates: the {in_areas} core points with a distance inside the stable \
-             areas",
-            s.method
-        );
-    }
-    let ground = StableGround { stable };
+        _ => (automatic, None),
+    };
+    let ground = StableGround { stable, areas };
     super::write_json(out, FILE, &ground)?;
     Ok(StableMeta {
         sampled: samples.len(),
     })
+}
+
+/// M3C2 of pair `pair`'s surveys (as every later stage reads them: aligned, cleared) at every
+/// point of the before survey inside `areas` (one in `n` past [`SAMPLES`]): the samples with a
+/// distance, and how many points were computed.
+fn areas_sample(ctx: &Ctx, pair: usize, areas: &Areas) -> Result<(Vec<Sample>, usize)> {
+    let plan = ctx.plan;
+    let p = &plan.pairs[pair];
+    let sv = &plan.surveys[p.before];
+    let b = &sv.bounds;
+    let one_in = areas.one_in(
+        [b.min[0], b.min[1], b.max[0], b.max[1]],
+        sv.points as f64,
+        SAMPLES,
+    );
+    let params = crate::m3c2::M3c2Params {
+        orientation: crate::m3c2::Orientation::Up,
+        ..plan.params.m3c2()
+    };
+    super::sample::sample(
+        ctx,
+        [ctx.tiling(p.before)?, ctx.tiling(p.after)?],
+        [p.before, p.after],
+        &super::sample::Region::Areas(areas),
+        super::sample::Picks::Points(one_in),
+        &params,
+    )
 }
 
 /// How far a pair's core points got: how many have a normal, enough points of each epoch in their

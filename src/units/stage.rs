@@ -184,6 +184,7 @@ pub fn default_stages() -> Vec<&'static dyn Registered> {
         entry::<align::AlignStage>(),
         entry::<aligned::AlignedStage>(),
         entry::<cleared::ClearedStage>(),
+        entry::<orient::OrientStage>(),
         entry::<cores::UserCoresStage>(),
         entry::<cores::ThinnedStage>(),
         entry::<m3c2::M3c2Stage>(),

@@ -110,6 +110,15 @@ pub struct Measured {
     /// The share of the event's core points that look like vegetation in either epoch
     /// (`events::vegetation`); None when the volume came from the user's surfaces (no points).
     pub vegetation_fraction: Option<f64>,
+    /// The data decides the event's sign: most of its core points' normals are oriented by a
+    /// decided field ([`sign_known`]).
+    pub sign_known: bool,
+}
+
+/// Whether the data decides event `d`'s sign: at most half its core points have a normal whose
+/// sign it does not decide (a face near vertical scanned alone: `m3c2::field`).
+pub fn sign_known(d: &Draft) -> bool {
+    2 * d.sign_unknown <= d.event.n_points
 }
 
 /// Edges of open rim (see `volume::OpenRim`) that must have changed before an event is called
@@ -124,6 +133,15 @@ const OPEN_RIM_SHARE: f64 = 0.05;
 /// event's own change where the region meets ground not measured.
 fn incomplete(d: &Draft, v: &EventVolume, noise: f64, params: &Params) -> Option<String> {
     let mut why = Vec::new();
+    if !sign_known(d) {
+        why.push(format!(
+            "the data cannot tell which side of the surface is out for {} of its {} core points \
+             (a face near vertical scanned alone: nothing in front of it or above it to say \
+             which way it faces): gain and loss may be the reverse; give --orientation \
+             toward:X,Y,Z (the scanner's position) to decide",
+            d.sign_unknown, d.event.n_points
+        ));
+    }
     if d.beyond_reach > 0 {
         why.push(format!(
             "{} of its {} core points have the other survey beyond the M3C2 cylinder's \
@@ -666,6 +684,7 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
                             complete: note.is_none(),
                             note,
                             vegetation_fraction,
+                            sign_known: sign_known(d),
                         }
                     }
                     Err(err) => Measured {
@@ -683,6 +702,7 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
                         complete: false,
                         note: Some(err.to_string()),
                         vegetation_fraction,
+                        sign_known: sign_known(d),
                     },
                 }
             };
@@ -755,6 +775,7 @@ mod tests {
                     event,
                     candidates: vec![obb],
                     beyond_reach: 0,
+                    sign_unknown: 0,
                 }
             })
             .collect();

@@ -136,3 +136,4 @@ pub fn publish_journal(dir: &Path, absolute: bool) -> serde_json::Value {
 
 pub mod dod;
 pub mod laspy;
+pub mod scan;

@@ -47,6 +47,9 @@ pub struct Draft {
     /// Its core points whose other epoch lies beyond the user's half-length (not measured: the
     /// event is incomplete).
     pub beyond_reach: usize,
+    /// Its core points whose normal's sign the data does not decide (`CoreResult::sign_known`):
+    /// where they are most of it, its sign may be the reverse.
+    pub sign_unknown: usize,
 }
 
 /// A kept core point.
@@ -64,6 +67,8 @@ pub struct Kept {
     /// The other epoch lies beyond the user's half-length: `d` is the walk's finding, not a
     /// measurement (`m3c2::Reach::Beyond`).
     pub beyond: bool,
+    /// The data does not decide which side of the surface is out here (`CoreResult::sign_known`).
+    pub sign_unknown: bool,
 }
 
 /// The candidate boxes of an event with core points `cluster` (see [`Draft::candidates`]).
@@ -158,7 +163,8 @@ impl Stage for EventsStage {
 }
 
 /// The scratch rows of an events unit: every kept core point in key order — key (its bits),
-/// position (3), distance, LoD, normal (3), spreads (2), beyond reach (1 or 0). Read back for the
+/// position (3), distance, LoD, normal (3), spreads (2), flags (1: beyond reach, 2: sign unknown).
+/// Read back for the
 /// events' descriptions and `kept.tile` together, and, when the kept points are more than the
 /// budget holds, a piece of space at a time ([`pieces`]).
 const SPILL: &str = "kept_rows.tmp";
@@ -175,7 +181,8 @@ fn from_row(r: &[f64]) -> Kept {
         std_dev: [r[9], r[10]],
         smoothed: f64::NAN,
         event: 0,
-        beyond: r[11] == 1.0,
+        beyond: r[11] as u8 & 1 != 0,
+        sign_unknown: r[11] as u8 & 2 != 0,
     }
 }
 
@@ -229,7 +236,7 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<EventsMeta> {
             nz,
             r.std_dev1,
             r.std_dev2,
-            f64::from(u8::from(beyond)),
+            f64::from(u8::from(beyond) | u8::from(!r.sign_known) << 1),
         ])?;
         if let Some((keys, pts, d)) = held.as_mut() {
             keys.push(k.key);
@@ -265,6 +272,7 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<EventsMeta> {
     let clusters = found.kinds.len();
     let mut sums = vec![events::describe::Sums::default(); clusters];
     let mut beyond = vec![0usize; clusters];
+    let mut unknown = vec![0usize; clusters];
     let mut rows = Vec::with_capacity(KEPT_FRAME.min(n));
     let mut file = KeptWriter::new(out)?;
     let mut scratch = spill.reader()?;
@@ -276,6 +284,7 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<EventsMeta> {
             let c = c as usize;
             sums[c].add(k.lod, &k.normal);
             beyond[c] += usize::from(k.beyond);
+            unknown[c] += usize::from(k.sign_unknown);
         }
         rows.push(k);
         if rows.len() == KEPT_FRAME {
@@ -301,6 +310,7 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<EventsMeta> {
                 event: e,
                 candidates,
                 beyond_reach: beyond[c],
+                sign_unknown: unknown[c],
             });
         }
     };
@@ -555,6 +565,7 @@ fn to_columns(kept: &[Kept]) -> TileColumns {
             f("smoothed", &|k| k.smoothed),
             u("event", &|k| k.event),
             u("beyond", &|k| k.beyond as u32),
+            u("sign_unknown", &|k| k.sign_unknown as u32),
         ],
     }
 }
@@ -693,6 +704,7 @@ fn from_columns(c: &TileColumns, path: &std::path::Path) -> Result<Vec<Kept>> {
         _ => Err(bad(name)),
     };
     let (hi, lo, ev, beyond) = (g("key_hi")?, g("key_lo")?, g("event")?, g("beyond")?);
+    let unknown = g("sign_unknown")?;
     let (d, lod, sm) = (f("distance")?, f("lod")?, f("smoothed")?);
     let (nx, ny, nz) = (f("normal_x")?, f("normal_y")?, f("normal_z")?);
     let (s1, s2) = (f("std_dev1")?, f("std_dev2")?);
@@ -707,6 +719,7 @@ fn from_columns(c: &TileColumns, path: &std::path::Path) -> Result<Vec<Kept>> {
             smoothed: sm[i],
             event: ev[i],
             beyond: beyond[i] == 1,
+            sign_unknown: unknown[i] == 1,
         })
         .collect();
     Ok(kept)

@@ -91,6 +91,7 @@ impl Stage for M3c2Stage {
             let mut deps = p.survey_tiles(b)?;
             deps.extend(p.survey_tiles(a)?);
             deps.extend(core_unit);
+            deps.extend(p.find(&Spec::survey(super::orient::OrientStage::KIND, b)));
             let label = p.plan.pairs[pair].label.clone();
             for t in grid.tiles() {
                 p.add(
@@ -164,6 +165,7 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<M3c2Meta> {
     }
     let extent = tile_extent(plan, pair, tile)?;
     let params = plan.params.m3c2();
+    let field = super::orient::read_near(ctx, pair, extent.held, plan.layout.anchor)?;
     let mut results = compute(
         &epoch(&before),
         &epoch(&after),
@@ -172,7 +174,9 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<M3c2Meta> {
         user_cores.as_deref(),
         &params,
         &extent,
+        field.as_ref(),
     );
+    drop(field);
     let owned = |t: &TilePoints| t.owned.iter().filter(|&&o| o).count() as u64;
     let points = owned(&before) + owned(&after);
     // Core points whose walk left the tile: walked again over the points along their axes.
@@ -368,6 +372,10 @@ fn to_columns(rs: &[KeyedResult]) -> TileColumns {
                 name: "reach".into(),
                 data: ColumnData::U8(rs.iter().map(|r| r.r.reach as u8).collect()),
             },
+            Column {
+                name: "sign_known".into(),
+                data: ColumnData::U8(rs.iter().map(|r| r.r.sign_known as u8).collect()),
+            },
         ],
     }
 }
@@ -397,7 +405,7 @@ pub fn read_chunk(path: &std::path::Path) -> Result<Vec<KeyedResult>> {
             _ => Err(missing(name)),
         }
     };
-    let (sig, reach) = (bytes("significant")?, bytes("reach")?);
+    let (sig, reach, known) = (bytes("significant")?, bytes("reach")?, bytes("sign_known")?);
     let (hi, lo) = (u("key_hi")?, u("key_lo")?);
     let (d, unc, s1, s2) = (
         f("distance")?,
@@ -425,6 +433,7 @@ pub fn read_chunk(path: &std::path::Path) -> Result<Vec<KeyedResult>> {
                         path: path.to_path_buf(),
                         problem: format!("reach code {} at row {i}", reach[i]),
                     })?,
+                    sign_known: known[i] == 1,
                 },
             })
         })

@@ -80,6 +80,11 @@ pub const M3C2_DIMS: &[ExtraDim] = &[
         ty: ExtraType::U8,
         description: "1: other epoch past cyl_halflen",
     },
+    ExtraDim {
+        name: Cow::Borrowed("normal_sign_unknown"),
+        ty: ExtraType::U8,
+        description: "1: data cannot tell side out",
+    },
 ];
 
 /// Counts of what m3c2.laz holds.
@@ -92,6 +97,8 @@ pub struct Written {
     pub extended: u64,
     /// Core points whose other epoch lies beyond the user's half-length ([`Reach::Beyond`]).
     pub beyond_reach: u64,
+    /// Core points whose normal's sign the data does not decide (`CoreResult::sign_known`).
+    pub sign_unknown: u64,
 }
 
 /// Write m3c2.laz into `out` from the pair's `total` results in key order (`results`), with the
@@ -118,6 +125,7 @@ pub fn write_m3c2_laz(
         significant: 0,
         extended: 0,
         beyond_reach: 0,
+        sign_unknown: 0,
     };
     while let Some(mut k) = results.next_result()? {
         k.r = k.r.with_registration(reg_error);
@@ -144,6 +152,7 @@ pub fn write_m3c2_laz(
             smoothed,
             event as f64,
             beyond as u8 as f64,
+            !r.sign_known as u8 as f64,
         ];
         w.write(k.xyz, &extra)?;
         written.core_points += 1;
@@ -151,6 +160,7 @@ pub fn write_m3c2_laz(
         written.significant += significant as u64;
         written.extended += (r.reach == Reach::Extended) as u64;
         written.beyond_reach += beyond as u64;
+        written.sign_unknown += !r.sign_known as u64;
     }
     w.finish()?;
     out.add_file("m3c2.laz")?;

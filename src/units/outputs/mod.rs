@@ -73,6 +73,8 @@ pub struct EventRecord {
     pub vegetation_fraction: Option<f64>,
     /// Most of its core points look like vegetation (`events::vegetation::MOST`).
     pub vegetation: bool,
+    /// The data decides the event's sign (`units::volumes::sign_known`).
+    pub sign_known: bool,
 }
 
 impl EventRecord {
@@ -108,6 +110,7 @@ impl EventRecord {
             complete: m.complete,
             region: m.region,
             meshes: m.meshes,
+            sign_known: m.sign_known,
         }
     }
 }
@@ -142,6 +145,10 @@ pub struct Summary {
     pub parameters: Params,
     /// Noise and registration error measured on the stable ground (None: too little of it).
     pub stable: Option<Stable>,
+    /// With `--stable`: what the user's areas held (points inside, with a distance) and whether
+    /// the stable ground is theirs (else why not, and what was used instead).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stable_areas: Option<crate::events::stable::AreasUse>,
     pub tiles: usize,
     pub tile_size: f64,
     pub core_points: u64,
@@ -150,6 +157,7 @@ pub struct Summary {
     /// Core points kept by the significance filter (|d| ≥ τ and significant).
     pub kept_points: u64,
     pub events: usize,
+    /// The events the totals count ([`Totals::counted`]) that gained, and that lost.
     pub gain_events: usize,
     pub loss_events: usize,
     /// Events whose |volume| exceeds its 95 % uncertainty (the others stay out of the totals).
@@ -158,11 +166,12 @@ pub struct Summary {
     /// `remove` they stay out of the totals.
     #[serde(default)]
     pub vegetation_events: usize,
-    /// Sum of the positive volumes of the significant events that count (not vegetation, unless
-    /// `--vegetation keep`), m³.
+    /// Sum of the volumes of the gain events the totals count, m³.
     pub total_gain_m3: f64,
-    /// Sum of the negative volumes of the same events, m³ (≤ 0).
+    /// Sum of the volumes of the loss events they count, m³ (≤ 0).
     pub total_loss_m3: f64,
+    /// What the totals hold, and every event they leave out, by why.
+    pub totals: Totals,
     /// How far M3C2 looked for the other epoch (SPEC.md §1 "Change of any depth").
     #[serde(default)]
     pub reach: ReachSummary,
@@ -177,6 +186,117 @@ pub struct Summary {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub vegetation_removed: Option<[u64; 2]>,
     pub stages: Vec<StageTime>,
+    /// The run computed M3C2 alone (`--m3c2-only`): no events, no totals.
+    #[serde(default)]
+    pub m3c2_only: bool,
+}
+
+/// summary.json `totals`: what `total_gain_m3` and `total_loss_m3` sum and what they leave out.
+/// An event is counted when it is significant, complete and of known sign (and not vegetation,
+/// unless `--vegetation keep`); an incomplete one measured part of its change only, so its
+/// volume is a bound (the change is at least that), reported apart; one whose sign the data
+/// cannot tell is reported by its size alone.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct Totals {
+    /// The rule, in words.
+    pub counted: String,
+    /// Significant events of known sign whose volume covers part of their change only
+    /// (`complete: false`): how many, and the least gain and loss they show (m³).
+    pub incomplete_events: usize,
+    pub incomplete_gain_at_least_m3: f64,
+    pub incomplete_loss_at_least_m3: f64,
+    /// Significant events whose sign the data does not decide (`sign_known: false`): how many
+    /// and the sum of their |volumes| (m³).
+    pub sign_unknown_events: usize,
+    pub sign_unknown_abs_m3: f64,
+    /// Events whose |volume| does not exceed its uncertainty.
+    pub not_significant_events: usize,
+    /// Vegetation events left out (`--vegetation flag` or `remove`).
+    pub vegetation_left_out: usize,
+}
+
+/// Which of the totals an event falls in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Tally {
+    Counted,
+    Incomplete,
+    SignUnknown,
+    NotSignificant,
+    Vegetation,
+}
+
+impl EventRecord {
+    /// Where the totals put this event, under vegetation mode `mode`.
+    pub fn tally(&self, mode: crate::params::Vegetation) -> Tally {
+        if !mode.counts(self.vegetation) {
+            Tally::Vegetation
+        } else if !self.significant {
+            Tally::NotSignificant
+        } else if !self.sign_known {
+            Tally::SignUnknown
+        } else if !self.complete {
+            Tally::Incomplete
+        } else {
+            Tally::Counted
+        }
+    }
+}
+
+impl Totals {
+    /// The totals of `records` under vegetation mode `mode`: (gains counted, losses counted,
+    /// the rest).
+    pub fn of(
+        records: &[EventRecord],
+        mode: crate::params::Vegetation,
+    ) -> ([f64; 2], [usize; 2], Totals) {
+        let mut t = Totals {
+            counted: format!(
+                "significant (|V| above its 95 % uncertainty), complete and of known sign{}",
+                if mode == crate::params::Vegetation::Keep {
+                    ", vegetation events included (--vegetation keep)"
+                } else {
+                    ", not vegetation"
+                }
+            ),
+            ..Totals::default()
+        };
+        let (mut sums, mut counts) = ([0.0f64; 2], [0usize; 2]);
+        for e in records {
+            let v = e.volume_m3.unwrap_or(0.0);
+            match e.tally(mode) {
+                Tally::Counted => {
+                    let k = usize::from(v < 0.0);
+                    sums[k] += v;
+                    counts[k] += 1;
+                }
+                Tally::Incomplete => {
+                    t.incomplete_events += 1;
+                    if v > 0.0 {
+                        t.incomplete_gain_at_least_m3 += v;
+                    } else {
+                        t.incomplete_loss_at_least_m3 += v;
+                    }
+                }
+                Tally::SignUnknown => {
+                    t.sign_unknown_events += 1;
+                    t.sign_unknown_abs_m3 += v.abs();
+                }
+                Tally::NotSignificant => t.not_significant_events += 1,
+                Tally::Vegetation => t.vegetation_left_out += 1,
+            }
+        }
+        // An empty sum is +0, never the −0 a float sum starts from.
+        (sums.map(|s| s + 0.0), counts, t)
+    }
+}
+
+/// A volume for the terminal: signed, three decimals, zero without a sign.
+pub fn volume_text(v: f64) -> String {
+    if v == 0.0 {
+        "0.000".into()
+    } else {
+        format!("{v:+.3}")
+    }
 }
 
 /// summary.json `classes` (SPEC.md §4 "classification first").
@@ -250,6 +370,13 @@ pub struct AlignmentSummary {
     /// The least share, over the directions fitted, of what the core points tell of that
     /// direction that comes from ground the fit leaves at rest (applied only from 0.5).
     pub at_rest_share: f64,
+    /// The share of its predicted change the held-out blocks of stable ground confirm (applied
+    /// only from 0.5; null where too little could be held out).
+    pub confirmed_share: Option<f64>,
+    /// The largest displacement it gives a point of the stable ground (m).
+    pub largest_shift_m: f64,
+    /// Only the vertical was fitted: the stable ground does not see both tilts.
+    pub vertical_only: bool,
     /// The surveys the transform passes through, from this one to the first (0): `[k, 0]` for
     /// a fit onto the first, longer for a chain through predecessors.
     pub route: Vec<usize>,
@@ -272,6 +399,9 @@ impl AlignmentSummary {
             stable_points: a.stable_points,
             residual_m: a.residual_m,
             at_rest_share: a.at_rest_share,
+            confirmed_share: a.confirmed_share,
+            largest_shift_m: a.largest_shift_m,
+            vertical_only: a.vertical_only,
             route: r.surveys.clone(),
             reason: a.reason.clone(),
         }
@@ -325,24 +455,78 @@ impl ReachSummary {
 }
 
 impl Summary {
-    /// One line for the terminal.
+    /// One line for the terminal: what was measured, what the totals count and what they
+    /// leave out.
     pub fn one_line(&self) -> String {
-        format!(
-            "talus: {} core points ({} with a distance, {} significant), {} event(s), {} significant: {} gain {:+.3} m³, {} loss {:+.3} m³; {} tile(s)",
-            self.core_points,
-            self.computed_points,
-            self.significant_points,
+        let points = format!(
+            "talus: {} core points ({} with a distance, {} significant)",
+            self.core_points, self.computed_points, self.significant_points
+        );
+        if self.m3c2_only {
+            return format!("{points}; M3C2 only, no events; {} tile(s)", self.tiles)
+                + &self.alignment_line()
+                + &self.classes_line();
+        }
+        let t = &self.totals;
+        let mut line = format!(
+            "{points}, {} event(s): {} gain {} m³ and {} loss {} m³ counted ({})",
             self.events,
-            self.significant_events,
             self.gain_events,
-            self.total_gain_m3,
+            volume_text(self.total_gain_m3),
             self.loss_events,
-            self.total_loss_m3,
-            self.tiles,
-        ) + &self.vegetation_line()
+            volume_text(self.total_loss_m3),
+            if self.parameters.vegetation.value == crate::params::Vegetation::Keep {
+                "significant, complete, known sign, vegetation included"
+            } else {
+                "significant, complete, known sign"
+            }
+        );
+        if t.incomplete_events > 0 {
+            line += &format!(
+                "; {} incomplete, measured in part: at least {} and {} m³, not in the totals \
+                 (see volume_note)",
+                t.incomplete_events,
+                volume_text(t.incomplete_gain_at_least_m3),
+                volume_text(t.incomplete_loss_at_least_m3)
+            );
+        }
+        if t.sign_unknown_events > 0 {
+            line += &format!(
+                "; {} whose sign the data cannot tell (|V| {:.3} m³ in all), not in the totals: \
+                 give --orientation toward:X,Y,Z",
+                t.sign_unknown_events, t.sign_unknown_abs_m3
+            );
+        }
+        if t.not_significant_events > 0 {
+            line += &format!(
+                "; {} not significant (|V| within its uncertainty)",
+                t.not_significant_events
+            );
+        }
+        line + &format!("; {} tile(s)", self.tiles)
+            + &self.areas_line()
+            + &self.vegetation_line()
             + &self.reach_line()
             + &self.alignment_line()
             + &self.classes_line()
+    }
+
+    /// What the one line says of the user's stable areas when they did not give the stable
+    /// ground: never dropped in silence.
+    fn areas_line(&self) -> String {
+        match &self.stable_areas {
+            Some(a) if !a.used => format!(
+                "; the stable areas {} held {} points with a distance: too few, {}",
+                a.file.display(),
+                a.with_distance,
+                if self.stable.is_some() {
+                    "the automatic stable ground was used"
+                } else {
+                    "and no automatic stable ground either: the threshold is the point spacing's"
+                }
+            ),
+            _ => String::new(),
+        }
     }
 
     /// What the one line says of vegetation events, when there are any.
@@ -405,25 +589,21 @@ impl Summary {
                 a.rotation_deg,
                 a.residual_m
             ),
-            Some(a) if a.reason.contains("directions") || a.reason.contains("stable") => {
+            // Refused for a reason the user should hear (not merely too small to matter).
+            Some(a)
+                if !a.reason.contains("within its own uncertainty")
+                    && !a.reason.contains("moves the stable surface by") =>
+            {
                 format!("; alignment {}", a.reason)
             }
             _ => String::new(),
         }
     }
 
-    /// What the one line adds about reach: incomplete events (their intervals are not confident
-    /// bounds) and core points beyond a user's half-length.
+    /// What the one line adds about reach: core points beyond a user's half-length.
     fn reach_line(&self) -> String {
         let r = &self.reach;
         let mut s = String::new();
-        if r.incomplete_events > 0 {
-            s += &format!(
-                "; {} event(s) incomplete: measured in part only (see volume_note), their \
-                 intervals are not 95 % bounds",
-                r.incomplete_events
-            );
-        }
         if r.beyond_reach_points > 0 {
             s += &format!(
                 "; {} core point(s) with the other survey beyond --cyl-halflen, not measured",
@@ -589,7 +769,7 @@ fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<Outp
         unit,
         pair,
         params,
-        ground.stable,
+        (ground.stable, ground.areas),
         &records,
         &written,
         kept_count,
@@ -624,7 +804,7 @@ fn summarize(
     unit: usize,
     pair: usize,
     params: Params,
-    stable: Option<Stable>,
+    (stable, stable_areas): (Option<Stable>, Option<crate::events::stable::AreasUse>),
     records: &[EventRecord],
     written: &laz::Written,
     kept: u64,
@@ -690,7 +870,7 @@ fn summarize(
         .collect();
     let significant = || records.iter().filter(|e| e.significant);
     let mode = params.vegetation.value;
-    let counted = || significant().filter(|e| mode.counts(e.vegetation));
+    let ([gain, loss], [gains, losses], totals) = Totals::of(records, mode);
     let reach = ReachSummary::new(&params, written, records);
     let alignment = super::aligned::route(ctx, p.after)?.map(|r| AlignmentSummary::of(&r));
     let classes = ClassesSummary {
@@ -719,6 +899,7 @@ fn summarize(
         spacing: plan.spacing.clone(),
         parameters: params,
         stable,
+        stable_areas,
         tiles: plan.layout.len(),
         tile_size: plan.layout.tile_size,
         core_points: written.core_points,
@@ -726,27 +907,17 @@ fn summarize(
         significant_points: written.significant,
         kept_points: kept,
         events: records.len(),
-        gain_events: records
-            .iter()
-            .filter(|e| e.event.kind == Kind::Gain)
-            .count(),
-        loss_events: records
-            .iter()
-            .filter(|e| e.event.kind == Kind::Loss)
-            .count(),
+        gain_events: gains,
+        loss_events: losses,
         significant_events: significant().count(),
         vegetation_events: records.iter().filter(|e| e.vegetation).count(),
-        total_gain_m3: counted()
-            .filter_map(|e| e.volume_m3)
-            .filter(|v| *v > 0.0)
-            .sum(),
-        total_loss_m3: counted()
-            .filter_map(|e| e.volume_m3)
-            .filter(|v| *v < 0.0)
-            .sum(),
+        total_gain_m3: gain,
+        total_loss_m3: loss,
+        totals,
         reach,
         alignment,
         classes,
         stages,
+        m3c2_only: plan.m3c2_only,
     })
 }

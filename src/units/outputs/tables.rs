@@ -73,6 +73,15 @@ pub struct EventProperties {
     /// the magnitude–frequency fit unless `--vegetation keep`.
     #[serde(default)]
     pub vegetation: bool,
+    /// The data decides which side of the surface is out over most of it (false: a face near
+    /// vertical scanned alone, its gain and loss may be the reverse; `complete` is false and
+    /// `volume_note` says so). Absent from older results: true.
+    #[serde(default = "known")]
+    pub sign_known: bool,
+}
+
+fn known() -> bool {
+    true
 }
 
 impl EventProperties {
@@ -106,6 +115,7 @@ impl EventProperties {
             volume_note: r.volume_note.clone(),
             vegetation_fraction: finite(r.vegetation_fraction),
             vegetation: r.vegetation,
+            sign_known: r.sign_known,
         }
     }
 }
@@ -259,7 +269,7 @@ pub fn write_tables(out: &mut UnitWriter, events: &[EventRecord], crs: &Crs) -> 
          mean_distance_m,max_abs_distance_m,mean_lod95_m,coverage,region_area_m2,obb_center_x,obb_center_y,obb_center_z,\
          obb_axis1_x,obb_axis1_y,obb_axis1_z,obb_axis2_x,obb_axis2_y,obb_axis2_z,\
          obb_axis3_x,obb_axis3_y,obb_axis3_z,obb_half_1,obb_half_2,obb_half_3,complete,volume_note,\
-         vegetation_fraction,vegetation\n",
+         vegetation_fraction,vegetation,sign_known\n",
     );
     let f = |v: Option<f64>| v.map(|x| format!("{x:.6}")).unwrap_or_default();
     for r in events {
@@ -293,6 +303,7 @@ pub fn write_tables(out: &mut UnitWriter, events: &[EventRecord], crs: &Crs) -> 
         row.push(csv_text(r.volume_note.as_deref().unwrap_or("")));
         row.push(f(r.vegetation_fraction));
         row.push(r.vegetation.to_string());
+        row.push(r.sign_known.to_string());
         csv.push_str(&row.join(","));
         csv.push('\n');
     }

@@ -14,15 +14,27 @@
 //!
 //! What the stable ground can see. A direction of the six whose eigenvalue is small (a flat
 //! beach sees no horizontal shift and no turn about the vertical: its standard error would be
-//! more than half the noise of one distance) is not constrained: the fit is the truncated pseudo-inverse (Golub & Van Loan §5.5.4), which
-//! leaves such a direction at zero. It is **applied** only when (1) enough stable points, (2) the
-//! vertical and both tilts at least are constrained, (3) the fitted motion is larger than its
-//! own uncertainty (χ² of p over its covariance above the 99.9 % quantile of its degrees of
-//! freedom), (4) the stable ground, the fit removed, holds still to within [`RIGID`] times its
-//! measurement noise (a beach whose sand moved, or a slope creeping as a whole, does not: its
-//! "fit" would be a tilt of the ground, not of the survey) and (5) it moves the stable surface
-//! by at least a fifth of the noise of one M3C2 distance (a millimetre shift on a
-//! centimetre-noise survey changes nothing worth the risk).
+//! more than half the noise of one distance) is not constrained: the fit is the truncated
+//! pseudo-inverse (Golub & Van Loan §5.5.4), which leaves such a direction at zero. Where the
+//! vertical is seen but not both tilts (a single strip of stable ground), the fit is the
+//! vertical shift alone: the bias DEM-of-difference practice removes on stable ground.
+//!
+//! It is **applied** only when, in order ([`decide`]): (1) enough stable points for the
+//! directions fitted, (2) the vertical at least is constrained, (3) the fitted motion is larger
+//! than its own uncertainty (χ² of p over its covariance above the 99.9 % quantile of its
+//! degrees of freedom), (4) the stable ground, the fit removed, holds still to within [`RIGID`]
+//! times its measurement noise (a beach whose sand moved, or a slope creeping as a whole, does
+//! not: its "fit" would be a tilt of the ground, not of the survey), (5) ground at rest is most
+//! of what fixes it ([`AT_REST`]), (6) it moves the stable surface by at least a fifth of the
+//! noise of one M3C2 distance (a millimetre shift on a centimetre-noise survey changes nothing
+//! worth the risk), (7) it holds out of sample: fitted on the stable ground of all but one block
+//! of the footprint, it explains the held-out block's distances ([`holdout`]; change aligned
+//! away explains nothing there), (8) it tilts the survey by no more than a levelled survey is
+//! off (a tilt of degrees is change fitted, or a distorted surface: the BMX track of the autzen
+//! pair, built up between surveys, "fits" a 6.7° turn), and (9) it is a plausible
+//! misregistration ([`Limits`]: what GNSS, targets and ICP leave). A transform that passes all
+//! but (9) is a gross misregistration ([`Alignment::gross`]): the surveys are far off, and the
+//! caller says so.
 //! Otherwise it is reported with the reason, and not applied.
 
 use nalgebra::{Matrix6, SymmetricEigen, Vector3, Vector6};
@@ -30,8 +42,57 @@ use nalgebra::{Matrix6, SymmetricEigen, Vector3, Vector6};
 use super::stable::Sample;
 use crate::geom::Point3;
 
-/// Fewest stable points a fit is tried on.
-pub const MIN_POINTS: usize = 200;
+pub mod holdout;
+
+/// Fewest stable points a fit of `dof` directions is tried on: 30 a direction, at least 50.
+pub fn min_points(dof: usize) -> usize {
+    (30 * dof).max(50)
+}
+/// Fewest stable points the six-direction fit starts from.
+pub const MIN_POINTS: usize = 180;
+/// Least share of its predicted change the held-out ground must confirm ([`holdout`]), and
+/// 2 − it the most: the share is 2β − 1 for β the slope of the held-out distances on the
+/// prediction, 1 for one motion; a share far above 1 is structure the prediction only follows
+/// (the tails of a mound that grew read as a tilt).
+pub const HOLDS_OUT: f64 = 0.5;
+
+/// How far a transform may move a survey and still be a misregistration (SPEC.md §1: "bounded by
+/// what GNSS, targets and ICP leave"): the largest displacement it gives any point of the
+/// stable ground's footprint, and its turn.
+///
+/// The default, [`Limits::PLAUSIBLE`] (1 m, 0.5°): airborne lidar strips adjusted to GNSS/INS
+/// leave centimetres to a few decimetres (ASPRS 2014 positional accuracy standards: 10 cm RMSE
+/// vertical at QL2, decimetres horizontal at common flying heights), UAV photogrammetry with
+/// control points or RTK a few centimetres to two decimetres and tilts of hundredths to a few
+/// tenths of a degree (poor control geometry), terrestrial scans registered to targets
+/// millimetres to centimetres and hundredths of a degree. Twice the worst of these is the
+/// bound; beyond it a "fit" is a different survey datum, a wrong CRS or change aligned away.
+/// `--align on` raises it to [`Limits::FORCED`].
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Limits {
+    pub shift_m: f64,
+    pub turn_deg: f64,
+}
+
+/// Whose stable ground a fit is on: found in the distances, or the user's areas. The user's
+/// word makes their ground stable (as in DoD practice): a fit on it need not be confirmed on
+/// held-out ground, which only says how much the areas agree among themselves.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Ground {
+    Automatic,
+    User,
+}
+
+impl Limits {
+    pub const PLAUSIBLE: Limits = Limits {
+        shift_m: 1.0,
+        turn_deg: 0.5,
+    };
+    pub const FORCED: Limits = Limits {
+        shift_m: 100.0,
+        turn_deg: 20.0,
+    };
+}
 /// A direction of the scaled normal matrix whose eigenvalue is below this is not constrained:
 /// its standard error, σ/√λ at the stable ground's radius, would be more than half the noise of
 /// one distance (λ is the information of that many points entirely along it).
@@ -87,6 +148,16 @@ pub struct Alignment {
     /// rest: near 1 when a misregistration was removed, small when the fit holds still only a
     /// self-selected part of ground that moves.
     pub at_rest_share: f64,
+    /// The share of its predicted change the held-out blocks of stable ground confirm
+    /// ([`holdout`]); None where too few points could be held out.
+    pub confirmed_share: Option<f64>,
+    /// The largest displacement the transform gives a point of the stable ground's footprint (m).
+    pub largest_shift_m: f64,
+    /// Only the vertical was fitted (the stable ground does not see both tilts).
+    pub vertical_only: bool,
+    /// Rigid, significant, at rest and confirmed out of sample, but beyond the limits: the
+    /// surveys are far off (a datum, a CRS), not misregistered by a fraction of a metre.
+    pub gross: bool,
     pub applied: bool,
     /// The transform is known: enough stable ground, seeing the vertical and both tilts, that
     /// holds still as one rigid body, at rest, once it is removed (every rule of the module's
@@ -114,6 +185,10 @@ impl Alignment {
             chi2: 0.0,
             stable_points: 0,
             at_rest_share: 0.0,
+            confirmed_share: None,
+            largest_shift_m: 0.0,
+            vertical_only: false,
+            gross: false,
             applied: false,
             determined: false,
             reason,
@@ -228,6 +303,19 @@ fn median(v: &mut [f64]) -> f64 {
     *m
 }
 
+/// The vertical shift alone over `idx` (least squares of d = n_z t_z), as the six-parameter
+/// vector (ω, t) with only t_z set.
+fn solve_vertical(samples: &[Sample], idx: &[usize]) -> Vector6<f64> {
+    let (mut nn, mut nd) = (0.0, 0.0);
+    for &i in idx {
+        let nz = samples[i].normal[2];
+        nn += nz * nz;
+        nd += nz * samples[i].distance;
+    }
+    let t = if nn > 0.0 { nd / nn } else { 0.0 };
+    Vector6::new(0.0, 0.0, 0.0, 0.0, 0.0, t)
+}
+
 /// A least-squares solution over `idx` with the truncated pseudo-inverse; returns the scaled
 /// parameters, the eigen-decomposition of the normal matrix and the kept directions.
 fn solve(
@@ -262,8 +350,16 @@ fn solve(
 /// within [`super::stable::KEEP_SIGMAS`] robust standard deviations. (The stable set a
 /// translation alone finds leaves out what a turn moves more than the noise — the far ends of a
 /// wall turned 0.1° about the vertical — and a fit on what is left would be biased toward no
-/// turn.) `sigma_d` is the noise of one distance on stable ground.
-pub fn fit(samples: &[Sample], stable: &[usize], pool: &[usize], sigma_d: f64) -> Alignment {
+/// turn.) `sigma_d` is the noise of one distance on stable ground; `limits` bound a plausible
+/// misregistration.
+pub fn fit(
+    samples: &[Sample],
+    stable: &[usize],
+    pool: &[usize],
+    sigma_d: f64,
+    limits: &Limits,
+    ground: Ground,
+) -> Alignment {
     let mut keep: Vec<usize> = stable.to_vec();
     let centroid = |idx: &[usize]| -> Vector3<f64> {
         let mut s = Vector3::zeros();
@@ -315,6 +411,27 @@ pub fn fit(samples: &[Sample], stable: &[usize], pool: &[usize], sigma_d: f64) -
         fitted = solve(samples, &keep, &o, scale);
     }
     let (p, eig, kept) = fitted;
+    // Vertical and both tilts: the unit vertical translation and the horizontal rotations.
+    let sees = |dir: Vector6<f64>| -> bool {
+        let dir = dir.normalize();
+        let seen: f64 = kept
+            .iter()
+            .map(|&k| eig.eigenvectors.column(k).dot(&dir).powi(2))
+            .sum();
+        seen > 0.99
+    };
+    let vertical_seen = sees(Vector6::new(0.0, 0.0, 0.0, 0.0, 0.0, 1.0));
+    let tilts = sees(Vector6::new(1.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+        && sees(Vector6::new(0.0, 1.0, 0.0, 0.0, 0.0, 0.0));
+    // The vertical alone where the tilts are not seen: DoD practice's bias on stable ground.
+    let vertical_only = vertical_seen && !tilts;
+    let (p, kept) = if vertical_only {
+        (solve_vertical(samples, &keep), vec![])
+    } else {
+        (p, kept)
+    };
+    let residual =
+        |p: &Vector6<f64>, i: usize| samples[i].distance - row(&samples[i], &o, scale).dot(p);
     let mut dev: Vec<f64> = keep.iter().map(|&i| residual(&p, i).abs()).collect();
     if !dev.is_empty() {
         sigma = 1.4826 * median(&mut dev);
@@ -325,7 +442,7 @@ pub fn fit(samples: &[Sample], stable: &[usize], pool: &[usize], sigma_d: f64) -
         .filter(|l| l.is_finite())
         .collect();
     let noise = median(&mut lods);
-    // Covariance of the kept directions: σ² Σ v vᵀ / λ.
+    // Covariance of the kept directions: σ² Σ v vᵀ / λ (the vertical alone: σ² / Σ n_z²).
     let var = sigma * sigma;
     let mut cov = Matrix6::zeros();
     let mut chi2 = 0.0;
@@ -335,6 +452,11 @@ pub fn fit(samples: &[Sample], stable: &[usize], pool: &[usize], sigma_d: f64) -
         let along = v.dot(&p);
         chi2 += along * along * eig.eigenvalues[k] / var.max(f64::MIN_POSITIVE);
     }
+    if vertical_only {
+        let nn: f64 = keep.iter().map(|&i| samples[i].normal[2].powi(2)).sum();
+        cov[(5, 5)] = var / nn.max(f64::MIN_POSITIVE);
+        chi2 = p[5] * p[5] / cov[(5, 5)].max(f64::MIN_POSITIVE);
+    }
     let effect = (keep
         .iter()
         .map(|&i| row(&samples[i], &o, scale).dot(&p).powi(2))
@@ -343,35 +465,52 @@ pub fn fit(samples: &[Sample], stable: &[usize], pool: &[usize], sigma_d: f64) -
         .sqrt();
     // A parameter with a part in an unconstrained direction has no standard error.
     let free = |k: usize| -> f64 {
+        if vertical_only {
+            return if k == 5 { 0.0 } else { 1.0 };
+        }
         (0..6)
             .filter(|j| !kept.contains(j))
             .map(|j| eig.eigenvectors[(k, j)].powi(2))
             .sum()
     };
     let sd = |k: usize, unit: f64| (free(k) < 1e-3).then(|| cov[(k, k)].max(0.0).sqrt() / unit);
-    // Vertical and both tilts: the unit vertical translation and the horizontal rotations.
-    let sees = |dir: Vector6<f64>| -> bool {
-        let dir = dir.normalize();
-        let seen: f64 = kept
-            .iter()
-            .map(|&k| eig.eigenvectors.column(k).dot(&dir).powi(2))
-            .sum();
-        seen > 0.99
+    let dof = if vertical_only { 1 } else { kept.len() };
+    let at_rest = if vertical_only {
+        // The share of the vertical's information from ground at rest.
+        let (mut all, mut still) = (0.0, 0.0);
+        for &i in pool {
+            let w = samples[i].normal[2].powi(2);
+            all += w;
+            if residual(&p, i).abs() <= super::stable::KEEP_SIGMAS * sigma.max(noise) {
+                still += w;
+            }
+        }
+        still / all
+    } else {
+        at_rest_share(
+            pool,
+            &kept,
+            &eig,
+            |i| row(&samples[i], &o, scale),
+            |i| residual(&p, i).abs() <= super::stable::KEEP_SIGMAS * sigma.max(noise),
+        )
     };
-    let vertical = sees(Vector6::new(0.0, 0.0, 0.0, 0.0, 0.0, 1.0))
-        && sees(Vector6::new(1.0, 0.0, 0.0, 0.0, 0.0, 0.0))
-        && sees(Vector6::new(0.0, 1.0, 0.0, 0.0, 0.0, 0.0));
-    let dof = kept.len();
-    let at_rest = at_rest_share(
-        pool,
-        &kept,
-        &eig,
-        |i| row(&samples[i], &o, scale),
-        |i| residual(&p, i).abs() <= super::stable::KEEP_SIGMAS * sigma.max(noise),
+    let confirmed = holdout::confirmed_share(samples, &keep, pool, &o, scale, vertical_only);
+    // The largest displacement of a point of the stable ground's footprint: |t + ω × (c − o)|.
+    let (w, t) = (
+        Vector3::new(p[0], p[1], p[2]) / scale,
+        Vector3::new(p[3], p[4], p[5]),
     );
-    let (applied, determined, reason) = decide(&Figures {
+    let largest = pool
+        .iter()
+        .map(|&i| (t + w.cross(&(Vector3::from(samples[i].xyz) - o))).norm())
+        .fold(t.norm(), f64::max);
+    let turn = w.norm().to_degrees();
+    let tilt = w[0].hypot(w[1]).to_degrees();
+    let (applied, determined, gross, reason) = decide(&Figures {
         stable: keep.len(),
-        vertical,
+        vertical: vertical_seen,
+        vertical_only,
         dof,
         chi2,
         sigma,
@@ -379,10 +518,16 @@ pub fn fit(samples: &[Sample], stable: &[usize], pool: &[usize], sigma_d: f64) -
         at_rest,
         effect,
         sigma_d,
+        confirmed,
+        largest,
+        turn,
+        tilt,
+        limits: *limits,
+        ground,
     });
     Alignment {
-        rotation: [p[0] / scale, p[1] / scale, p[2] / scale],
-        translation: [p[3], p[4], p[5]],
+        rotation: [w[0], w[1], w[2]],
+        translation: [t[0], t[1], t[2]],
         origin: [o[0], o[1], o[2]],
         rotation_sd: [sd(0, scale), sd(1, scale), sd(2, scale)],
         translation_sd: [sd(3, 1.0), sd(4, 1.0), sd(5, 1.0)],
@@ -393,16 +538,170 @@ pub fn fit(samples: &[Sample], stable: &[usize], pool: &[usize], sigma_d: f64) -
         chi2,
         stable_points: keep.len(),
         at_rest_share: at_rest,
+        confirmed_share: confirmed.is_finite().then_some(confirmed),
+        largest_shift_m: largest,
+        vertical_only,
+        gross,
         applied,
         determined,
         reason,
     }
 }
 
+/// The fit over `samples`: their stable ground, its noise, the rigid transform within `limits`.
+/// The stable ground is first sought near zero distance ([`super::stable::select`]); where that
+/// finds none, or none that holds still, the surveys may be far apart (every distance large):
+/// the fit is tried again over every sample, its stable set re-selected from its own residuals,
+/// and taken when it applies or is a gross misregistration. `spacing` is the core spacing (the
+/// noise's variogram's shortest lag).
+pub fn find(samples: &[Sample], spacing: f64, limits: &Limits, ground: Ground) -> Alignment {
+    let finite: Vec<usize> = (0..samples.len())
+        .filter(|&i| samples[i].distance.is_finite() && samples[i].normal[0].is_finite())
+        .collect();
+    let sel = super::stable::select(samples);
+    let sigma_d = super::stable::measure(samples, spacing).map_or_else(
+        || {
+            // No stable ground to measure the noise on: the distances' own LoDs say it.
+            let mut l: Vec<f64> = finite.iter().map(|&i| samples[i].lod / 1.96).collect();
+            median(&mut l)
+        },
+        |m| m.sigma_d,
+    );
+    let near = match &sel {
+        Some(sel) => fit(samples, &sel.keep, &sel.finite, sigma_d, limits, ground),
+        None => Alignment::none(format!(
+            "not applied: no stable ground among the {} core points sampled",
+            samples.len()
+        )),
+    };
+    if near.applied || near.determined || finite.len() < MIN_POINTS {
+        return near;
+    }
+    let wide = fit(samples, &finite, &finite, sigma_d, limits, ground);
+    if wide.applied || wide.gross {
+        return Alignment {
+            reason: format!(
+                "{} (near zero distance: {}; over every core point sampled)",
+                wide.reason, near.reason
+            ),
+            ..wide
+        };
+    }
+    near
+}
+
+/// The fit `user` on the user's stable areas (over `inside`, their samples), its free
+/// directions — those its ground does not see: a flat area sees no horizontal shift and no turn
+/// about the vertical — taken from the rest of the surveys' stable ground (the fit over `rest`,
+/// the automatic sample), so that a misregistration the areas cannot see is still removed.
+/// Where the rest cannot fix them either, the fit is the areas' alone, and says so.
+pub fn complete(
+    user: &Alignment,
+    inside: &[Sample],
+    rest: &[Sample],
+    spacing: f64,
+    limits: &Limits,
+) -> Alignment {
+    let other = find(rest, spacing, limits, Ground::Automatic);
+    let free: Vec<usize> = (0..6)
+        .filter(|&k| {
+            if k < 3 {
+                user.rotation_sd[k].is_none()
+            } else {
+                user.translation_sd[k - 3].is_none()
+            }
+        })
+        .collect();
+    let names = [
+        "turn about x",
+        "turn about y",
+        "turn about z",
+        "x",
+        "y",
+        "z",
+    ];
+    let said: Vec<&str> = free.iter().map(|&k| names[k]).collect();
+    if !other.determined || other.gross {
+        return Alignment {
+            reason: format!(
+                "{}; the directions the stable areas leave free ({}) could not be fitted on the \
+                 rest of the surveys' stable ground ({}): a misregistration along them is not \
+                 removed, and the intervals do not hold it",
+                user.reason,
+                said.join(", "),
+                other.reason
+            ),
+            ..user.clone()
+        };
+    }
+    // The areas' own directions as they fitted them (nothing, where their motion was within its
+    // uncertainty), the free ones from the rest, every translation about the areas' origin.
+    let keep_user = user.applied;
+    let o = Vector3::from(user.origin);
+    let w_rest = Vector3::from(other.rotation);
+    let t_rest =
+        Vector3::from(other.translation) + w_rest.cross(&(o - Vector3::from(other.origin)));
+    let mut a = user.clone();
+    for k in 0..3 {
+        let (fr, ft) = (free.contains(&k), free.contains(&(k + 3)));
+        a.rotation[k] = if fr {
+            other.rotation[k]
+        } else if keep_user {
+            user.rotation[k]
+        } else {
+            0.0
+        };
+        a.translation[k] = if ft {
+            t_rest[k]
+        } else if keep_user {
+            user.translation[k]
+        } else {
+            0.0
+        };
+        if fr {
+            a.rotation_sd[k] = other.rotation_sd[k];
+        }
+        if ft {
+            a.translation_sd[k] = other.translation_sd[k];
+        }
+    }
+    a.constrained = (user.constrained + free.len()).min(6);
+    let w = Vector3::from(a.rotation);
+    let t = Vector3::from(a.translation);
+    a.largest_shift_m = inside
+        .iter()
+        .chain(rest)
+        .map(|s| (t + w.cross(&(Vector3::from(s.xyz) - o))).norm())
+        .fold(t.norm(), f64::max);
+    let (turn, tilt) = (w.norm().to_degrees(), w[0].hypot(w[1]).to_degrees());
+    let plausible = a.largest_shift_m <= limits.shift_m && turn <= limits.turn_deg;
+    a.applied = (user.applied || other.applied) && plausible && tilt <= limits.turn_deg;
+    a.determined = user.determined && other.determined && plausible;
+    a.reason = format!(
+        "{}: {} of 6 directions from the stable areas ({}), {} ({}) from the rest of the \
+         surveys' stable ground ({} core points: {})",
+        if a.applied {
+            "applied"
+        } else if plausible {
+            "not applied"
+        } else {
+            "not applied, beyond a registration error's size"
+        },
+        6 - free.len(),
+        user.reason,
+        free.len(),
+        said.join(", "),
+        other.stable_points,
+        other.reason
+    );
+    a
+}
+
 /// What [`fit`] measured, for [`decide`].
 struct Figures {
     stable: usize,
     vertical: bool,
+    vertical_only: bool,
     dof: usize,
     chi2: f64,
     sigma: f64,
@@ -410,14 +709,22 @@ struct Figures {
     at_rest: f64,
     effect: f64,
     sigma_d: f64,
+    confirmed: f64,
+    largest: f64,
+    turn: f64,
+    tilt: f64,
+    limits: Limits,
+    ground: Ground,
 }
 
-/// Whether a fit is applied, whether it is determined ([`Alignment::determined`]), and why (or
-/// why not): the rules of the module's header, in order.
-fn decide(f: &Figures) -> (bool, bool, String) {
+/// Whether a fit is applied, whether it is determined ([`Alignment::determined`]), whether it is
+/// a gross misregistration ([`Alignment::gross`]), and why: the rules of the module's header, in
+/// order.
+fn decide(f: &Figures) -> (bool, bool, bool, String) {
     let &Figures {
         stable,
         vertical,
+        vertical_only,
         dof,
         chi2,
         sigma,
@@ -425,20 +732,29 @@ fn decide(f: &Figures) -> (bool, bool, String) {
         at_rest,
         effect,
         sigma_d,
+        confirmed,
+        largest,
+        turn,
+        tilt,
+        limits,
+        ground,
     } = f;
     let rigid = !(sigma.is_nan() || noise.is_nan() || sigma > RIGID * noise);
     let at_rest_ok = !(at_rest.is_nan() || at_rest < AT_REST);
-    let determined = stable >= MIN_POINTS && vertical && rigid && at_rest_ok;
-    let not = if stable < MIN_POINTS {
+    let enough = stable >= min_points(dof);
+    let determined = enough && vertical && rigid && at_rest_ok;
+    let what = if vertical_only {
+        "the vertical alone (the stable ground does not see both tilts)".to_string()
+    } else {
+        format!("{dof} of 6 directions")
+    };
+    let not = if !enough {
         format!(
-            "not applied: {} stable core points, fewer than {MIN_POINTS}",
-            stable
+            "not applied: {stable} stable core points, fewer than {} for {what}",
+            min_points(dof)
         )
     } else if !vertical {
-        format!(
-            "not applied: the stable ground constrains {dof} of 6 directions, not the vertical \
-             and both tilts"
-        )
+        format!("not applied: the stable ground constrains {dof} of 6 directions, not the vertical")
     } else if chi2 <= CHI2_999[dof.clamp(1, 6) - 1] {
         format!(
             "not applied: the motion is within its own uncertainty (χ² {chi2:.1} over {dof} \
@@ -468,17 +784,81 @@ fn decide(f: &Figures) -> (bool, bool, String) {
              than {MIN_EFFECT} × σ_d ({:.4})",
             effect, sigma_d
         )
+    } else if ground == Ground::Automatic
+        && (confirmed.is_nan() || !(HOLDS_OUT..=2.0 - HOLDS_OUT).contains(&confirmed))
+    {
+        let share = if confirmed.is_nan() {
+            "too little of it could be held out to check".to_string()
+        } else {
+            format!(
+                "fitted on all but one block of the stable ground, it explains {:.0} % of what \
+                 it predicts on the held-out block ({:.0} to {:.0} %: one motion explains all it \
+                 predicts there, no less and no more)",
+                100.0 * confirmed.clamp(-9.99, 9.99),
+                100.0 * HOLDS_OUT,
+                100.0 * (2.0 - HOLDS_OUT)
+            )
+        };
+        // Unconfirmed, it is not a misregistration known to be there; below the noise of one
+        // distance it is known to be too small to matter (a chain may pass it as the identity).
+        return (
+            false,
+            determined && effect < sigma_d,
+            false,
+            format!(
+                "not applied: it does not hold out of sample: {share}; what it fits is not one \
+                 motion of the whole survey (change, or ground moving from place to place)"
+            ),
+        );
+    } else if tilt > limits.turn_deg {
+        // A survey is levelled (a scanner's compensator, GNSS/INS, control points): a tilt of
+        // degrees is no misregistration, small or gross, but change or a distorted datum fitted.
+        return (
+            false,
+            false,
+            false,
+            format!(
+                "not applied: it tilts the survey by {tilt:.3}° (turn {turn:.3}°, shift up to \
+                 {largest:.3} m), more than any levelled survey is off ({}°): what it fits is \
+                 change or a distorted surface, not a misregistration",
+                limits.turn_deg
+            ),
+        );
+    } else if largest > limits.shift_m || turn > limits.turn_deg {
+        return (
+            false,
+            false,
+            true,
+            format!(
+                "not applied: it moves the survey by up to {largest:.3} m and turns it \
+                 {turn:.3}°, more than a registration error leaves ({} m, {}°): the surveys are \
+                 far apart (another datum or CRS, a georeferencing error)",
+                limits.shift_m, limits.turn_deg
+            ),
+        );
     } else {
         return (
             true,
             true,
+            false,
             format!(
-                "applied: {dof} of 6 directions constrained by {stable} stable core points; it \
-                 moves them by {effect:.4} (RMS along the normals), χ² {chi2:.0}"
+                "applied: {what} constrained by {stable} stable points; it moves them by \
+                 {effect:.4} (RMS along the normals), χ² {chi2:.0}, and explains {} of what it \
+                 predicts on held-out ground{}",
+                if confirmed.is_nan() {
+                    "an unknown share".to_string()
+                } else {
+                    format!("{:.0} %", 100.0 * confirmed)
+                },
+                if ground == Ground::User {
+                    " (the user's stable ground: not required)"
+                } else {
+                    ""
+                }
             ),
         );
     };
-    (false, determined, not)
+    (false, determined, false, not)
 }
 
 #[cfg(test)]
@@ -529,7 +909,14 @@ mod tests {
         let w = [0.0005, -0.0003, 0.002]; // 0.03°, 0.02°, 0.11°
         let t = [0.06, -0.04, 0.08];
         let s = scene(w, t, [10.0, 5.0, 3.0], 0.01, false, 1);
-        let a = fit(&s, &all(&s), &all(&s), 0.01);
+        let a = fit(
+            &s,
+            &all(&s),
+            &all(&s),
+            0.01,
+            &Limits::PLAUSIBLE,
+            Ground::Automatic,
+        );
         assert!(a.applied, "{}", a.reason);
         assert_eq!(a.constrained, 6);
         // The fit's own origin: ω is the same, t moves by ω × (o − o_fit).
@@ -565,7 +952,14 @@ mod tests {
     #[test]
     fn registered_surveys_are_not_aligned() {
         let s = scene([0.0; 3], [0.0; 3], [0.0; 3], 0.01, false, 2);
-        let a = fit(&s, &all(&s), &all(&s), 0.01);
+        let a = fit(
+            &s,
+            &all(&s),
+            &all(&s),
+            0.01,
+            &Limits::PLAUSIBLE,
+            Ground::Automatic,
+        );
         assert!(!a.applied, "{}", a.reason);
         assert!(a.reason.contains("uncertainty"), "{}", a.reason);
     }
@@ -573,7 +967,14 @@ mod tests {
     #[test]
     fn flat_ground_constrains_only_the_vertical_and_the_tilts() {
         let s = scene([0.001, 0.0, 0.0], [0.3, 0.0, 0.05], [0.0; 3], 0.01, true, 3);
-        let a = fit(&s, &all(&s), &all(&s), 0.01);
+        let a = fit(
+            &s,
+            &all(&s),
+            &all(&s),
+            0.01,
+            &Limits::PLAUSIBLE,
+            Ground::Automatic,
+        );
         assert_eq!(a.constrained, 3, "{a:?}");
         // The horizontal shift is invisible: left at zero, not guessed, and said so.
         assert!(a.translation[0].abs() < 1e-6, "{a:?}");
@@ -588,7 +989,14 @@ mod tests {
         let mut s = scene([0.0; 3], [0.05, 0.0, 0.0], [0.0; 3], 0.01, false, 4);
         // Keep the wall facing −x only.
         s.retain(|p| p.normal[0] != 0.0);
-        let a = fit(&s, &all(&s), &all(&s), 0.01);
+        let a = fit(
+            &s,
+            &all(&s),
+            &all(&s),
+            0.01,
+            &Limits::PLAUSIBLE,
+            Ground::Automatic,
+        );
         assert!(!a.applied);
         assert!(a.reason.contains("directions"), "{}", a.reason);
     }
@@ -602,7 +1010,14 @@ mod tests {
         for p in s.iter_mut().step_by(10) {
             p.distance += 1.0;
         }
-        let a = fit(&s, &all(&s), &all(&s), 0.01);
+        let a = fit(
+            &s,
+            &all(&s),
+            &all(&s),
+            0.01,
+            &Limits::PLAUSIBLE,
+            Ground::Automatic,
+        );
         assert!(a.applied, "{}", a.reason);
         assert!(a.stable_points < 2800, "{}", a.stable_points);
         assert!((a.residual_m - 0.01).abs() < 0.003, "{}", a.residual_m);
@@ -626,9 +1041,133 @@ mod tests {
         let first: Vec<usize> = (0..s.len())
             .filter(|&i| s[i].normal[2] == 0.0 || (s[i].distance + 0.0625).abs() < 0.002)
             .collect();
-        let a = fit(&s, &first, &all(&s), 0.002);
+        let a = fit(
+            &s,
+            &first,
+            &all(&s),
+            0.002,
+            &Limits::PLAUSIBLE,
+            Ground::Automatic,
+        );
         assert!(!a.applied, "{a:?}");
         assert!(a.at_rest_share < 0.5, "{a:?}");
         assert!(a.reason.contains("at rest"), "{}", a.reason);
+    }
+
+    #[test]
+    fn a_survey_metres_off_is_a_gross_misregistration_not_applied() {
+        let s = scene([0.0; 3], [1.5, -2.0, 0.8], [0.0; 3], 0.01, false, 7);
+        let a = fit(
+            &s,
+            &all(&s),
+            &all(&s),
+            0.01,
+            &Limits::PLAUSIBLE,
+            Ground::Automatic,
+        );
+        assert!(!a.applied && a.gross, "{a:?}");
+        assert!(!a.determined, "a chain must not pass it as the identity");
+        assert!(
+            (a.largest_shift_m - 2.62).abs() < 0.05,
+            "{}",
+            a.largest_shift_m
+        );
+        // Forced: removed.
+        let a = fit(
+            &s,
+            &all(&s),
+            &all(&s),
+            0.01,
+            &Limits::FORCED,
+            Ground::Automatic,
+        );
+        assert!(a.applied && !a.gross, "{}", a.reason);
+        for (k, want) in [1.5, -2.0, 0.8].into_iter().enumerate() {
+            assert!(
+                (a.translation[k] - want).abs() < 0.002,
+                "{:?}",
+                a.translation
+            );
+        }
+    }
+
+    #[test]
+    fn a_tilt_of_degrees_is_change_fitted_not_a_misregistration() {
+        // 3° about x: no levelled survey is off by that; refused, and no gross error either.
+        let s = scene([0.052, 0.0, 0.0], [0.0; 3], [0.0; 3], 0.01, false, 8);
+        let a = fit(
+            &s,
+            &all(&s),
+            &all(&s),
+            0.01,
+            &Limits::FORCED,
+            Ground::Automatic,
+        );
+        assert!(a.applied, "forced: {}", a.reason);
+        let a = fit(
+            &s,
+            &all(&s),
+            &all(&s),
+            0.01,
+            &Limits::PLAUSIBLE,
+            Ground::Automatic,
+        );
+        assert!(!a.applied && !a.gross, "{a:?}");
+        assert!(a.reason.contains("tilts"), "{}", a.reason);
+    }
+
+    #[test]
+    fn relief_that_changed_is_not_aligned_away() {
+        // A flat site whose only relief is a mound built up between the surveys (0.5 m high,
+        // 8 m wide, off the centre): a tilt and a shift "explain" part of it, and nothing of it
+        // on held-out ground.
+        let mut s = scene([0.0; 3], [0.0; 3], [0.0; 3], 0.01, true, 9);
+        for p in s.iter_mut() {
+            let r2 = (p.xyz[0] - 28.0).powi(2) + (p.xyz[1] - 14.0).powi(2);
+            p.distance += 0.5 * (-r2 / 32.0).exp();
+        }
+        let a = fit(
+            &s,
+            &all(&s),
+            &all(&s),
+            0.01,
+            &Limits::PLAUSIBLE,
+            Ground::Automatic,
+        );
+        assert!(!a.applied, "{a:?}");
+    }
+
+    #[test]
+    fn a_strip_of_stable_ground_gives_the_vertical_alone() {
+        // A transect: flat ground 40 m long and half a metre wide, the later survey 6 cm low.
+        let mut r = SplitMix64::new(10);
+        let s: Vec<Sample> = (0..2000)
+            .map(|_| {
+                let xyz = [r.range(0.0, 40.0), r.range(0.0, 0.5), 0.0];
+                Sample {
+                    xyz,
+                    normal: [0.0, 0.0, 1.0],
+                    distance: -0.06 + 0.01 * r.normal(),
+                    std_dev: [0.01, 0.01],
+                    lod: 0.02,
+                }
+            })
+            .collect();
+        let a = fit(
+            &s,
+            &all(&s),
+            &all(&s),
+            0.01,
+            &Limits::PLAUSIBLE,
+            Ground::User,
+        );
+        assert!(a.vertical_only && a.applied, "{a:?}");
+        assert_eq!(a.constrained, 1);
+        assert!(
+            (a.translation[2] + 0.06).abs() < 0.002,
+            "{:?}",
+            a.translation
+        );
+        assert_eq!(a.rotation, [0.0; 3]);
     }
 }
