@@ -50,10 +50,10 @@ enum Command {
         #[arg(long, default_value = "127.0.0.1")]
         bind: std::net::IpAddr,
     },
-    /// Execute units of the run in DIR (started by `talus compare`) beside the process that
-    /// runs it: any number of workers, on this or other machines sharing DIR.
+    /// Execute units of the run in DIR (started by `talus compare` or `talus campaign`) beside
+    /// the process that runs it: any number of workers, on this or other machines sharing DIR.
     Worker {
-        /// The --out directory of a running comparison.
+        /// The --out directory of a running comparison or campaign.
         dir: PathBuf,
         /// Units at a time.
         #[arg(long, default_value_t = 1)]
@@ -75,7 +75,8 @@ enum Command {
         /// The submission's number (DIR/.talus/slurm/N).
         #[arg(long)]
         submission: u32,
-        /// The stage: tiling, cores, m3c2, stable, events, volumes, outputs, campaign, publish.
+        /// The stage: tiling, align, aligned, cleared, orient, cores, thinned, m3c2, merged,
+        /// stable, events, points, volumes, outputs, campaign, publish.
         #[arg(long)]
         stage: String,
         /// The task (default: SLURM_ARRAY_TASK_ID).
@@ -202,25 +203,33 @@ struct ExecArgs {
     /// (slurm) Write the plan and the sbatch scripts into DIR/.talus/slurm/N, submit nothing.
     #[arg(long)]
     plan_only: bool,
-    /// (slurm) Tiles per array task in the tile stages (M3C2, volumes).
-    #[arg(long, default_value_t = 1, value_name = "N")]
-    tiles_per_task: usize,
+    /// (slurm) Tiles per array task in the tile stages (M3C2, volumes) (default: 1).
+    #[arg(long, value_name = "N")]
+    tiles_per_task: Option<usize>,
 }
 
 impl ExecArgs {
     fn executor(&self) -> crate::Result<crate::exec::Executor> {
+        // Refused whatever the executor (it was ignored locally, 0 and all).
+        if self.tiles_per_task == Some(0) {
+            return Err(crate::Error::Usage(
+                "--tiles-per-task: must be at least 1".into(),
+            ));
+        }
         if self.executor == "local" {
             if self.wait || self.slurm_args.is_some() || self.plan_only {
                 return Err(crate::Error::Usage(
                     "--wait, --slurm-args and --plan-only go with --executor slurm".into(),
                 ));
             }
+            if self.tiles_per_task.is_some() {
+                return Err(crate::Error::Usage(
+                    "--tiles-per-task goes with --executor slurm (a local run takes every tile \
+                     as it comes)"
+                        .into(),
+                ));
+            }
             return Ok(crate::exec::Executor::Local);
-        }
-        if self.tiles_per_task == 0 {
-            return Err(crate::Error::Usage(
-                "--tiles-per-task: must be at least 1".into(),
-            ));
         }
         if self.wait && self.plan_only {
             return Err(crate::Error::Usage(
@@ -232,7 +241,7 @@ impl ExecArgs {
             args: crate::exec::slurm::split_args(self.slurm_args.as_deref().unwrap_or(""))?,
             wait: self.wait,
             plan_only: self.plan_only,
-            tiles_per_task: self.tiles_per_task,
+            tiles_per_task: self.tiles_per_task.unwrap_or(1),
         }))
     }
 }
@@ -360,7 +369,7 @@ struct SynthArgs {
     #[arg(long)]
     las: bool,
     /// `synth vegetation`: deliver the surveys classified (ground 2, grass 3, shrubs 4, tree 5)
-    /// instead of unclassified (1).
+    /// instead of unclassified (1). Every other scene's points are ground, class 2.
     #[arg(long)]
     classified: bool,
 }
@@ -555,5 +564,64 @@ mod tests {
             .map(|h| h.to_string())
             .unwrap_or_default();
         assert!(memory.contains("2 GiB"), "{memory}");
+    }
+
+    /// The help of a subcommand's argument or option `id`.
+    fn help_of(sub: &str, id: &str) -> String {
+        let cli = Cli::command();
+        let cmd = cli.find_subcommand(sub).unwrap();
+        let about = cmd.get_about().map(|a| a.to_string()).unwrap_or_default();
+        let arg = cmd
+            .get_arguments()
+            .find(|a| a.get_id() == id)
+            .and_then(|a| a.get_help())
+            .map(|h| h.to_string())
+            .unwrap_or_default();
+        format!("{about}\n{arg}")
+    }
+
+    /// Issue 44, item 7: the help and README say what is true — every scene `synth` knows,
+    /// every stage `slurm-task --stage` takes (the registry's and the publishing job), a worker
+    /// serving a campaign too; README's synth classes, scenes, Slurm stages and worker.
+    #[test]
+    fn help_and_readme_name_what_there_is() {
+        let readme = include_str!("../README.md");
+        let scenes = help_of("synth", "scene");
+        let synth_line = readme
+            .lines()
+            .find(|l| l.starts_with("talus synth SCENE"))
+            .unwrap();
+        for kind in crate::synth::SceneKind::ALL {
+            let name = kind.name();
+            let word = |t: &str| t.split(|c: char| !c.is_alphanumeric()).any(|w| w == name);
+            assert!(word(&scenes), "synth --help lacks {name}: {scenes}");
+            assert!(word(synth_line), "README's synth line lacks {name}");
+        }
+        let stages = help_of("slurm-task", "stage");
+        let arrays = readme
+            .split("**How the plan maps onto job arrays.**")
+            .nth(1)
+            .and_then(|t| t.split("Every unit depends only").next())
+            .unwrap();
+        for kind in crate::units::stage::registry()
+            .stages()
+            .iter()
+            .map(|s| s.kind())
+        {
+            assert!(stages.contains(kind), "slurm-task --stage lacks {kind}");
+            assert!(
+                arrays.contains(&format!("`{kind}`")),
+                "README's arrays lack {kind}"
+            );
+        }
+        assert!(stages.contains(crate::exec::slurm::PUBLISH));
+        assert!(help_of("worker", "dir").contains("campaign"));
+        assert!(
+            readme.contains("beside its `compare`\n                              or `campaign`")
+        );
+        assert!(
+            !readme.contains("all class 1"),
+            "README: synth scenes are ground, class 2"
+        );
     }
 }

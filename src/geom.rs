@@ -56,3 +56,13 @@ impl Bounds {
             && other.min[1] <= self.max[1]
     }
 }
+
+/// A coordinate or length for a message: three decimals, or scientific notation where those
+/// would run to hundreds of digits (coordinates of 1e295 in a damaged file).
+pub fn show(x: f64) -> String {
+    if x.is_finite() && x.abs() < 1e12 {
+        format!("{x:.3}")
+    } else {
+        format!("{x:.3e}")
+    }
+}

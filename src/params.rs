@@ -80,7 +80,9 @@ impl UserParams {
     /// Read a TOML config file whose top-level tables or arrays named in `sections` are not
     /// parameters (a campaign's `[[epoch]]` entries): they are returned apart, unparsed.
     pub fn from_toml_file_with(path: &Path, sections: &[&str]) -> Result<(Self, toml::Table)> {
-        let text = std::fs::read_to_string(path)
+        // A regular file only: a FIFO would block, `<(…)` is read once (`io::open_file`).
+        let mut text = String::new();
+        std::io::Read::read_to_string(&mut crate::io::open_file(path)?, &mut text)
             .map_err(|e| Error::input(path, format!("cannot read config: {e}")))?;
         let bad = |e: toml::de::Error| {
             let line = e.span().map_or(String::new(), |s| {
@@ -474,6 +476,13 @@ impl Params {
                 return Err(user.bad_value(name, "must be at least 1"));
             }
         }
+        if user.min_points == Some(0) {
+            // It was taken as 1 in silence: a cylinder without a point gives no distance.
+            return Err(user.bad_value(
+                "min_points",
+                "must be at least 1 (a cylinder without a point of an epoch gives no distance)",
+            ));
+        }
         match user.threads {
             Some(0) => return Err(user.bad_value("threads", "must be at least 1")),
             Some(n) if n > MAX_THREADS => {
@@ -595,6 +604,29 @@ impl Params {
             memory_bytes: memory,
             threads: pick(user.threads, threads_default, "default: available cores"),
         })
+    }
+
+    /// Refuse a core spacing so much finer than the surveys' points that no event can form:
+    /// every point is a core point, and the DBSCAN radius derived from it (2.5 × core_spacing)
+    /// is shorter than the gap between points (one effective spacing), so it joins no two of
+    /// them — every change would come out as no event, in silence. A core spacing below the
+    /// point spacing with `--eps` given is the user's choice (every point a core point).
+    pub fn check_core_spacing(&self, user: &UserParams) -> Result<()> {
+        let (c, s) = (self.core_spacing.value, self.point_spacing.value);
+        if self.eps.is_user() || self.eps.value >= s {
+            return Ok(());
+        }
+        Err(user.bad_value(
+            "core_spacing",
+            format!(
+                "{c} is far finer than the surveys' points (effective spacing {s:.4}): every \
+                 point would be a core point, and the DBSCAN radius derived from it (--eps = 2.5 \
+                 × core spacing = {:.3e}) joins no two of them, so no event could form; give a \
+                 core spacing of at least {:.4} (0.4 × the spacing), or --eps too",
+                self.eps.value,
+                0.4 * s
+            ),
+        ))
     }
 
     /// The registration error and threshold the user left out, from the stable ground's

@@ -136,6 +136,11 @@ pub fn start_clock() {
     CLOCK.get_or_init(Instant::now);
 }
 
+/// Seconds since the process started its clock ([`start_clock`]).
+pub fn since_start() -> f64 {
+    CLOCK.get_or_init(Instant::now).elapsed().as_secs_f64()
+}
+
 /// With `TALUS_TRACE` set in the environment, print `talus: [+S.SSS s, R MiB resident] what` on
 /// stderr: when each phase of a run and each unit started and ended (and was trimmed), with the
 /// process's resident size then, for profiling a run's timeline.

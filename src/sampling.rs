@@ -68,14 +68,41 @@ pub fn measure_keeping(
     classes: Option<&Classes>,
     keep: &mut dyn FnMut(&[Point3]),
 ) -> Result<Measured> {
-    let mut reader = io::open_with(path, classes)?;
-    let info = reader.info().clone();
-    let no_spacing = || {
+    measure_in(path, classes, keep)?.map_err(|n| {
         Error::input(
             path,
-            "cannot measure a point spacing: all points coincide or there are fewer than two",
+            format!("cannot measure a point spacing: {}", n.problem),
         )
-    };
+    })
+}
+
+/// Why a readable file has no point spacing, with what was read of it (`talus info` describes
+/// such a file all the same).
+pub struct NoSpacing {
+    /// In the user's terms (after "cannot measure a point spacing: "): the classes compared
+    /// leave none of its points (naming those it holds), too few distinct positions,
+    /// coordinates so large that distances overflow.
+    pub problem: String,
+    /// Its points per class (with a class filter on a LAS/LAZ file).
+    pub classes: Option<ClassCounts>,
+}
+
+/// [`measure`], or why no spacing can be measured on a file that reads (errors reading it stay
+/// errors).
+pub fn measure_or_why(
+    path: &Path,
+    classes: Option<&Classes>,
+) -> Result<std::result::Result<Measured, NoSpacing>> {
+    measure_in(path, classes, &mut |_| {})
+}
+
+fn measure_in(
+    path: &Path,
+    classes: Option<&Classes>,
+    keep: &mut dyn FnMut(&[Point3]),
+) -> Result<std::result::Result<Measured, NoSpacing>> {
+    let mut reader = io::open_with(path, classes)?;
+    let info = reader.info().clone();
     if info.point_count <= WHOLE {
         let mut all = Vec::with_capacity(info.point_count as usize);
         let mut buf = Vec::new();
@@ -86,10 +113,24 @@ pub fn measure_keeping(
         let mut grid = DensityGrid::new(&info.bounds);
         grid.add(&all);
         let origin = all.first().copied().unwrap_or_default();
+        let kept = all.len();
         distinct(&mut all);
         let probes: Vec<usize> = (0..all.len()).collect();
         let index = Index::new(&all, origin);
-        let (s, density) = stats(&index, &probes).ok_or_else(no_spacing)?;
+        let counts = reader.class_counts();
+        let Some((s, density)) = stats(&index, &probes) else {
+            let problem = unmeasurable(classes, counts.as_ref(), kept, all.len(), "");
+            return Ok(Err(NoSpacing {
+                problem,
+                classes: counts,
+            }));
+        };
+        if let Some(problem) = overflow(&info, 1.0 / density.sqrt()) {
+            return Ok(Err(NoSpacing {
+                problem,
+                classes: counts,
+            }));
+        }
         let spacing = Spacing {
             spacing: s,
             density,
@@ -97,12 +138,12 @@ pub fn measure_keeping(
             measured_points: all.len(),
             method: "over all points".into(),
         };
-        return Ok(Measured {
+        return Ok(Ok(Measured {
             spacing,
             density: grid,
-            classes: reader.class_counts(),
+            classes: counts,
             info,
-        });
+        }));
     }
     drop(reader);
     let b = info.bounds;
@@ -129,7 +170,7 @@ pub fn measure_keeping(
             None => half /= 2.0, // denser than expected: shrink
             Some(pts) if pts.len() < 1000 && half < max_half => half *= 3.0,
             Some(mut pts) => {
-                let origin = [cx, cy, pts[0][2]];
+                let origin = [cx, cy, pts.first().map_or(0.0, |p| p[2])];
                 distinct(&mut pts);
                 let inner: Vec<usize> = (0..pts.len())
                     .filter(|&i| {
@@ -137,7 +178,23 @@ pub fn measure_keeping(
                     })
                     .collect();
                 let index = Index::new(&pts, origin);
-                let (s, density) = stats(&index, &inner).ok_or_else(no_spacing)?;
+                let measured = stats(&index, &inner);
+                let problem = match measured {
+                    None => Some(unmeasurable(
+                        classes,
+                        whole.1.as_ref(),
+                        0,
+                        inner.len(),
+                        " in a window at the footprint's centre",
+                    )),
+                    Some((_, density)) => overflow(&info, 1.0 / density.sqrt()),
+                };
+                let (Some((s, density)), None) = (measured, problem.clone()) else {
+                    return Ok(Err(NoSpacing {
+                        problem: problem.unwrap_or_default(),
+                        classes: whole.1,
+                    }));
+                };
                 let spacing = Spacing {
                     spacing: s,
                     density,
@@ -150,16 +207,82 @@ pub fn measure_keeping(
                     ),
                 };
                 let (density, classes) = whole;
-                return Ok(Measured {
+                return Ok(Ok(Measured {
                     spacing,
                     density,
                     classes,
                     info,
-                });
+                }));
             }
         }
     }
-    Err(no_spacing())
+    let problem = unmeasurable(
+        classes,
+        whole.1.as_ref(),
+        0,
+        0,
+        " near the footprint's centre",
+    );
+    Ok(Err(NoSpacing {
+        problem,
+        classes: whole.1,
+    }))
+}
+
+/// Distinct positions a point spacing needs: a point and its 10 nearest neighbours.
+pub const MIN_DISTINCT: usize = 11;
+
+/// Why no spacing could be measured on `path`, in the user's terms: the classes compared leave
+/// none of its points (naming the classes it holds), or too few distinct positions are left
+/// (`kept` points of the classes compared, `distinct` positions among them, `where` they were
+/// looked for).
+fn unmeasurable(
+    classes: Option<&Classes>,
+    counts: Option<&ClassCounts>,
+    kept: usize,
+    distinct: usize,
+    place: &str,
+) -> String {
+    if let (Some(c), Some(counts)) = (classes, counts) {
+        if counts.kept() == 0 {
+            return counts.none_kept(c);
+        }
+    }
+    // "of the classes compared" only where classes were read and some left out.
+    let of = if counts.is_some_and(|c| c.left_out() > 0) {
+        " of the classes compared"
+    } else {
+        ""
+    };
+    let held = match kept {
+        0 => format!("points{of}{place} at {distinct} distinct position(s)"),
+        k if k == distinct => format!("{k} point(s){of}{place}"),
+        k => format!("{k} points{of}{place} at only {distinct} distinct position(s)"),
+    };
+    format!(
+        "{held}; it needs at least {MIN_DISTINCT} distinct positions (a point and its 10 nearest \
+         neighbours)"
+    )
+}
+
+/// A spacing that is not a positive finite length comes from coordinates so large that the
+/// distances between points overflow: said so (an input error naming the file), never a number
+/// passed on.
+fn overflow(info: &io::CloudInfo, effective: f64) -> Option<String> {
+    if effective.is_finite() && effective > 0.0 {
+        return None;
+    }
+    let b = &info.bounds;
+    let largest = b
+        .min
+        .iter()
+        .chain(&b.max)
+        .fold(0.0f64, |m, v| m.max(v.abs()));
+    Some(format!(
+        "coordinates as large as {} make the distances between points overflow; are they in \
+         metres (or another length unit)?",
+        crate::geom::show(largest)
+    ))
 }
 
 /// Keep one of each set of exactly coincident points: a cloud stored twice over (merged flight

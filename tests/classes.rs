@@ -420,3 +420,87 @@ fn a_file_decoded_once_reads_back_from_its_copy_as_it_decodes() {
     talus::sampling::measure_keeping(&path, None, &mut |p| recorder.push(p)).unwrap();
     assert!(recorder.finish(&info, None).is_none());
 }
+
+/// Issue 44, item 5: classes that leave no point are named as such — `--classes 9` on class-2
+/// data (as BEFORE), an all-noise file (as AFTER: it said "the epochs do not overlap"; as
+/// BEFORE "all points coincide or there are fewer than two") — and `talus info` describes such a
+/// file (its count, its classes, what is left out) instead of failing.
+#[test]
+fn classes_that_leave_no_point_are_named() {
+    let dir = common::tempdir();
+    let slope = |n: usize, class: u8| -> Vec<(Point3, u8)> {
+        classified_points(n)
+            .into_iter()
+            .map(|(p, _)| (p, class))
+            .collect()
+    };
+    let ground = dir.path().join("ground.laz");
+    let ground2 = dir.path().join("ground2.laz");
+    let noise = dir.path().join("noise.laz");
+    write_las(&ground, 6, true, &slope(2000, 2));
+    write_las(&ground2, 6, true, &slope(1800, 2));
+    write_las(&noise, 6, true, &slope(2000, 7));
+    let out = dir.path().join("out");
+    let cases: [(&Path, &Path, &[&str], &Path, String); 3] = [
+        (
+            &ground,
+            &ground2,
+            &["--classes", "9"],
+            &ground,
+            "none of its 2000 points is of the classes compared (9): it holds class 2 (2000 \
+             points)"
+                .to_string(),
+        ),
+        (
+            &ground,
+            &noise,
+            &[],
+            &noise,
+            "none of its 2000 points is of the classes compared (all but 3,4,5,7,18): it holds \
+             class 7 (2000 points)"
+                .to_string(),
+        ),
+        (
+            &noise,
+            &ground,
+            &[],
+            &noise,
+            "none of its 2000 points is of the classes compared".to_string(),
+        ),
+    ];
+    for (before, after, extra, named, needle) in cases {
+        let o = common::run_compare(before, after, &out, extra);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{err}");
+        let last = err.trim().lines().last().unwrap_or("");
+        assert!(
+            last.contains(named.to_str().unwrap()) && last.contains(&needle),
+            "{needle}: {err}"
+        );
+        for untrue in ["coincide", "fewer than two", "do not overlap"] {
+            assert!(!err.contains(untrue), "{err}");
+        }
+        assert!(!out.exists(), "{} left behind", out.display());
+    }
+    let o = common::run(&["info", noise.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for needle in [
+        "points         2000",
+        "classes        7: 2000; a comparison leaves out 2000 points",
+        "not measurable: none of its 2000 points is of the classes compared",
+    ] {
+        assert!(text.contains(needle), "{needle}: {text}");
+    }
+    let o = common::run(&["info", "--json", noise.to_str().unwrap()]);
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v[0]["classes"]["left_out"], 2000);
+    assert!(
+        v[0]["spacing"].is_null() && v[0]["derived"].is_null(),
+        "{v}"
+    );
+    assert!(
+        v[0]["spacing_note"].as_str().unwrap().contains("class 7"),
+        "{v}"
+    );
+}

@@ -268,17 +268,23 @@ fn judge(
 
 /// What must hold when `talus info --json` accepted a variant: the bounds are the header's
 /// (read here from the bytes), finite and ordered, and every point the reader yields lies in
-/// them (half a scale step of slack); a positive spacing.
+/// them (half a scale step of slack); a positive spacing, or none and why.
 fn sane_info(path: &Path, bytes: &[u8], stdout: &[u8]) -> Option<String> {
     let v: serde_json::Value = match serde_json::from_slice(stdout) {
         Ok(v) => v,
         Err(e) => return Some(format!("info printed no JSON: {e}")),
     };
     let r = &v[0];
+    // A file info describes without a spacing says why (issue 44: too few distinct positions,
+    // or none of the classes compared), and derives nothing.
+    let unmeasured = r["spacing"].is_null()
+        && r["derived"].is_null()
+        && r["spacing_note"].as_str().is_some_and(|n| !n.is_empty());
     let spacing = r["spacing"]["effective_spacing"]
         .as_f64()
         .unwrap_or(f64::NAN);
-    if !(spacing > 0.0 && spacing.is_finite()) {
+    let measured = spacing > 0.0 && spacing.is_finite();
+    if !(unmeasured || measured) {
         return Some(format!("spacing {spacing}"));
     }
     let (info, points) = match talus::io::read_all(path) {

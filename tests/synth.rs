@@ -1541,6 +1541,7 @@ fn campaign_command_line() {
     assert_eq!(
         names,
         [
+            ".talus-synth.json",
             "survey_20210301.las",
             "survey_20210601.las",
             "survey_20210901.las",
@@ -1560,4 +1561,92 @@ fn campaign_command_line() {
         let r = run(args);
         assert_eq!(r.status.code(), Some(2), "{args:?}");
     }
+}
+
+/// Run the talus binary with `args`.
+fn talus_cmd(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_talus"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+/// Issue 44, item 4: `synth` and `demo` never replace a file they did not write — a user's
+/// `before.laz`, `truth.json`, a survey or a `.tmp` of one in `--out` is named and left, and
+/// nothing of the scene is written; synth's own files are replaced, and those of an earlier scene
+/// the new one does not write (a campaign of fewer surveys) removed, the user's beside them kept.
+#[test]
+fn synth_and_demo_never_replace_a_users_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("scene");
+    let o = out.to_str().unwrap();
+    std::fs::create_dir(&out).unwrap();
+    for name in ["before.laz", "truth.json", "after.laz.tmp"] {
+        std::fs::write(out.join(name), format!("the user's {name}")).unwrap();
+        let r = talus_cmd(&["synth", "cliff", "--out", o, "--points", "20000"]);
+        let err = String::from_utf8_lossy(&r.stderr);
+        assert_eq!(r.status.code(), Some(2), "{name}: {err}");
+        assert!(
+            err.contains(name) && err.contains("did not write it"),
+            "{name}: {err}"
+        );
+        assert_eq!(
+            std::fs::read_to_string(out.join(name)).unwrap(),
+            format!("the user's {name}")
+        );
+        std::fs::remove_file(out.join(name)).unwrap();
+        let left: Vec<_> = std::fs::read_dir(&out).unwrap().flatten().collect();
+        assert!(left.is_empty(), "{name}: wrote {left:?}");
+    }
+    // Its own files: written again at will.
+    std::fs::write(out.join("notes.txt"), "mine").unwrap();
+    for _ in 0..2 {
+        let r = talus_cmd(&["synth", "cliff", "--out", o, "--points", "20000"]);
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    }
+    // A campaign of 4 surveys, then of 3: the fourth (synth's) goes, the user's file stays.
+    let camp = dir.path().join("camp");
+    let c = camp.to_str().unwrap();
+    std::fs::create_dir(&camp).unwrap();
+    std::fs::write(camp.join("notes.txt"), "mine").unwrap();
+    for epochs in ["4", "3"] {
+        let r = talus_cmd(&[
+            "synth", "campaign", "--out", c, "--epochs", epochs, "--points", "20000",
+        ]);
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    }
+    let surveys = std::fs::read_dir(&camp)
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().starts_with("survey_"))
+        .count();
+    assert_eq!(surveys, 3);
+    for folder in [&out, &camp] {
+        assert_eq!(
+            std::fs::read_to_string(folder.join("notes.txt")).unwrap(),
+            "mine"
+        );
+    }
+    // A user's survey file where the campaign would write one.
+    let name = campaign::file_name(3, true);
+    std::fs::write(camp.join(&name), "the user's survey").unwrap();
+    let r = talus_cmd(&["synth", "campaign", "--out", c, "--epochs", "4"]);
+    assert_eq!(r.status.code(), Some(2));
+    assert_eq!(
+        std::fs::read_to_string(camp.join(&name)).unwrap(),
+        "the user's survey"
+    );
+    // demo: its scene folder holding the user's before.laz.
+    let demo = dir.path().join("demo");
+    std::fs::create_dir_all(demo.join("scene")).unwrap();
+    std::fs::write(demo.join("scene/before.laz"), "the user's").unwrap();
+    let r = talus_cmd(&["demo", "--out", demo.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert_eq!(r.status.code(), Some(2), "{err}");
+    assert!(err.contains("before.laz"), "{err}");
+    assert_eq!(
+        std::fs::read_to_string(demo.join("scene/before.laz")).unwrap(),
+        "the user's"
+    );
+    assert!(!demo.join("result").exists());
 }

@@ -296,10 +296,31 @@ fn a_campaign_keeps_vegetation_out_of_tracks_and_the_fit() {
         veg.len()
     );
     assert!(veg.len() >= 10, "both pairs' plants flagged");
+    // In no track: null (it was 0, which the viewer counted as one more track than the
+    // command line's): the tracks the files hold are summary.json's.
     assert!(
-        veg.iter().all(|p| p["track_id"] == 0),
+        veg.iter().all(|p| p["track_id"].is_null()),
         "vegetation in a track"
     );
+    let tracks: std::collections::BTreeSet<u64> = events
+        .iter()
+        .filter_map(|p| p["track_id"].as_u64())
+        .collect();
+    let summary = json_file(&out.join("summary.json"));
+    assert_eq!(tracks.len() as u64, summary["tracks"].as_u64().unwrap());
+    assert!(!tracks.contains(&0));
+    // events.csv likewise: an empty track_id (the 4th column, before any quoted text).
+    let csv = std::fs::read_to_string(out.join("events.csv")).unwrap();
+    assert_eq!(
+        csv.lines().next().unwrap().split(',').nth(3),
+        Some("track_id")
+    );
+    let untracked = csv
+        .lines()
+        .skip(1)
+        .filter(|r| r.split(',').nth(3) == Some(""))
+        .count();
+    assert_eq!(untracked, veg.len());
     // The fit's values: significant events that count, of both consecutive pairs.
     let counted = events
         .iter()
@@ -364,5 +385,34 @@ fn removed_vegetation_leaves_the_real_change() {
             std::fs::read(whole.join(f)).unwrap() == std::fs::read(tiled.join(f)).unwrap(),
             "{f} differs with 12 m tiles"
         );
+    }
+}
+
+/// Issue 44, item 6: `--vegetation remove` on a cliff without plants drops points (edges and
+/// creases of the rock look scattered too) and so shifts the totals; the run says how many of
+/// each survey and by what rule, the counts those of summary.json.
+#[test]
+fn removing_vegetation_says_what_it_removed_and_why() {
+    let tmp = common::tempdir();
+    let (before, after) = common::synth_cliff(tmp.path(), 20_000);
+    let out = tmp.path().join("out");
+    let o = common::run_compare(&before, &after, &out, &["--vegetation", "remove"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    let summary = json_file(&out.join("summary.json"));
+    let removed = &summary["vegetation_removed"];
+    let (b, a) = (removed[0].as_u64().unwrap(), removed[1].as_u64().unwrap());
+    assert!(b > 0 && a > 0, "{removed}");
+    let note = err
+        .lines()
+        .find(|l| l.starts_with("talus: --vegetation remove left out"))
+        .unwrap_or_else(|| panic!("no note: {err}"));
+    for needle in [
+        format!("{b} of 20000 points"),
+        format!("{a} of 20000 points"),
+        "not planar in balls of 4 and 8 point spacings".into(),
+        "edges and creases of the terrain".into(),
+    ] {
+        assert!(note.contains(&needle), "'{needle}' not in: {note}");
     }
 }

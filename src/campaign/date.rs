@@ -46,25 +46,36 @@ impl Date {
     /// The first date written `YYYYMMDD` or `YYYY-MM-DD` in `name` (not inside a longer run of
     /// digits, so a 10-digit id is not read as a date).
     pub fn find_in(name: &str) -> Option<Date> {
-        let b = name.as_bytes();
-        let digit = |i: usize| i < b.len() && b[i].is_ascii_digit();
-        for start in 0..b.len() {
-            if !digit(start) || (start > 0 && digit(start - 1)) {
-                continue;
+        tokens(name).find_map(Date::parse)
+    }
+
+    /// A `YYYYMMDD` or `YYYY-MM-DD` in `name` (where [`Date::find_in`] looks) of a survey's year
+    /// that is no date, with why: "20210230 (2021-02 has 28 days)". For the message that a name
+    /// holds a date, but an impossible one — not that it holds none.
+    pub fn impossible_in(name: &str) -> Option<String> {
+        tokens(name).find_map(|token| {
+            let t = token.as_bytes();
+            let dashed = t.len() == 10 && t[4] == b'-' && t[7] == b'-';
+            let digits: String = token.chars().filter(|c| *c != '-').collect();
+            if (token.len() == 10 && !dashed) || !digits.bytes().all(|c| c.is_ascii_digit()) {
+                return None;
             }
-            for len in [10, 8] {
-                if start + len > b.len() || digit(start + len) {
-                    continue;
-                }
-                if let Some(d) = std::str::from_utf8(&b[start..start + len])
-                    .ok()
-                    .and_then(Date::parse)
-                {
-                    return Some(d);
-                }
+            let (y, m, d): (i32, u32, u32) = (
+                digits[..4].parse().ok()?,
+                digits[4..6].parse().ok()?,
+                digits[6..].parse().ok()?,
+            );
+            if !(1900..=2200).contains(&y) || Date::new(y, m, d).is_some() {
+                return None;
             }
-        }
-        None
+            let why = if (1..=12).contains(&m) {
+                let days = (28..=31).rev().find(|&n| Date::new(y, m, n).is_some());
+                format!("{y}-{m:02} has {} days", days.unwrap_or(0))
+            } else {
+                format!("there is no month {m}")
+            };
+            Some(format!("{token} ({why})"))
+        })
     }
 
     /// Days since 1970-01-01 (proleptic Gregorian; Howard Hinnant's days_from_civil).
@@ -124,6 +135,21 @@ impl Date {
     }
 }
 
+/// The runs of 10 or 8 characters in `name` that start and end a run of digits (not inside a
+/// longer one), where a date may be written: the 10 first, at each start.
+fn tokens(name: &str) -> impl Iterator<Item = &str> {
+    let b = name.as_bytes();
+    let digit = move |i: usize| i < b.len() && b[i].is_ascii_digit();
+    (0..b.len())
+        .filter(move |&start| digit(start) && !(start > 0 && digit(start - 1)))
+        .flat_map(move |start| {
+            [10, 8]
+                .into_iter()
+                .filter(move |&len| start + len <= b.len() && !digit(start + len))
+                .filter_map(move |len| std::str::from_utf8(&b[start..start + len]).ok())
+        })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -138,6 +164,22 @@ mod tests {
         assert_eq!(d("flight-2019-03-11.laz").as_deref(), Some("2019-03-11"));
         assert_eq!(d("scan_1234567890.laz"), None);
         assert_eq!(d("survey_20191332.laz"), None);
+        let bad = |s: &str| Date::impossible_in(s);
+        assert_eq!(
+            bad("x_20210230.laz").as_deref(),
+            Some("20210230 (2021-02 has 28 days)")
+        );
+        assert_eq!(
+            bad("x_2020-02-30.laz").as_deref(),
+            Some("2020-02-30 (2020-02 has 29 days)")
+        );
+        assert_eq!(
+            bad("survey_20191332.laz").as_deref(),
+            Some("20191332 (there is no month 13)")
+        );
+        assert_eq!(bad("scan_1234567890.laz"), None);
+        assert_eq!(bad("x_20210228.laz"), None);
+        assert_eq!(bad("1234é56789x"), None);
         assert_eq!(d("x20200229y").as_deref(), Some("2020-02-29"));
         assert_eq!(d("x20190229y"), None);
     }

@@ -48,7 +48,20 @@ pub fn epochs(
     entries: &[EpochEntry],
     config: Option<&Path>,
 ) -> Result<Vec<Epoch>> {
+    for (i, a) in args.iter().enumerate() {
+        if let Some(b) = args[..i].iter().find(|b| same_path(a, b)) {
+            return Err(Error::input(
+                a,
+                format!(
+                    "given twice (also as {}): each survey once, it is compared with the others",
+                    b.display()
+                ),
+            ));
+        }
+    }
     let mut out = Vec::with_capacity(args.len());
+    // Whether each epoch's label is the config's (else its date's).
+    let mut named = Vec::with_capacity(args.len());
     for arg in args {
         let entry = entries.iter().find(|e| same_path(&e.path, arg));
         let (date, label) = match entry {
@@ -70,15 +83,23 @@ pub fn epochs(
                     .file_name()
                     .map(|n| n.to_string_lossy().into_owned())
                     .unwrap_or_default();
-                let date = Date::find_in(&name).ok_or_else(|| {
-                    Error::input(
+                let date = Date::find_in(&name).ok_or_else(|| match Date::impossible_in(&name) {
+                    Some(bad) => Error::input(
+                        arg,
+                        format!(
+                            "the date in its name, {bad}, is not a date: rename it, or date it \
+                             with an [[epoch]] entry in a config"
+                        ),
+                    ),
+                    None => Error::input(
                         arg,
                         "no date in the name (YYYYMMDD or YYYY-MM-DD) and no [[epoch]] entry in a config: say when it was surveyed",
-                    )
+                    ),
                 })?;
                 (date, None)
             }
         };
+        named.push(label.is_some());
         let label = match label {
             Some(l)
                 if l.is_empty()
@@ -99,6 +120,33 @@ pub fn epochs(
             date,
             label,
         });
+    }
+    // One label, two surveys: say which kind of label it is (two of one date are below).
+    for i in 0..out.len() {
+        for j in 0..i {
+            let (a, b) = (&out[j], &out[i]);
+            if a.label != b.label || !(named[i] || named[j]) {
+                continue;
+            }
+            let problem = if named[i] && named[j] {
+                format!(
+                    "[[epoch]] label '{}' names two surveys, {} and {}: each needs its own",
+                    b.label,
+                    a.arg.display(),
+                    b.arg.display()
+                )
+            } else {
+                let (labelled, dated) = if named[i] { (b, a) } else { (a, b) };
+                format!(
+                    "[[epoch]] label '{}' of {} is also {}'s label (its date, unlabelled): \
+                     choose another",
+                    labelled.label,
+                    labelled.arg.display(),
+                    dated.arg.display()
+                )
+            };
+            return Err(Error::input(config.unwrap_or(Path::new("config")), problem));
+        }
     }
     for e in entries {
         if !args.iter().any(|a| same_path(a, &e.path)) {

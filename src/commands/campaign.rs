@@ -104,7 +104,12 @@ pub fn campaign(opts: &CampaignOptions) -> Result<Option<Done>> {
         &crate::units::campaign::is_output,
         &given,
     )?;
-    let (store, created) = open_store(&opts.out, opts.resume, opts.force)?;
+    let (store, created) = open_store(
+        &opts.out,
+        opts.resume,
+        opts.force,
+        &crate::units::campaign::is_output,
+    )?;
     let mut decoded = None;
     let result = run_planned(
         &store,
@@ -117,6 +122,7 @@ pub fn campaign(opts: &CampaignOptions) -> Result<Option<Done>> {
     let Some(marker) = forget_if_input_error(result, created, &opts.out)? else {
         return Ok(None);
     };
+    super::compare::say_removed_vegetation(&store)?;
     let text = std::fs::read(&marker).map_err(|e| Error::output(&marker, e))?;
     let summary: serde_json::Value =
         serde_json::from_slice(&text).map_err(|e| Error::Internal(format!("summary.json: {e}")))?;
@@ -143,6 +149,7 @@ fn plan(
         super::compare::keeps_decoded(opts.resume, &opts.executor).then_some(decoded),
     )?;
     let params = Params::resolve(user, spacing.effective_spacing)?;
+    params.check_core_spacing(user)?;
     let surveys = epochs
         .iter()
         .zip(files)

@@ -56,11 +56,19 @@ fn check_inputs(opts: &CompareOptions, user: &UserParams) -> Result<Inputs> {
     let after = SurveyFiles::open(&opts.after)?;
     if !before.bounds().overlaps_xy(&after.bounds()) {
         let (b, a) = (before.bounds(), after.bounds());
+        let show = crate::geom::show;
         return Err(Error::Epochs(format!(
-            "{} and {}: the epochs do not overlap (x {:.3}..{:.3}, y {:.3}..{:.3} vs x {:.3}..{:.3}, y {:.3}..{:.3})",
+            "{} and {}: the epochs do not overlap (x {}..{}, y {}..{} vs x {}..{}, y {}..{})",
             opts.before.display(),
             opts.after.display(),
-            b.min[0], b.max[0], b.min[1], b.max[1], a.min[0], a.max[0], a.min[1], a.max[1],
+            show(b.min[0]),
+            show(b.max[0]),
+            show(b.min[1]),
+            show(b.max[1]),
+            show(a.min[0]),
+            show(a.max[0]),
+            show(a.min[1]),
+            show(a.max[1]),
         )));
     }
     let cores = match &opts.core_points {
@@ -78,8 +86,10 @@ fn check_inputs(opts: &CompareOptions, user: &UserParams) -> Result<Inputs> {
         _ => {}
     }
     for mesh in [&opts.before_mesh, &opts.after_mesh].into_iter().flatten() {
-        if !mesh.is_file() {
-            return Err(Error::input(mesh, "no such mesh file"));
+        match std::fs::metadata(mesh) {
+            Err(_) => return Err(Error::input(mesh, "no such mesh file")),
+            Ok(m) if !m.is_file() => return Err(io::not_regular(mesh)),
+            Ok(_) => {}
         }
     }
     // Validate the user's values before measuring anything.
@@ -199,6 +209,7 @@ fn plan(
     )?;
     crate::progress::trace(|| "spacing measured".into());
     let params = Params::resolve(user, spacing.effective_spacing)?;
+    params.check_core_spacing(user)?;
     let surveys = vec![
         survey(store, "before", &inputs.before)?,
         survey(store, "after", &inputs.after)?,
@@ -315,27 +326,20 @@ pub fn check_out_dir(
         let mut found = Vec::new();
         output_names(&dir, "", ours, &mut found);
         if !found.is_empty() {
-            let shown: Vec<&str> = found.iter().take(6).map(String::as_str).collect();
-            return Err(Error::Usage(format!(
-                "{}: holds {} file(s) with the names of talus outputs ({}{}) but no talus run \
-                 (.talus/): they are not talus's to replace; move them or choose another --out",
-                out.display(),
-                found.len(),
-                shown.join(", "),
-                if found.len() > shown.len() {
-                    ", …"
-                } else {
-                    ""
-                }
-            )));
+            return Err(user_outputs(out, &found));
         }
     }
     Ok(())
 }
 
-/// Prepare DIR: refuse one that holds something else unless `resume` or `force`; whether this
-/// run created DIR.
-pub fn open_store(out: &Path, resume: bool, force: bool) -> Result<(Store, bool)> {
+/// Prepare DIR: refuse one that holds something else unless `resume` or `force`, saying what
+/// would work (`ours` tells talus's outputs by name); whether this run created DIR.
+pub fn open_store(
+    out: &Path,
+    resume: bool,
+    force: bool,
+    ours: &dyn Fn(&str) -> bool,
+) -> Result<(Store, bool)> {
     let existed = out.exists();
     if existed && !out.is_dir() {
         return Err(Error::Usage(format!(
@@ -344,15 +348,75 @@ pub fn open_store(out: &Path, resume: bool, force: bool) -> Result<(Store, bool)
         )));
     }
     if existed && !resume && !force {
-        let mut entries = std::fs::read_dir(out).map_err(|e| Error::output(out, e))?;
-        if entries.next().is_some() {
-            return Err(Error::Usage(format!(
-                "{}: the output directory is not empty; use --resume to continue a run there or --force to replace it",
-                out.display()
-            )));
-        }
+        refuse_unless_empty(out, ours)?;
     }
     Ok((Store::open(out, true)?, !existed))
+}
+
+/// A plain run (neither `--resume` nor `--force`) into an existing DIR: fine when it is empty,
+/// or holds only the work area of a run that stopped before planning (or is starting: the
+/// lock decides then); else refused with advice that holds — a live run holding DIR is named
+/// as such (two runs started at once: the second is told "in use", not to resume), a finished
+/// or stopped run can be resumed or forced, files of the user's with the names of talus
+/// outputs are refused by both, and other files of the user's only stand beside `--force`'s
+/// outputs.
+fn refuse_unless_empty(out: &Path, ours: &dyn Fn(&str) -> bool) -> Result<()> {
+    let entries: Vec<String> = std::fs::read_dir(out)
+        .map_err(|e| Error::input(out, format!("cannot read: {e}")))?
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n != ".talus")
+        .collect();
+    if out.join(".talus").is_dir() {
+        let store = Store::inspect(out)?;
+        if let Some(held) = store.lock_holder().filter(|l| !l.owner.gone(None)) {
+            return Err(Error::Busy {
+                dir: out.to_path_buf(),
+                holder: held.describe(),
+            });
+        }
+        let planned = store.work().join("plan.json").exists();
+        if entries.is_empty() && !planned {
+            return Ok(());
+        }
+        return Err(Error::Usage(format!(
+            "{}: holds a talus run; use --resume to continue it or --force to compute it again \
+             (files talus did not write are kept either way)",
+            out.display()
+        )));
+    }
+    if entries.is_empty() {
+        return Ok(());
+    }
+    let mut found = Vec::new();
+    output_names(out, "", ours, &mut found);
+    if !found.is_empty() {
+        // --resume and --force refuse these too (check_out_dir).
+        return Err(user_outputs(out, &found));
+    }
+    Err(Error::Usage(format!(
+        "{}: the output directory is not empty and holds no talus run; choose an empty or new \
+         --out, or use --force to write talus's outputs beside what it holds (left as it is)",
+        out.display()
+    )))
+}
+
+/// Files of the user's with the names of talus outputs, in a DIR without a talus run: never
+/// replaced, whatever the flags.
+fn user_outputs(out: &Path, found: &[String]) -> Error {
+    let shown: Vec<&str> = found.iter().take(6).map(String::as_str).collect();
+    Error::Usage(format!(
+        "{}: holds {} file(s) with the names of talus outputs ({}{}) but no talus run (.talus/): \
+         they are not talus's to replace; move them or choose another --out",
+        out.display(),
+        found.len(),
+        shown.join(", "),
+        if found.len() > shown.len() {
+            ", …"
+        } else {
+            ""
+        }
+    ))
 }
 
 /// The path of the plan in a store.
@@ -385,7 +449,7 @@ pub fn compare(opts: &CompareOptions) -> Result<Option<Summary>> {
             .map(PathBuf::as_path),
     );
     check_out_dir(&opts.out, opts.resume, opts.force, &is_output, &given)?;
-    let (store, created) = open_store(&opts.out, opts.resume, opts.force)?;
+    let (store, created) = open_store(&opts.out, opts.resume, opts.force, &is_output)?;
     let mut decoded = None;
     let result = run_planned(&store, opts.force, &is_output, &opts.executor, |store| {
         plan(store, opts, &user, &inputs, &mut decoded)
@@ -394,10 +458,21 @@ pub fn compare(opts: &CompareOptions) -> Result<Option<Summary>> {
     let Some(marker) = forget_if_input_error(result, created, &opts.out)? else {
         return Ok(None);
     };
+    say_removed_vegetation(&store)?;
     let text = std::fs::read(&marker).map_err(|e| Error::output(&marker, e))?;
     serde_json::from_slice(&text)
         .map(Some)
         .map_err(|e| Error::Internal(format!("summary.json: {e}")))
+}
+
+/// Tell what `--vegetation remove` took out of the surveys of the run just published
+/// (`super::removed`).
+pub fn say_removed_vegetation(store: &Store) -> Result<()> {
+    let plan = Plan::load(&plan_path(store))?;
+    if let Some(note) = super::removed::vegetation(store, &plan)? {
+        eprintln!("talus: {note}");
+    }
+    Ok(())
 }
 
 /// After a failed run in a DIR it created: remove DIR again when the failure is the input's
@@ -430,7 +505,7 @@ pub fn run_planned(
 ) -> Result<Option<PathBuf>> {
     let command = std::env::args().collect::<Vec<_>>().join(" ");
     let lock = store.lock("run", &command)?;
-    store.recover()?;
+    store.recover(ours)?;
     // Jobs of an earlier submission still queued or running would compute beside this run.
     if !matches!(executor, crate::exec::Executor::Local) || force {
         crate::exec::slurm::check_idle(store)?;

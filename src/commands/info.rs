@@ -23,8 +23,15 @@ pub struct CloudReport {
     /// The points per LAS class, and those a comparison leaves out by default (null for text
     /// and PLY).
     pub classes: Option<crate::units::outputs::SurveyClasses>,
-    pub spacing: Spacing,
-    pub derived: Params,
+    /// None when it cannot be measured: `spacing_note` says why.
+    pub spacing: Option<Spacing>,
+    /// Why there is no spacing (the classes a comparison keeps leave no point, too few distinct
+    /// positions, coordinates so large that distances overflow); the file is described all the
+    /// same, and a comparison with it as BEFORE would be refused so.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub spacing_note: Option<String>,
+    /// None without a spacing.
+    pub derived: Option<Params>,
 }
 
 /// Inspect one cloud (reads it once or twice; never holds more than a window of it). The spacing
@@ -34,11 +41,16 @@ pub fn inspect(path: &Path) -> Result<CloudReport> {
     let reader = io::open(path)?;
     let info = reader.info().clone();
     drop(reader);
-    let sampling::Measured {
-        spacing, classes, ..
-    } = sampling::measure(path, Some(&Classes::default()))?;
+    let (spacing, classes, note) = match sampling::measure_or_why(path, Some(&Classes::default()))?
+    {
+        Ok(m) => (Some(m.spacing), m.classes, None),
+        Err(why) => (None, why.classes, Some(why.problem)),
+    };
     let classes = classes.map(|c| crate::units::outputs::SurveyClasses::of(&c));
-    let derived = Params::resolve(&UserParams::default(), spacing.effective_spacing)?;
+    let derived = spacing
+        .as_ref()
+        .map(|s| Params::resolve(&UserParams::default(), s.effective_spacing))
+        .transpose()?;
     Ok(CloudReport {
         path: path.to_path_buf(),
         format: info.format,
@@ -49,6 +61,7 @@ pub fn inspect(path: &Path) -> Result<CloudReport> {
         crs_wkt: info.crs.wkt,
         classes,
         spacing,
+        spacing_note: note,
         derived,
     })
 }
@@ -75,19 +88,19 @@ pub fn print(files: &[PathBuf], json: bool) -> Result<()> {
     let mut out = String::new();
     for r in &reports {
         let b = &r.bounds;
-        let p = &r.derived;
         outln!(out, "{}", r.path.display());
         outln!(out, "  format         {}", r.format_detail);
         outln!(out, "  points         {}", r.points);
+        let show = crate::geom::show;
         outln!(
             out,
-            "  bounds         x {:.3} .. {:.3}  y {:.3} .. {:.3}  z {:.3} .. {:.3}",
-            b.min[0],
-            b.max[0],
-            b.min[1],
-            b.max[1],
-            b.min[2],
-            b.max[2]
+            "  bounds         x {} .. {}  y {} .. {}  z {} .. {}",
+            show(b.min[0]),
+            show(b.max[0]),
+            show(b.min[1]),
+            show(b.max[1]),
+            show(b.min[2]),
+            show(b.max[2])
         );
         outln!(out, "  crs            {}", r.crs);
         if let Some(c) = &r.classes {
@@ -113,22 +126,35 @@ pub fn print(files: &[PathBuf], json: bool) -> Result<()> {
                 }
             );
         }
+        let (Some(spacing), Some(p)) = (&r.spacing, &r.derived) else {
+            outln!(
+                out,
+                "  spacing        not measurable: {}",
+                r.spacing_note.as_deref().unwrap_or("")
+            );
+            outln!(
+                out,
+                "  parameters     none derived: a comparison refuses this file as BEFORE or AFTER \
+                 for that reason"
+            );
+            continue;
+        };
         outln!(
             out,
             "  spacing        {:.4} effective point spacing s = 1/√density: the parameters below derive from it",
-            r.spacing.effective_spacing
+            spacing.effective_spacing
         );
         outln!(
             out,
             "  density        {:.2} points per square unit of the CRS (per m² for metric input)",
-            r.spacing.density
+            spacing.density
         );
         outln!(
             out,
             "  nearest point  {:.4} median distance from a point to its nearest neighbour ({}, {} points)",
-            r.spacing.spacing,
-            r.spacing.method,
-            r.spacing.measured_points
+            spacing.spacing,
+            spacing.method,
+            spacing.measured_points
         );
         outln!(
             out,

@@ -6,6 +6,7 @@ pub mod campaign;
 pub mod compare;
 pub mod demo;
 pub mod info;
+pub mod removed;
 pub mod status;
 pub mod synth;
 pub mod view;

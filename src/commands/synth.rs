@@ -26,7 +26,8 @@ pub fn synth(
         if opts != plain {
             return Err(Error::Usage(
                 "synth campaign: --rotate, --density2, --shift, --turn and --creep are for the \
-                 pair scenes"
+                 pair scenes, --classified for the vegetation scene (a campaign's points are all \
+                 ground, class 2)"
                     .into(),
             ));
         }

@@ -381,8 +381,13 @@ impl Roots {
         // shows a whole set, never half of one.
         // (A campaign's pair folder, pairs/<pair>, is published by its campaign's DIR.)
         if let Some(run) = data.ancestors().take(3).find(|d| d.join(".talus").is_dir()) {
-            if let Ok(store) = crate::store::Store::open(run, false) {
-                store.finish_interrupted_publish("talus view")?;
+            // Opened for reading: a result on a read-only mount is viewed all the same.
+            let store = crate::store::Store::inspect(run)?;
+            let ours = crate::exec::publish::any_output;
+            if let crate::store::Recovery::Unfinished(why) =
+                store.finish_interrupted_publish("talus view", &ours)?
+            {
+                eprintln!("talus: {}", super::status::unfinished_note(run, &why));
             }
         }
         // A comparison (view.json), or a campaign (campaign.json; each pairs/<label>/ is a

@@ -97,6 +97,14 @@ pub fn run_units(
             // A file edited after the unit's commit (a published output edited in place: it
             // is a hard link to the unit's file) is not reused: the unit is thrown away and
             // computed again, and the next publish puts its files back.
+            // A publishing unit's list of outputs names paths: one read back from DIR that
+            // names anything outside it is damage too (`publish::listed_outputs`).
+            if let Err(e @ Error::Damaged { .. }) = publish::listed_outputs(store, plan, i, &record)
+            {
+                eprintln!("talus: {e}; computing unit {} again", unit.name);
+                store.invalidate(&unit)?;
+                return Ok(false);
+            }
             let edited = store.edited_files(&unit, &record);
             if edited.is_empty() {
                 return Ok(true);
@@ -111,7 +119,17 @@ pub fn run_units(
             store.invalidate(&unit)?;
             Ok(false)
         })
-        .collect::<Result<_>>()?;
+        .collect::<Result<Vec<bool>>>()?;
+    // A unit found done counts as done only once every unit before it is (dependencies precede
+    // their dependents): a unit reads records beyond its direct dependencies (the outputs' stage
+    // times, the surveys' tilings), so one whose dependency is computed again waits for it, and
+    // is then found done without being computed.
+    let mut finished = finished;
+    for i in 0..n {
+        if finished[i] && plan.units[i].deps.iter().any(|&d| !finished[d]) {
+            finished[i] = false;
+        }
+    }
     let reused = finished.iter().filter(|&&d| d).count();
     // Units outside the wanted set count as done for this run.
     let wanted = match only {
@@ -252,8 +270,10 @@ fn slot(cx: &RunCtx) {
             continue;
         }
         match outcome {
-            Ok(Ran::Done) => {
-                computed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            Ok(ran @ (Ran::Done | Ran::Found)) => {
+                if ran == Ran::Done {
+                    computed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                }
                 sh.state[picked] = State::Done;
                 stages.unit_done(
                     plan,
@@ -322,8 +342,11 @@ fn refresh_elsewhere(store: &Store, plan: &Plan, sh: &mut Shared) {
     }
 }
 
+#[derive(Clone, Copy, PartialEq, Eq)]
 enum Ran {
     Done,
+    /// It was done already (by another process, or before this run: see `run_units`).
+    Found,
     /// Another live process holds the unit.
     Elsewhere,
 }
@@ -346,7 +369,7 @@ fn claim_and_run(
     // Another process may have finished it between our look and our claim.
     if store.done(&unit).is_some() {
         drop(claim);
-        return Ok(Ran::Done);
+        return Ok(Ran::Found);
     }
     let started = Instant::now();
     stages.unit_started(plan, i);

@@ -41,6 +41,17 @@ pub fn outputs_of(plan: &Plan) -> Result<fn(&str) -> bool> {
         .ok_or_else(|| Error::Internal(format!("unit {} publishes nothing", last.name)))
 }
 
+/// Whether `name` in DIR is an output of any stage that publishes (a comparison's or a
+/// campaign's): what a command that does not know DIR's plan (`talus status`, `talus view`)
+/// lets an interrupted publish's journal remove or place.
+pub fn any_output(name: &str) -> bool {
+    registry()
+        .stages()
+        .iter()
+        .filter_map(|s| s.is_output())
+        .any(|ours| ours(name))
+}
+
 /// Publish the plan's last unit's `publish` list into DIR as one set; returns the path of the
 /// marker (the file published last) in its unit.
 pub fn publish(store: &Store, plan: &Plan, ours: &dyn Fn(&str) -> bool) -> Result<PathBuf> {
@@ -74,7 +85,10 @@ pub fn damaged_outputs(store: &Store, plan: &Plan) -> Result<Vec<String>> {
         let want = store
             .done(&u)
             .and_then(|r| r.files.into_iter().find(|f| f.name == p.file));
-        let got = crate::store::crc_and_size(&store.dir().join(&p.name)).ok();
+        // Not through a link in DIR (`pairs` → elsewhere): such a file is not what was published.
+        let got = crate::store::no_links(store.dir(), std::path::Path::new(&p.name))
+            .ok()
+            .and_then(|()| crate::store::crc_and_size(&store.dir().join(&p.name)).ok());
         if want.is_none_or(|w| got != Some((w.crc32, w.size))) {
             bad.push(p.name.clone());
         }
@@ -82,14 +96,58 @@ pub fn damaged_outputs(store: &Store, plan: &Plan) -> Result<Vec<String>> {
     Ok(bad)
 }
 
-/// What the plan's final unit (done) lists to publish.
+/// What the plan's final unit (done) lists to publish ([`listed_outputs`]).
 fn publish_list(store: &Store, plan: &Plan) -> Result<Vec<Publish>> {
-    let unit = last_unit(plan)?;
+    let i = final_unit(plan)?;
+    let unit = unit_ref(plan, i);
     let record = store
         .done(&unit)
         .ok_or_else(|| Error::Internal(format!("unit {} not done", unit.name)))?;
-    registry()
-        .get(&unit.kind)?
-        .publish_list(&unit.name, &record.meta)?
+    listed_outputs(store, plan, i, &record)?
         .ok_or_else(|| Error::Internal(format!("unit {} publishes nothing", unit.name)))
+}
+
+/// What publishing unit `i` of the plan (done, with `record`) lists to publish, each entry
+/// checked: a unit's file (kind, unit and file names that stay in their directories) published
+/// under one of its stage's output names in DIR. A record is read back from DIR, which may come
+/// from anyone: one that lists anything else is damaged (`Error::Damaged`: the executor
+/// computes the unit again), and nothing of it is read or placed. None for a unit that
+/// publishes nothing.
+pub fn listed_outputs(
+    store: &Store,
+    plan: &Plan,
+    i: usize,
+    record: &crate::store::Record,
+) -> Result<Option<Vec<Publish>>> {
+    let unit = unit_ref(plan, i);
+    let stage = registry().get(&unit.kind)?;
+    let Some(ours) = stage.is_output() else {
+        return Ok(None);
+    };
+    let damaged = |problem: String| Error::Damaged {
+        path: store
+            .unit_dir(&unit)
+            .map(|d| d.join(crate::store::RECORD_FILE))
+            .unwrap_or_default(),
+        problem,
+    };
+    let list = match stage.publish_list(&unit.name, &record.meta) {
+        Ok(Some(list)) => list,
+        Ok(None) => return Ok(None),
+        Err(e) => return Err(damaged(e.to_string())),
+    };
+    for p in &list {
+        let ok = crate::store::UnitRef::new(p.kind.clone(), p.unit.clone()).is_ok()
+            && crate::store::check_rel_path("file", &p.file).is_ok()
+            && crate::store::check_rel_path("output", &p.name).is_ok()
+            && ours(&p.name);
+        if !ok {
+            return Err(damaged(format!(
+                "its list of outputs names {:?} of unit {:?} ({:?}) as {:?}: not a unit's file \
+                 published as a talus output in DIR",
+                p.file, p.unit, p.kind, p.name
+            )));
+        }
+    }
+    Ok(Some(list))
 }

@@ -134,6 +134,31 @@ impl ClassCounts {
         self.classes.iter().map(|c| c.2).sum()
     }
 
+    /// Points kept, in all.
+    pub fn kept(&self) -> u64 {
+        self.classes.iter().map(|c| c.1 - c.2).sum()
+    }
+
+    /// The classes read with their points: "class 2 (1000 points), class 7 (12 points)".
+    pub fn describe(&self) -> String {
+        let v: Vec<String> = self
+            .classes
+            .iter()
+            .map(|&(c, r, _)| format!("class {c} ({r} point{})", if r == 1 { "" } else { "s" }))
+            .collect();
+        v.join(", ")
+    }
+
+    /// Why a file read with `classes` gave no point: what it holds and what was compared.
+    pub fn none_kept(&self, classes: &Classes) -> String {
+        let read: u64 = self.classes.iter().map(|c| c.1).sum();
+        format!(
+            "none of its {read} points is of the classes compared ({classes}): it holds {}; \
+             choose the classes with --classes (e.g. --classes all)",
+            self.describe()
+        )
+    }
+
     /// Whether the points carry a classification: some class other than 0 (never classified)
     /// and 1 (unclassified).
     pub fn classified(&self) -> bool {

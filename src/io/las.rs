@@ -457,8 +457,7 @@ fn decode(
     let opened = match &layered {
         Some((header, start)) => coordinates_only(&path, header, *start, classified)
             .map(|l| Decoder::Layers(Box::new(l))),
-        None => File::open(&path)
-            .map_err(|e| Error::input(&path, format!("cannot open: {e}")))
+        None => super::open_file(&path)
             .and_then(|f| {
                 guarded(&path, &format!("{kind} file"), || {
                     las::Reader::new(BufReader::with_capacity(1 << 20, f)).map_err(|e| {
@@ -641,10 +640,7 @@ fn coordinates_only(
 ) -> Result<Layers> {
     laz_items_match(path, header)?;
     let corrupt = |e: String| Error::input(path, format!("truncated or corrupt LAZ file: {e}"));
-    let mut f = BufReader::with_capacity(
-        1 << 20,
-        File::open(path).map_err(|e| Error::input(path, format!("cannot open: {e}")))?,
-    );
+    let mut f = BufReader::with_capacity(1 << 20, super::open_file(path)?);
     f.seek(SeekFrom::Start(start))
         .map_err(|e| corrupt(e.to_string()))?;
     let vlr = header.laz_vlr().map_err(|e| corrupt(e.to_string()))?;

@@ -71,7 +71,7 @@ pub fn write_ply(path: &Path, mesh: &Mesh) -> Result<()> {
 /// Read a triangle mesh (global coordinates) from a PLY file.
 pub fn read_ply_mesh(path: &Path) -> Result<Mesh> {
     let bad = |m: String| Error::input(path, m);
-    let f = std::fs::File::open(path).map_err(|e| bad(format!("cannot open: {e}")))?;
+    let f = super::open_file(path)?;
     let mut r = BufReader::new(f);
     // The header parser is the point reader's: one PLY grammar in the project.
     let (enc, elements) = ply::parse_elements(path, &mut r)?;

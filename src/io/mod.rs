@@ -233,12 +233,37 @@ fn read_prefix(path: &Path, buf: &mut [u8]) -> Result<usize> {
     Ok(n)
 }
 
-/// Open a file for reading, turning "not found" and friends into one clear input error.
+/// Open a file for reading, turning "not found" and friends into one clear input error. Only a
+/// regular file is taken: it is opened without blocking (a FIFO with no writer would hang
+/// `open` for ever), and a FIFO, pipe (`<(…)`), socket or device is refused at once — talus
+/// reads an input several times (header, spacing, tiling), a pipe gives its bytes once.
 pub(crate) fn open_file(path: &Path) -> Result<std::fs::File> {
-    match std::fs::File::open(path) {
+    use std::os::unix::fs::OpenOptionsExt;
+    use std::os::unix::io::AsRawFd;
+    let opened = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NONBLOCK)
+        .open(path);
+    match opened {
         Ok(f) => {
-            if f.metadata().map(|m| m.is_dir()).unwrap_or(false) {
+            let m = f
+                .metadata()
+                .map_err(|e| Error::input(path, format!("cannot read: {e}")))?;
+            if m.is_dir() {
                 return Err(Error::input(path, "is a directory, not a point cloud"));
+            }
+            if !m.is_file() {
+                return Err(not_regular(path));
+            }
+            // Back to blocking reads (no effect on a regular file on Linux; kept plain for any
+            // file system that would honour it).
+            // SAFETY: fcntl on a descriptor this function owns, with flags read from it.
+            unsafe {
+                let fd = f.as_raw_fd();
+                let flags = libc::fcntl(fd, libc::F_GETFL);
+                if flags >= 0 {
+                    libc::fcntl(fd, libc::F_SETFL, flags & !libc::O_NONBLOCK);
+                }
             }
             Ok(f)
         }
@@ -247,6 +272,15 @@ pub(crate) fn open_file(path: &Path) -> Result<std::fs::File> {
         }
         Err(e) => Err(Error::input(path, format!("cannot open: {e}"))),
     }
+}
+
+/// The error for an input that is not a regular file (see [`open_file`]).
+pub fn not_regular(path: &Path) -> Error {
+    Error::input(
+        path,
+        "not a regular file (a FIFO, pipe, socket or device): talus reads an input more than \
+         once; write it to a file first",
+    )
 }
 
 /// The check every reader applies to every point: a NaN or infinite coordinate is an input

@@ -12,8 +12,10 @@ use crate::io::{self, Bounds, CloudInfo, Crs};
 /// Extensions of the point-cloud files a folder is searched for.
 const CLOUD_EXTENSIONS: &[&str] = &["las", "laz", "txt", "csv", "xyz", "pts", "ply"];
 
+/// A point cloud of a survey folder by its extension: a file, or a FIFO or other special file
+/// (not skipped in silence: reading it refuses it, naming it), never a folder.
 fn is_cloud(p: &Path) -> bool {
-    p.is_file()
+    !p.is_dir()
         && p.extension().is_some_and(|e| {
             let e = e.to_string_lossy().to_ascii_lowercase();
             CLOUD_EXTENSIONS.contains(&e.as_str())
@@ -61,7 +63,7 @@ pub fn survey_files(arg: &Path) -> Result<Vec<PathBuf>> {
             .map_err(|e| Error::input(arg, format!("cannot list {}: {e}", dir.display())))?;
         rd.filter_map(|e| e.ok().map(|e| e.path()))
             .filter(|p| {
-                p.is_file()
+                !p.is_dir()
                     && p.file_name()
                         .is_some_and(|n| glob_match(&pat, &n.to_string_lossy()))
             })
@@ -155,7 +157,8 @@ impl SurveyFiles {
                 format!(
                     "all points coincide or lie on one vertical line (x {}, y {}): a survey \
                      must cover an area",
-                    b.min[0], b.min[1]
+                    crate::geom::show(b.min[0]),
+                    crate::geom::show(b.min[1])
                 ),
             ));
         }

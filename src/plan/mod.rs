@@ -303,9 +303,10 @@ impl Plan {
         Ok(talus_tiling::atomic_write(path, &text)?)
     }
 
-    /// Read the plan at `path`.
+    /// Read the plan at `path` (in DIR's store: a regular file, not through a link), and
+    /// [`Plan::check`] it.
     pub fn load(path: &Path) -> Result<Plan> {
-        let text = std::fs::read(path)
+        let text = crate::store::read_store_file(path)
             .map_err(|e| Error::input(path, format!("cannot read the run's plan: {e}")))?;
         let plan: Plan = serde_json::from_slice(&text)
             .map_err(|e| Error::input(path, format!("not a talus plan: {e}")))?;
@@ -318,6 +319,56 @@ impl Plan {
                 ),
             ));
         }
+        plan.check().map_err(|problem| {
+            Error::input(
+                path,
+                format!("a damaged plan ({problem}): run the command again with --force"),
+            )
+        })?;
         Ok(plan)
+    }
+
+    /// What every reader of a plan read back from DIR relies on: its run id and every unit's
+    /// kind and name are single path components (they name directories of the store: nothing
+    /// read or written through them leaves it), every dependency an earlier unit, every survey,
+    /// pair and tile index within the plan. The problem, if any.
+    pub fn check(&self) -> std::result::Result<(), String> {
+        use crate::store::check_component;
+        let n = self.surveys.len();
+        if !self.run.is_empty() {
+            check_component("run id", &self.run).map_err(|e| e.to_string())?;
+        }
+        for p in &self.pairs {
+            if p.before >= n || p.after >= n {
+                return Err(format!("pair {} names a survey it does not have", p.label));
+            }
+        }
+        let tiles = self
+            .layout
+            .grid()
+            .is_ok()
+            .then_some((self.layout.cols, self.layout.rows));
+        for (i, u) in self.units.iter().enumerate() {
+            check_component("unit kind", u.kind()).map_err(|e| e.to_string())?;
+            check_component("unit name", &u.name).map_err(|e| e.to_string())?;
+            if u.deps.iter().any(|&d| d >= i) {
+                return Err(format!(
+                    "unit {i} depends on a unit that does not precede it"
+                ));
+            }
+            let survey_ok = u.spec.survey.is_none_or(|s| s < n);
+            let pair_ok = u.spec.pair.is_none_or(|p| p < self.pairs.len());
+            let tile_ok = match (u.spec.tile, tiles) {
+                (Some([c, r]), Some((cols, rows))) => c < cols && r < rows,
+                (Some(_), None) => false,
+                (None, _) => true,
+            };
+            if !(survey_ok && pair_ok && tile_ok) {
+                return Err(format!(
+                    "unit {i} is for a survey, pair or tile the plan does not have"
+                ));
+            }
+        }
+        Ok(())
     }
 }

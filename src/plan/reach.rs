@@ -23,7 +23,15 @@ fn ranges(b: &Bounds, gap: [f64; 3]) -> String {
     let any = gap.iter().any(|&g| g > 0.0);
     (0..3)
         .filter(|&i| !any || gap[i] > 0.0)
-        .map(|i| format!("{} {:.3}..{:.3}", ["x", "y", "z"][i], b.min[i], b.max[i]))
+        .map(|i| {
+            let show = crate::geom::show;
+            format!(
+                "{} {}..{}",
+                ["x", "y", "z"][i],
+                show(b.min[i]),
+                show(b.max[i])
+            )
+        })
         .collect::<Vec<_>>()
         .join(", ")
 }
@@ -52,10 +60,10 @@ pub fn check(plan: &Plan, cores: Option<(&str, &Bounds)>) -> Result<()> {
         let g = gap(&b.bounds, &a.bounds);
         if beyond(norm(g), reach) {
             return Err(Error::Epochs(format!(
-                "{what}: the epochs do not overlap: before {}; after {} ({:.3} apart, and {cylinder})",
+                "{what}: the epochs do not overlap: before {}; after {} ({} apart, and {cylinder})",
                 ranges(&b.bounds, g),
                 ranges(&a.bounds, g),
-                norm(g)
+                crate::geom::show(norm(g))
             )));
         }
         let Some((name, c)) = cores else { continue };
@@ -81,10 +89,10 @@ pub fn check(plan: &Plan, cores: Option<(&str, &Bounds)>) -> Result<()> {
             continue;
         };
         return Err(Error::Epochs(format!(
-            "{what}: {name} ({}) lie outside the {epoch} epoch's bounds ({}): {:.3} away, beyond {how}",
+            "{what}: {name} ({}) lie outside the {epoch} epoch's bounds ({}): {} away, beyond {how}",
             ranges(c, g),
             ranges(&e.bounds, g),
-            norm(g),
+            crate::geom::show(norm(g)),
         )));
     }
     Ok(())

@@ -8,13 +8,13 @@
 //!
 //! [`UnitWriter::commit`]: super::UnitWriter::commit
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 
-use super::fsops::out_err;
+use super::fsops::{no_links, out_err, read_store_file};
 use super::owner_file::{self, Acquired, Owner};
 use super::process;
 use super::unit_ref::{check_component, UnitRef};
@@ -45,8 +45,13 @@ impl Store {
     pub fn claim(&self, run: &str, unit: &UnitRef, label: &str) -> Result<Option<Claim>> {
         check_component("run id", run)?;
         unit.check()?;
-        let dir = self.work.join("claims").join(run).join(&unit.kind);
+        let rel = Path::new("claims").join(run).join(&unit.kind);
+        let dir = self.work.join(&rel);
+        // No link on the way: a claim taken over is moved away and deleted, and a planted
+        // `claims/<run>` → elsewhere would make that a file outside DIR.
+        no_links(&self.work, &rel)?;
         std::fs::create_dir_all(&dir).map_err(out_err(&dir))?;
+        no_links(&self.work, &rel)?;
         let path = dir.join(&unit.name);
         let info = ClaimInfo {
             owner: Owner::me(),
@@ -71,13 +76,10 @@ impl Store {
     pub fn claim_holder(&self, run: &str, unit: &UnitRef) -> Option<ClaimInfo> {
         check_component("run id", run).ok()?;
         unit.check().ok()?;
-        let path = self
-            .work
-            .join("claims")
-            .join(run)
-            .join(&unit.kind)
-            .join(&unit.name);
-        serde_json::from_slice(&std::fs::read(path).ok()?).ok()
+        let rel = Path::new("claims").join(run).join(&unit.kind);
+        no_links(&self.work, &rel).ok()?;
+        let path = self.work.join(rel).join(&unit.name);
+        serde_json::from_slice(&read_store_file(&path).ok()?).ok()
     }
 }
 

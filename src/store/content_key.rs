@@ -99,7 +99,7 @@ impl Store {
 
     /// An unreadable or foreign cache is an empty one: it only ever saves work.
     fn load_cache(&self) -> Cache {
-        fs::read(self.cache_path())
+        super::fsops::read_store_file(&self.cache_path())
             .ok()
             .and_then(|b| serde_json::from_slice::<Cache>(&b).ok())
             .filter(|c| c.version == CACHE_VERSION)

@@ -213,10 +213,76 @@ pub fn sorted_names(dir: &Path) -> Result<Vec<String>> {
     Ok(names)
 }
 
-/// The CRC-32 and size of a file, read once in 1 MiB blocks.
+/// Open a file of the store, or one talus published into DIR, for reading: never through a
+/// symbolic link, and only a regular file (else `InvalidData`). A result folder may come from anyone (shared on a
+/// cluster, sent as an archive): a link planted in it must not make talus read elsewhere, and a
+/// FIFO must not block a reader forever (it is opened without blocking, then refused).
+pub fn open_store_file(path: &Path) -> io::Result<File> {
+    use std::os::unix::fs::OpenOptionsExt;
+    let f = fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK)
+        .open(path)
+        .map_err(|e| {
+            if e.raw_os_error() == Some(libc::ELOOP) {
+                io::Error::new(
+                    io::ErrorKind::InvalidData,
+                    "is a symbolic link (talus follows no link in its work area)",
+                )
+            } else {
+                e
+            }
+        })?;
+    if !f.metadata()?.is_file() {
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidData,
+            "not a regular file",
+        ));
+    }
+    Ok(f)
+}
+
+/// The whole content of a file of the store ([`open_store_file`]).
+pub fn read_store_file(path: &Path) -> io::Result<Vec<u8>> {
+    use std::io::Read;
+    let mut bytes = Vec::new();
+    open_store_file(path)?.read_to_end(&mut bytes)?;
+    Ok(bytes)
+}
+
+/// Refuse a symbolic link at any existing component of `root/rel` below `root` (`rel` relative,
+/// checked by the caller): the store's directories and DIR's output folders are walked without
+/// following links, so that nothing talus reads, writes or removes there lies outside DIR. A
+/// component that does not exist ends the walk (nothing below it exists either).
+pub fn no_links(root: &Path, rel: &Path) -> Result<()> {
+    let mut path = root.to_path_buf();
+    for c in rel.components() {
+        path.push(c);
+        match fs::symlink_metadata(&path) {
+            Ok(m) if m.file_type().is_symlink() => return Err(link_error(&path)),
+            Ok(_) => {}
+            Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(()),
+            Err(e) => return Err(Error::input(&path, format!("cannot read: {e}"))),
+        }
+    }
+    Ok(())
+}
+
+/// The error for a symbolic link found where talus keeps or publishes its files.
+pub fn link_error(path: &Path) -> Error {
+    Error::input(
+        path,
+        "is a symbolic link inside a talus result folder: talus follows no link there (the folder \
+         may come from anyone, and a link could make it read, write or remove files elsewhere); \
+         remove the link",
+    )
+}
+
+/// The CRC-32 and size of a regular file of the store or DIR (never through a link:
+/// [`open_store_file`]), read once in 1 MiB blocks.
 pub fn crc_and_size(path: &Path) -> io::Result<(u32, u64)> {
     use std::io::Read;
-    let mut f = File::open(path)?;
+    let mut f = open_store_file(path)?;
     let mut h = crc32fast::Hasher::new();
     let mut buf = vec![0u8; 1 << 20];
     let mut size = 0u64;

@@ -39,7 +39,9 @@ impl Store {
         let units = self.units();
         for kind in sorted_names(&units)? {
             let kind_dir = units.join(&kind);
-            if check_component("unit kind", &kind).is_err() || !kind_dir.is_dir() {
+            // Never through a link: a `units/<kind>` planted as a link to a folder elsewhere
+            // would have gc remove what is in it.
+            if check_component("unit kind", &kind).is_err() || !real_dir(&kind_dir) {
                 continue;
             }
             for name in sorted_names(&kind_dir)? {
@@ -47,7 +49,7 @@ impl Store {
                 let Ok(unit) = UnitRef::new(kind.clone(), name) else {
                     continue;
                 };
-                if keep.contains(&unit) || !path.is_dir() {
+                if keep.contains(&unit) || !real_dir(&path) {
                     continue;
                 }
                 let bytes = tree_size(&path);
@@ -74,6 +76,11 @@ impl Store {
         }
         Ok(report)
     }
+}
+
+/// A directory, not a link to one.
+fn real_dir(path: &Path) -> bool {
+    fs::symlink_metadata(path).is_ok_and(|m| m.is_dir())
 }
 
 /// The total size of the files at or below `path`.

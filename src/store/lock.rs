@@ -93,7 +93,7 @@ impl Store {
 
     /// Who holds DIR's lock now, if anyone (the file's content; the holder may be dead).
     pub fn lock_holder(&self) -> Option<LockInfo> {
-        serde_json::from_slice(&std::fs::read(self.lock_path()).ok()?).ok()
+        serde_json::from_slice(&super::fsops::read_store_file(&self.lock_path()).ok()?).ok()
     }
 }
 

@@ -35,7 +35,7 @@ impl Store {
     /// The spacing and density grid measured on the file of content key `key` read with the
     /// class filter `classes` (its canonical text), when this store has them.
     pub fn cached_spacing(&self, key: &str, classes: &str) -> Option<(Spacing, DensityGrid)> {
-        let bytes = std::fs::read(self.measured_path(key, classes)).ok()?;
+        let bytes = super::fsops::read_store_file(&self.measured_path(key, classes)).ok()?;
         let e: Entry = serde_json::from_slice(&bytes).ok()?;
         (e.method == METHOD && e.key == key && e.classes == classes)
             .then_some((e.spacing, e.density))

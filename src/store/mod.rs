@@ -38,6 +38,8 @@ mod claim_tests;
 #[cfg(test)]
 mod content_key_tests;
 #[cfg(test)]
+mod hostile_tests;
+#[cfg(test)]
 mod lock_tests;
 #[cfg(test)]
 mod publish_tests;
@@ -50,13 +52,13 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 pub use claim::{Claim, ClaimInfo};
-pub use fsops::{crc_and_size, Sweep};
+pub use fsops::{crc_and_size, link_error, no_links, open_store_file, read_store_file, Sweep};
 pub use gc::GcReport;
 pub use lock::{Lock, LockInfo};
 pub use owner_file::Owner;
 pub use record::{Record, RecordFile, RECORD_FILE};
 pub use recover::Recovery;
-pub use unit_ref::{check_component, UnitRef};
+pub use unit_ref::{check_component, check_rel_path, UnitRef};
 pub use writer::UnitWriter;
 
 use crate::error::{Error, Result};
@@ -79,7 +81,8 @@ impl Store {
     /// Open the store of `dir`, creating `dir` and `.talus/{units,tmp,claims,cache}` when
     /// `create`. Writability is probed now (a file in `tmp/`), before any work is spent: a file
     /// where DIR should be, a missing store without `create`, or an unwritable DIR is
-    /// `Error::Output` naming the path.
+    /// `Error::Output` naming the path. A symbolic link or a special file in `.talus/` is refused
+    /// ([`Store::check_work_area`]).
     pub fn open(dir: &Path, create: bool) -> Result<Store> {
         match std::fs::metadata(dir) {
             Ok(m) if !m.is_dir() => {
@@ -98,31 +101,97 @@ impl Store {
             Err(e) if !create => return Err(Error::input(dir, format!("cannot read: {e}"))),
             Err(_) => std::fs::create_dir_all(dir).map_err(out_err(dir))?,
         }
-        let work = dir.join(".talus");
-        let store = Store {
-            dir: dir.to_path_buf(),
-            work,
-            lease: DEFAULT_LEASE,
-            racy: content_key::RACY,
-        };
+        let store = Store::at(dir);
+        if create {
+            fsops::no_links(dir, Path::new(".talus"))?;
+        }
         for sub in ["units", "tmp", "claims", "cache"] {
             let p = store.work.join(sub);
             if create {
                 std::fs::create_dir_all(&p).map_err(out_err(&p))?;
             } else if !p.is_dir() {
-                return Err(Error::input(
-                    dir,
-                    format!(
-                        "no talus run here ({} is missing): not the --out directory of a \
-                         talus compare or campaign",
-                        p.strip_prefix(dir).unwrap_or(&p).display()
-                    ),
-                ));
+                return Err(store.not_a_run(&p));
             }
         }
+        store.check_work_area()?;
         let probe = fsops::write_tmp(&store.tmp(), "probe", b"ok")?;
         std::fs::remove_file(&probe).map_err(out_err(&probe))?;
         Ok(store)
+    }
+
+    /// Open the store of `dir` for reading only (`talus status`, `talus view`, `plan-stats`):
+    /// nothing is created or probed, so a finished result on a read-only mount, under a
+    /// read-only `.talus/` or on a full disk can be inspected. The same checks of `.talus/` as
+    /// [`Store::open`].
+    pub fn inspect(dir: &Path) -> Result<Store> {
+        match std::fs::metadata(dir) {
+            Ok(m) if !m.is_dir() => {
+                return Err(Error::input(
+                    dir,
+                    "is a file, not a directory: not the --out directory of a talus compare or \
+                     campaign",
+                ))
+            }
+            Ok(_) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                return Err(Error::input(dir, "no such directory: no talus run here"))
+            }
+            Err(e) => return Err(Error::input(dir, format!("cannot read: {e}"))),
+        }
+        let store = Store::at(dir);
+        if !store.work.is_dir() {
+            return Err(store.not_a_run(&store.work));
+        }
+        store.check_work_area()?;
+        Ok(store)
+    }
+
+    fn at(dir: &Path) -> Store {
+        Store {
+            dir: dir.to_path_buf(),
+            work: dir.join(".talus"),
+            lease: DEFAULT_LEASE,
+            racy: content_key::RACY,
+        }
+    }
+
+    fn not_a_run(&self, missing: &Path) -> Error {
+        Error::input(
+            &self.dir,
+            format!(
+                "no talus run here ({} is missing): not the --out directory of a talus compare \
+                 or campaign",
+                missing.strip_prefix(&self.dir).unwrap_or(missing).display()
+            ),
+        )
+    }
+
+    /// `.talus` and everything directly in it must be a directory or a regular file: a symbolic
+    /// link there (to `/home`, say, as `tmp/`) would let talus's clean-up remove files outside
+    /// DIR, and a FIFO (as `lock` or `plan.json`) would block it. Deeper entries are checked
+    /// where they are used (unit directories by [`Store::done`], claims by [`Store::claim`]).
+    fn check_work_area(&self) -> Result<()> {
+        fsops::no_links(&self.dir, Path::new(".talus"))?;
+        let entries = std::fs::read_dir(&self.work)
+            .map_err(|e| Error::input(&self.work, format!("cannot read: {e}")))?;
+        for entry in entries {
+            let path = entry
+                .map_err(|e| Error::input(&self.work, format!("cannot read: {e}")))?
+                .path();
+            let m = std::fs::symlink_metadata(&path)
+                .map_err(|e| Error::input(&path, format!("cannot read: {e}")))?;
+            if m.file_type().is_symlink() {
+                return Err(fsops::link_error(&path));
+            }
+            if !m.is_dir() && !m.is_file() {
+                return Err(Error::input(
+                    &path,
+                    "is neither a file nor a directory (a FIFO, socket or device) in talus's \
+                     work area: remove it",
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// The same store with another lease for claims from other hosts (default 6 h).

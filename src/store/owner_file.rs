@@ -123,6 +123,10 @@ pub fn acquire(
         let (bytes, mtime) = match read_with_mtime(path) {
             Ok(x) => x,
             Err(e) if e.kind() == io::ErrorKind::NotFound => continue,
+            // A link or a FIFO planted as the owner file: the folder's problem, not the disk's.
+            Err(e) if e.kind() == io::ErrorKind::InvalidData => {
+                return Err(Error::input(path, e.to_string()))
+            }
             Err(e) => return Err(Error::output(path, e)),
         };
         if !stale(&bytes, mtime) {
@@ -187,7 +191,8 @@ fn create_exclusive(path: &Path, tmp: &Path, content: &[u8]) -> Result<bool> {
 
 fn read_with_mtime(path: &Path) -> io::Result<(Vec<u8>, Option<SystemTime>)> {
     use std::io::Read;
-    let mut f = fs::File::open(path)?;
+    // Not through a link, not a FIFO: see `open_store_file`.
+    let mut f = super::fsops::open_store_file(path)?;
     let mtime = f.metadata().ok().and_then(|m| m.modified().ok());
     let mut bytes = Vec::new();
     f.read_to_end(&mut bytes)?;
@@ -196,7 +201,7 @@ fn read_with_mtime(path: &Path) -> io::Result<(Vec<u8>, Option<SystemTime>)> {
 
 /// Whether `path` still holds the owner file with `token`.
 pub fn is_ours(path: &Path, token: &str) -> bool {
-    fs::read(path)
+    super::fsops::read_store_file(path)
         .ok()
         .and_then(|b| serde_json::from_slice::<Owner>(&b).ok())
         .is_some_and(|o| o.token == token)

@@ -24,14 +24,19 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 
-use super::fsops::{out_err, parent, remove_any, replace_file, sync_dir, sync_file, tmp_name};
-use super::unit_ref::check_rel_path;
+use super::fsops::{
+    no_links, out_err, parent, remove_any, replace_file, sync_dir, sync_file, tmp_name,
+};
+use super::unit_ref::{check_rel_path, UnitRef};
 use super::Store;
 
-/// The journal of a publish in progress (`.talus/publishing`).
+/// The journal of a publish in progress (`.talus/publishing`). It is read back by whichever
+/// command finds it, possibly from a folder someone else wrote: [`Journal::check`] holds every
+/// path in it to DIR before anything is done.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub(super) struct Journal {
-    /// The new set: source file and name in DIR, the marker last.
+    /// The new set: source file (relative to `.talus/units`: `<kind>/<name>/<file>`) and name
+    /// in DIR, the marker last.
     pub files: Vec<(PathBuf, String)>,
     pub marker: String,
     /// Old talus outputs to remove, the marker (if there was one) first.
@@ -83,6 +88,9 @@ impl Store {
         let mut new_dirs = BTreeSet::new();
         for (src, name) in files {
             check_rel_path("output", name)?;
+            if is_work_area(name) {
+                return Err(Error::Internal(format!("output {name:?} inside .talus")));
+            }
             if !names.insert(name.as_str()) {
                 return Err(Error::Internal(format!("output {name:?} listed twice")));
             }
@@ -146,9 +154,24 @@ impl Store {
                 .cmp(&a.matches('/').count())
                 .then(a.cmp(b))
         });
-        let mut ordered: Vec<(PathBuf, String)> =
-            files.iter().filter(|(_, n)| n != marker).cloned().collect();
-        ordered.extend(files.iter().filter(|(_, n)| n == marker).cloned());
+        let units = self.units();
+        let relative = |(src, name): &(PathBuf, String)| -> Result<(PathBuf, String)> {
+            let rel = src.strip_prefix(&units).map_err(|_| {
+                Error::Internal(format!(
+                    "output {name}: its source {} is not a unit's file",
+                    src.display()
+                ))
+            })?;
+            Ok((rel.to_path_buf(), name.clone()))
+        };
+        let mut ordered: Vec<(PathBuf, String)> = files
+            .iter()
+            .filter(|(_, n)| n != marker)
+            .map(relative)
+            .collect::<Result<_>>()?;
+        for f in files.iter().filter(|(_, n)| n == marker) {
+            ordered.push(relative(f)?);
+        }
         Ok(Journal {
             files: ordered,
             marker: marker.to_string(),
@@ -199,14 +222,14 @@ impl Store {
         self.remove_outputs(j, &mut touched)?;
         let needed: BTreeSet<&str> = j.files.iter().flat_map(|(_, n)| ancestors(n)).collect();
         for d in j.dirs.iter().filter(|d| !needed.contains(d.as_str())) {
-            let path = self.dir.join(d);
+            let path = self.out_path(d)?;
             // Fails, as it should, on a directory that still holds anything.
             if fs::remove_dir(&path).is_ok() {
                 touched.insert(parent(&path).to_path_buf());
             }
         }
         for (i, (src, name)) in j.files.iter().enumerate() {
-            let dest = self.dir.join(name);
+            let dest = self.out_path(name)?;
             if *name == j.marker {
                 // Everything else of the set is durable before the marker says it is complete.
                 sync_dirs(&touched)?;
@@ -214,7 +237,7 @@ impl Store {
             #[cfg(test)]
             fault::check(i, &dest)?;
             let _ = i;
-            self.place(src, &dest)?;
+            self.place(&self.units().join(src), &dest)?;
             touched.insert(parent(&dest).to_path_buf());
         }
         touched.insert(self.dir.clone());
@@ -226,7 +249,7 @@ impl Store {
     /// Step 2: the marker first (durably), then every other old output.
     fn remove_outputs(&self, j: &Journal, touched: &mut BTreeSet<PathBuf>) -> Result<()> {
         for (i, name) in j.remove.iter().enumerate() {
-            let path = self.dir.join(name);
+            let path = self.out_path(name)?;
             remove_any(&path)?;
             remove_any(&side_tmp(&path))?;
             touched.insert(parent(&path).to_path_buf());
@@ -270,19 +293,19 @@ impl Store {
     /// Back to "no outputs": the marker first, then every file of either set, then the store's
     /// empty directories; the journal goes last.
     pub(super) fn undo(&self, j: &Journal) -> Result<()> {
-        let marker = self.dir.join(&j.marker);
+        let marker = self.out_path(&j.marker)?;
         remove_any(&marker)?;
         sync_dir(parent(&marker))?;
         let mut touched = BTreeSet::new();
         let names = j.files.iter().map(|(_, n)| n).chain(j.remove.iter());
         for name in names {
-            let path = self.dir.join(name);
+            let path = self.out_path(name)?;
             remove_any(&path)?;
             remove_any(&side_tmp(&path))?;
             touched.insert(parent(&path).to_path_buf());
         }
         for d in &j.dirs {
-            let path = self.dir.join(d);
+            let path = self.out_path(d)?;
             if fs::remove_dir(&path).is_ok() {
                 touched.insert(parent(&path).to_path_buf());
             }
@@ -292,6 +315,116 @@ impl Store {
         remove_any(&self.journal_path())?;
         sync_dir(&self.work)
     }
+}
+
+impl Store {
+    /// DIR/`name` for an output name already checked ([`check_rel_path`]), its folders inside
+    /// DIR walked without following a link: a folder of DIR replaced by a link (`pairs` → `/`)
+    /// must not make a removal or a placement land outside DIR.
+    fn out_path(&self, name: &str) -> Result<PathBuf> {
+        let rel = Path::new(name);
+        no_links(&self.dir, rel.parent().unwrap_or(Path::new("")))?;
+        Ok(self.dir.join(rel))
+    }
+}
+
+impl Journal {
+    /// Hold every path of a journal read back from DIR to DIR (see [`Journal`]): each source a
+    /// regular file of a finished unit (`<kind>/<name>/<file>` below `.talus/units`, no link on
+    /// the way; an absolute path is taken only when it lies there, as journals before sources
+    /// were relative wrote them), each name in DIR an output `ours` accepts (so a removal never
+    /// reaches a file of the user's), nothing in `.talus`. The problem, or the journal with
+    /// relative sources.
+    pub(super) fn check(
+        mut self,
+        dir: &Path,
+        units: &Path,
+        ours: &dyn Fn(&str) -> bool,
+    ) -> std::result::Result<Journal, String> {
+        // Inside DIR: a relative name, not in `.talus`, no link among its folders.
+        let inside = |what: &str, name: &str| -> std::result::Result<(), String> {
+            if check_rel_path(what, name).is_err() || is_work_area(name) {
+                return Err(format!("{what} {} is not a name inside DIR", shown(name)));
+            }
+            let folders = Path::new(name).parent().unwrap_or(Path::new(""));
+            no_links(dir, folders).map_err(|e| e.to_string())
+        };
+        let name_ok = |what: &str, name: &str| -> std::result::Result<(), String> {
+            inside(what, name)?;
+            if !ours(name) {
+                return Err(format!("{what} {} is not a talus output", shown(name)));
+            }
+            Ok(())
+        };
+        for (src, name) in &mut self.files {
+            name_ok("the output", name)?;
+            let rel = if src.is_absolute() || src.starts_with(units) {
+                src.strip_prefix(units).map_err(|_| {
+                    format!(
+                        "the source {} of {name} lies outside DIR's store",
+                        src.display()
+                    )
+                })?
+            } else {
+                src.as_path()
+            };
+            let text = rel.to_str().unwrap_or("");
+            let mut parts = text.splitn(3, '/');
+            let (kind, unit, file) = (parts.next(), parts.next(), parts.next());
+            let ok = match (kind, unit, file) {
+                (Some(k), Some(u), Some(f)) => {
+                    UnitRef::new(k, u).is_ok() && check_rel_path("file", f).is_ok()
+                }
+                _ => false,
+            };
+            if !ok {
+                return Err(format!(
+                    "the source {} of {} is not a file of a unit in DIR's store",
+                    shown(&src.to_string_lossy()),
+                    shown(name)
+                ));
+            }
+            *src = PathBuf::from(text);
+            no_links(units, src).map_err(|e| e.to_string())?;
+            if let Ok(m) = fs::symlink_metadata(units.join(&*src)) {
+                if !m.is_file() {
+                    return Err(format!(
+                        "the source {} of {} is not a regular file",
+                        src.display(),
+                        shown(name)
+                    ));
+                }
+            }
+        }
+        if !self.files.iter().any(|(_, n)| *n == self.marker) {
+            return Err(format!(
+                "its marker {} is not among its outputs",
+                shown(&self.marker)
+            ));
+        }
+        for name in &self.remove {
+            name_ok("the old output", name)?;
+        }
+        for d in &self.dirs {
+            // Only ever removed when empty, but never outside DIR or in .talus.
+            inside("the folder", d)?;
+        }
+        Ok(self)
+    }
+}
+
+/// `s` quoted for a message, cut at 80 characters (a crafted name may be megabytes long).
+fn shown(s: &str) -> String {
+    if s.chars().count() > 80 {
+        format!("{:?}…", s.chars().take(80).collect::<String>())
+    } else {
+        format!("{s:?}")
+    }
+}
+
+/// `.talus` or a name below it: the store, never an output.
+fn is_work_area(name: &str) -> bool {
+    name.split('/').next() == Some(".talus")
 }
 
 /// fsync every directory of `dirs` that still exists (one emptied and removed has nothing left

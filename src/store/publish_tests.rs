@@ -17,26 +17,12 @@ fn ours(name: &str) -> bool {
 
 /// Every file below DIR but `.talus`, with its content.
 fn listing(dir: &Path) -> BTreeMap<String, String> {
-    fn walk(dir: &Path, rel: &str, out: &mut BTreeMap<String, String>) {
-        for e in std::fs::read_dir(dir).unwrap().flatten() {
-            let name = e.file_name().to_string_lossy().into_owned();
-            let name = if rel.is_empty() {
-                name
-            } else {
-                format!("{rel}/{name}")
-            };
-            if name == ".talus" {
-                continue;
-            }
-            if e.file_type().unwrap().is_dir() {
-                walk(&e.path(), &name, out);
-            } else {
-                out.insert(name, std::fs::read_to_string(e.path()).unwrap());
-            }
-        }
-    }
     let mut out = BTreeMap::new();
-    walk(dir, "", &mut out);
+    super::hostile_tests::walk(dir, &mut |name, path, m| {
+        if !m.is_dir() {
+            out.insert(name.to_string(), std::fs::read_to_string(path).unwrap());
+        }
+    });
     out
 }
 
@@ -104,7 +90,7 @@ fn publish_replaces_the_old_set_and_keeps_the_users_files() {
     let a = std::fs::metadata(s.dir().join("m3c2.laz")).unwrap().ino();
     assert_eq!(std::fs::metadata(&files[0].0).unwrap().ino(), a);
     assert!(super::unit_tests::tmp_entries(&s).is_empty());
-    assert_eq!(s.recover().unwrap(), Recovery::Nothing);
+    assert_eq!(s.recover(&ours).unwrap(), Recovery::Nothing);
 
     // A set without meshes: meshes/ stays for the user's file; without it, it goes.
     let few: Vec<_> = files
@@ -156,7 +142,7 @@ fn a_failing_publish_leaves_no_outputs() {
     assert!(s.publish(&files, "summary.json", &ours).is_err());
     assert_eq!(listing(s.dir()), expected(&[]));
     assert!(!s.work().join("publishing").exists());
-    assert_eq!(s.recover().unwrap(), Recovery::Nothing);
+    assert_eq!(s.recover(&ours).unwrap(), Recovery::Nothing);
 }
 
 #[test]
@@ -174,9 +160,9 @@ fn a_crash_at_any_step_never_mixes_sets_and_recover_finishes_it() {
             assert!(now[n].starts_with("new "), "crash at {at}: {now:?}");
         }
         assert!(s.work().join("publishing").exists());
-        assert_eq!(s.recover().unwrap(), Recovery::RolledForward);
+        assert_eq!(s.recover(&ours).unwrap(), Recovery::RolledForward);
         assert_eq!(listing(s.dir()), expected(NEW), "crash at {at}");
-        assert_eq!(s.recover().unwrap(), Recovery::Nothing);
+        assert_eq!(s.recover(&ours).unwrap(), Recovery::Nothing);
     }
 }
 
@@ -186,7 +172,7 @@ fn recover_undoes_a_publish_whose_sources_are_gone() {
     fault::arm(1, Fault::Crash);
     assert!(s.publish(&files, "summary.json", &ours).is_err());
     s.invalidate(&unit("outputs", "pair0-abc")).unwrap();
-    assert_eq!(s.recover().unwrap(), Recovery::RolledBack);
+    assert_eq!(s.recover(&ours).unwrap(), Recovery::RolledBack);
     assert_eq!(listing(s.dir()), expected(&[]));
     assert!(!s.dir().join("meshes/event_0002_after.ply").exists());
     assert!(!s.work().join("publishing").exists());
@@ -214,11 +200,11 @@ fn recover_finishes_a_journal_left_after_the_old_marker_went() {
         serde_json::to_vec(&journal).unwrap(),
     )
     .unwrap();
-    assert_eq!(s.recover().unwrap(), Recovery::RolledForward);
+    assert_eq!(s.recover(&ours).unwrap(), Recovery::RolledForward);
     assert_eq!(listing(s.dir()), expected(NEW));
 
     std::fs::write(s.work().join("publishing"), b"{damaged").unwrap();
-    assert!(matches!(s.recover(), Err(Error::Input { .. })));
+    assert!(matches!(s.recover(&ours), Err(Error::Input { .. })));
 }
 
 /// Issue "Trust, second round", item 6: `talus status` and `talus view` finish a publish a
@@ -230,13 +216,13 @@ fn a_reading_command_finishes_an_interrupted_publish_unless_a_run_holds_dir() {
     assert!(s.publish(&files, "summary.json", &ours).is_err());
     let lock = s.lock("run", "talus compare …").unwrap();
     assert_eq!(
-        s.finish_interrupted_publish("talus status").unwrap(),
+        s.finish_interrupted_publish("talus status", &ours).unwrap(),
         Recovery::Nothing
     );
     assert!(s.work().join("publishing").exists(), "left to the run");
     lock.release().unwrap();
     assert_eq!(
-        s.finish_interrupted_publish("talus status").unwrap(),
+        s.finish_interrupted_publish("talus status", &ours).unwrap(),
         Recovery::RolledForward
     );
     assert_eq!(listing(s.dir()), expected(NEW));
@@ -271,7 +257,7 @@ fn a_published_file_edited_in_place_is_found() {
 fn a_damaged_journal_names_the_files() {
     let (_t, s, _files) = setup();
     std::fs::write(s.work().join("publishing"), b"{ not json").unwrap();
-    let e = s.recover().unwrap_err().to_string();
+    let e = s.recover(&ours).unwrap_err().to_string();
     for name in [
         "summary.json",
         "m3c2.laz",

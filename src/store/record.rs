@@ -36,10 +36,11 @@ pub struct Record {
 }
 
 impl Record {
-    /// Read the record of the unit directory `dir`, if it parses, belongs to `unit` and names only
-    /// files inside the directory (a damaged record must not point a reader elsewhere).
+    /// Read the record of the unit directory `dir`, if it is a regular file (no link), parses,
+    /// belongs to `unit` and names only files inside the directory (a damaged or crafted record
+    /// must not point a reader elsewhere).
     pub fn read(dir: &Path, unit: &UnitRef) -> Option<Record> {
-        let bytes = std::fs::read(dir.join(RECORD_FILE)).ok()?;
+        let bytes = super::fsops::read_store_file(&dir.join(RECORD_FILE)).ok()?;
         let record: Record = serde_json::from_slice(&bytes).ok()?;
         let names_ok = record
             .files

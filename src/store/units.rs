@@ -3,11 +3,11 @@
 
 use std::fs;
 use std::io;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
 
-use super::fsops::{crc_and_size, move_to_trash, trash};
+use super::fsops::{crc_and_size, move_to_trash, no_links, trash};
 use super::record::Record;
 use super::unit_ref::UnitRef;
 use super::Store;
@@ -21,14 +21,20 @@ impl Store {
 
     /// The record of finished `unit`: its directory exists, its `record.json` parses and names
     /// this unit, and every listed file exists with the recorded size. Nothing is read but the
-    /// record and the files' metadata: a flipped byte is found only by [`Store::verify`].
+    /// record and the files' metadata: a flipped byte is found only by [`Store::verify`]. No
+    /// link is followed on the way (`units/<kind>/<name>/<file>`, a link planted anywhere along
+    /// it makes the unit not done): whoever reads a done unit's files reads inside the store.
     pub fn done(&self, unit: &UnitRef) -> Option<Record> {
         let dir = self.unit_dir(unit).ok()?;
+        let rel = Path::new(&unit.kind).join(&unit.name);
+        no_links(&self.units(), &rel).ok()?;
         let record = Record::read(&dir, unit)?;
-        let sizes_ok = record.files.iter().all(|f| {
-            fs::metadata(dir.join(&f.name)).is_ok_and(|m| m.is_file() && m.len() == f.size)
+        let files_ok = record.files.iter().all(|f| {
+            no_links(&dir, Path::new(&f.name)).is_ok()
+                && fs::symlink_metadata(dir.join(&f.name))
+                    .is_ok_and(|m| m.is_file() && m.len() == f.size)
         });
-        sizes_ok.then_some(record)
+        files_ok.then_some(record)
     }
 
     /// The files of finished `unit` edited since its commit: modified after its record was

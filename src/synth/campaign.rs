@@ -685,8 +685,13 @@ fn truth_pair(model: &CampaignModel, before: usize, after: usize) -> Result<Camp
 /// last). Returns the truth.
 pub fn write(out_dir: &Path, opts: &CampaignOptions) -> Result<CampaignTruth> {
     let r = resolve(opts)?;
-    std::fs::create_dir_all(out_dir).map_err(|e| Error::output(out_dir, e))?;
     let n = r.model.epochs;
+    // Only files synth wrote there itself are replaced (`super::owned`).
+    let written: Vec<String> = (0..n)
+        .map(|k| file_name(k, opts.laz))
+        .chain(["truth.json".to_string()])
+        .collect();
+    super::owned::take(out_dir, &written)?;
     let mut epochs = Vec::with_capacity(n);
     for k in 0..n {
         let file = PathBuf::from(file_name(k, opts.laz));

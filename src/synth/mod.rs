@@ -27,6 +27,7 @@
 pub mod campaign;
 pub mod face;
 mod output;
+pub mod owned;
 mod plants;
 pub(crate) mod rng;
 mod sampling;
@@ -401,13 +402,27 @@ fn chunks_of(
 /// when `opts.laz` is false) and `truth.json`, each written atomically. Returns the truth.
 pub fn synth(kind: SceneKind, opts: &SynthOptions, out_dir: &Path) -> Result<Truth> {
     let r = resolve(kind, opts)?;
-    std::fs::create_dir_all(out_dir).map_err(|e| Error::output(out_dir, e))?;
-    let model = SceneModel::new(kind, r.points[0], opts.seed);
     let ext = if opts.laz { "laz" } else { "las" };
     let names = [
         PathBuf::from(format!("before.{ext}")),
         PathBuf::from(format!("after.{ext}")),
     ];
+    // Only files synth wrote there itself are replaced (`owned`).
+    let written: Vec<String> = names
+        .iter()
+        .map(|n| n.display().to_string())
+        .chain(["truth.json".to_string()])
+        .collect();
+    let model = SceneModel::new(kind, r.points[0], opts.seed);
+    if opts.classified && !model.has_plants() {
+        // It was accepted and did nothing: the scene's points are ground, class 2, either way.
+        return Err(Error::Usage(format!(
+            "synth {}: --classified is for a scene with plants (vegetation): this one's points \
+             are all ground, class 2, already",
+            kind.name()
+        )));
+    }
+    owned::take(out_dir, &written)?;
     let mut written = [0u64; 2];
     let turn_z = turn_height(&model, &r, opts);
     // Scenes without plants are ground, as before; a scene with plants is unclassified unless

@@ -16,6 +16,7 @@ use super::outputs::tables::{
     EventFeature, EventProperties, Feature, FeatureCollection, PointGeometry, RegionFeature,
     RegionGeometry,
 };
+use super::outputs::view::ViewRange;
 use super::outputs::{AlignmentSummary, OutputsStage, Publish, Summary};
 use super::stage::{Line, Planner, Publishes, Scope, Stage};
 use super::{read_json, Ctx};
@@ -103,7 +104,9 @@ struct CampaignEvent<'a> {
     pair: &'a str,
     before_date: String,
     after_date: String,
-    track_id: u32,
+    /// None for an event in no track (vegetation, unless `--vegetation keep`): was 0, which a
+    /// reader counted as one more track.
+    track_id: Option<u32>,
 }
 
 /// A feature of the campaign's events.geojson.
@@ -188,6 +191,26 @@ impl Stage for CampaignStage {
     }
 }
 
+/// summary.json's `seconds`: the wall time of the run that computes the campaign, up to its
+/// files (it was the sum of the pairs' stage times, which counts a survey's tiling once per pair
+/// it is in and no time twice that ran at once). Measured by the command's own clock when the
+/// unit runs in the process holding DIR's lock (a local run: from the command's start), else
+/// from when the run wrote its plan (`.talus/plan.json`: a `talus worker` beside a run, a Slurm
+/// task: from the submission).
+fn wall_seconds(ctx: &Ctx) -> f64 {
+    let here = ctx.store.lock_holder().is_some_and(|l| {
+        l.owner.pid == std::process::id() && l.owner.host == crate::store::Owner::me().host
+    });
+    if here {
+        return crate::progress::since_start();
+    }
+    std::fs::metadata(ctx.store.work().join("plan.json"))
+        .and_then(|m| m.modified())
+        .ok()
+        .and_then(|t| t.elapsed().ok())
+        .map_or(0.0, |d| d.as_secs_f64())
+}
+
 /// Write the campaign's files into `out`.
 fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<CampaignMeta> {
     let plan = ctx.plan;
@@ -198,11 +221,18 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<CampaignMeta> {
     let days = |s: usize| crate::campaign::epochs::Date::parse(&date(s)).map_or(0, |d| d.days());
     // Per pair: its summary and its events.
     let mut rows = Vec::new();
+    // The widest of the pairs' colour ranges: the viewer's one scale for every pair.
+    let mut range = [0.0f64, 0.0];
     let mut events: Vec<PairEvent> = Vec::new();
     let mut publish: Vec<Publish> = Vec::new();
     for (k, p) in plan.pairs.iter().enumerate() {
         let o = ctx.unit(&Spec::pair(OutputsStage::KIND, k))?;
         let summary: Summary = read_json(ctx, o, super::outputs::MARKER)?;
+        let view: ViewRange = read_json(ctx, o, "view.json")?;
+        range = [
+            range[0].min(view.distance_range[0]),
+            range[1].max(view.distance_range[1]),
+        ];
         let mine = pair_events(ctx, k, o)?;
         let volumes: Vec<f64> = mine
             .iter()
@@ -246,7 +276,8 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<CampaignMeta> {
     // `--vegetation keep`; the pairs' totals already leave them out.
     let counts = |e: &PairEvent| plan.params.vegetation.value.counts(e.properties.vegetation);
     let gain = |e: &PairEvent| e.properties.kind == Kind::Gain;
-    // Tracks over every pair's events that count; the others keep track 0.
+    // Tracks over every pair's events that count (numbered from 1); the others are in none (0
+    // here, no track_id in the files).
     let depth = plan.params.cyl_halflen.value;
     let counted: Vec<usize> = (0..events.len()).filter(|&i| counts(&events[i])).collect();
     let placed: Vec<Placed> = counted
@@ -295,10 +326,10 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<CampaignMeta> {
     write_table(
         out,
         &rows,
-        gain_fit.as_ref(),
-        loss_fit.as_ref(),
+        [gain_fit.as_ref(), loss_fit.as_ref()],
         plan,
         &alignments,
+        range,
     )?;
     // magnitude_frequency.csv.
     let mut mf = String::from("kind,volume_m3,events_at_least,exceedance\n");
@@ -356,6 +387,15 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<CampaignMeta> {
             "crs": s.crs,
         })).collect::<Vec<_>>(),
         "parameters": plan.params,
+        // Where the pairs' stable ground came from: `--stable` (the file) or their distances.
+        "stable": match &plan.stable_areas {
+            Some(a) => json!({
+                "source": "areas",
+                "file": a.file.path,
+                "polygons": a.areas.polygons.len(),
+            }),
+            None => json!({ "source": "auto", "file": null }),
+        },
         "spacing": plan.spacing,
         "pairs": rows.iter().map(|r| json!({
             "label": r.row.label,
@@ -366,7 +406,7 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<CampaignMeta> {
         "tracks": track.iter().copied().max().unwrap_or(0),
         "tiles": plan.layout.len(),
         "core_points": points,
-        "seconds": rows.iter().map(|r| r.row.seconds).sum::<f64>(),
+        "seconds": wall_seconds(ctx),
     });
     let text = serde_json::to_vec_pretty(&summary).map_err(|e| Error::Internal(e.to_string()))?;
     super::write_bytes(out, MARKER, &text)?;
@@ -395,6 +435,8 @@ fn write_events(
     for (e, &t) in events.iter().zip(track) {
         let p = &plan.pairs[e.pair];
         let q = &e.properties;
+        // Tracks are numbered from 1; 0 is no track.
+        let t = (t > 0).then_some(t);
         features.push(CampaignFeature {
             kind: Feature::Feature,
             geometry: PointGeometry::Point(e.centroid),
@@ -410,7 +452,7 @@ fn write_events(
             p.label.clone(),
             date(p.before),
             date(p.after),
-            t.to_string(),
+            cell(&t),
             cell(&q.id),
             cell(&q.kind),
             cell(&q.volume_m3),
@@ -440,13 +482,15 @@ fn write_events(
     super::write_bytes(out, "events.csv", csv.as_bytes())
 }
 
+/// campaign.csv and campaign.json: the pairs' rows, the power-law fits (gain, loss), the epochs
+/// with their alignments, and the colour range every pair is drawn on.
 fn write_table(
     out: &mut UnitWriter,
     rows: &[Row],
-    gain: Option<&PowerLawFit>,
-    loss: Option<&PowerLawFit>,
+    [gain, loss]: [Option<&PowerLawFit>; 2],
     plan: &crate::plan::Plan,
     alignments: &[Option<AlignmentSummary>],
+    distance_range: [f64; 2],
 ) -> Result<()> {
     let mut sorted: Vec<&Row> = rows.iter().collect();
     sorted.sort_by(|a, b| {
@@ -493,6 +537,9 @@ fn write_table(
             "date": s.date,
             "alignment": a,
         })).collect::<Vec<_>>(),
+        // One colour scale for every pair (the viewer's), so that pairs compare by eye: the
+        // widest of the pairs' ranges (view.json: 2nd and 98th percentiles of the distances).
+        "distance_range": distance_range,
     });
     let text = serde_json::to_vec_pretty(&table).map_err(|e| Error::Internal(e.to_string()))?;
     super::write_bytes(out, "campaign.json", &text)

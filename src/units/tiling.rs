@@ -11,6 +11,7 @@ use crate::error::Result;
 use crate::io;
 use crate::io::classes::ClassCounts;
 use crate::plan::Spec;
+use crate::sampling::MIN_DISTINCT;
 use crate::store::UnitWriter;
 
 /// The file of tile `id` in a tiling unit.
@@ -131,6 +132,7 @@ pub fn split(
     let mut buf = Vec::new();
     let keep = plan.params.classes();
     let mut classes: Option<ClassCounts> = None;
+    let mut positions = FewPositions::default();
     // A survey delivered as tiles: its files one after the other, in name order.
     for (k, f) in files.iter().enumerate() {
         let mut reader = io::open_with(&f.path, Some(&keep))?;
@@ -142,6 +144,7 @@ pub fn split(
             if let Some(f) = transform {
                 f(&mut buf);
             }
+            positions.see(&buf);
             splitting.push(&buf)?;
             // The points read, those left out by class included: the line counts up to the
             // survey's points.
@@ -157,7 +160,63 @@ pub fn split(
             });
         }
     }
+    positions.check(ctx, survey, classes.as_ref(), splitting.points)?;
     splitting.finish(out, classes)
+}
+
+/// The first [`MIN_DISTINCT`] distinct positions of a survey's points (of the classes
+/// compared): a survey with fewer describes no surface. The before survey's spacing pass refuses
+/// such a survey before anything runs; an after survey (or a tile of a survey in several files)
+/// is only read here, so it is refused here, with the same words — it was taken as AFTER and
+/// gave a few distances at the core points it touched, or "the epochs do not overlap" when the
+/// classes left none of its points.
+#[derive(Default)]
+struct FewPositions(Vec<crate::geom::Point3>);
+
+impl FewPositions {
+    /// Note `points` (cheap: once [`MIN_DISTINCT`] positions are seen, nothing more is done).
+    fn see(&mut self, points: &[crate::geom::Point3]) {
+        for p in points {
+            if self.0.len() >= MIN_DISTINCT {
+                return;
+            }
+            if !self.0.contains(p) {
+                self.0.push(*p);
+            }
+        }
+    }
+
+    /// Refuse survey `survey` when it showed fewer than [`MIN_DISTINCT`] positions (`points`
+    /// kept, `classes` its class counts).
+    fn check(
+        &self,
+        ctx: &Ctx,
+        survey: usize,
+        classes: Option<&ClassCounts>,
+        points: u64,
+    ) -> Result<()> {
+        if self.0.len() >= MIN_DISTINCT {
+            return Ok(());
+        }
+        let keep = ctx.plan.params.classes();
+        let problem = match classes {
+            Some(c) if c.kept() == 0 => c.none_kept(&keep),
+            _ => format!(
+                "{points} points{} at only {} distinct position(s): a survey needs at least \
+                 {MIN_DISTINCT} to describe a surface",
+                if classes.is_some_and(|c| c.left_out() > 0) {
+                    " of the classes compared"
+                } else {
+                    ""
+                },
+                self.0.len()
+            ),
+        };
+        Err(crate::error::Error::input(
+            &ctx.plan.surveys[survey].arg,
+            problem,
+        ))
+    }
 }
 
 /// Points being cut into the run's tiles (square + halo, owned flag) in a unit's directory,

@@ -91,6 +91,49 @@ pub fn data(sub: &str) -> PathBuf {
     );
     p
 }
+/// Assert that `talus status DIR` says DIR holds its plan's whole published set.
+pub fn assert_published(dir: &Path) {
+    let o = run(&["status", dir.to_str().unwrap()]);
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("published (this plan's)"),
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
+/// The journal a publish of DIR's finished outputs unit writes (`.talus/publishing`): its files,
+/// the marker last, each source as a path in `.talus/units` (`absolute`) or relative to it (as
+/// journals are written since sources were made relative).
+pub fn publish_journal(dir: &Path, absolute: bool) -> serde_json::Value {
+    let units = dir.join(".talus/units");
+    let unit = std::fs::read_dir(units.join("outputs"))
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .path();
+    let record: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(unit.join("record.json")).unwrap()).unwrap();
+    let mut files: Vec<(String, String)> = record["meta"]["publish"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| {
+            let rel = Path::new(p["kind"].as_str().unwrap())
+                .join(p["unit"].as_str().unwrap())
+                .join(p["file"].as_str().unwrap());
+            let src = if absolute { units.join(rel) } else { rel };
+            (
+                src.to_string_lossy().into_owned(),
+                p["name"].as_str().unwrap().to_string(),
+            )
+        })
+        .collect();
+    files.sort_by_key(|(_, n)| n == "summary.json");
+    serde_json::json!({ "files": files, "marker": "summary.json", "remove": [], "dirs": [] })
+}
+
 pub mod dod;
 pub mod laspy;
 pub mod scan;

@@ -29,7 +29,21 @@ export async function loadCampaign(top) {
   const [table, fc] = await Promise.all([get('campaign.json'), get('events.geojson')]);
   if (!table || !Array.isArray(table.pairs) || !table.pairs.length) throw new Error('campaign.json: no pairs');
   const pairs = table.pairs.filter((p) => typeof p.label === 'string' && p.label);
-  return { pairs, epochs: table.epochs || top.epochs, fc, summary: top };
+  // One colour scale for every pair, so that pairs compare by eye: campaign.json's
+  // distance_range (the widest of the pairs'); a campaign written before it had one takes the
+  // widest of its pairs' view.json ranges.
+  let range = validRange(table.distance_range);
+  if (!range) {
+    const views = await Promise.all(pairs.map((p) => get(`pairs/${encodeURIComponent(p.label)}/view.json`).catch(() => null)));
+    range = views.map((v) => validRange(v?.distance_range)).filter(Boolean)
+      .reduce((a, b) => (a ? [Math.min(a[0], b[0]), Math.max(a[1], b[1])] : b), null);
+  }
+  return { pairs, epochs: table.epochs || top.epochs, fc, summary: top, distanceRange: range };
+}
+
+/** `r` when it is [lo, hi] of finite numbers, else null. */
+function validRange(r) {
+  return Array.isArray(r) && r.length === 2 && r.every(Number.isFinite) ? r : null;
 }
 
 /** The choice in the URL's hash, completed with defaults (the first pair, its events, by kind). */

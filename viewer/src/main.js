@@ -98,7 +98,9 @@ async function main() {
   sun.position.set(0.6, -0.8, 1.4);
   scene.add(hemi, sun);
 
-  const half = rampHalfWidth(view.distance_range);
+  // A campaign draws every pair on one scale (campaign.js), a comparison on its own range.
+  const half = rampHalfWidth(campaign?.distanceRange ?? view.distance_range);
+  T.rampHalf = half;
   const terrain = new Terrain(terrainData.positions, distanceColors(terrainData.distances, half));
   scene.add(terrain.points);
   T.terrainPoints = terrain.count;
@@ -312,7 +314,8 @@ async function main() {
 
   // The vegetation key once the result judges vegetation (older results never do).
   const judged = events.some((e) => e.vegetation || e.vegetation_fraction != null);
-  drawLegend($('legend'), half, view.units, campaign ? colourKeys(campaign, state, events) : null, judged);
+  drawLegend($('legend'), half, view.units, campaign ? colourKeys(campaign, state, events) : null, judged,
+    campaign?.distanceRange ? 'the same scale for every pair' : '');
   drawMeta($('meta'), view, crsName, events.length, summary, events.filter((e) => e.vegetation).length);
   /** The marker colour of every event (0xRRGGBB), by id. */
   T.markerColours = Object.fromEntries(events.map((e) => [e.id, layer.markerColour(e)]));

@@ -94,7 +94,13 @@ export class EventTable {
       ];
       for (const [text, cls] of cells) {
         const td = document.createElement('td');
-        td.textContent = text;
+        // A long label (a pair's `20210301_20210601`) may break after its '_' so the table fits
+        // its panel; the text stays the same (<wbr> adds none).
+        const parts = text.split('_');
+        parts.forEach((part, i) => {
+          if (i) td.append('_', document.createElement('wbr'));
+          td.append(part);
+        });
         if (cls) td.className = cls;
         tr.appendChild(td);
       }
@@ -193,10 +199,12 @@ export function showEvent(panel, e, units) {
 }
 
 /**
- * The legend: the distance ramp with ticks and units, marker colours and sizes; `vegetation`
- * adds the vegetation events' colour (when the result judges vegetation at all).
+ * The legend: the distance ramp with ticks and units (`scale` says whose: a campaign's one scale
+ * for every pair), the event markers as they are drawn (a disk with a white rim, in the kind's
+ * colour, sized by volume: the small outlined dots on the terrain), and `vegetation` adds the
+ * vegetation events' colour (when the result judges vegetation at all).
  */
-export function drawLegend(el, half, units, colourKeys = null, vegetation = false) {
+export function drawLegend(el, half, units, colourKeys = null, vegetation = false, scale = '') {
   const u = units || 'm';
   // Three significant figures, trailing zeros dropped: "+0.3", "−0.0075", "+150".
   const tick = (v) => (v === 0 ? '0' : (v < 0 ? '\u2212' : '+') + String(Number(Math.abs(v).toPrecision(3))));
@@ -204,15 +212,15 @@ export function drawLegend(el, half, units, colourKeys = null, vegetation = fals
     .map((t) => `<span style="left:${(t + 1) * 50}%">${tick(t * half)}</span>`)
     .join('');
   el.innerHTML = `
-    <div class="title">M3C2 distance (${u})</div>
+    <div class="title">M3C2 distance (${u})${scale ? ` <span class="scale">· ${scale}</span>` : ''}</div>
     <div class="ramp" style="background:${rampCss()}"></div>
     <div class="ticks">${ticks}</div>
     <div class="keys">
       <span><span class="sw" style="background:rgb(${NO_DATA.join(',')})"></span>not computed</span>
-      ${colourKeys ? '' : `<span><span class="dot" style="background:${hex(KIND_COLOR.gain)}"></span>gain (red: material added)</span>
-      <span><span class="dot" style="background:${hex(KIND_COLOR.loss)}"></span>loss (blue: material removed)</span>`}
-      ${vegetation ? `<span><span class="dot" style="background:${hex(VEGETATION_COLOR)}"></span>vegetation (not in totals)</span>` : ''}
-      <span>marker size ∝ ∛|volume|</span>
+      ${colourKeys ? '' : `<span><span class="dot marker" style="background:${hex(KIND_COLOR.gain)}"></span>gain (red: material added)</span>
+      <span><span class="dot marker" style="background:${hex(KIND_COLOR.loss)}"></span>loss (blue: material removed)</span>`}
+      ${vegetation ? `<span><span class="dot marker" style="background:${hex(VEGETATION_COLOR)}"></span>vegetation (not in totals)</span>` : ''}
+      <span class="marker-key"><span class="dot marker small"></span><span class="dot marker"></span>an event's marker, at its centre: size ∝ ∛|volume| (the smallest events are the small dots)</span>
     </div>`;
   if (colourKeys) {
     const keys = document.createElement('div');
@@ -221,7 +229,7 @@ export function drawLegend(el, half, units, colourKeys = null, vegetation = fals
       const span = document.createElement('span');
       if (c != null) {
         const dot = document.createElement('span');
-        dot.className = 'dot';
+        dot.className = 'dot marker';
         dot.style.background = hex(c);
         span.appendChild(dot);
       }

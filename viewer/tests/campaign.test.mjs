@@ -337,6 +337,47 @@ test('St Leonards: a 49-event pair has readable labels', async () => {
   await page.close();
 });
 
+/** The ramp's half-width the legend should show for range [lo, hi]: the larger |end| rounded up
+ * to 1, 1.5, 2, 2.5, 3, 4, 5, 6, 8 × 10^k (viewer/README.md), computed here from the files. */
+function niceHalf([lo, hi]) {
+  const r = Math.max(Math.abs(lo), Math.abs(hi));
+  const p = 10 ** Math.floor(Math.log10(r));
+  return [1, 1.5, 2, 2.5, 3, 4, 5, 6, 8, 10].find((m) => m * p >= r * (1 - 1e-9)) * p;
+}
+
+test('every pair is coloured on one scale, the campaign\'s, so pairs compare by eye', async () => {
+  const own = synth.table.map((p) => readJson(join(synth.dir, 'pairs', p.label, 'view.json')).distance_range);
+  const widest = own.reduce((a, b) => [Math.min(a[0], b[0]), Math.max(a[1], b[1])]);
+  assert.deepEqual(readJson(join(synth.dir, 'campaign.json')).distance_range, widest);
+  // The pairs' own scales differ (else the test shows nothing).
+  assert.ok(new Set(own.map(niceHalf)).size > 1, `pairs' own scales ${own.map(niceHalf)}`);
+  const want = niceHalf(widest);
+  for (const p of synth.table) {
+    // A page of its own per pair (a hash change on one page reloads it: campaign.js).
+    const page = await newPage(synth.url);
+    await page.goto(`${synth.url}#pair=${encodeURIComponent(p.label)}`);
+    await showing(page, p.label);
+    assert.equal(await page.evaluate(() => window.__talus.rampHalf), want, p.label);
+    const ticks = await page.$$eval('#legend .ticks span', (s) => s.map((x) => x.textContent));
+    assert.equal(ticks.at(-1), `+${Number(want.toPrecision(3))}`, `${p.label}: ${ticks}`);
+    assert.match(await page.textContent('#legend .title'), /the same scale for every pair/);
+    await page.close();
+  }
+});
+
+test('the events table fits its panel, with every column of all pairs', async () => {
+  const page = await newPage(synth.url);
+  await page.goto(`${synth.url}#pair=${encodeURIComponent(synth.table[0].label)}&events=all&colour=track`);
+  await page.waitForFunction(() => window.__talus?.ready && window.__talus.campaign?.scope === 'all', null, { timeout: 120_000 });
+  const fit = await page.$eval('#table-wrap', (w) => ({ scroll: w.scrollWidth, client: w.clientWidth, cols: w.querySelectorAll('#events th').length }));
+  assert.ok(fit.cols >= 8, `${fit.cols} columns`);
+  assert.ok(fit.scroll <= fit.client, `the table is ${fit.scroll} px wide in a panel of ${fit.client}`);
+  // An event in no track (vegetation) shows none, not track 0.
+  const tracks = await page.$$eval('#events tbody tr', (trs) => trs.map((tr) => tr.children[3].textContent));
+  assert.ok(!tracks.includes('0'), `${tracks}`);
+  await page.close();
+});
+
 test('no console errors, no failed requests, nothing fetched from elsewhere', async () => {
   assert.deepEqual(consoleErrors, []);
   assert.deepEqual(failedRequests, []);

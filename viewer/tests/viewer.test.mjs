@@ -180,6 +180,24 @@ test('the legend says the colour convention (the report uses the same)', async (
   assert.match(text, /vegetation \(not in totals\)/);
 });
 
+test('the legend shows the small outlined dots on the terrain: the events\' markers', async () => {
+  // The markers are disks with a white rim (events.js), the smallest ones small dots.
+  const keys = await page.$$eval('#legend .dot', (ds) => ds.map((d) => ({
+    rim: getComputedStyle(d).borderTopColor, width: getComputedStyle(d).borderTopWidth, text: d.parentElement.textContent,
+  })));
+  assert.ok(keys.length >= 4, JSON.stringify(keys));
+  for (const k of keys) {
+    assert.match(k.rim, /rgba?\(255, 255, 255/, JSON.stringify(k));
+    assert.notEqual(k.width, '0px', JSON.stringify(k));
+  }
+  assert.match(await page.textContent('#legend'), /an event's marker, at its centre: size ∝ ∛\|volume\| \(the smallest events are the small dots\)/);
+});
+
+test('the events table fits its panel', async () => {
+  const fit = await page.$eval('#table-wrap', (w) => ({ scroll: w.scrollWidth, client: w.clientWidth }));
+  assert.ok(fit.scroll <= fit.client, `the table is ${fit.scroll} px wide in a panel of ${fit.client}`);
+});
+
 test('a vegetation event is green whatever its kind, on its marker too', async () => {
   const colours = await page.evaluate(() => window.__talus.markerColours);
   for (const e of fixture.events) {

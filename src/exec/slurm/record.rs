@@ -88,6 +88,16 @@ pub fn dir(store: &Store, n: u32) -> PathBuf {
     root(store).join(n.to_string())
 }
 
+/// [`dir`], refused when a link lies on the way to it or to its `tasks/` and `logs/` (what its
+/// tasks read and write must stay inside DIR).
+pub fn checked_dir(store: &Store, n: u32) -> Result<PathBuf> {
+    for sub in ["tasks", "logs"] {
+        let rel = Path::new("slurm").join(n.to_string()).join(sub);
+        crate::store::no_links(store.work(), &rel)?;
+    }
+    Ok(dir(store, n))
+}
+
 /// The file of task `task` of stage `kind`'s report in submission directory `dir`.
 pub fn task_report_path(dir: &Path, kind: &str, task: usize) -> PathBuf {
     dir.join("tasks").join(format!("{kind}-{task}.json"))
@@ -104,8 +114,10 @@ fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
     Ok(talus_tiling::atomic_write(path, &bytes)?)
 }
 
+/// A record of DIR's store (a regular file, never through a link: `store::read_store_file`).
 fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
-    let bytes = std::fs::read(path).map_err(|e| Error::input(path, e.to_string()))?;
+    let bytes =
+        crate::store::read_store_file(path).map_err(|e| Error::input(path, e.to_string()))?;
     serde_json::from_slice(&bytes)
         .map_err(|e| Error::input(path, format!("not a talus record: {e}")))
 }
@@ -128,7 +140,7 @@ fn numbers(store: &Store) -> Result<Vec<u32>> {
 /// submitted (None with `--plan-only`, or while it is being submitted).
 pub fn latest(store: &Store) -> Result<Option<(u32, Submission, Option<Jobs>)>> {
     for n in numbers(store)?.into_iter().rev() {
-        let d = dir(store, n);
+        let d = checked_dir(store, n)?;
         if !d.join("submission.json").is_file() {
             continue;
         }
@@ -145,7 +157,7 @@ pub fn latest(store: &Store) -> Result<Option<(u32, Submission, Option<Jobs>)>> 
 
 /// Submission `n` of DIR and the plan its tasks execute.
 pub fn load(store: &Store, n: u32) -> Result<(Submission, Plan)> {
-    let d = dir(store, n);
+    let d = checked_dir(store, n)?;
     let sub = read_json(&d.join("submission.json"))?;
     let plan = Plan::load(&d.join("plan.json"))?;
     Ok((sub, plan))
@@ -239,5 +251,5 @@ pub fn save_task_report(path: &Path, report: &TaskReport) -> Result<()> {
 
 /// A task's report, if it wrote one.
 pub fn task_report(path: &Path) -> Option<TaskReport> {
-    serde_json::from_slice(&std::fs::read(path).ok()?).ok()
+    serde_json::from_slice(&crate::store::read_store_file(path).ok()?).ok()
 }

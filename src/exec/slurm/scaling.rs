@@ -53,7 +53,7 @@ pub fn report(dir: &std::path::Path, nodes: &[usize], cores: usize, scale: f64) 
     if !(scale.is_finite() && scale >= 1.0) {
         return Err(Error::Usage("--scale: a factor of at least 1".into()));
     }
-    let store = Store::open(dir, false)?;
+    let store = Store::inspect(dir)?;
     let plan = Plan::load(&store.work().join("plan.json"))?;
     let mut stages: Vec<StageWork> = Vec::new();
     let mut secs = vec![0.0; plan.units.len()];

@@ -152,8 +152,12 @@ impl Report {
                         let array = jobs.as_ref().and_then(|j| j.ids.get(k));
                         let id = array.map_or(format!("?_{t}"), |a| format!("{a}_{t}"));
                         let slurm = states.get(&id).cloned();
-                        let report =
-                            record::task_report(&record::task_report_path(&sdir, &s.kind, t));
+                        // The kind names a file: read back from DIR, it must stay a name.
+                        let report = crate::store::check_component("stage", &s.kind)
+                            .ok()
+                            .and_then(|()| {
+                                record::task_report(&record::task_report_path(&sdir, &s.kind, t))
+                            });
                         let outcome = if jobs.is_none() {
                             Outcome::Unknown
                         } else {
@@ -204,15 +208,22 @@ impl Report {
                 }
             })
             .collect();
+        // Neither file through a link, nor a FIFO that would block: see `read_store_file`.
         let marker = crate::exec::publish::marker_path(store, &plan)
             .ok()
-            .and_then(|m| std::fs::read(m).ok())
+            .and_then(|m| crate::store::read_store_file(&m).ok())
             .is_some_and(|m| {
-                std::fs::read(store.dir().join(crate::units::outputs::MARKER)).ok() == Some(m)
+                crate::store::read_store_file(&store.dir().join(crate::units::outputs::MARKER)).ok()
+                    == Some(m)
             });
         // This plan's marker is there: check every published file against the run's result.
         let damaged = if marker {
-            crate::exec::publish::damaged_outputs(store, &plan).unwrap_or_default()
+            match crate::exec::publish::damaged_outputs(store, &plan) {
+                Ok(d) => d,
+                // The run's list of what it published is damaged itself: nothing it names is
+                // read, and the set is not taken for whole.
+                Err(e) => vec![format!("the run's list of outputs ({e})")],
+            }
         } else {
             Vec::new()
         };

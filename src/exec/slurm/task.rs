@@ -35,6 +35,9 @@ fn threads() -> usize {
 /// Run task `task` (default `SLURM_ARRAY_TASK_ID`) of stage `stage` of submission `number`.
 pub fn run(dir: &Path, number: u32, stage: &str, task: Option<usize>) -> Result<()> {
     let store = Store::open(dir, false)?;
+    // The stage names the task's report file: a name, never a path.
+    crate::store::check_component("stage", stage)
+        .map_err(|_| Error::Usage(format!("slurm-task: --stage {stage:?} is not a stage")))?;
     let (sub, plan) = record::load(&store, number)?;
     let task = match task {
         Some(t) => t,
@@ -135,7 +138,8 @@ fn publish(store: &Store, plan: &Plan) -> Result<()> {
             Err(e) => return Err(e),
         }
     };
-    store.recover()?;
-    crate::exec::publish::publish_and_gc(store, plan, &crate::exec::publish::outputs_of(plan)?)?;
+    let ours = crate::exec::publish::outputs_of(plan)?;
+    store.recover(&ours)?;
+    crate::exec::publish::publish_and_gc(store, plan, &ours)?;
     lock.release()
 }

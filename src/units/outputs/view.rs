@@ -33,6 +33,13 @@ struct ViewJson<'a> {
     meshes: std::collections::BTreeMap<String, EventMeshes>,
 }
 
+/// What a campaign reads of a pair's view.json (written as [`ViewJson`]): the pair's colour range,
+/// from which the campaign's one scale for every pair is drawn.
+#[derive(Debug, Clone, Deserialize)]
+pub struct ViewRange {
+    pub distance_range: [f64; 2],
+}
+
 /// The terrain the viewer gets: every `stride`-th core point of the canonical order, collected
 /// while m3c2.laz is written (one pass over the results for both).
 pub struct TerrainSample {
