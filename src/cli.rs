@@ -593,7 +593,10 @@ mod tests {
             .unwrap();
         for kind in crate::synth::SceneKind::ALL {
             let name = kind.name();
-            let word = |t: &str| t.split(|c: char| !c.is_alphanumeric()).any(|w| w == name);
+            let word = |t: &str| {
+                t.split(|c: char| !(c.is_alphanumeric() || c == '-'))
+                    .any(|w| w == name)
+            };
             assert!(word(&scenes), "synth --help lacks {name}: {scenes}");
             assert!(word(synth_line), "README's synth line lacks {name}");
         }

@@ -965,7 +965,11 @@ fn campaign_summary_records_stable_areas_and_wall_time() {
         seconds <= wall && seconds >= 0.5 * wall,
         "seconds {seconds} for a run of {wall:.3} s"
     );
-    assert_eq!(summary["stable"]["source"], "auto", "{}", summary["stable"]);
+    assert_eq!(
+        summary["stable"]["source"], "automatic",
+        "{}",
+        summary["stable"]
+    );
     // With --stable: the file named.
     let areas = tmp.path().join("stable.geojson");
     std::fs::write(
@@ -982,7 +986,7 @@ fn campaign_summary_records_stable_areas_and_wall_time() {
         &["--stable", areas.to_str().unwrap()],
     ));
     let stable = &json(&out2.join("summary.json"))["stable"];
-    assert_eq!(stable["source"], "areas", "{stable}");
+    assert_eq!(stable["source"], "user", "{stable}");
     assert_eq!(
         stable["file"].as_str().unwrap(),
         areas.canonicalize().unwrap().to_str().unwrap()

@@ -390,11 +390,11 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<CampaignMeta> {
         // Where the pairs' stable ground came from: `--stable` (the file) or their distances.
         "stable": match &plan.stable_areas {
             Some(a) => json!({
-                "source": "areas",
+                "source": "user",
                 "file": a.file.path,
                 "polygons": a.areas.polygons.len(),
             }),
-            None => json!({ "source": "auto", "file": null }),
+            None => json!({ "source": "automatic", "file": null }),
         },
         "spacing": plan.spacing,
         "pairs": rows.iter().map(|r| json!({
