@@ -29,7 +29,38 @@ fn files(dir: &Path, out: &mut Vec<PathBuf>) {
     }
 }
 
+/// The commit this build is of (`git rev-parse`), so that `talus --version` tells two builds
+/// apart; "unknown" outside a git checkout (a source tarball). Rebuilt when HEAD moves.
+fn commit() -> String {
+    let git = |args: &[&str]| {
+        std::process::Command::new("git")
+            .args(args)
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .output()
+            .ok()
+            .filter(|o| o.status.success())
+            .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
+    };
+    if let Some(dir) = git(&["rev-parse", "--absolute-git-dir"]) {
+        let dir = Path::new(&dir);
+        println!("cargo:rerun-if-changed={}", dir.join("HEAD").display());
+        if let Some(head) = git(&["symbolic-ref", "-q", "HEAD"]) {
+            // The branch's ref (loose, or packed once git packs it); in a worktree, the common dir.
+            let common = git(&["rev-parse", "--git-common-dir"])
+                .map(|c| Path::new(env!("CARGO_MANIFEST_DIR")).join(c))
+                .unwrap_or_else(|| dir.to_path_buf());
+            println!("cargo:rerun-if-changed={}", common.join(&head).display());
+            println!(
+                "cargo:rerun-if-changed={}",
+                common.join("packed-refs").display()
+            );
+        }
+    }
+    git(&["rev-parse", "--short=12", "HEAD"]).unwrap_or_else(|| "unknown".to_string())
+}
+
 fn main() {
+    println!("cargo:rustc-env=TALUS_COMMIT={}", commit());
     let viewer = Path::new(env!("CARGO_MANIFEST_DIR")).join("viewer");
     let mut list = vec![viewer.join("index.html")];
     for sub in ["src", "vendor"] {

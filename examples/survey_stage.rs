@@ -34,6 +34,7 @@ struct Heights {
 impl Stage for SurveyHeights {
     const KIND: &'static str = "survey_heights";
     const SCOPE: Scope = Scope::Survey;
+    const VERSION: u32 = 1;
     const LINE: Line = Line {
         name: "survey heights",
         counts: "points",

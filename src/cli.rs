@@ -12,7 +12,7 @@ use crate::params::UserParams;
 #[derive(Parser)]
 #[command(
     name = "talus",
-    version,
+    version = concat!(env!("CARGO_PKG_VERSION"), " (commit ", env!("TALUS_COMMIT"), ")"),
     about = "Change events and their volumes between two terrain surveys (M3C2, out-of-core tiles)"
 )]
 struct Cli {

@@ -155,15 +155,6 @@ fn near(events: &[(V3, Value)], centre: V3, r: f64) -> (f64, Vec<Value>) {
     (v, mine)
 }
 
-fn run_ok(args: &[&str]) {
-    let o = common::run(args);
-    assert!(
-        o.status.success(),
-        "talus {args:?}: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-}
-
 fn summary(res: &Path) -> Value {
     serde_json::from_str(&std::fs::read_to_string(res.join("summary.json")).unwrap()).unwrap()
 }
@@ -176,7 +167,7 @@ fn face_run(
     extra: &[&str],
 ) -> (Value, std::path::PathBuf, Vec<V3>, Vec<V3>) {
     let s = dir.join(scene);
-    run_ok(&["synth", scene, "--out", s.to_str().unwrap()]);
+    common::run_ok(&["synth", scene, "--out", s.to_str().unwrap()]);
     let truth: Value =
         serde_json::from_str(&std::fs::read_to_string(s.join("truth.json")).unwrap()).unwrap();
     let res = dir.join(format!("res-{scene}"));
@@ -189,7 +180,7 @@ fn face_run(
     ];
     args.extend(extra.iter().map(|a| a.to_string()));
     let refs: Vec<&str> = args.iter().map(String::as_str).collect();
-    run_ok(&refs);
+    common::run_ok(&refs);
     (
         truth,
         res,

@@ -48,6 +48,7 @@ pub struct AlignMeta {
 impl Stage for AlignStage {
     const KIND: &'static str = "align";
     const SCOPE: Scope = Scope::Survey;
+    const VERSION: u32 = 1;
     const LINE: Line = Line {
         name: "alignment",
         counts: "core points sampled",

@@ -34,6 +34,7 @@ pub struct AlignedMeta {
 impl Stage for AlignedStage {
     const KIND: &'static str = "aligned";
     const SCOPE: Scope = Scope::Survey;
+    const VERSION: u32 = 1;
     const LINE: Line = Line {
         name: "alignment",
         counts: "core points sampled",

@@ -151,6 +151,7 @@ pub struct CampaignMeta {
 impl Stage for CampaignStage {
     const KIND: &'static str = "campaign";
     const SCOPE: Scope = Scope::Run;
+    const VERSION: u32 = 1;
     const LINE: Line = OutputsStage::LINE;
     type Meta = CampaignMeta;
 

@@ -36,6 +36,7 @@ pub struct ClearedMeta {
 impl Stage for ClearedStage {
     const KIND: &'static str = "cleared";
     const SCOPE: Scope = Scope::Survey;
+    const VERSION: u32 = 1;
     const LINE: Line = Line {
         name: "vegetation removed",
         counts: "points",

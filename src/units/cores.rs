@@ -34,6 +34,7 @@ pub struct UserCoresStage;
 impl Stage for UserCoresStage {
     const KIND: &'static str = "cores";
     const SCOPE: Scope = Scope::Run;
+    const VERSION: u32 = 1;
     const LINE: Line = LINE;
     type Meta = CoresMeta;
 
@@ -61,6 +62,7 @@ pub struct ThinnedStage;
 impl Stage for ThinnedStage {
     const KIND: &'static str = "thinned";
     const SCOPE: Scope = Scope::Survey;
+    const VERSION: u32 = 1;
     const LINE: Line = LINE;
     type Meta = CoresMeta;
 

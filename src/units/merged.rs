@@ -78,6 +78,7 @@ pub struct MergedMeta {
 impl Stage for MergedStage {
     const KIND: &'static str = "merged";
     const SCOPE: Scope = Scope::Pair;
+    const VERSION: u32 = 1;
     const LINE: Line = Line {
         name: "merging tiles",
         counts: "core points",

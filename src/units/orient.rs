@@ -107,6 +107,7 @@ pub struct OrientMeta {
 impl Stage for OrientStage {
     const KIND: &'static str = "orient";
     const SCOPE: Scope = Scope::Survey;
+    const VERSION: u32 = 1;
     const LINE: Line = Line {
         name: "orientation",
         counts: "points",

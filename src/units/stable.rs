@@ -63,6 +63,7 @@ pub struct StableMeta {
 impl Stage for StableStage {
     const KIND: &'static str = "stable";
     const SCOPE: Scope = Scope::Pair;
+    const VERSION: u32 = 1;
     const LINE: Line = Line {
         name: "stable ground",
         counts: "core points sampled",

@@ -74,6 +74,13 @@ pub trait Stage: Send + Sync + 'static {
     const KIND: &'static str;
     /// How many units it has.
     const SCOPE: Scope;
+    /// The version of what its units write (tantivy versions its index format so). It is part of
+    /// every unit's key, so a unit an older talus wrote is computed again, never reused beside
+    /// new ones, after a `--resume` or an appended survey; units after it in the pipeline follow
+    /// (their keys hold their dependencies'). Bump it whenever the stage's files or meta change
+    /// for the same inputs: `tests/stage_versions.rs` fails when a stage's output on a fixed
+    /// campaign changes and its version did not.
+    const VERSION: u32;
     /// The progress line (and summary.json stage) its units count on.
     const LINE: Line;
     /// What its units record (their record's meta, beside the executor's [`Timing`]). A field
@@ -117,6 +124,7 @@ pub trait Registered: Send + Sync {
     fn kind(&self) -> &'static str;
     fn scope(&self) -> Scope;
     fn line(&self) -> Line;
+    fn version(&self) -> u32;
     fn plan(&self, p: &mut Planner) -> Result<()>;
     fn run(&self, ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<serde_json::Value>;
     fn is_output(&self) -> Option<fn(&str) -> bool>;
@@ -138,6 +146,9 @@ impl<S: Stage> Registered for Entry<S> {
     }
     fn line(&self) -> Line {
         S::LINE
+    }
+    fn version(&self) -> u32 {
+        S::VERSION
     }
     fn plan(&self, p: &mut Planner) -> Result<()> {
         S::plan(p)
@@ -310,10 +321,15 @@ impl Planner<'_> {
     /// Add a unit (see [`Plan::push`]); the unit of `spec` if it is planned already (a survey
     /// tiled once serves every pair it is in).
     pub fn add(&mut self, spec: Spec, label: &str, key_parts: &[&str], deps: Vec<usize>) -> usize {
-        match self.find(&spec) {
-            Some(i) => i,
-            None => self.plan.push(spec, label, key_parts, deps),
+        if let Some(i) = self.find(&spec) {
+            return i;
         }
+        // The stage's version is part of the key ([`Stage::VERSION`]).
+        let version = registry().get(&spec.kind).map_or(0, |s| s.version());
+        let v = format!("{} v{version}", spec.kind);
+        let mut parts = vec![v.as_str()];
+        parts.extend_from_slice(key_parts);
+        self.plan.push(spec, label, &parts, deps)
     }
 
     /// The unit the pairs' core points come from: the user's core points, or a campaign's

@@ -75,6 +75,7 @@ pub struct TilingMeta {
 impl Stage for TilingStage {
     const KIND: &'static str = "tiling";
     const SCOPE: Scope = Scope::Survey;
+    const VERSION: u32 = 1;
     const LINE: Line = Line {
         name: "pass 1: tiling",
         counts: "points",

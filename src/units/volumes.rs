@@ -456,6 +456,7 @@ pub struct VolumesMeta {
 impl Stage for VolumesStage {
     const KIND: &'static str = "volumes";
     const SCOPE: Scope = Scope::Tile;
+    const VERSION: u32 = 1;
     const LINE: Line = Line {
         name: "volumes",
         counts: "events",

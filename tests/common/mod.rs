@@ -42,6 +42,16 @@ pub fn run(args: &[&str]) -> Output {
     talus().args(args).output().expect("talus runs")
 }
 
+/// `talus ARGS...`, which must succeed (else the test fails with its stderr).
+pub fn run_ok(args: &[&str]) {
+    let o = run(args);
+    assert!(
+        o.status.success(),
+        "talus {args:?}: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
 /// `talus compare BEFORE AFTER --out OUT EXTRA...`, whatever its outcome.
 pub fn run_compare(before: &Path, after: &Path, out: &Path, extra: &[&str]) -> Output {
     let mut args = vec![

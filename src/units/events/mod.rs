@@ -112,6 +112,7 @@ pub struct EventsMeta {
 impl Stage for EventsStage {
     const KIND: &'static str = "events";
     const SCOPE: Scope = Scope::Pair;
+    const VERSION: u32 = 1;
     const LINE: Line = Line {
         name: "events",
         counts: "events",

@@ -657,6 +657,7 @@ pub struct OutputsMeta {
 impl Stage for OutputsStage {
     const KIND: &'static str = "outputs";
     const SCOPE: Scope = Scope::Pair;
+    const VERSION: u32 = 1;
     const LINE: Line = Line {
         name: "outputs",
         counts: "files",
