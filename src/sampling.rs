@@ -68,7 +68,18 @@ pub fn measure_keeping(
     classes: Option<&Classes>,
     keep: &mut dyn FnMut(&[Point3]),
 ) -> Result<Measured> {
-    let mut reader = io::open_with(path, classes)?;
+    measure_opened(path, &|| io::open_with(path, classes), keep)
+}
+
+/// [`measure_keeping`] of the cloud `open` delivers, from its start each time it is called (a
+/// file's reader, or points already in memory: the Python bindings measure numpy arrays so, and
+/// get the spacing a file of the same points gives); `path` names the cloud in errors.
+pub fn measure_opened<'a>(
+    path: &Path,
+    open: &dyn Fn() -> Result<Box<dyn io::PointReader + 'a>>,
+    keep: &mut dyn FnMut(&[Point3]),
+) -> Result<Measured> {
+    let mut reader = open()?;
     let info = reader.info().clone();
     let no_spacing = || {
         Error::input(
@@ -117,8 +128,7 @@ pub fn measure_keeping(
     let mut counting = Some((&mut whole, keep));
     for _ in 0..12 {
         let pts = window(
-            path,
-            classes,
+            open,
             cx,
             cy,
             half,
@@ -219,16 +229,15 @@ type Whole<'a, 'k> = (
 /// The points within the XY window, or None when more than `cap` fall in it; every point of
 /// the file counted into `whole`'s grid and handed to its keeper when given (then the whole file
 /// is read, and its class counts recorded there).
-fn window(
-    path: &Path,
-    classes: Option<&Classes>,
+fn window<'a>(
+    open: &dyn Fn() -> Result<Box<dyn io::PointReader + 'a>>,
     cx: f64,
     cy: f64,
     half: f64,
     cap: usize,
     mut whole: Option<Whole<'_, '_>>,
 ) -> Result<Option<Vec<Point3>>> {
-    let mut reader = io::open_with(path, classes)?;
+    let mut reader = open()?;
     let mut buf = Vec::new();
     let mut out = Vec::new();
     let mut over = false;
