@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Every test of talus, on a fresh machine: installs what the tests need (a Python venv with laspy
-# for the independent-reader checks, Debian chromium and the viewer's npm packages for the
-# browser tests, Debian's Slurm and munge for the cluster test), then runs the Rust tests of the
-# workspace, the viewer's browser tests and the Slurm executor against a real one-node Slurm.
+# for the independent-reader checks, the Python package's wheel in a fresh venv with py4dgeo,
+# Debian chromium and the viewer's npm packages for the browser tests, Debian's Slurm and munge
+# for the cluster test), then runs the Rust tests of the workspace, the Python package's tests,
+# the viewer's browser tests and the Slurm executor against a real one-node Slurm.
 # This is the test command README.md gives; .ci/run calls it.
 set -euo pipefail
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -17,6 +18,12 @@ fi
 export TALUS_PYTHON="$repo/tests/py/.venv/bin/python"
 
 cargo test --workspace --no-fail-fast
+
+# The Python package (python/, README.md "Python"): its wheel built and installed into a fresh
+# venv with numpy, pandas, laspy and py4dgeo from PyPI; its numbers checked against the talus
+# binary `cargo test` built and against py4dgeo. About 6 min on a fresh machine: the wheel's cold
+# release build 3.5, the venv 1.5 (downloads), the tests 0.5.
+bash python/tests/run.sh
 
 # Browser tests of the web viewer (installs chromium and npm packages when missing).
 bash viewer/tests/run.sh

@@ -36,6 +36,18 @@ pub fn uninstall() {
     }
 }
 
+/// Ask for an interruption, as SIGINT does (for a host that catches the signal itself: the
+/// Python bindings, whose interpreter owns SIGINT).
+pub fn request() {
+    REQUESTED.store(true, Ordering::SeqCst);
+}
+
+/// Forget an interruption once the run it stopped has returned, so that the next run in this
+/// process starts (the Python bindings; the command line exits instead).
+pub fn reset() {
+    REQUESTED.store(false, Ordering::SeqCst);
+}
+
 /// Has an interruption been asked for?
 pub fn requested() -> bool {
     REQUESTED.load(Ordering::Relaxed)

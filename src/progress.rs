@@ -24,7 +24,7 @@ impl Stage {
     /// Start a stage expected to handle about `total` items (`unit`, e.g. "points"); `None` when
     /// the total is unknown (a spinner on a terminal).
     pub fn start(name: &str, total: Option<u64>, unit: &'static str) -> Stage {
-        let bar = std::io::stderr().is_terminal().then(|| {
+        let bar = (std::io::stderr().is_terminal() && !has_sink()).then(|| {
             let target = ProgressDrawTarget::stderr();
             let bar = match total {
                 Some(n) => {
@@ -105,14 +105,14 @@ impl Stage {
         } else {
             format!(", {note}")
         };
-        eprintln!(
+        line(&format!(
             "talus: {}: {} {} in {:.2} s{}",
             self.name,
             self.count(),
             self.unit,
             secs,
             note
-        );
+        ));
         secs
     }
 }
@@ -125,6 +125,29 @@ impl Drop for Stage {
                 b.abandon();
             }
         }
+    }
+}
+
+/// Where the stages' lines go instead of stderr, when set ([`set_sink`]).
+type Sink = Box<dyn Fn(&str) + Send + Sync>;
+static SINK: std::sync::RwLock<Option<Sink>> = std::sync::RwLock::new(None);
+
+/// Send the stages' lines to `sink` instead of stderr, and draw no bars (None: stderr again).
+/// For a host with a console of its own: the Python bindings hand them to `sys.stderr`, which a
+/// notebook shows (the process's stderr it does not).
+pub fn set_sink(sink: Option<Sink>) {
+    *SINK.write().unwrap_or_else(|e| e.into_inner()) = sink;
+}
+
+fn has_sink() -> bool {
+    SINK.read().map(|s| s.is_some()).unwrap_or(false)
+}
+
+/// Print a stage's line: to the sink when one is set, else on stderr.
+fn line(text: &str) {
+    match SINK.read().as_deref() {
+        Ok(Some(sink)) => sink(text),
+        _ => eprintln!("{text}"),
     }
 }
 

@@ -68,7 +68,20 @@ pub fn measure_keeping(
     classes: Option<&Classes>,
     keep: &mut dyn FnMut(&[Point3]),
 ) -> Result<Measured> {
-    measure_in(path, classes, keep)?.map_err(|n| {
+    measure_opened(path, classes, &|| io::open_with(path, classes), keep)
+}
+
+/// [`measure_keeping`] of the cloud `open` delivers, from its start each time it is called (a
+/// file's reader, or points already in memory: the Python bindings measure numpy arrays so, and
+/// get the spacing a file of the same points gives); `path` names the cloud in errors, `classes`
+/// what `open` keeps of it.
+pub fn measure_opened<'a>(
+    path: &Path,
+    classes: Option<&Classes>,
+    open: &dyn Fn() -> Result<Box<dyn io::PointReader + 'a>>,
+    keep: &mut dyn FnMut(&[Point3]),
+) -> Result<Measured> {
+    measure_in(classes, open, keep)?.map_err(|n| {
         Error::input(
             path,
             format!("cannot measure a point spacing: {}", n.problem),
@@ -93,15 +106,15 @@ pub fn measure_or_why(
     path: &Path,
     classes: Option<&Classes>,
 ) -> Result<std::result::Result<Measured, NoSpacing>> {
-    measure_in(path, classes, &mut |_| {})
+    measure_in(classes, &|| io::open_with(path, classes), &mut |_| {})
 }
 
-fn measure_in(
-    path: &Path,
+fn measure_in<'a>(
     classes: Option<&Classes>,
+    open: &dyn Fn() -> Result<Box<dyn io::PointReader + 'a>>,
     keep: &mut dyn FnMut(&[Point3]),
 ) -> Result<std::result::Result<Measured, NoSpacing>> {
-    let mut reader = io::open_with(path, classes)?;
+    let mut reader = open()?;
     let info = reader.info().clone();
     if info.point_count <= WHOLE {
         let mut all = Vec::with_capacity(info.point_count as usize);
@@ -158,8 +171,7 @@ fn measure_in(
     let mut counting = Some((&mut whole, keep));
     for _ in 0..12 {
         let pts = window(
-            path,
-            classes,
+            open,
             cx,
             cy,
             half,
@@ -342,16 +354,15 @@ type Whole<'a, 'k> = (
 /// The points within the XY window, or None when more than `cap` fall in it; every point of
 /// the file counted into `whole`'s grid and handed to its keeper when given (then the whole file
 /// is read, and its class counts recorded there).
-fn window(
-    path: &Path,
-    classes: Option<&Classes>,
+fn window<'a>(
+    open: &dyn Fn() -> Result<Box<dyn io::PointReader + 'a>>,
     cx: f64,
     cy: f64,
     half: f64,
     cap: usize,
     mut whole: Option<Whole<'_, '_>>,
 ) -> Result<Option<Vec<Point3>>> {
-    let mut reader = io::open_with(path, classes)?;
+    let mut reader = open()?;
     let mut buf = Vec::new();
     let mut out = Vec::new();
     let mut over = false;
