@@ -86,9 +86,9 @@ echo "job arrays submitted (stage, job id, tasks):"
 sed 's/^/  /' "$work/slurm.jobs"
 sed 's/^/  /' "$work/slurm.err"
 [[ $rc == 0 ]] || fail "the Slurm run exited $rc"
-# One array per registered stage that has units here (tiling, align, aligned, thinned, m3c2,
-# stable, events, points, volumes, outputs, campaign) and the publishing job.
-[[ "$(wc -l <"$work/slurm.jobs")" == 12 ]] || fail "expected 12 arrays (11 stages and the publishing job)"
+# One array per registered stage that has units here (tiling, align, aligned, orient, thinned,
+# m3c2, stable, events, points, volumes, outputs, campaign) and the publishing job.
+[[ "$(wc -l <"$work/slurm.jobs")" == 13 ]] || fail "expected 13 arrays (12 stages and the publishing job)"
 echo "Slurm run: $((SECONDS - t0)) s"
 same_as_local slurm
 
