@@ -87,7 +87,7 @@ impl Stage for AlignStage {
 
     fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<AlignMeta> {
         let s = ctx.survey(unit)?;
-        let (onto_first, mut sampled) = fit_onto(ctx, 0, s, false)?;
+        let (onto_first, mut sampled) = fit_onto(ctx, 0, s)?;
         gross(ctx, 0, s, &onto_first)?;
         // Through the predecessor unless the direct fit is known to be too small to matter: the
         // route is then the identity (`events::chain`), and a survey that needs no alignment
@@ -95,7 +95,7 @@ impl Stage for AlignStage {
         let nothing = onto_first.determined && !onto_first.applied;
         let onto_previous = match predecessor(&later_surveys(ctx.plan), s) {
             Some(prev) if !nothing => {
-                let (a, n) = fit_onto(ctx, prev, s, true)?;
+                let (a, n) = fit_onto(ctx, prev, s)?;
                 sampled += n;
                 gross(ctx, prev, s, &a)?;
                 Some(a)
@@ -120,17 +120,11 @@ impl Stage for AlignStage {
 /// The fit of survey `s` onto survey `onto`, and how many points it computed. With the user's
 /// stable areas, on every point inside them; where their ground leaves directions free (flat
 /// areas see no horizontal shift, no turn about the vertical), those are fitted on the rest of
-/// the surveys' stable ground ([`crate::events::align::complete`]). Onto a predecessor that is
-/// itself misregistered (`link`), the plausible offset is that of two misregistrations
-/// ([`Limits::between`]).
-fn fit_onto(ctx: &Ctx, onto: usize, s: usize, link: bool) -> Result<(Alignment, usize)> {
+/// the surveys' stable ground ([`crate::events::align::complete`]).
+fn fit_onto(ctx: &Ctx, onto: usize, s: usize) -> Result<(Alignment, usize)> {
     let plan = ctx.plan;
     let spacing = plan.params.core_spacing.value;
-    let limits = if link {
-        plan.params.align_limits().between()
-    } else {
-        plan.params.align_limits()
-    };
+    let limits = limits_onto(plan.params.align_limits(), onto);
     let windows = Region::Windows(windows(plan));
     let Some(areas) = &plan.stable_areas else {
         let (samples, n) = sample_of(ctx, onto, s, &windows, Picks::Cores(1))?;
@@ -168,6 +162,17 @@ fn points_one_in(plan: &crate::plan::Plan, onto: usize, areas: &Areas) -> u64 {
     )
 }
 
+/// How far a survey may be off survey `onto` when each is within `limits` of the first: onto
+/// the first itself, one misregistration; onto a predecessor (itself aligned), two
+/// ([`Limits::between`]).
+fn limits_onto(limits: Limits, onto: usize) -> Limits {
+    if onto == 0 {
+        limits
+    } else {
+        limits.between()
+    }
+}
+
 /// A gross misregistration of survey `s` onto survey `onto` stops the run (exit 2), naming the
 /// survey, how far off it is and what to do: a comparison of surveys metres apart measures
 /// their offset, not the terrain's change.
@@ -177,12 +182,7 @@ fn gross(ctx: &Ctx, onto: usize, s: usize, a: &Alignment) -> Result<()> {
     }
     let (later, earlier) = (&ctx.plan.surveys[s], &ctx.plan.surveys[onto]);
     let t = a.translation;
-    // Onto the first survey, one misregistration; onto an aligned predecessor, two.
-    let limits = if onto == 0 {
-        Limits::PLAUSIBLE
-    } else {
-        Limits::PLAUSIBLE.between()
-    };
+    let limits = limits_onto(Limits::PLAUSIBLE, onto);
     Err(crate::error::Error::input(
         &later.arg,
         format!(

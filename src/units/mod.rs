@@ -260,6 +260,16 @@ impl TilePoints {
     pub fn point(&self, i: usize) -> Point3 {
         [self.x[i], self.y[i], self.z[i]]
     }
+
+    /// The columns as M3C2's tile kernel reads an epoch.
+    pub fn epoch(&self) -> crate::m3c2::tile::EpochPoints<'_> {
+        crate::m3c2::tile::EpochPoints {
+            x: &self.x,
+            y: &self.y,
+            z: &self.z,
+            owned: &self.owned,
+        }
+    }
 }
 
 /// Read tile `id` of the tiling unit `tiling`.

@@ -9,7 +9,7 @@ use super::{read_tile_near, Ctx, TilePoints};
 use crate::error::Result;
 use crate::events::stable::Sample;
 use crate::geom::Point3;
-use crate::m3c2::tile::{compute, EpochPoints};
+use crate::m3c2::tile::compute;
 use crate::m3c2::{Extent, Reach};
 use crate::spatial::areas::Areas;
 
@@ -162,8 +162,8 @@ pub fn sample(
         }
         let (before, after) = (within(&before, &near), within(&after, &near));
         let results = compute(
-            &epoch(&before),
-            &epoch(&after),
+            &before.epoch(),
+            &after.epoch(),
             plan.layout.anchor,
             plan.layout.core_spacing,
             Some(&cores),
@@ -194,15 +194,6 @@ pub fn sample(
     // Key order: the same whatever order the tiles came in.
     keyed.sort_by_key(|(k, _)| *k);
     Ok((keyed.into_iter().map(|(_, s)| s).collect(), computed))
-}
-
-fn epoch(t: &TilePoints) -> EpochPoints<'_> {
-    EpochPoints {
-        x: &t.x,
-        y: &t.y,
-        z: &t.z,
-        owned: &t.owned,
-    }
 }
 
 /// The points of `t` inside any of `boxes` ([x0, y0, x1, y1]), in their order.

@@ -93,6 +93,12 @@ impl Limits {
         turn_deg: 20.0,
     };
 
+    /// Whether a motion moving no point more than `largest` metres and turning `turn` degrees
+    /// is within these.
+    pub fn admit(&self, largest: f64, turn: f64) -> bool {
+        largest <= self.shift_m && turn <= self.turn_deg
+    }
+
     /// The limits between two surveys each within these of a third (a campaign's survey and its
     /// predecessor, both off the first): their offsets add up to twice.
     pub fn between(&self) -> Limits {
@@ -505,17 +511,11 @@ pub fn fit(
         )
     };
     let confirmed = holdout::confirmed_share(samples, &keep, pool, &o, scale, vertical_only);
-    // The largest displacement of a point of the stable ground's footprint: |t + ω × (c − o)|.
     let (w, t) = (
         Vector3::new(p[0], p[1], p[2]) / scale,
         Vector3::new(p[3], p[4], p[5]),
     );
-    let largest = pool
-        .iter()
-        .map(|&i| (t + w.cross(&(Vector3::from(samples[i].xyz) - o))).norm())
-        .fold(t.norm(), f64::max);
-    let turn = w.norm().to_degrees();
-    let tilt = w[0].hypot(w[1]).to_degrees();
+    let (largest, turn, tilt) = size(&w, &t, &o, pool.iter().map(|&i| samples[i].xyz));
     let (applied, determined, gross, reason) = decide(&Figures {
         stable: keep.len(),
         vertical: vertical_seen,
@@ -675,15 +675,10 @@ pub fn complete(
         }
     }
     a.constrained = (user.constrained + free.len()).min(6);
-    let w = Vector3::from(a.rotation);
-    let t = Vector3::from(a.translation);
-    a.largest_shift_m = inside
-        .iter()
-        .chain(rest)
-        .map(|s| (t + w.cross(&(Vector3::from(s.xyz) - o))).norm())
-        .fold(t.norm(), f64::max);
-    let (turn, tilt) = (w.norm().to_degrees(), w[0].hypot(w[1]).to_degrees());
-    let plausible = a.largest_shift_m <= limits.shift_m && turn <= limits.turn_deg;
+    let (w, t) = (Vector3::from(a.rotation), Vector3::from(a.translation));
+    let (largest, turn, tilt) = size(&w, &t, &o, inside.iter().chain(rest).map(|s| s.xyz));
+    a.largest_shift_m = largest;
+    let plausible = limits.admit(largest, turn);
     a.applied = (user.applied || other.applied) && plausible && tilt <= limits.turn_deg;
     a.determined = user.determined && other.determined && plausible;
     a.reason = format!(
@@ -704,6 +699,25 @@ pub fn complete(
         other.reason
     );
     a
+}
+
+/// The size of the motion ω, t about `o` over the points `at`: the largest displacement of any
+/// of them, |t + ω × (c − o)| (at least |t|), its turn and its tilt (the turn about horizontal
+/// axes), in degrees.
+fn size(
+    w: &Vector3<f64>,
+    t: &Vector3<f64>,
+    o: &Vector3<f64>,
+    at: impl Iterator<Item = Point3>,
+) -> (f64, f64, f64) {
+    let largest = at
+        .map(|c| (t + w.cross(&(Vector3::from(c) - o))).norm())
+        .fold(t.norm(), f64::max);
+    (
+        largest,
+        w.norm().to_degrees(),
+        w[0].hypot(w[1]).to_degrees(),
+    )
 }
 
 /// What [`fit`] measured, for [`decide`].
@@ -833,7 +847,7 @@ fn decide(f: &Figures) -> (bool, bool, bool, String) {
                 limits.turn_deg
             ),
         );
-    } else if largest > limits.shift_m || turn > limits.turn_deg {
+    } else if !limits.admit(largest, turn) {
         return (
             false,
             false,

@@ -18,7 +18,7 @@ use super::stage::{Line, Planner, Scope, Stage, Total};
 use super::{read_tile, Ctx, TilePoints};
 use crate::error::{Error, Result};
 use crate::io::Point3;
-use crate::m3c2::tile::{compute, distances_along, EpochPoints, KeyedResult};
+use crate::m3c2::tile::{compute, distances_along, KeyedResult};
 use crate::m3c2::{CoreResult, Extent, Reach};
 use crate::plan::Spec;
 use crate::spatial::Tubes;
@@ -156,20 +156,12 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<M3c2Meta> {
         Some(c) => Some(super::cores::read(ctx, c, tile)?),
         None => None,
     };
-    fn epoch(t: &TilePoints) -> EpochPoints<'_> {
-        EpochPoints {
-            x: &t.x,
-            y: &t.y,
-            z: &t.z,
-            owned: &t.owned,
-        }
-    }
     let extent = tile_extent(plan, pair, tile)?;
     let params = plan.params.m3c2();
     let field = super::orient::read_near(ctx, pair, extent.held, plan.layout.anchor)?;
     let mut results = compute(
-        &epoch(&before),
-        &epoch(&after),
+        &before.epoch(),
+        &after.epoch(),
         plan.layout.anchor,
         plan.layout.core_spacing,
         user_cores.as_deref(),
