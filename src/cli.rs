@@ -197,6 +197,11 @@ struct ExecArgs {
     /// (slurm) Wait for the last job and exit with the run's status.
     #[arg(long)]
     wait: bool,
+    /// Keep the intermediate units (tiles, M3C2 results) after the run: a later run with new
+    /// event or volume parameters then starts from them. By default their files are released
+    /// once the outputs are published, and computed again when a later run needs them.
+    #[arg(long)]
+    keep_units: bool,
     /// (slurm) Arguments for every sbatch, e.g. "-p long -A geo --time=1:00:00".
     #[arg(long, allow_hyphen_values = true, value_name = "ARGS")]
     slurm_args: Option<String>,
@@ -425,6 +430,7 @@ fn run(cli: Cli) -> crate::Result<()> {
                 after_mesh: a.after_mesh,
                 tile_size: a.tile_size,
                 m3c2_only: a.m3c2_only,
+                keep_units: a.exec.keep_units,
                 executor: a.exec.executor()?,
             };
             if let Some(summary) = crate::commands::compare::compare(&opts)? {
@@ -442,6 +448,7 @@ fn run(cli: Cli) -> crate::Result<()> {
                 resume: a.resume,
                 force: a.force,
                 tile_size: a.tile_size,
+                keep_units: a.exec.keep_units,
                 executor: a.exec.executor()?,
             };
             let Some(done) = crate::commands::campaign::campaign(&opts)? else {

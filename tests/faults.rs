@@ -20,7 +20,8 @@ use std::process::Command;
 use common::run_compare;
 use pipeline_common::{assert_same_outputs, cliff, compare, stage_line, unit_dir, unit_times};
 
-const ARGS: &[&str] = &["--tile-size", "5", "--core-spacing", "0.25"];
+/// `--keep-units`: the tests damage units' files after a finished run.
+const ARGS: &[&str] = &["--tile-size", "5", "--core-spacing", "0.25", "--keep-units"];
 
 /// Flip one byte of a file (the last: inside the compressed payload, so only a checksum can
 /// tell).

@@ -59,7 +59,8 @@ impl Case {
             &self.outside().join("before.las"),
             &self.outside().join("after.las"),
             &self.d(),
-            extra,
+            // The units' files stay after a run, for the cases to plant links among them.
+            &[extra, &["--keep-units"]].concat(),
         )
     }
     fn status(&self) -> std::process::Output {

@@ -86,17 +86,19 @@ fn sigkill_at_random_moments_then_resume_gives_the_uninterrupted_result() {
 
 #[test]
 fn a_changed_parameter_or_input_redoes_exactly_what_depends_on_it() {
+    // The units' files kept (`--keep-units`): a later run with new parameters starts from them.
+    const KEEP: &[&str] = &["--tile-size", "5", "--core-spacing", "0.25", "--keep-units"];
     let tmp = common::tempdir();
     // Uncompressed LAS: another sampling of the scene has exactly the same size.
     let (before, after) = cliff_seeded(&tmp.path().join("scene"), 60_000, 1);
     // `--resume` where nothing ran yet is a fresh run.
     let dir = tmp.path().join("run");
     assert_eq!(
-        compare_passes(&before, &after, &dir, &[ARGS, &["--resume"]].concat()),
+        compare_passes(&before, &after, &dir, &[KEEP, &["--resume"]].concat()),
         [(120_000, false), (120_000, false)]
     );
     // A DIR holding a run is not overwritten without --resume or --force.
-    let out = run_compare(&before, &after, &dir, ARGS);
+    let out = run_compare(&before, &after, &dir, KEEP);
     assert_eq!(out.status.code(), Some(2));
 
     // Events parameters (threshold, eps) reuse the tiles and every M3C2 unit, and give what a
@@ -108,18 +110,18 @@ fn a_changed_parameter_or_input_redoes_exactly_what_depends_on_it() {
             &before,
             &after,
             &dir,
-            &[ARGS, &events_params, &["--resume"]].concat()
+            &[KEEP, &events_params, &["--resume"]].concat()
         ),
         [(0, true), (0, true)]
     );
     assert_eq!(unit_times(&dir, "m3c2"), times);
     let fresh = tmp.path().join("fresh");
-    compare(&before, &after, &fresh, &[ARGS, &events_params].concat());
+    compare(&before, &after, &fresh, &[KEEP, &events_params].concat());
     assert_same_outputs(&fresh, &dir);
 
     // The registration error enters after M3C2 (LoD95, threshold, volume uncertainty): every
     // unit is reused and the result is a fresh run's.
-    let reg_params = [ARGS, &events_params, &["--reg-error", "0.01"]].concat();
+    let reg_params = [KEEP, &events_params, &["--reg-error", "0.01"]].concat();
     assert_eq!(
         compare_passes(
             &before,
@@ -180,6 +182,83 @@ fn a_changed_parameter_or_input_redoes_exactly_what_depends_on_it() {
     let fresh2 = tmp.path().join("fresh2");
     compare(&before, &after, &fresh2, &m3c2_params);
     assert_same_outputs(&fresh2, &dir);
+}
+
+/// By default a finished run releases its intermediate units' files (tiles, M3C2 results): DIR
+/// keeps its outputs and the units' records. A resume with nothing changed computes nothing; one
+/// with new events parameters computes again the units it needs (the M3C2 results, from tiles
+/// made again) and gives a fresh run's outputs, byte for byte.
+#[test]
+fn a_released_run_resumed_with_new_parameters_gives_a_fresh_runs_outputs() {
+    let tmp = common::tempdir();
+    let (before, after) = cliff(&tmp.path().join("scene"), 60_000);
+    let dir = tmp.path().join("run");
+    compare(&before, &after, &dir, ARGS);
+    let units = dir.join(".talus/units");
+    for kind in ["tiling", "orient", "m3c2"] {
+        for unit in std::fs::read_dir(units.join(kind)).unwrap() {
+            let unit = unit.unwrap().path();
+            let names: Vec<String> = std::fs::read_dir(&unit)
+                .unwrap()
+                .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .collect();
+            assert_eq!(names, ["record.json"], "{}", unit.display());
+            let record: serde_json::Value =
+                serde_json::from_slice(&std::fs::read(unit.join("record.json")).unwrap()).unwrap();
+            assert_eq!(record["released"], true, "{}", unit.display());
+        }
+    }
+    // Nothing changed: nothing computed, the same outputs.
+    let reference = tmp.path().join("reference");
+    compare(
+        &before,
+        &after,
+        &reference,
+        &[ARGS, &["--keep-units"]].concat(),
+    );
+    assert_eq!(
+        compare_passes(&before, &after, &dir, &[ARGS, &["--resume"]].concat()),
+        [(0, true), (0, true)]
+    );
+    assert_same_outputs(&reference, &dir);
+    // A changed parameter says which units it computes again and why, and so does `talus
+    // status` afterwards.
+    let o = run_compare(
+        &before,
+        &after,
+        &dir,
+        &[ARGS, &["--resume", "--threshold", "0.3"]].concat(),
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let said = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        said.contains("computing 1 events unit(s) again: a parameter it computes from changed")
+            && said.contains("→ 0.3)"),
+        "{said}"
+    );
+    let status = common::talus()
+        .args(["status", dir.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let shown = String::from_utf8_lossy(&status.stdout);
+    assert!(
+        shown.contains("computed again: 1 events unit(s): a parameter it computes from changed"),
+        "{shown}"
+    );
+    // New events parameters: tiles and M3C2 computed again, a fresh run's outputs.
+    let events_params = ["--threshold", "0.2", "--eps", "0.8"];
+    assert_eq!(
+        compare_passes(
+            &before,
+            &after,
+            &dir,
+            &[ARGS, &events_params, &["--resume"]].concat()
+        ),
+        [(120_000, false), (120_000, false)]
+    );
+    let fresh = tmp.path().join("fresh");
+    compare(&before, &after, &fresh, &[ARGS, &events_params].concat());
+    assert_same_outputs(&fresh, &dir);
 }
 
 /// A resumed run takes the spacing its store measured on the same file (`Store::cached_spacing`:

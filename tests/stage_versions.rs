@@ -200,7 +200,8 @@ fn a_stage_whose_output_changed_has_a_new_version() {
     let mut args: Vec<&str> = vec!["campaign"];
     args.extend(surveys.iter().map(String::as_str));
     let out = s(&camp);
-    args.extend(["--out", &out, "--vegetation", "remove"]);
+    // Every unit's files stay after the run, to be hashed.
+    args.extend(["--out", &out, "--vegetation", "remove", "--keep-units"]);
     common::run_ok(&args);
     let pair = t.join("pair");
     common::run_ok(&[
@@ -211,6 +212,7 @@ fn a_stage_whose_output_changed_has_a_new_version() {
         &s(&pair),
         "--core-points",
         &surveys[0],
+        "--keep-units",
     ]);
 
     let mut hashes = BTreeMap::new();

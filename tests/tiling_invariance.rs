@@ -83,7 +83,14 @@ fn tiled_runs_equal_the_whole_cloud_run() {
 fn tiling_from_the_decoded_copy_equals_decoding_again() {
     let tmp = common::tempdir();
     let (before, after) = cliff(&tmp.path().join("scene"), 120_000);
-    let base = ["--core-spacing", "0.25", "--tile-size", "10"];
+    // The tile files stay after the run (`--keep-units`), to be compared.
+    let base = [
+        "--core-spacing",
+        "0.25",
+        "--tile-size",
+        "10",
+        "--keep-units",
+    ];
     let kept = tmp.path().join("kept");
     compare(&before, &after, &kept, &base);
     let scratch: Vec<_> = std::fs::read_dir(kept.join(".talus/tmp"))

@@ -31,6 +31,8 @@ pub struct CampaignOptions {
     pub force: bool,
     /// Force the tile side (tests); None = plan from the memory budget.
     pub tile_size: Option<f64>,
+    /// Keep the intermediate units' files after the run (`--keep-units`).
+    pub keep_units: bool,
     /// Where the units run (SPEC.md §6).
     pub executor: crate::exec::Executor,
 }
@@ -194,6 +196,8 @@ fn plan(
         stable_areas: None,
         meshes: None,
         m3c2_only: false,
+        keep_units: opts.keep_units,
+        recomputed: Vec::new(),
         units: Vec::new(),
     };
     plan.stable_areas = super::compare::stable_areas(store, user, &plan.surveys)?;

@@ -40,6 +40,8 @@ pub struct CompareOptions {
     /// Stop after M3C2: m3c2.laz (without smoothed values and event ids), summary.json and the
     /// viewer's terrain; no events, volumes or meshes.
     pub m3c2_only: bool,
+    /// Keep the intermediate units' files after the run (`--keep-units`).
+    pub keep_units: bool,
     /// Where the units run (SPEC.md §6).
     pub executor: crate::exec::Executor,
 }
@@ -249,6 +251,8 @@ fn plan(
         stable_areas: None,
         meshes,
         m3c2_only: opts.m3c2_only,
+        keep_units: opts.keep_units,
+        recomputed: Vec::new(),
         units: Vec::new(),
     };
     plan.stable_areas = stable_areas(store, user, &plan.surveys)?;
@@ -496,6 +500,25 @@ pub fn forget_if_input_error<T>(result: Result<T>, created: bool, out: &Path) ->
 /// no longer in the plan; on Slurm, submit the units not done (the final job publishes). Returns
 /// the path of the published marker in its unit, or None when the run was submitted to Slurm and
 /// not waited for (or only planned).
+/// Say which units of `plan` are computed again where DIR's previous run (its saved plan) had
+/// them under other keys, and why (`Plan::recomputed`): an upgraded talus, a changed parameter
+/// or input. Kept in the plan for `talus status`.
+fn explain_recomputed(store: &Store, plan: &mut Plan) {
+    let Ok(old) = Plan::load(&plan_path(store)) else {
+        return;
+    };
+    let todo: Vec<usize> = (0..plan.units.len())
+        .filter(|&i| store.done(&crate::units::unit_ref(plan, i)).is_none())
+        .collect();
+    plan.recomputed = plan.recomputed(&old, &todo);
+    for r in &plan.recomputed {
+        eprintln!(
+            "talus: computing {} {} unit(s) again: {}",
+            r.units, r.kind, r.reason
+        );
+    }
+}
+
 pub fn run_planned(
     store: &Store,
     force: bool,
@@ -510,7 +533,10 @@ pub fn run_planned(
     if !matches!(executor, crate::exec::Executor::Local) || force {
         crate::exec::slurm::check_idle(store)?;
     }
-    let plan = plan(store)?;
+    let mut plan = plan(store)?;
+    if !force {
+        explain_recomputed(store, &mut plan);
+    }
     plan.save(&plan_path(store))?;
     // Every unit gone from the store at once; their files deleted beside the run (a tile file's
     // unlink blocks for milliseconds), at the latest before publishing.

@@ -88,12 +88,14 @@ pub fn run_units(
     label: &str,
 ) -> Result<Report> {
     let n = plan.units.len();
+    let mut released = vec![false; n];
     let finished: Vec<bool> = (0..n)
         .map(|i| -> Result<bool> {
             let unit = unit_ref(plan, i);
             let Some(record) = store.done(&unit) else {
                 return Ok(false);
             };
+            released[i] = record.released;
             // A file edited after the unit's commit (a published output edited in place: it
             // is a hard link to the unit's file) is not reused: the unit is thrown away and
             // computed again, and the next publish puts its files back.
@@ -120,11 +122,32 @@ pub fn run_units(
             Ok(false)
         })
         .collect::<Result<Vec<bool>>>()?;
+    let mut finished = finished;
+    // A released unit (`Store::release`) is done, but a unit to be computed reads its files:
+    // computed again first (the same bytes), and so on down its released dependencies.
+    // Dependencies precede their dependents: one pass from the end sees every need.
+    let mut needed: Vec<bool> = match only {
+        None => (0..n).map(|i| !finished[i]).collect(),
+        Some(list) => (0..n).map(|i| !finished[i] && list.contains(&i)).collect(),
+    };
+    for i in (0..n).rev() {
+        if !needed[i] {
+            continue;
+        }
+        for &d in &plan.units[i].deps {
+            if !finished[d] {
+                needed[d] = true;
+            } else if released[d] {
+                finished[d] = false;
+                needed[d] = true;
+            }
+        }
+    }
+    let revive: Vec<bool> = (0..n).map(|i| needed[i] && released[i]).collect();
     // A unit found done counts as done only once every unit before it is (dependencies precede
     // their dependents): a unit reads records beyond its direct dependencies (the outputs' stage
     // times, the surveys' tilings), so one whose dependency is computed again waits for it, and
     // is then found done without being computed.
-    let mut finished = finished;
     for i in 0..n {
         if finished[i] && plan.units[i].deps.iter().any(|&d| !finished[d]) {
             finished[i] = false;
@@ -175,6 +198,7 @@ pub fn run_units(
                     watch: &watch,
                     pool: &pool,
                     computed: &computed,
+                    revive: &revive,
                 })
             });
         }
@@ -203,6 +227,9 @@ struct RunCtx<'a> {
     watch: &'a resident::Watch,
     pool: &'a crate::memory::Pool,
     computed: &'a std::sync::atomic::AtomicUsize,
+    /// Released units to be computed again (their files needed); any other released unit
+    /// reached is found done.
+    revive: &'a [bool],
 }
 
 /// One slot: take ready units until every unit is done or the run failed.
@@ -210,13 +237,11 @@ fn slot(cx: &RunCtx) {
     let RunCtx {
         store,
         plan,
-        label,
         shared,
         wake,
         stages,
-        watch,
-        pool,
         computed,
+        ..
     } = *cx;
     let lock = || shared.lock().unwrap_or_else(|e| e.into_inner());
     loop {
@@ -259,7 +284,7 @@ fn slot(cx: &RunCtx) {
                 }
             }
         };
-        let outcome = claim_and_run(store, plan, picked, label, stages, watch, pool);
+        let outcome = claim_and_run(cx, picked);
         let mut sh = lock();
         // A dependency thrown away while this unit ran (another unit found it damaged) took its
         // files from under it: whatever that made it fail with, run it again once the dependency
@@ -352,24 +377,31 @@ enum Ran {
 }
 
 /// Claim unit `i`, run it, commit it (or find another process did).
-fn claim_and_run(
-    store: &Store,
-    plan: &Plan,
-    i: usize,
-    label: &str,
-    stages: &Stages,
-    watch: &resident::Watch,
-    pool: &crate::memory::Pool,
-) -> Result<Ran> {
+fn claim_and_run(cx: &RunCtx, i: usize) -> Result<Ran> {
+    let RunCtx {
+        store,
+        plan,
+        label,
+        stages,
+        watch,
+        pool,
+        ..
+    } = *cx;
+    let revive = cx.revive[i];
     let unit = unit_ref(plan, i);
     let claim: Option<Claim> = store.claim(&plan.run, &unit, label)?;
     let Some(claim) = claim else {
         return Ok(Ran::Elsewhere);
     };
-    // Another process may have finished it between our look and our claim.
-    if store.done(&unit).is_some() {
-        drop(claim);
-        return Ok(Ran::Found);
+    // Another process may have finished it between our look and our claim. A released unit to
+    // be revived is computed again: its record goes (its files already have).
+    match store.done(&unit) {
+        Some(r) if !(r.released && revive) => {
+            drop(claim);
+            return Ok(Ran::Found);
+        }
+        Some(_) => store.invalidate(&unit)?,
+        None => {}
     }
     let started = Instant::now();
     stages.unit_started(plan, i);

@@ -18,7 +18,42 @@ pub fn publish_and_gc(store: &Store, plan: &Plan, ours: &dyn Fn(&str) -> bool) -
     let marker = publish(store, plan, ours)?;
     let keep = (0..plan.units.len()).map(|i| unit_ref(plan, i)).collect();
     store.gc(&keep)?;
+    if !plan.keep_units {
+        release(store, plan)?;
+    }
     Ok(marker)
+}
+
+/// Release the files of the plan's intermediate units ([`crate::units::stage::Stage::INTERMEDIATE`]):
+/// what DIR keeps after a run is its outputs and the units' records, with the small units the
+/// outputs are made from; the tiles and per-tile M3C2 results are computed again by a later run
+/// that needs them. A campaign keeps the units of its first and last surveys (their tiles, the
+/// last one's orientation field): the survey appended next is aligned onto the first and
+/// compared with the last. Says how much it freed.
+fn release(store: &Store, plan: &Plan) -> Result<()> {
+    let stages = registry();
+    use crate::units::stage::Stage;
+    let campaign = plan
+        .of_kind(crate::units::campaign::CampaignStage::KIND)
+        .next()
+        .is_some();
+    let ends = [Some(0), plan.surveys.len().checked_sub(1)];
+    let mut freed = 0u64;
+    for (i, u) in plan.units.iter().enumerate() {
+        let stage = stages.get(u.kind())?;
+        let next_needs = campaign && u.spec.pair.is_none() && ends.contains(&u.spec.survey);
+        if stage.intermediate() && !next_needs {
+            freed += store.release(&unit_ref(plan, i), stage.kept())?;
+        }
+    }
+    if freed > 0 {
+        eprintln!(
+            "talus: released {:.1} MiB of intermediate units (tiles, M3C2 results: a later run \
+             computes again what it needs; --keep-units keeps them)",
+            freed as f64 / f64::from(1 << 20)
+        );
+    }
+    Ok(())
 }
 
 /// The plan's final unit (whose record lists what to publish).

@@ -194,6 +194,11 @@ pub struct Unit {
     /// Indices (into `Plan::units`) of the units whose results this one reads.
     pub deps: Vec<usize>,
     pub spec: Spec,
+    /// Its key's own parts ([`Plan::push`]'s `key_parts`: the stage's version first, then the
+    /// parameters and inputs it computes from), each as itself when short, else as a hash: what
+    /// a later plan compares to say why a unit is computed again ([`Plan::recomputed`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub parts: Vec<String>,
 }
 
 impl Unit {
@@ -222,7 +227,56 @@ pub struct Plan {
     pub meshes: Option<[InputFile; 2]>,
     /// Stop after M3C2: no events, volumes or meshes.
     pub m3c2_only: bool,
+    /// Keep the intermediate units' files after the run (`--keep-units`); by default they are
+    /// released once the outputs are published (`exec::publish`).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub keep_units: bool,
+    /// Units this run computes again that DIR's previous run had under other keys, and why
+    /// (`talus status` shows them).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub recomputed: Vec<Recomputed>,
     pub units: Vec<Unit>,
+}
+
+/// Why unit `u` is computed again where `o` (a previous plan's unit of the same spec) had
+/// another key (see [`Plan::recomputed`]).
+fn reason(o: &Unit, u: &Unit) -> String {
+    if o.parts.is_empty() {
+        "its key's parts were not recorded (an older talus made it)".to_string()
+    } else if o.parts.first() != u.parts.first() {
+        format!(
+            "the stage's version changed ({} → {})",
+            o.parts.first().map_or("?", String::as_str),
+            u.parts.first().map_or("?", String::as_str)
+        )
+    } else if let Some(k) = (0..u.parts.len()).find(|&k| o.parts.get(k) != u.parts.get(k)) {
+        let (a, b) = (o.parts.get(k).map_or("", String::as_str), &u.parts[k]);
+        if a.starts_with('#') || b.starts_with('#') {
+            format!("an input it computes from changed (key part {k})")
+        } else {
+            // Parameters are `|`-separated in a part: the first that differs.
+            let (a, b) = a
+                .split('|')
+                .zip(b.split('|'))
+                .find(|(x, y)| x != y)
+                .unwrap_or((a, b));
+            format!("a parameter it computes from changed ({a} → {b})")
+        }
+    } else {
+        "a unit it reads is computed again".to_string()
+    }
+}
+
+/// Key parts up to this length are kept as they are in the plan ([`Unit::parts`]): a parameter's
+/// value, a stage's version; longer ones (a survey's description) as a hash.
+const PART_SHOWN: usize = 512;
+
+/// Units of one kind computed again for one reason ([`Plan::recomputed`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Recomputed {
+    pub kind: String,
+    pub units: usize,
+    pub reason: String,
 }
 
 /// A unit key: FNV-1a 64 over the parts, each length-prefixed (so ("ab","c") ≠ ("a","bc")).
@@ -271,13 +325,54 @@ impl Plan {
         parts.extend_from_slice(key_parts);
         parts.extend(dep_keys);
         let key = key_of(&parts);
+        let parts = key_parts
+            .iter()
+            .map(|p| {
+                if p.len() <= PART_SHOWN {
+                    (*p).to_string()
+                } else {
+                    format!("#{}", key_of(&[p]))
+                }
+            })
+            .collect();
         self.units.push(Unit {
             name: format!("{}-{key}", slug(label)),
             key,
             deps,
             spec,
+            parts,
         });
         self.units.len() - 1
+    }
+
+    /// Why the units `todo` (indices of units to compute) are computed again where `old` (the
+    /// plan of DIR's previous run) had a unit of the same spec under another key: by kind and
+    /// reason, how many — the stage's version changed, a parameter or input it computes from
+    /// changed (shown when short), or a unit it reads is computed again.
+    pub fn recomputed(&self, old: &Plan, todo: &[usize]) -> Vec<Recomputed> {
+        let mut out: Vec<Recomputed> = Vec::new();
+        for &i in todo {
+            let u = &self.units[i];
+            let Some(o) = old.find(&u.spec).map(|j| &old.units[j]) else {
+                continue;
+            };
+            if o.key == u.key {
+                continue;
+            }
+            let why = reason(o, u);
+            match out
+                .iter_mut()
+                .find(|r| r.kind == u.kind() && r.reason == why)
+            {
+                Some(r) => r.units += 1,
+                None => out.push(Recomputed {
+                    kind: u.kind().to_string(),
+                    units: 1,
+                    reason: why,
+                }),
+            }
+        }
+        out
     }
 
     /// The index of the unit of `spec`.
@@ -370,5 +465,44 @@ impl Plan {
             }
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn unit(parts: &[&str]) -> Unit {
+        Unit {
+            name: String::new(),
+            key: key_of(parts),
+            deps: Vec::new(),
+            spec: Spec::run("m3c2"),
+            parts: parts.iter().map(|p| p.to_string()).collect(),
+        }
+    }
+
+    #[test]
+    fn a_unit_computed_again_says_why() {
+        let old = unit(&["m3c2 v1", "0.5|2|measured"]);
+        assert_eq!(
+            reason(&old, &unit(&["m3c2 v2", "0.5|2|measured"])),
+            "the stage's version changed (m3c2 v1 → m3c2 v2)"
+        );
+        assert_eq!(
+            reason(&old, &unit(&["m3c2 v1", "0.5|3|measured"])),
+            "a parameter it computes from changed (2 → 3)"
+        );
+        assert_eq!(
+            reason(&old, &unit(&["m3c2 v1", "#0123456789abcdef"])),
+            "an input it computes from changed (key part 1)"
+        );
+        assert_eq!(
+            reason(&old, &unit(&["m3c2 v1", "0.5|2|measured"])),
+            "a unit it reads is computed again"
+        );
+        let mut older = old.clone();
+        older.parts.clear();
+        assert!(reason(&older, &old).contains("older talus"));
     }
 }

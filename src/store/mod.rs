@@ -6,7 +6,8 @@
 //! ```text
 //! DIR/.talus/
 //!   lock                          one run per DIR                      (lock.rs)
-//!   units/<kind>/<name>/          one finished unit: files + record.json (writer.rs, units.rs)
+//!   units/<kind>/<name>/          one finished unit: files + record.json (writer.rs, units.rs);
+//!                                 an intermediate one released: its record alone (release.rs)
 //!   tmp/                          units being written, trash, temporaries (fsops.rs, gc.rs)
 //!   claims/<run>/<kind>/<name>    who computes a unit now              (claim.rs)
 //!   cache/inputs.json             content keys of inputs by identity    (content_key.rs)
@@ -14,7 +15,9 @@
 //! ```
 //!
 //! A unit's name carries its content key, so a unit never changes: it exists complete or not at
-//! all, and two processes computing it produce the same bytes (the first commit is kept).
+//! all, and two processes computing it produce the same bytes (the first commit is kept). Its
+//! one later change: released after a published run, its record is replaced (atomically) by one
+//! naming no files, and the files go.
 //! Claims only avoid duplicate work; the lock keeps two runs from publishing into one DIR.
 //! Everything outside `.talus` is the user's, except the outputs [`Store::publish`] places.
 
@@ -29,6 +32,7 @@ mod process;
 mod publish;
 mod record;
 mod recover;
+mod release;
 mod unit_ref;
 mod units;
 mod writer;

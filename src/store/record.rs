@@ -33,6 +33,11 @@ pub struct Record {
     pub created: u64,
     /// `host:pid` of the process that committed it.
     pub writer: String,
+    /// Its files were released after the run that used them ([`super::Store::release`]): the
+    /// unit is done for the units that read it, and is computed again (the same bytes) before
+    /// a unit that needs its files runs.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub released: bool,
 }
 
 impl Record {

@@ -121,6 +121,7 @@ impl UnitWriter {
             meta,
             created: process::now_secs(),
             writer: format!("{}:{}", process::host(), std::process::id()),
+            released: false,
         };
         let bytes = serde_json::to_vec_pretty(&record)
             .map_err(|e| Error::Internal(format!("record of {}: {e}", self.unit)))?;

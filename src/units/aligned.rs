@@ -35,6 +35,8 @@ impl Stage for AlignedStage {
     const KIND: &'static str = "aligned";
     const SCOPE: Scope = Scope::Survey;
     const VERSION: u32 = 1;
+    const INTERMEDIATE: bool = true;
+    const KEPT: &'static [&'static str] = &[FILE];
     const LINE: Line = Line {
         name: "alignment",
         counts: "core points sampled",

@@ -11,13 +11,13 @@ use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 
 use super::cores::ThinnedStage;
-use super::m3c2::M3c2Stage;
 use super::outputs::tables::{
     EventFeature, EventProperties, Feature, FeatureCollection, PointGeometry, RegionFeature,
     RegionGeometry,
 };
 use super::outputs::view::ViewRange;
 use super::outputs::{AlignmentSummary, OutputsStage, Publish, Summary};
+use super::series::{SeriesReader, SeriesStage};
 use super::stage::{Line, Planner, Publishes, Scope, Stage};
 use super::{read_json, Ctx};
 use crate::campaign::powerlaw::{self, PowerLawFit};
@@ -155,7 +155,8 @@ impl Stage for CampaignStage {
     const LINE: Line = OutputsStage::LINE;
     type Meta = CampaignMeta;
 
-    /// One per campaign, over every pair's outputs and M3C2 units (the time series) and the
+    /// One per campaign, over every pair's outputs and column of the time series
+    /// ([`super::series`]: not their M3C2 results, which are released after a run) and the
     /// campaign's core points.
     fn plan(p: &mut Planner) -> Result<()> {
         let Some(title) = p.campaign.clone() else {
@@ -163,12 +164,7 @@ impl Stage for CampaignStage {
         };
         let mut deps = vec![p.the(&Spec::survey(ThinnedStage::KIND, 0))?];
         deps.extend(p.plan.of_kind(OutputsStage::KIND).collect::<Vec<_>>());
-        deps.extend(p.plan.of_kind(M3c2Stage::KIND).collect::<Vec<_>>());
-        deps.extend(
-            p.plan
-                .of_kind(super::merged::MergedStage::KIND)
-                .collect::<Vec<_>>(),
-        );
+        deps.extend(p.plan.of_kind(SeriesStage::KIND).collect::<Vec<_>>());
         let pairs = serde_json::to_string(&p.plan.pairs).unwrap_or_default();
         let version = env!("CARGO_PKG_VERSION");
         p.add(
@@ -584,58 +580,45 @@ fn write_timeseries(
         CoordinateGrid::for_extent(extent.min, extent.max, &scales),
         Some(super::m3c2::pair_count(ctx, 0)?),
     )?;
-    // One pair's merge at a time (each holds up to `merged::FAN_IN` chunks; all at once grew
-    // with the pairs): the later pairs' distances go to temporary columns in the unit's
-    // directory, then one pass over pair 0's results reads them beside it. Every pair has the
-    // campaign's core points in key order; a count and a hash of the keys check it.
-    let _held = ctx.reserve(
-        super::merged::pair_merge_need(plan)
-            + (plan.pairs.len() * super::scratch::BUFFER) as u64
-            + (8 << 20),
-        "the time series (a pair's merge at a time)",
-    )?;
-    let keys_of =
-        |k: usize, each: &mut dyn FnMut(&crate::m3c2::tile::KeyedResult) -> Result<()>| {
-            let mut s = super::m3c2::Merged::new(ctx, k)?;
-            let (mut n, mut h) = (0u64, talus_tiling::Fnv64::new());
-            while let Some(r) = s.next_result()? {
-                h.write_u64(r.key);
-                n += 1;
-                each(&r)?;
-            }
-            Ok::<_, Error>((n, h.finish()))
-        };
-    let mut columns = Vec::new();
-    for k in 1..plan.pairs.len() {
-        let mut w = super::scratch::RowsWriter::create(out, &format!("timeseries_{k:05}.tmp"), 1)?;
-        let seen = keys_of(k, &mut |r| w.push(&[r.r.measured()]))?;
-        columns.push((w.finish()?, seen));
-    }
-    let mut readers = columns
+    // Every pair's column (`units::series`), read beside the first's rows (x, y, z, d): every
+    // pair has the campaign's core points in key order; counts and key hashes check it.
+    let series: Vec<usize> = (0..plan.pairs.len())
+        .map(|k| ctx.unit(&Spec::pair(SeriesStage::KIND, k)))
+        .collect::<Result<_>>()?;
+    let metas = series
         .iter()
-        .map(|(c, _)| c.reader())
+        .map(|&u| ctx.meta::<SeriesStage>(u))
         .collect::<Result<Vec<_>>>()?;
-    let mut values = vec![f64::NAN; plan.pairs.len()];
-    let first = keys_of(0, &mut |r| {
-        values[0] = r.r.measured();
-        for (k, rd) in readers.iter_mut().enumerate() {
-            values[k + 1] = rd.next_row()?[0];
-        }
-        w.write(r.xyz, &values)
-    })?;
-    drop(readers);
-    for (k, (column, seen)) in columns.into_iter().enumerate() {
-        if seen != first {
+    let first = &metas[0];
+    for (k, m) in metas.iter().enumerate().skip(1) {
+        if (m.core_points, &m.keys) != (first.core_points, &first.keys) {
             return Err(Error::Internal(format!(
-                "pair {}'s core points differ from pair 0's ({} against {})",
-                k + 1,
-                seen.0,
-                first.0
+                "pair {k}'s core points differ from pair 0's ({} against {})",
+                m.core_points, first.core_points
             )));
         }
-        column.remove()?;
     }
-    let n = first.0;
+    let _held = ctx.reserve(
+        (plan.pairs.len() * super::scratch::BUFFER) as u64 + (8 << 20),
+        "the time series (every pair's column)",
+    )?;
+    let mut readers = series
+        .iter()
+        .enumerate()
+        .map(|(k, &u)| SeriesReader::open(ctx, u, if k == 0 { 4 } else { 1 }))
+        .collect::<Result<Vec<_>>>()?;
+    let mut values = vec![f64::NAN; plan.pairs.len()];
+    for _ in 0..first.core_points {
+        let row = readers[0].next_row()?;
+        let xyz = [row[0], row[1], row[2]];
+        values[0] = row[3];
+        for (k, rd) in readers.iter_mut().enumerate().skip(1) {
+            values[k] = rd.next_row()?[0];
+        }
+        w.write(xyz, &values)?;
+    }
+    drop(readers);
+    let n = first.core_points;
     w.finish()?;
     out.add_file("timeseries.laz")?;
     Ok(n)

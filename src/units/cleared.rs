@@ -37,6 +37,7 @@ impl Stage for ClearedStage {
     const KIND: &'static str = "cleared";
     const SCOPE: Scope = Scope::Survey;
     const VERSION: u32 = 1;
+    const INTERMEDIATE: bool = true;
     const LINE: Line = Line {
         name: "vegetation removed",
         counts: "points",

@@ -79,6 +79,7 @@ impl Stage for MergedStage {
     const KIND: &'static str = "merged";
     const SCOPE: Scope = Scope::Pair;
     const VERSION: u32 = 1;
+    const INTERMEDIATE: bool = true;
     const LINE: Line = Line {
         name: "merging tiles",
         counts: "core points",

@@ -24,6 +24,7 @@ pub mod orient;
 pub mod outputs;
 pub mod sample;
 pub mod scratch;
+pub mod series;
 pub mod solids;
 pub mod stable;
 pub mod stage;

@@ -108,6 +108,7 @@ impl Stage for OrientStage {
     const KIND: &'static str = "orient";
     const SCOPE: Scope = Scope::Survey;
     const VERSION: u32 = 1;
+    const INTERMEDIATE: bool = true;
     const LINE: Line = Line {
         name: "orientation",
         counts: "points",

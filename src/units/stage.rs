@@ -81,6 +81,15 @@ pub trait Stage: Send + Sync + 'static {
     /// for the same inputs: `tests/stage_versions.rs` fails when a stage's output on a fixed
     /// campaign changes and its version did not.
     const VERSION: u32;
+    /// Whether its units' files are intermediate: read only by later units (tiles, per-tile
+    /// M3C2 results), never published. After a finished run they are released
+    /// ([`crate::store::Store::release`]: the record stays, the files go) unless `--keep-units`,
+    /// and a later run that needs them (an appended survey, new parameters) computes them
+    /// again — the same bytes, units being deterministic.
+    const INTERMEDIATE: bool = false;
+    /// The files an intermediate unit keeps when released: small records that units beyond its
+    /// dependents read (the aligned unit's route, for every pair's and the campaign's summary).
+    const KEPT: &'static [&'static str] = &[];
     /// The progress line (and summary.json stage) its units count on.
     const LINE: Line;
     /// What its units record (their record's meta, beside the executor's [`Timing`]). A field
@@ -125,6 +134,8 @@ pub trait Registered: Send + Sync {
     fn scope(&self) -> Scope;
     fn line(&self) -> Line;
     fn version(&self) -> u32;
+    fn intermediate(&self) -> bool;
+    fn kept(&self) -> &'static [&'static str];
     fn plan(&self, p: &mut Planner) -> Result<()>;
     fn run(&self, ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<serde_json::Value>;
     fn is_output(&self) -> Option<fn(&str) -> bool>;
@@ -149,6 +160,12 @@ impl<S: Stage> Registered for Entry<S> {
     }
     fn version(&self) -> u32 {
         S::VERSION
+    }
+    fn intermediate(&self) -> bool {
+        S::INTERMEDIATE
+    }
+    fn kept(&self) -> &'static [&'static str] {
+        S::KEPT
     }
     fn plan(&self, p: &mut Planner) -> Result<()> {
         S::plan(p)
@@ -202,6 +219,7 @@ pub fn default_stages() -> Vec<&'static dyn Registered> {
         entry::<merged::MergedStage>(),
         entry::<stable::StableStage>(),
         entry::<events::EventsStage>(),
+        entry::<series::SeriesStage>(),
         entry::<outputs::points::PointsStage>(),
         entry::<volumes::VolumesStage>(),
         entry::<outputs::OutputsStage>(),

@@ -76,6 +76,7 @@ impl Stage for TilingStage {
     const KIND: &'static str = "tiling";
     const SCOPE: Scope = Scope::Survey;
     const VERSION: u32 = 1;
+    const INTERMEDIATE: bool = true;
     const LINE: Line = Line {
         name: "pass 1: tiling",
         counts: "points",

@@ -309,6 +309,13 @@ impl Report {
             count(UnitState::Failed),
             count(UnitState::Missing)
         );
+        for r in &self.plan.recomputed {
+            let _ = writeln!(
+                s,
+                "computed again: {} {} unit(s): {}",
+                r.units, r.kind, r.reason
+            );
+        }
         let _ =
             writeln!(
                 s,

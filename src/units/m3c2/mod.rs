@@ -68,6 +68,7 @@ impl Stage for M3c2Stage {
     const KIND: &'static str = "m3c2";
     const SCOPE: Scope = Scope::Tile;
     const VERSION: u32 = 1;
+    const INTERMEDIATE: bool = true;
     const LINE: Line = Line {
         name: "pass 2: normals and M3C2",
         counts: "points",

@@ -1,0 +1,142 @@
+//! A campaign pair's column of the time series: its M3C2 distance at every one of the
+//! campaign's core points, in key order (every pair of a campaign has the same core points), as
+//! little-endian f64 — the first pair's rows also hold each core point's x, y, z. Not
+//! compressed: the distances' low bits are noise (zstd saves little), and the campaign reads
+//! every pair's column at once, a few pages each, where a zstd stream's decoder holds a
+//! window and tables (≈ 0.2 MiB a pair: 80 MiB at 400 pairs).
+//!
+//! The campaign unit reads these columns, not the pairs' M3C2 results: those are
+//! intermediate (released after the run, `Stage::INTERMEDIATE`), and a survey appended to the
+//! campaign years later must not compute every old pair's M3C2 again to extend its time series.
+
+use std::io::{BufReader, Read, Write};
+
+use serde::{Deserialize, Serialize};
+
+use super::stage::{Line, Planner, Scope, Stage, Total};
+use super::Ctx;
+use crate::error::{Error, Result};
+use crate::plan::Spec;
+use crate::store::UnitWriter;
+
+/// The file of a series unit.
+pub const FILE: &str = "series.f64";
+
+/// One pair's column of the campaign's time series.
+pub struct SeriesStage;
+
+/// What a series unit records.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct SeriesMeta {
+    /// Core points (rows).
+    pub core_points: u64,
+    /// FNV-1a 64 over the core points' keys in order: every pair's must be the first's.
+    pub keys: String,
+    /// Values a row: 4 (x, y, z, distance) for the first pair, 1 for the others.
+    pub width: usize,
+}
+
+impl Stage for SeriesStage {
+    const KIND: &'static str = "series";
+    const SCOPE: Scope = Scope::Pair;
+    const VERSION: u32 = 1;
+    const LINE: Line = Line {
+        name: "time series",
+        counts: "core points",
+        total: Total::Unknown,
+    };
+    type Meta = SeriesMeta;
+
+    /// With a campaign: one per pair, over the pair's M3C2 results.
+    fn plan(p: &mut Planner) -> Result<()> {
+        if p.campaign.is_none() {
+            return Ok(());
+        }
+        for pair in 0..p.plan.pairs.len() {
+            let deps = p.pair_results(pair);
+            let label = p.plan.pairs[pair].label.clone();
+            let width = if pair == 0 { "xyz d" } else { "d" };
+            p.add(Spec::pair(Self::KIND, pair), &label, &[width], deps);
+        }
+        Ok(())
+    }
+
+    fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<SeriesMeta> {
+        let pair = ctx.pair(unit)?;
+        let _held = ctx.reserve(
+            super::merged::pair_merge_need(ctx.plan) + (8 << 20),
+            "a pair's column of the time series (its merge)",
+        )?;
+        let path = out.path(FILE)?;
+        let file = std::fs::File::create(&path).map_err(|e| Error::output(&path, e))?;
+        let mut z = std::io::BufWriter::with_capacity(super::scratch::BUFFER, file);
+        let width = if pair == 0 { 4 } else { 1 };
+        let mut merged = super::m3c2::Merged::new(ctx, pair)?;
+        let (mut n, mut h) = (0u64, talus_tiling::Fnv64::new());
+        let mut row = Vec::with_capacity(32);
+        while let Some(r) = merged.next_result()? {
+            h.write_u64(r.key);
+            n += 1;
+            row.clear();
+            if width == 4 {
+                for v in r.xyz {
+                    row.extend_from_slice(&v.to_le_bytes());
+                }
+            }
+            row.extend_from_slice(&r.r.measured().to_le_bytes());
+            z.write_all(&row).map_err(|e| Error::output(&path, e))?;
+            if n % (1 << 16) == 0 {
+                (ctx.progress)(1 << 16);
+                crate::interrupt::check()?;
+            }
+        }
+        (ctx.progress)(n % (1 << 16));
+        z.flush().map_err(|e| Error::output(&path, e))?;
+        out.add_file(FILE)?;
+        Ok(SeriesMeta {
+            core_points: n,
+            keys: h.hex(),
+            width,
+        })
+    }
+}
+
+/// A series unit's rows, read in order.
+pub struct SeriesReader {
+    input: BufReader<std::fs::File>,
+    path: std::path::PathBuf,
+    row: Vec<f64>,
+    bytes: Vec<u8>,
+}
+
+impl SeriesReader {
+    /// The rows of series unit `unit` (of the plan), `width` values each.
+    pub fn open(ctx: &Ctx, unit: usize, width: usize) -> Result<SeriesReader> {
+        let path = ctx.input(unit, FILE)?;
+        let file = crate::store::open_store_file(&path).map_err(|e| Error::Damaged {
+            path: path.clone(),
+            problem: e.to_string(),
+        })?;
+        let input = BufReader::with_capacity(super::scratch::BUFFER, file);
+        Ok(SeriesReader {
+            input,
+            path,
+            row: vec![0.0; width],
+            bytes: vec![0; 8 * width],
+        })
+    }
+
+    /// The next row (an error past the last: the caller knows the count).
+    pub fn next_row(&mut self) -> Result<&[f64]> {
+        self.input
+            .read_exact(&mut self.bytes)
+            .map_err(|e| Error::Damaged {
+                path: self.path.clone(),
+                problem: format!("a row of the time series: {e}"),
+            })?;
+        for (v, b) in self.row.iter_mut().zip(self.bytes.chunks_exact(8)) {
+            *v = f64::from_le_bytes(b.try_into().expect("8 bytes"));
+        }
+        Ok(&self.row)
+    }
+}
