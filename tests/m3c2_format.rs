@@ -7,17 +7,17 @@ mod common;
 use talus::io::result_table;
 
 const NAMES: [(&str, &str); 14] = [
-    ("m3c2_distance", "float64"),
-    ("m3c2_uncertainty", "float64"),
+    ("m3c2_distance", "float32"),
+    ("m3c2_uncertainty", "float32"),
     ("m3c2_significant", "uint8"),
-    ("m3c2_std_dev1", "float64"),
-    ("m3c2_std_dev2", "float64"),
+    ("m3c2_std_dev1", "float32"),
+    ("m3c2_std_dev2", "float32"),
     ("m3c2_count1", "uint32"),
     ("m3c2_count2", "uint32"),
     ("normal_x", "float32"),
     ("normal_y", "float32"),
     ("normal_z", "float32"),
-    ("m3c2_smoothed", "float64"),
+    ("m3c2_smoothed", "float32"),
     ("event_id", "uint32"),
     ("m3c2_beyond_reach", "uint8"),
     ("normal_sign_unknown", "uint8"),
@@ -86,14 +86,19 @@ fn m3c2_laz_dimensions_and_values() {
             continue;
         }
         computed += 1;
-        // LoD95 = 1.96 (sqrt(σ1²/n1 + σ2²/n2) + reg_error), significant = |d| > LoD95.
+        // LoD95 = 1.96 (sqrt(σ1²/n1 + σ2²/n2) + reg_error), significant = |d| > LoD95; the file
+        // holds them as float32 (relative rounding 6e-8 each), and rounding keeps their order.
         let want = 1.96 * ((s1[i] * s1[i] / n1[i] + s2[i] * s2[i] / n2[i]).sqrt() + reg);
         assert!(
-            (lod[i] - want).abs() <= 1e-12 * want.max(1.0),
+            (lod[i] - want).abs() <= 1e-6 * want.max(1.0),
             "{} vs {want}",
             lod[i]
         );
-        assert_eq!(sig[i] == 1.0, d[i].abs() > lod[i]);
+        if sig[i] == 1.0 {
+            assert!(d[i].abs() >= lod[i], "{} vs {}", d[i], lod[i]);
+        } else {
+            assert!(d[i].abs() <= lod[i], "{} vs {}", d[i], lod[i]);
+        }
         assert!(n1[i] >= 1.0 && n2[i] >= 1.0);
         let len = (nx[i] * nx[i] + ny[i] * ny[i] + nz[i] * nz[i]).sqrt();
         assert!((len - 1.0).abs() < 1e-6, "normal length {len}");

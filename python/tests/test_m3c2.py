@@ -44,11 +44,14 @@ def assert_same_as_cli(r, las, cores):
     assert len(r) == len(las.points) == len(cores)
     # m3c2.laz keeps the core points' order, at the core file's scale (0.1 mm).
     assert np.abs(xyz - cores).max() <= 0.5e-4 + 1e-9
-    np.testing.assert_array_equal(r.distances, np.asarray(las.m3c2_distance))
-    np.testing.assert_array_equal(r.lodetection, np.asarray(las.m3c2_uncertainty))
+    # m3c2.laz holds distances, LoDs and spreads as float32 (CloudCompare's width): the
+    # in-process float64 values rounded to it, exactly.
+    f32 = np.float32
+    np.testing.assert_array_equal(r.distances.astype(f32), np.asarray(las.m3c2_distance))
+    np.testing.assert_array_equal(r.lodetection.astype(f32), np.asarray(las.m3c2_uncertainty))
     np.testing.assert_array_equal(r.significant, np.asarray(las.m3c2_significant) == 1)
-    np.testing.assert_array_equal(r.spread1, np.asarray(las.m3c2_std_dev1))
-    np.testing.assert_array_equal(r.spread2, np.asarray(las.m3c2_std_dev2))
+    np.testing.assert_array_equal(r.spread1.astype(f32), np.asarray(las.m3c2_std_dev1))
+    np.testing.assert_array_equal(r.spread2.astype(f32), np.asarray(las.m3c2_std_dev2))
     np.testing.assert_array_equal(r.num_samples1, np.asarray(las.m3c2_count1))
     np.testing.assert_array_equal(r.num_samples2, np.asarray(las.m3c2_count2))
     np.testing.assert_array_equal(r.beyond_reach, np.asarray(las.m3c2_beyond_reach) == 1)

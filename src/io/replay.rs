@@ -13,6 +13,8 @@
 //! class filter reads the copy ([`ReplayReader`]) instead: the same points in the same order,
 //! the same header information and class counts, at the speed of reading a file.
 //!
+//! A copy is read once: removed as soon as a reader has read it whole (the tiling).
+//!
 //! Only what this process recorded is replayed (another process, e.g. a Slurm worker, decodes
 //! the file itself); a file whose size or modification time changed since it was recorded is
 //! decoded again. The copy's CRC-32 is checked as it is read back: a damaged copy is an error,
@@ -322,6 +324,11 @@ impl PointReader for ReplayReader {
             if self.crc.clone().finalize() != self.copy.crc32 {
                 return Err(self.damaged("does not match its checksum"));
             }
+            // Read whole once: its one reader (the survey's tiling) is done with it. Removed now,
+            // not when the run ends, so that the run's peak on disk does not hold a copy of the
+            // survey beside its tiles; a later reader decodes the file.
+            copies().retain(|c| c.file != self.copy.file);
+            let _ = std::fs::remove_file(&self.copy.file);
             return Ok(0);
         }
         let layout = self.copy.layout;

@@ -53,7 +53,7 @@ pub const FILES: [&str; 2] = ["m3c2.laz", "terrain.bin"];
 impl Stage for PointsStage {
     const KIND: &'static str = "points";
     const SCOPE: Scope = Scope::Pair;
-    const VERSION: u32 = 1;
+    const VERSION: u32 = 2;
     const LINE: Line = Line {
         name: "m3c2.laz",
         counts: "core points",
