@@ -1,19 +1,20 @@
 #!/usr/bin/env bash
 # Every test of talus, on a fresh machine: installs what the tests need (a Python venv with laspy
-# for the independent-reader checks, the Python package's wheel in a fresh venv with py4dgeo,
-# Debian chromium and the viewer's npm packages for the browser tests, Debian's Slurm and munge
-# for the cluster test), then runs the Rust tests of the workspace, the Python package's tests,
+# and pyarrow for the independent-reader checks, the Python package's wheel in a fresh venv with
+# py4dgeo, Debian chromium and the viewer's npm packages for the browser tests, Debian's Slurm and
+# munge for the cluster test), then runs the Rust tests of the workspace, the Python package's tests,
 # the viewer's browser tests and the Slurm executor against a real one-node Slurm.
 # This is the test command README.md gives; .ci/run calls it.
 set -euo pipefail
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$repo"
 
-# Independent LAS reader for the format tests (tests/py/.venv, gitignored).
-if ! tests/py/.venv/bin/python -c "import laspy, lazrs" 2>/dev/null; then
-  echo "test.sh: creating tests/py/.venv with laspy" >&2
+# Independent LAS and Parquet readers for the format tests (tests/py/.venv, gitignored): laspy,
+# and pyarrow for a campaign's timeseries.parquet.
+if ! tests/py/.venv/bin/python -c "import laspy, lazrs, pyarrow" 2>/dev/null; then
+  echo "test.sh: creating tests/py/.venv with laspy and pyarrow" >&2
   python3 -m venv tests/py/.venv
-  tests/py/.venv/bin/pip install --quiet --disable-pip-version-check 'laspy[lazrs]'
+  tests/py/.venv/bin/pip install --quiet --disable-pip-version-check 'laspy[lazrs]' pyarrow
 fi
 export TALUS_PYTHON="$repo/tests/py/.venv/bin/python"
 

@@ -333,7 +333,7 @@ struct SynthArgs {
     /// Points per epoch (default: per scene).
     #[arg(long)]
     points: Option<u64>,
-    /// Surveys of `synth campaign` (3 to 41; default 5).
+    /// Surveys of `synth campaign` (3 to 401; default 5).
     #[arg(long)]
     epochs: Option<usize>,
     /// Seed of the random streams that draw the points (the planted changes do not depend on it).

@@ -15,7 +15,11 @@
 //!   of a run on all six at once;
 //! - SIGKILL at random moments then `--resume` gives the outputs of an uninterrupted run;
 //! - bad input (no date, one date twice, an empty folder, tiles in two CRSs, a survey off the
-//!   site): exit 2, one line naming the file and the problem, nothing written.
+//!   site): exit 2, one line naming the file and the problem, nothing written;
+//! - the time series: timeseries.parquet read by pyarrow holds timeseries.laz's values (laspy)
+//!   and each pair's m3c2.laz distances, bit for bit, nulls where they have NaN; at 400 pairs
+//!   (past what a LAS VLR describes) the Parquet holds them all and timeseries.laz the core
+//!   points only, which laspy reads.
 //!
 //! "The outputs" are every file of DIR but the timings a run records of itself (summary.json's
 //! stage seconds, the `seconds` column of campaign.csv/json and the run-time column of
@@ -348,6 +352,27 @@ fn synth_campaign(dir: &Path, epochs: usize, points: u64, extra: &[&str]) -> Cam
     serde_json::from_slice(&std::fs::read(dir.join("truth.json")).unwrap()).unwrap()
 }
 
+/// A synthetic campaign's pairs as (before, after): the consecutive ones, then the baseline
+/// ones (the campaign's order).
+fn all_pairs(truth: &CampaignTruth) -> Vec<(usize, usize)> {
+    truth
+        .pairs
+        .iter()
+        .chain(&truth.baseline_pairs)
+        .map(|p| (p.before, p.after))
+        .collect()
+}
+
+/// The surveys of a synthetic campaign written into `data`, and their labels in a campaign
+/// (YYYYMMDD).
+fn surveys_of(truth: &CampaignTruth, data: &Path) -> (Vec<PathBuf>, Vec<String>) {
+    truth
+        .epochs
+        .iter()
+        .map(|e| (data.join(&e.file), e.date.replace('-', "")))
+        .unzip()
+}
+
 /// A synthetic campaign of 4 surveys of `points` points in `tmp`/data (`synth` more arguments
 /// of `synth campaign`), then `talus campaign` of them with `--baseline` and `extra` into
 /// `tmp`/campaign: the truth, the surveys, their labels in the campaign (YYYYMMDD) and the
@@ -360,11 +385,7 @@ fn synth_and_campaign(
 ) -> (CampaignTruth, Vec<PathBuf>, Vec<String>, PathBuf) {
     let data = tmp.join("data");
     let truth = synth_campaign(&data, 4, points, synth);
-    let (surveys, labels): (Vec<PathBuf>, Vec<String>) = truth
-        .epochs
-        .iter()
-        .map(|e| (data.join(&e.file), e.date.replace('-', "")))
-        .unzip();
+    let (surveys, labels) = surveys_of(&truth, &data);
     let dir = tmp.join("campaign");
     let mut args = vec!["--baseline"];
     args.extend_from_slice(extra);
@@ -647,12 +668,7 @@ fn synthetic_campaign_pairs_are_compares_with_its_parameters_and_core_points() {
     let summary = json(&dir.join("summary.json"));
     assert!(summary["tiles"].as_u64().unwrap() > 1, "one tile");
     let cores = dir.join("timeseries.laz");
-    let pairs: Vec<(usize, usize)> = truth
-        .pairs
-        .iter()
-        .chain(&truth.baseline_pairs)
-        .map(|p| (p.before, p.after))
-        .collect();
+    let pairs = all_pairs(&truth);
     assert_eq!(pairs.len(), 5);
     for (b, a) in pairs {
         let label = format!("{}_{}", labels[b], labels[a]);
@@ -811,12 +827,7 @@ fn forty_one_surveys_every_planted_event_within_5_percent() {
     let tmp = common::tempdir();
     let data = tmp.path().join("data");
     let truth = synth_campaign(&data, 41, 500_000, &[]);
-    let surveys: Vec<PathBuf> = truth.epochs.iter().map(|e| data.join(&e.file)).collect();
-    let labels: Vec<String> = truth
-        .epochs
-        .iter()
-        .map(|e| e.date.replace('-', ""))
-        .collect();
+    let (surveys, labels) = surveys_of(&truth, &data);
     let dir = tmp.path().join("campaign");
     ok(&campaign(&surveys, &dir, &[]));
     let fc = json(&dir.join("events.geojson"));
@@ -997,4 +1008,137 @@ fn campaign_summary_records_stable_areas_and_wall_time() {
         areas.canonicalize().unwrap().to_str().unwrap()
     );
     assert_eq!(stable["polygons"], 1);
+}
+
+/// The distance columns of a time series: `d_<before>_<after>` per pair of `pairs`, of surveys
+/// labelled `labels`.
+fn distance_columns(pairs: &[(usize, usize)], labels: &[String]) -> Vec<String> {
+    pairs
+        .iter()
+        .map(|&(b, a)| format!("d_{}_{}", labels[b], labels[a]))
+        .collect()
+}
+
+/// What tests/py/read_timeseries.py found, checked: every value compared agreed; the Parquet's
+/// columns are x, y, z (required) and `names` (nullable), all DOUBLE, in as many rows as the
+/// campaign's core points; `created_by` and the key-value metadata (version, the CRS of the
+/// synthetic surveys, each pair's column, labels and dates).
+fn assert_timeseries(r: &Value, dir: &Path, names: &[String], truth: &CampaignTruth) {
+    assert_eq!(
+        r["mismatches"],
+        serde_json::json!([]),
+        "{}",
+        r["mismatches"]
+    );
+    let columns: Vec<&str> = r["columns"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c.as_str().unwrap())
+        .collect();
+    let want: Vec<&str> = ["x", "y", "z"]
+        .into_iter()
+        .chain(names.iter().map(String::as_str))
+        .collect();
+    assert_eq!(columns, want);
+    assert_eq!(r["types"], serde_json::json!(["double"]));
+    let nullable: Vec<bool> = (0..columns.len()).map(|c| c >= 3).collect();
+    assert_eq!(r["nullable"], serde_json::json!(nullable));
+    let summary = json(&dir.join("summary.json"));
+    assert_eq!(r["rows"], summary["core_points"]);
+    assert_eq!(r["laz"]["points"], summary["core_points"]);
+    assert_eq!(r["nulls"]["x"], 0);
+    let version = env!("CARGO_PKG_VERSION");
+    assert_eq!(r["created_by"], format!("talus version {version}").as_str());
+    let meta = &r["metadata"];
+    assert_eq!(meta["talus:version"], version);
+    assert_eq!(meta["talus:crs_epsg"], truth.crs_epsg.to_string().as_str());
+    assert_eq!(meta["talus:crs_wkt"], truth.crs_wkt.as_str());
+    let pairs: Value = serde_json::from_str(meta["talus:pairs"].as_str().unwrap()).unwrap();
+    let pairs = pairs.as_array().unwrap();
+    assert_eq!(pairs.len(), names.len());
+    for (p, name) in pairs.iter().zip(names) {
+        assert_eq!(p["column"], name.as_str());
+        let (b, a) = name[2..].split_once('_').unwrap();
+        assert_eq!((&p["before"], &p["after"]), (&b.into(), &a.into()), "{p}");
+        let date = |l: &str| format!("{}-{}-{}", &l[..4], &l[4..6], &l[6..]);
+        assert_eq!(p["before_date"], date(b).as_str());
+        assert_eq!(p["after_date"], date(a).as_str());
+    }
+}
+
+/// Issue 46, item 3: timeseries.parquet holds timeseries.laz's core points and distances, and
+/// each pair's m3c2.laz distances, read by independent readers (pyarrow, laspy:
+/// tests/py/read_timeseries.py) and compared bit for bit, a null exactly where the LAS has NaN
+/// (a 0.3 m half-length leaves the deeper changes beyond reach: nulls in every pair). The
+/// consecutive and baseline pairs are columns in the campaign's pair order, the LAS's
+/// dimensions the same; summary.json says the LAS holds the distances.
+#[test]
+fn timeseries_parquet_holds_the_laz_values_read_by_pyarrow_and_laspy() {
+    let Some(py) = common::laspy::pyarrow_python() else {
+        return;
+    };
+    let tmp = common::tempdir();
+    let (truth, _, labels, dir) =
+        synth_and_campaign(tmp.path(), 30_000, &[], &["--cyl-halflen", "0.3"]);
+    let pairs = all_pairs(&truth);
+    // The plan's order: the consecutive pairs, then the baseline ones.
+    let names = distance_columns(&pairs, &labels);
+    let r = common::laspy::read_timeseries(&py, &dir, true, None);
+    assert_timeseries(&r, &dir, &names, &truth);
+    assert_eq!(r["laz"]["extra_dims"], serde_json::json!(names));
+    let rows = r["rows"].as_u64().unwrap();
+    assert_eq!(r["compared"]["laz"], rows * (3 + names.len() as u64));
+    assert_eq!(r["compared"]["pairs"], rows * names.len() as u64);
+    for n in &names {
+        assert!(r["nulls"][n].as_u64().unwrap() > 0, "{n}: no null");
+    }
+    let summary = json(&dir.join("summary.json"));
+    assert_eq!(summary["timeseries"]["laz_distances"], true);
+}
+
+/// Issue 46, item 3: a campaign of 401 surveys (400 pairs, more than the 341 whose extra-bytes
+/// descriptors fit a LAS VLR) writes timeseries.parquet with 400 distance columns, which pyarrow
+/// reads, each bit for bit its pair's m3c2.laz distances (laspy) at the same core points, and the
+/// first three the dimensions of the timeseries.laz of a campaign of the first four surveys;
+/// its timeseries.laz holds the core points only, and laspy reads it; summary.json says so.
+/// About 30 s in release (the surveys 5 s, the campaign 20 s).
+#[test]
+fn four_hundred_pairs_in_parquet_columns_and_a_laz_of_core_points_readers_read() {
+    let Some(py) = common::laspy::pyarrow_python() else {
+        return;
+    };
+    let t = Instant::now();
+    let tmp = common::tempdir();
+    let data = tmp.path().join("data");
+    let truth = synth_campaign(&data, 401, 2000, &[]);
+    let made = t.elapsed().as_secs_f64();
+    let (surveys, labels) = surveys_of(&truth, &data);
+    let dir = tmp.path().join("campaign");
+    ok(&campaign(&surveys, &dir, &["--align", "off"]));
+    let ran = t.elapsed().as_secs_f64() - made;
+    let small = tmp.path().join("four");
+    ok(&campaign(&surveys[..4], &small, &["--align", "off"]));
+    let pairs: Vec<(usize, usize)> = (1..401).map(|k| (k - 1, k)).collect();
+    let names = distance_columns(&pairs, &labels);
+    let r = common::laspy::read_timeseries(&py, &dir, true, Some(&small));
+    assert_timeseries(&r, &dir, &names, &truth);
+    let rows = r["rows"].as_u64().unwrap();
+    assert!(rows > 100, "{rows} core points");
+    assert_eq!(r["compared"]["pairs"], rows * 400);
+    assert_eq!(r["compared"]["against"], rows * 3);
+    // The LAS: the core points alone (compared with the Parquet's x, y, z).
+    assert_eq!(r["laz"]["extra_dims"], serde_json::json!([]));
+    assert_eq!(r["compared"]["laz"], rows * 3);
+    let summary = json(&dir.join("summary.json"));
+    assert_eq!(summary["timeseries"]["laz_distances"], false);
+    let note = summary["timeseries"]["laz"].as_str().unwrap();
+    assert!(
+        note.contains("core points only") && note.contains("341"),
+        "{note}"
+    );
+    eprintln!(
+        "400 pairs: {rows} core points; surveys {made:.1} s, campaign {ran:.1} s, all {:.1} s",
+        t.elapsed().as_secs_f64()
+    );
 }

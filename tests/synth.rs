@@ -1110,16 +1110,17 @@ fn campaign_truths_match_numerical_integration() {
     }
 }
 
-/// The campaign's layout for every number of surveys (3 to 41): two or three events per interval
-/// of 1–20 m³; one recurring place (its track in intervals 1 and min(3, N − 1), the later shape
-/// containing the earlier, their footprints and truth circles overlapping, the second volume the
-/// difference); every other place changes in one interval only; in the last survey all places
-/// are ≥ 5 m apart on the beach and on the face, ≥ 5 m from the site's ends, the beach's seaward
-/// border, the face's foot and its top; deposits (gains on the beach) stay ≥ 1.5 m in front of the
-/// foot; a place's change stays in every later survey.
+/// The campaign's layout for every number of surveys from 3 to 41, and for 100 and 401 (the
+/// most): two or three events per interval of 1–20 m³; one recurring place (its track in
+/// intervals 1 and min(3, N − 1), the later shape containing the earlier, their footprints and
+/// truth circles overlapping, the second volume the difference); every other place changes in
+/// one interval only; in the last survey all places are ≥ 5 m apart on the beach and on the
+/// face, ≥ 5 m from the site's ends, the beach's seaward border, the face's foot and its top;
+/// deposits (gains on the beach) stay ≥ 1.5 m in front of the foot; a place's change stays in
+/// every later survey.
 #[test]
 fn campaign_layout_for_every_size() {
-    for n in campaign::MIN_EPOCHS..=campaign::MAX_EPOCHS {
+    for n in (campaign::MIN_EPOCHS..=41).chain([100, campaign::MAX_EPOCHS]) {
         let m = CampaignModel::new(n).unwrap();
         assert_eq!(m.epochs(), n);
         let recur = 3.min(n - 1);
@@ -1475,7 +1476,7 @@ fn campaign_same_seed_same_bytes() {
     }
 }
 
-/// Out-of-range options are usage errors: 2 or 42 surveys, too few points, bad noise, a pair not
+/// Out-of-range options are usage errors: 2 or 402 surveys, too few points, bad noise, a pair not
 /// in order, a survey past the last.
 #[test]
 fn campaign_bad_options_are_usage_errors() {
@@ -1487,7 +1488,7 @@ fn campaign_bad_options_are_usage_errors() {
             ..o.clone()
         },
         CampaignOptions {
-            epochs: 42,
+            epochs: campaign::MAX_EPOCHS + 1,
             ..o.clone()
         },
         CampaignOptions {

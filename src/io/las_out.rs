@@ -146,6 +146,31 @@ impl CoordinateGrid {
     }
 }
 
+impl CoordinateGrid {
+    /// The record of coordinate `v` of axis `axis` on the grid (the nearest step); None when it
+    /// does not fit an i32.
+    pub fn record(&self, axis: usize, v: f64) -> Option<i32> {
+        let r = ((v - self.offset[axis]) / self.scale[axis]).round();
+        (r >= f64::from(i32::MIN) && r <= f64::from(i32::MAX)).then_some(r as i32)
+    }
+
+    /// `xyz` as a LAS reader decodes it once written on the grid: record · scale + offset per
+    /// axis (LAS 1.4 R15 §2.4), in f64 as laspy and PDAL compute it. None when a record does not
+    /// fit.
+    pub fn decoded(&self, xyz: [f64; 3]) -> Option<[f64; 3]> {
+        let mut out = [0.0; 3];
+        for (a, o) in out.iter_mut().enumerate() {
+            *o = f64::from(self.record(a, xyz[a])?) * self.scale[a] + self.offset[a];
+        }
+        Some(out)
+    }
+}
+
+/// The most extra dimensions whose descriptors (192 bytes each) fit the Extra Bytes VLR, whose
+/// record length is a u16 (LAS 1.4 R15 §2.5.1): 341. More go to an EVLR, which laspy does not
+/// read extra bytes from.
+pub const MAX_VLR_EXTRA_DIMS: usize = u16::MAX as usize / 192;
+
 /// `s` itself, or the power of ten it is within rounding of, written exactly as that decimal
 /// (1e-5, not 1.0000000000000002e-5, in the header a reader prints).
 fn decimal(s: f64) -> f64 {
@@ -505,8 +530,7 @@ impl ResultWriter {
         }
         let mut raw = [0i32; 3];
         for k in 0..3 {
-            let v = ((xyz[k] - self.grid.offset[k]) / self.grid.scale[k]).round();
-            if !(v >= f64::from(i32::MIN) && v <= f64::from(i32::MAX)) {
+            let Some(v) = self.grid.record(k, xyz[k]) else {
                 return Err(Error::output(
                     &self.path,
                     std::io::Error::new(
@@ -517,8 +541,8 @@ impl ResultWriter {
                         ),
                     ),
                 ));
-            }
-            raw[k] = v as i32;
+            };
+            raw[k] = v;
         }
         let start = self.buffered * self.record_len;
         let bytes = &mut self.batch.resize_for(self.buffered + 1)[start..];

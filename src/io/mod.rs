@@ -12,6 +12,7 @@ pub mod classes;
 pub mod las;
 pub mod las_out;
 pub mod mesh_ply;
+pub mod parquet_out;
 pub mod ply;
 pub mod replay;
 pub mod result_table;

@@ -105,7 +105,8 @@ impl Store {
                      interrupted publish's. It holds: {}{}. Remove talus's outputs among them \
                      (m3c2.laz, events.geojson, events.csv, event_regions.geojson, summary.json, \
                      view.json, terrain.bin, meshes/; a campaign's campaign.csv, campaign.json, \
-                     report.html, timeseries.laz, magnitude_frequency.csv, pairs/) and this file, \
+                     report.html, timeseries.laz, timeseries.parquet, magnitude_frequency.csv, \
+                     pairs/) and this file, \
                      then run the command again with --resume",
                     self.dir.display(),
                     if names.is_empty() { "nothing".to_string() } else { names.join(", ") },

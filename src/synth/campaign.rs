@@ -50,8 +50,9 @@ use crate::error::{Error, Result};
 pub const DEFAULT_EPOCHS: usize = 5;
 /// Fewest surveys: two intervals, so that a change can recur.
 pub const MIN_EPOCHS: usize = 3;
-/// Most surveys: ten years of quarterly surveys (2021-03-01 to 2031-03-01).
-pub const MAX_EPOCHS: usize = 41;
+/// Most surveys: a hundred years of quarterly surveys (2021-03-01 to 2121-03-01), the 400 pairs
+/// of the time series' format tests (a campaign past what a LAS extra-bytes VLR describes).
+pub const MAX_EPOCHS: usize = 401;
 
 /// Width (m, along x) of one interval's cell.
 const PITCH: f64 = 13.0;
@@ -81,7 +82,7 @@ pub const RECURRING_TRACK: u32 = 1;
 /// Options of [`write`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct CampaignOptions {
-    /// Number of surveys (3 to 41).
+    /// Number of surveys (3 to 401).
     pub epochs: usize,
     pub seed: u64,
     /// Points per survey; None = 100 per m² of the site's surface (≈ 0.1 m spacing).
@@ -343,7 +344,7 @@ fn feature_radius(f: &Feature) -> f64 {
 }
 
 impl CampaignModel {
-    /// The model of a campaign of `epochs` surveys (3 to 41).
+    /// The model of a campaign of `epochs` surveys (3 to 401).
     pub fn new(epochs: usize) -> Result<Self> {
         if !(MIN_EPOCHS..=MAX_EPOCHS).contains(&epochs) {
             return Err(Error::Usage(format!(

@@ -1,9 +1,10 @@
 //! The campaign unit (SPEC.md §5): from every pair's outputs unit, the campaign's own files —
 //! `campaign.csv` and `campaign.json` (the paper's Table 1, completed), `events.geojson` and
-//! `events.csv` (every pair's events with their pair, dates and track), `timeseries.laz` (each
-//! core point's distance in every pair), `magnitude_frequency.csv` with a power-law fit per gain
-//! and loss (in campaign.json), `report.html`, and `summary.json`; and the list of files to
-//! publish: each pair's outputs under `pairs/<before>_<after>/` and the campaign's own.
+//! `events.csv` (every pair's events with their pair, dates and track), `timeseries.laz` and
+//! `timeseries.parquet` (each core point's distance in every pair), `magnitude_frequency.csv`
+//! with a power-law fit per gain and loss (in campaign.json), `report.html`, and
+//! `summary.json`; and the list of files to publish: each pair's outputs under
+//! `pairs/<before>_<after>/` and the campaign's own.
 
 use rustc_hash::FxHashMap as HashMap;
 
@@ -25,7 +26,8 @@ use crate::campaign::report::{self, EventRow, PairRow, Report};
 use crate::campaign::tracks::{self, Placed};
 use crate::error::{Error, Result};
 use crate::events::Kind;
-use crate::io::las_out::{CoordinateGrid, ExtraDim, ExtraType, ResultWriter};
+use crate::io::las_out::{self, CoordinateGrid, ExtraDim, ExtraType, ResultWriter};
+use crate::io::parquet_out::{self, Column, ParquetWriter};
 use crate::io::{self, Point3};
 use crate::plan::Spec;
 use crate::store::UnitWriter;
@@ -40,6 +42,7 @@ pub const FILES: &[&str] = &[
     "events.geojson",
     "events.csv",
     "timeseries.laz",
+    "timeseries.parquet",
     "magnitude_frequency.csv",
     "report.html",
     MARKER,
@@ -151,7 +154,7 @@ pub struct CampaignMeta {
 impl Stage for CampaignStage {
     const KIND: &'static str = "campaign";
     const SCOPE: Scope = Scope::Run;
-    const VERSION: u32 = 1;
+    const VERSION: u32 = 2;
     const LINE: Line = OutputsStage::LINE;
     type Meta = CampaignMeta;
 
@@ -211,8 +214,7 @@ fn wall_seconds(ctx: &Ctx) -> f64 {
 /// Write the campaign's files into `out`.
 fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<CampaignMeta> {
     let plan = ctx.plan;
-    let cores = ctx
-        .dep::<ThinnedStage>(unit)
+    ctx.dep::<ThinnedStage>(unit)
         .ok_or_else(|| Error::Internal("a campaign without its core points".into()))?;
     let date = |s: usize| plan.surveys[s].date.clone().unwrap_or_default();
     let days = |s: usize| crate::campaign::epochs::Date::parse(&date(s)).map_or(0, |d| d.days());
@@ -337,7 +339,7 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<CampaignMeta> {
     }
     super::write_bytes(out, "magnitude_frequency.csv", mf.as_bytes())?;
     // timeseries.laz.
-    let points = write_timeseries(ctx, out, cores, &crs_info)?;
+    let series = write_timeseries(ctx, out, &crs_info)?;
     // report.html.
     let report = Report {
         title: format!(
@@ -402,7 +404,8 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<CampaignMeta> {
         })).collect::<Vec<_>>(),
         "tracks": track.iter().copied().max().unwrap_or(0),
         "tiles": plan.layout.len(),
-        "core_points": points,
+        "core_points": series.points,
+        "timeseries": series.summary(plan.pairs.len()),
         "seconds": wall_seconds(ctx),
     });
     let text = serde_json::to_vec_pretty(&summary).map_err(|e| Error::Internal(e.to_string()))?;
@@ -542,15 +545,42 @@ fn write_table(
     super::write_bytes(out, "campaign.json", &text)
 }
 
-/// timeseries.laz: the campaign's core points (every pair has the same, in the same key order)
-/// with one dimension per pair, `d_<before>_<after>`, the M3C2 distance (NaN where not
-/// computed). Returns the number of core points.
-fn write_timeseries(
-    ctx: &Ctx,
-    out: &mut UnitWriter,
-    _cores: usize,
-    crs: &io::CloudInfo,
-) -> Result<u64> {
+/// The time series as written: its core points, and whether timeseries.laz holds the pairs'
+/// distances.
+struct Timeseries {
+    points: u64,
+    laz_distances: bool,
+}
+
+impl Timeseries {
+    /// summary.json's `timeseries`: what each file holds.
+    fn summary(&self, pairs: usize) -> Value {
+        let laz = if self.laz_distances {
+            "the core points with one extra-bytes dimension per pair, d_<before>_<after>"
+                .to_string()
+        } else {
+            format!(
+                "the core points only: the descriptors of {pairs} pairs' dimensions (192 bytes \
+                 each) exceed what a LAS VLR holds ({} pairs at most), and LAS readers do not \
+                 read them from an EVLR; the distances are in timeseries.parquet",
+                las_out::MAX_VLR_EXTRA_DIMS
+            )
+        };
+        json!({
+            "laz": laz,
+            "laz_distances": self.laz_distances,
+            "parquet": "x, y, z (the core points as timeseries.laz stores them) and one column \
+                        per pair, d_<before>_<after>, null where no distance was computed",
+        })
+    }
+}
+
+/// timeseries.laz and timeseries.parquet: the campaign's core points (every pair has the same,
+/// in the same key order) with one column per pair, `d_<before>_<after>`, the M3C2 distance (NaN
+/// in the LAS, null in the Parquet, where not computed). timeseries.laz holds the pairs'
+/// dimensions while their descriptors fit the Extra Bytes VLR (`las_out::MAX_VLR_EXTRA_DIMS`
+/// pairs), the core points alone past that (still a `--core-points` file).
+fn write_timeseries(ctx: &Ctx, out: &mut UnitWriter, crs: &io::CloudInfo) -> Result<Timeseries> {
     let plan = ctx.plan;
     let names: Vec<String> = plan
         .pairs
@@ -562,26 +592,26 @@ fn write_timeseries(
             )
         })
         .collect();
-    let dims: Vec<ExtraDim> = names
-        .iter()
-        .map(|n| ExtraDim {
-            name: n.clone().into(),
-            ty: ExtraType::F64,
-            description: "M3C2 distance of the pair",
-        })
-        .collect();
+    let laz_distances = names.len() <= las_out::MAX_VLR_EXTRA_DIMS;
+    let dims: Vec<ExtraDim> = if laz_distances {
+        names
+            .iter()
+            .map(|n| ExtraDim {
+                name: n.clone().into(),
+                ty: ExtraType::F64,
+                description: "M3C2 distance of the pair",
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
     let extent = &plan.layout.extent;
     let scales: Vec<[f64; 3]> = plan.surveys[0].scale.into_iter().collect();
+    let grid = CoordinateGrid::for_extent(extent.min, extent.max, &scales);
     let path = out.path("timeseries.laz")?;
-    let mut w = ResultWriter::create_on_grid(
-        &path,
-        &crs.crs,
-        &dims,
-        CoordinateGrid::for_extent(extent.min, extent.max, &scales),
-        Some(super::m3c2::pair_count(ctx, 0)?),
-    )?;
-    // Every pair's column (`units::series`), read beside the first's rows (x, y, z, d): every
-    // pair has the campaign's core points in key order; counts and key hashes check it.
+    // Every pair's column (`units::series`): every pair has the campaign's core points in key
+    // order; counts and key hashes check it. The first pair's rows hold x, y, z beside its
+    // distance.
     let series: Vec<usize> = (0..plan.pairs.len())
         .map(|k| ctx.unit(&Spec::pair(SeriesStage::KIND, k)))
         .collect::<Result<_>>()?;
@@ -598,28 +628,141 @@ fn write_timeseries(
             )));
         }
     }
+    let n = first.core_points;
+    let mut w = ResultWriter::create_on_grid(&path, &crs.crs, &dims, grid, Some(n))?;
+    // One pass over the columns writes the LAS and the first pair's columns (x, y, z as the LAS
+    // stores them, its distance) into scratch files; then the Parquet is written from those and
+    // the other pairs' columns, a column of a row group at a time.
+    let parquet_columns = plan.pairs.len() + 3;
     let _held = ctx.reserve(
-        (plan.pairs.len() * super::scratch::BUFFER) as u64 + (8 << 20),
-        "the time series (every pair's column)",
+        (parquet_columns * super::scratch::BUFFER) as u64
+            + (8 << 20)
+            + parquet_out::memory_need(parquet_columns, n),
+        "the time series (every pair's column, then the Parquet a column at a time)",
     )?;
-    let mut readers = series
+    let mut first_rows = SeriesReader::open(ctx, series[0], 4)?;
+    let mut readers = if laz_distances {
+        series[1..]
+            .iter()
+            .map(|&u| SeriesReader::open(ctx, u, 1))
+            .collect::<Result<Vec<_>>>()?
+    } else {
+        Vec::new()
+    };
+    let mut first_columns = ["x", "y", "z", "d"]
         .iter()
-        .enumerate()
-        .map(|(k, &u)| SeriesReader::open(ctx, u, if k == 0 { 4 } else { 1 }))
+        .map(|c| super::scratch::RowsWriter::create(out, &format!("timeseries_{c}.tmp"), 1))
         .collect::<Result<Vec<_>>>()?;
-    let mut values = vec![f64::NAN; plan.pairs.len()];
-    for _ in 0..first.core_points {
-        let row = readers[0].next_row()?;
-        let xyz = [row[0], row[1], row[2]];
-        values[0] = row[3];
-        for (k, rd) in readers.iter_mut().enumerate().skip(1) {
-            values[k] = rd.next_row()?[0];
+    let mut values = vec![f64::NAN; dims.len()];
+    for _ in 0..n {
+        let row = first_rows.next_row()?;
+        let (xyz, d) = ([row[0], row[1], row[2]], row[3]);
+        let stored = grid.decoded(xyz).ok_or_else(|| {
+            Error::Internal(format!(
+                "core point {xyz:?} off the time series' grid {grid:?}"
+            ))
+        })?;
+        for (c, v) in first_columns
+            .iter_mut()
+            .zip([stored[0], stored[1], stored[2], d])
+        {
+            c.push(&[v])?;
+        }
+        if laz_distances {
+            values[0] = d;
+            for (k, rd) in readers.iter_mut().enumerate() {
+                values[k + 1] = rd.next_row()?[0];
+            }
         }
         w.write(xyz, &values)?;
     }
-    drop(readers);
-    let n = first.core_points;
+    drop((first_rows, readers));
     w.finish()?;
     out.add_file("timeseries.laz")?;
-    Ok(n)
+    let columns: Vec<super::scratch::Rows> = first_columns
+        .into_iter()
+        .map(|c| c.finish())
+        .collect::<Result<Vec<_>>>()?;
+    let mut sources: Vec<Box<dyn super::series::Values>> = Vec::new();
+    for c in &columns {
+        sources.push(Box::new(c.reader()?));
+    }
+    for &u in &series[1..] {
+        sources.push(Box::new(SeriesReader::open(ctx, u, 1)?));
+    }
+    write_parquet(ctx, out, crs, &names, &mut sources, n)?;
+    drop(sources);
+    for c in columns {
+        c.remove()?;
+    }
+    Ok(Timeseries {
+        points: n,
+        laz_distances,
+    })
+}
+
+/// timeseries.parquet from the time series' scratch columns (x, y, z, then each pair's
+/// distance), `rows` rows; its key-value metadata: talus's version, the CRS (the first survey's
+/// WKT and EPSG code, when it has them) and the pairs (column, labels and dates).
+fn write_parquet(
+    ctx: &Ctx,
+    out: &mut UnitWriter,
+    crs: &io::CloudInfo,
+    names: &[String],
+    sources: &mut [Box<dyn super::series::Values>],
+    rows: u64,
+) -> Result<()> {
+    let plan = ctx.plan;
+    let schema: Vec<Column> = ["x", "y", "z"]
+        .iter()
+        .map(|c| Column::required(c))
+        .chain(names.iter().map(|n| Column::nullable(n)))
+        .collect();
+    let date = |s: usize| plan.surveys[s].date.clone();
+    let pairs: Vec<Value> = plan
+        .pairs
+        .iter()
+        .zip(names)
+        .map(|(p, n)| {
+            json!({
+                "column": n,
+                "before": plan.surveys[p.before].label,
+                "after": plan.surveys[p.after].label,
+                "before_date": date(p.before),
+                "after_date": date(p.after),
+            })
+        })
+        .collect();
+    let mut metadata =
+        vec![
+        ("talus:version".to_string(), env!("CARGO_PKG_VERSION").to_string()),
+        (
+            "talus:description".to_string(),
+            "x, y, z: the campaign's core points (in the CRS's units), as timeseries.laz stores \
+             them; d_<before>_<after>: the pair's M3C2 distance at the core point (metres, as \
+             its m3c2.laz's m3c2_distance), null where none was computed"
+                .to_string(),
+        ),
+    ];
+    if let Some(w) = &crs.crs.wkt {
+        metadata.push(("talus:crs_wkt".into(), w.clone()));
+    }
+    if let Some(e) = crs.crs.epsg_code() {
+        metadata.push(("talus:crs_epsg".into(), e.to_string()));
+    }
+    metadata.push((
+        "talus:pairs".into(),
+        serde_json::to_string(&pairs).map_err(|e| Error::Internal(e.to_string()))?,
+    ));
+    let path = out.path("timeseries.parquet")?;
+    let mut pw = ParquetWriter::create(&path, &schema, &metadata)?;
+    let per_group = parquet_out::rows_per_group(schema.len()) as u64;
+    let mut left = rows;
+    while left > 0 {
+        let n = left.min(per_group);
+        pw.write_group(n as usize, &mut |c, values| sources[c].next_values(values))?;
+        left -= n;
+    }
+    pw.finish()?;
+    out.add_file("timeseries.parquet")
 }

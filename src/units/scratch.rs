@@ -112,4 +112,19 @@ impl RowsReader {
         }
         Ok(&self.row)
     }
+
+    /// The next values in order, as many as `out` holds (rows × width).
+    pub fn next_values(&mut self, out: &mut [f64]) -> Result<()> {
+        let mut bytes = [0u8; 8 * 512];
+        for part in out.chunks_mut(512) {
+            let b = &mut bytes[..8 * part.len()];
+            self.file
+                .read_exact(b)
+                .map_err(|e| Error::output(&self.path, e))?;
+            for (v, x) in part.iter_mut().zip(b.chunks_exact(8)) {
+                *v = f64::from_le_bytes(x.try_into().expect("8 bytes"));
+            }
+        }
+        Ok(())
+    }
 }

@@ -101,6 +101,29 @@ impl Stage for SeriesStage {
     }
 }
 
+/// A column read in order, a batch of values at a time (the Parquet writer's sources: a series
+/// unit's column, the campaign's scratch columns).
+pub trait Values {
+    /// The next `out.len()` values.
+    fn next_values(&mut self, out: &mut [f64]) -> Result<()>;
+}
+
+impl Values for super::scratch::RowsReader {
+    fn next_values(&mut self, out: &mut [f64]) -> Result<()> {
+        super::scratch::RowsReader::next_values(self, out)
+    }
+}
+
+impl Values for SeriesReader {
+    /// Of a one-value-a-row column.
+    fn next_values(&mut self, out: &mut [f64]) -> Result<()> {
+        for v in out {
+            *v = self.next_row()?[0];
+        }
+        Ok(())
+    }
+}
+
 /// A series unit's rows, read in order.
 pub struct SeriesReader {
     input: BufReader<std::fs::File>,
