@@ -364,7 +364,20 @@ fn a_file_decoded_once_reads_back_from_its_copy_as_it_decodes() {
         let bits =
             |v: &[Point3]| -> Vec<[u64; 3]> { v.iter().map(|p| p.map(f64::to_bits)).collect() };
         assert_eq!(bits(&again), bits(&decoded), "{n}: replayed as decoded");
-        // That was the copy: damaged, it is an error naming it (another filter decodes the file).
+        // Read whole once, the copy is gone (its one reader, the tiling, is done): the next
+        // reader decodes the file.
+        assert!(!copy.exists(), "{n}: the copy is removed once read whole");
+        assert_eq!(bits(&read(&path, Some(&keep)).0), bits(&decoded));
+        drop(replay);
+        // Recorded again and damaged before it is read: an error naming it (another filter
+        // decodes the file).
+        let mut recorder = Recorder::create(&path, Some(&keep), transform, copy.clone());
+        let measured =
+            talus::sampling::measure_keeping(&path, Some(&keep), &mut |p| recorder.push(p))
+                .unwrap();
+        let replay = recorder
+            .finish(&measured.info, measured.classes.clone())
+            .expect("a copy");
         let mut f = std::fs::OpenOptions::new()
             .read(true)
             .write(true)
