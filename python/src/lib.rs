@@ -333,6 +333,8 @@ fn through_pipeline(
         core_points: Some(file("corepoints.ply")),
         user,
         m3c2_only: true,
+        // Its results are read from the M3C2 units below, after the run.
+        keep_units: true,
         ..Default::default()
     };
     run_compare(&opts)?;
@@ -458,6 +460,8 @@ fn campaign(
         resume,
         force,
         tile_size: None,
+        // The intermediate units are released after the run, as the command line's default.
+        keep_units: false,
         executor: Default::default(),
     };
     py.detach(|| talus::commands::campaign::campaign(&opts))

@@ -108,7 +108,10 @@ def test_registration_error_in_lod(bench_data, tmp_path):
     r = talus.m3c2(
         bench_data["e1"], bench_data["e2"], bench_data["c"], registration_error=0.01, **BENCH
     )
-    np.testing.assert_array_equal(r.lodetection, np.asarray(las.m3c2_uncertainty))
+    # m3c2.laz holds the LoD as float32.
+    np.testing.assert_array_equal(
+        r.lodetection.astype(np.float32), np.asarray(las.m3c2_uncertainty)
+    )
     np.testing.assert_array_equal(r.significant, np.asarray(las.m3c2_significant) == 1)
 
 
