@@ -337,13 +337,17 @@ fn a_file_decoded_once_reads_back_from_its_copy_as_it_decodes() {
         let info = io::open(&path).unwrap().info().clone();
         let copy = dir.path().join(format!("copy{n}"));
         let transform = info.transform.filter(|_| quantised);
-        let mut recorder = Recorder::create(&path, Some(&keep), transform, copy.clone());
-        let measured =
-            talus::sampling::measure_keeping(&path, Some(&keep), &mut |p| recorder.push(p))
-                .unwrap();
-        let replay = recorder
-            .finish(&measured.info, measured.classes.clone())
-            .expect("a copy");
+        // The spacing pass, recording what it decodes into `copy`.
+        let record = || {
+            let mut recorder = Recorder::create(&path, Some(&keep), transform, copy.clone());
+            let measured =
+                talus::sampling::measure_keeping(&path, Some(&keep), &mut |p| recorder.push(p))
+                    .unwrap();
+            recorder
+                .finish(&measured.info, measured.classes.clone())
+                .expect("a copy")
+        };
+        let replay = record();
         assert_eq!(replay.file(), copy.as_path());
         assert_eq!(
             std::fs::metadata(&copy).unwrap().len(),
@@ -371,13 +375,7 @@ fn a_file_decoded_once_reads_back_from_its_copy_as_it_decodes() {
         drop(replay);
         // Recorded again and damaged before it is read: an error naming it (another filter
         // decodes the file).
-        let mut recorder = Recorder::create(&path, Some(&keep), transform, copy.clone());
-        let measured =
-            talus::sampling::measure_keeping(&path, Some(&keep), &mut |p| recorder.push(p))
-                .unwrap();
-        let replay = recorder
-            .finish(&measured.info, measured.classes.clone())
-            .expect("a copy");
+        let replay = record();
         let mut f = std::fs::OpenOptions::new()
             .read(true)
             .write(true)

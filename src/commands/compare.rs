@@ -507,10 +507,9 @@ fn explain_recomputed(store: &Store, plan: &mut Plan) {
     let Ok(old) = Plan::load(&plan_path(store)) else {
         return;
     };
-    let todo: Vec<usize> = (0..plan.units.len())
-        .filter(|&i| store.done(&crate::units::unit_ref(plan, i)).is_none())
-        .collect();
-    plan.recomputed = plan.recomputed(&old, &todo);
+    plan.recomputed = plan.recomputed(&old, |i| {
+        store.done(&crate::units::unit_ref(plan, i)).is_some()
+    });
     for r in &plan.recomputed {
         eprintln!(
             "talus: computing {} {} unit(s) again: {}",

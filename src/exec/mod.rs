@@ -128,7 +128,13 @@ pub fn run_units(
     // Dependencies precede their dependents: one pass from the end sees every need.
     let mut needed: Vec<bool> = match only {
         None => (0..n).map(|i| !finished[i]).collect(),
-        Some(list) => (0..n).map(|i| !finished[i] && list.contains(&i)).collect(),
+        Some(list) => {
+            let mut m = vec![false; n];
+            for &i in list.iter().filter(|&&i| i < n) {
+                m[i] = !finished[i];
+            }
+            m
+        }
     };
     for i in (0..n).rev() {
         if !needed[i] {

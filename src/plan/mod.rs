@@ -124,7 +124,7 @@ pub struct Pair {
 /// What a unit does: its kind (a stage's [`crate::units::stage::Stage::KIND`]) and which survey,
 /// pair or tile it is for. Serialized as `{"kind": .., "survey" | "pair", "tile"}`, part of the
 /// unit's key.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub struct Spec {
     pub kind: String,
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -345,18 +345,20 @@ impl Plan {
         self.units.len() - 1
     }
 
-    /// Why the units `todo` (indices of units to compute) are computed again where `old` (the
-    /// plan of DIR's previous run) had a unit of the same spec under another key: by kind and
+    /// Why units not `done` (by index) are computed again where `old` (the plan of DIR's
+    /// previous run) had a unit of the same spec under another key: by kind and
     /// reason, how many — the stage's version changed, a parameter or input it computes from
     /// changed (shown when short), or a unit it reads is computed again.
-    pub fn recomputed(&self, old: &Plan, todo: &[usize]) -> Vec<Recomputed> {
+    pub fn recomputed(&self, old: &Plan, done: impl Fn(usize) -> bool) -> Vec<Recomputed> {
+        let by_spec: std::collections::HashMap<&Spec, &Unit> =
+            old.units.iter().map(|u| (&u.spec, u)).collect();
         let mut out: Vec<Recomputed> = Vec::new();
-        for &i in todo {
-            let u = &self.units[i];
-            let Some(o) = old.find(&u.spec).map(|j| &old.units[j]) else {
+        for (i, u) in self.units.iter().enumerate() {
+            // The key first (in memory); the store is asked only about a unit whose key changed.
+            let Some(&o) = by_spec.get(&u.spec) else {
                 continue;
             };
-            if o.key == u.key {
+            if o.key == u.key || done(i) {
                 continue;
             }
             let why = reason(o, u);
