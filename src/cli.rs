@@ -76,7 +76,7 @@ enum Command {
         #[arg(long)]
         submission: u32,
         /// The stage: tiling, align, aligned, cleared, orient, cores, thinned, m3c2, merged,
-        /// stable, events, series, points, volumes, outputs, campaign, publish.
+        /// stable, events, series, volumes, points, outputs, campaign, publish.
         #[arg(long)]
         stage: String,
         /// The task (default: SLURM_ARRAY_TASK_ID).

@@ -266,6 +266,88 @@ fn a_released_run_resumed_with_new_parameters_gives_a_fresh_runs_outputs() {
 /// survey again; a fresh run measures and caches it. Seen on disk: an entry's count of measured
 /// points, changed by hand, is what the resumed run's plan says; an entry of another version,
 /// another filter or one that does not read is measured again.
+/// The peak disk (issue 46): a unit's files go as soon as every unit that reads them is done,
+/// not after publishing, and m3c2.laz is written once the tiles are gone. Read from the run's
+/// timeline (`TALUS_TRACE`: each unit's begin, commit and release, in order) and its plan.
+#[test]
+fn intermediate_units_go_as_soon_as_their_readers_are_done() {
+    let tmp = common::tempdir();
+    let (before, after) = cliff(&tmp.path().join("scene"), 60_000);
+    let dir = tmp.path().join("run");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_talus"))
+        .args([
+            "compare",
+            before.to_str().unwrap(),
+            after.to_str().unwrap(),
+            "--out",
+        ])
+        .arg(&dir)
+        .args(ARGS)
+        .env("TALUS_TRACE", "1")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    // Where in the timeline each unit `what` happened ("begins", "committed", "released").
+    let at = |name: &str, what: &str| -> Option<usize> {
+        let line = format!("] unit {name} {what}");
+        stderr.lines().position(|l| l.ends_with(&line))
+    };
+    let plan: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join(".talus/plan.json")).unwrap()).unwrap();
+    let units = plan["units"].as_array().unwrap();
+    let name = |i: u64| units[i as usize]["name"].as_str().unwrap();
+    let kind = |u: &serde_json::Value| u["spec"]["kind"].as_str().unwrap().to_string();
+    let published = stderr
+        .lines()
+        .position(|l| l.ends_with("] published"))
+        .expect("a published line");
+    let mut released = 0;
+    for (i, u) in units.iter().enumerate() {
+        if !["tiling", "orient", "aligned", "m3c2"].contains(&kind(u).as_str()) {
+            continue;
+        }
+        let me = u["name"].as_str().unwrap();
+        let Some(gone) = at(me, "released") else {
+            panic!("unit {me} not released during the run:\n{stderr}");
+        };
+        assert!(gone < published, "{me} released only when publishing");
+        released += 1;
+        for r in units.iter().filter(|r| {
+            r["deps"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .any(|d| d.as_u64() == Some(i as u64))
+        }) {
+            let reader = r["name"].as_str().unwrap();
+            assert!(
+                at(reader, "committed").unwrap() < gone,
+                "{me} released before its reader {reader} was done"
+            );
+        }
+    }
+    assert!(released > 4, "{released} units released");
+    // m3c2.laz begins once the pair's volumes are done and every tile is gone.
+    let points = units.iter().find(|u| kind(u) == "points").unwrap();
+    let starts = at(points["name"].as_str().unwrap(), "begins").unwrap();
+    for (i, u) in units.iter().enumerate() {
+        match kind(u).as_str() {
+            "tiling" => assert!(at(name(i as u64), "released").unwrap() < starts),
+            "volumes" => assert!(at(name(i as u64), "committed").unwrap() < starts),
+            _ => {}
+        }
+    }
+    assert!(
+        points["after"].as_array().is_some_and(|a| !a.is_empty()),
+        "the points unit is ordered after the volumes"
+    );
+    // The timeline changed nothing: the outputs are a run's that keeps its units.
+    let kept = tmp.path().join("kept");
+    compare(&before, &after, &kept, &[ARGS, &["--keep-units"]].concat());
+    assert_same_outputs(&kept, &dir);
+}
+
 #[test]
 fn a_resumed_run_takes_the_spacing_its_store_measured() {
     let tmp = common::tempdir();

@@ -60,8 +60,8 @@ fn plan_only_writes_the_scripts_and_submits_nothing() {
     assert_eq!(
         stages,
         [
-            "tiling", "align", "aligned", "orient", "m3c2", "stable", "events", "points",
-            "volumes", "outputs", "publish"
+            "tiling", "align", "aligned", "orient", "m3c2", "stable", "events", "volumes",
+            "points", "outputs", "publish"
         ],
         "{stdout}"
     );

@@ -146,8 +146,8 @@ fn a_registered_stage_runs_locally_in_a_worker_and_in_a_slurm_plan() {
             "m3c2",
             "stable",
             "events",
-            "points",
             "volumes",
+            "points",
             "outputs",
             "publish"
         ],

@@ -1,7 +1,7 @@
 //! Every unit knows the code that made it (issue 46, item 2): a stage's `VERSION` is part of its
 //! units' keys, so it must change whenever what the stage writes changes. This test runs a fixed
 //! campaign (3 misregistered surveys of 20,000 points, `--vegetation remove`: tiling, align,
-//! aligned, cleared, orient, thinned, m3c2, stable, events, series, points, volumes, outputs,
+//! aligned, cleared, orient, thinned, m3c2, stable, events, series, volumes, points, outputs,
 //! campaign) and a compare with `--core-points` (cores), hashes each stage's units, and compares with
 //! `tests/data/stage_outputs.json`: a hash that changed under an unchanged version fails,
 //! naming the stage to bump, unless an earlier stage's version changed (a stage's output follows

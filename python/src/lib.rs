@@ -346,6 +346,7 @@ fn through_pipeline(
         store: &store,
         progress: &|_| {},
         pool: &pool,
+        reader: None,
     };
     let mut merged = Merged::new(&ctx, 0)?;
     let mut out = Columns::default();

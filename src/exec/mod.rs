@@ -50,6 +50,8 @@ struct Shared {
     error: Option<Error>,
     /// Units found claimed by another live process at the last look.
     elsewhere: Vec<bool>,
+    /// Units this run released (or let go to be released) once their dependents were done.
+    released: Vec<bool>,
 }
 
 /// What a run of the executor did.
@@ -185,12 +187,16 @@ pub fn run_units(
         withdrawn: vec![0; n],
         error: None,
         elsewhere: vec![false; n],
+        released: vec![false; n],
     });
     let wake = Condvar::new();
     let stages = Stages::new(plan, &done);
     let watch = resident::Watch::start();
     let pool = crate::memory::pool_for(plan.params.memory_bytes.value);
     let computed = std::sync::atomic::AtomicUsize::new(0);
+    let early = (only.is_none() && !plan.keep_units)
+        .then(|| EarlyRelease::new(plan))
+        .transpose()?;
     std::thread::scope(|s| {
         for _ in 0..slots.max(1) {
             s.spawn(|| {
@@ -205,6 +211,7 @@ pub fn run_units(
                     pool: &pool,
                     computed: &computed,
                     revive: &revive,
+                    early: early.as_ref(),
                 })
             });
         }
@@ -216,6 +223,9 @@ pub fn run_units(
         return Err(e);
     }
     stages.finish_all();
+    if let Some(e) = &early {
+        publish::say_released(e.freed.load(std::sync::atomic::Ordering::Relaxed));
+    }
     Ok(Report {
         computed: computed.into_inner(),
         reused,
@@ -236,6 +246,71 @@ struct RunCtx<'a> {
     /// Released units to be computed again (their files needed); any other released unit
     /// reached is found done.
     revive: &'a [bool],
+    /// Releasing intermediate units as the run goes (None: a run over part of the plan, or
+    /// `--keep-units`).
+    early: Option<&'a EarlyRelease>,
+}
+
+/// Releasing a unit's files as soon as every unit that reads them is done, rather than after
+/// publishing: the tiles, the per-tile M3C2 results and m3c2.laz would otherwise all be on disk
+/// at once near the end of a run (issue 46: the run's peak disk). A unit reads only its
+/// dependencies' files (`Ctx::input` refuses others), so once its dependents are done no unit
+/// of the plan reads it again.
+struct EarlyRelease {
+    /// The units that depend on each unit.
+    dependents: Vec<Vec<usize>>,
+    /// What each unit keeps when released (None: never released, `publish::releasable`).
+    kept: Vec<Option<&'static [&'static str]>>,
+    freed: std::sync::atomic::AtomicU64,
+}
+
+impl EarlyRelease {
+    fn new(plan: &Plan) -> Result<EarlyRelease> {
+        let n = plan.units.len();
+        let mut dependents = vec![Vec::new(); n];
+        for (i, u) in plan.units.iter().enumerate() {
+            for &d in &u.deps {
+                dependents[d].push(i);
+            }
+        }
+        Ok(EarlyRelease {
+            dependents,
+            kept: (0..n)
+                .map(|i| publish::releasable(plan, i))
+                .collect::<Result<_>>()?,
+            freed: Default::default(),
+        })
+    }
+
+    /// The dependencies of unit `done` (just done) that no unit still needs, marked released.
+    fn due(&self, plan: &Plan, sh: &mut Shared, done: usize) -> Vec<usize> {
+        let mut out = Vec::new();
+        for &d in &plan.units[done].deps {
+            let free = self.kept[d].is_some()
+                && !sh.released[d]
+                && sh.state[d] == State::Done
+                && self.dependents[d]
+                    .iter()
+                    .all(|&j| sh.state[j] == State::Done);
+            if free {
+                sh.released[d] = true;
+                out.push(d);
+            }
+        }
+        out
+    }
+
+    /// Release units `due` ([`EarlyRelease::due`]).
+    fn release(&self, store: &Store, plan: &Plan, due: &[usize]) -> Result<()> {
+        for &d in due {
+            let kept = self.kept[d].unwrap_or_default();
+            let freed = store.release(&unit_ref(plan, d), kept)?;
+            crate::progress::trace(|| format!("unit {} released", plan.units[d].name));
+            self.freed
+                .fetch_add(freed, std::sync::atomic::Ordering::Relaxed);
+        }
+        Ok(())
+    }
 }
 
 /// One slot: take ready units until every unit is done or the run failed.
@@ -271,6 +346,7 @@ fn slot(cx: &RunCtx) {
                         && plan.units[i]
                             .deps
                             .iter()
+                            .chain(&plan.units[i].after)
                             .all(|&d| sh.state[d] == State::Done)
                         && !sh.elsewhere[i]
                 });
@@ -306,6 +382,14 @@ fn slot(cx: &RunCtx) {
                     computed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                 }
                 sh.state[picked] = State::Done;
+                // Under the lock, so that no unit the release makes room for (the points unit
+                // after the tiles) starts before the files are gone.
+                if let Some(e) = cx.early {
+                    let due = e.due(plan, &mut sh, picked);
+                    if let Err(err) = e.release(store, plan, &due) {
+                        sh.error.get_or_insert(err);
+                    }
+                }
                 stages.unit_done(
                     plan,
                     picked,
@@ -417,6 +501,7 @@ fn claim_and_run(cx: &RunCtx, i: usize) -> Result<Ran> {
         store,
         progress: &progress,
         pool,
+        reader: Some(i),
     };
     let mut out = store.begin(&unit)?;
     watch.begin(i);

@@ -24,28 +24,44 @@ pub fn publish_and_gc(store: &Store, plan: &Plan, ours: &dyn Fn(&str) -> bool) -
     Ok(marker)
 }
 
-/// Release the files of the plan's intermediate units ([`crate::units::stage::Stage::INTERMEDIATE`]):
-/// what DIR keeps after a run is its outputs and the units' records, with the small units the
-/// outputs are made from; the tiles and per-tile M3C2 results are computed again by a later run
-/// that needs them. A campaign keeps the units of its first and last surveys (their tiles, the
-/// last one's orientation field): the survey appended next is aligned onto the first and
-/// compared with the last. Says how much it freed.
+/// Release the files of the plan's intermediate units that the run has not released already
+/// ([`releasable`]; the executor releases most as soon as their dependents are done:
+/// `exec::run_units`): what DIR keeps after a run is its outputs and the units' records, with
+/// the small units the outputs are made from. Says how much it freed.
 fn release(store: &Store, plan: &Plan) -> Result<()> {
-    let stages = registry();
+    let mut freed = 0u64;
+    for i in 0..plan.units.len() {
+        if let Some(kept) = releasable(plan, i)? {
+            freed += store.release(&unit_ref(plan, i), kept)?;
+        }
+    }
+    say_released(freed);
+    Ok(())
+}
+
+/// Whether unit `i` of the plan is released once its dependents are done, and the files its
+/// release keeps ([`crate::units::stage::Stage::KEPT`]): the units of an intermediate stage
+/// (tiles, per-tile M3C2 results), which a later run that needs them computes again. A campaign
+/// keeps the units of its first and last surveys (their tiles, the last one's orientation
+/// field): the survey appended next is aligned onto the first and compared with the last.
+pub fn releasable(plan: &Plan, i: usize) -> Result<Option<&'static [&'static str]>> {
     use crate::units::stage::Stage;
+    let u = &plan.units[i];
+    let stage = registry().get(u.kind())?;
+    if !stage.intermediate() {
+        return Ok(None);
+    }
     let campaign = plan
         .of_kind(crate::units::campaign::CampaignStage::KIND)
         .next()
         .is_some();
     let ends = [Some(0), plan.surveys.len().checked_sub(1)];
-    let mut freed = 0u64;
-    for (i, u) in plan.units.iter().enumerate() {
-        let stage = stages.get(u.kind())?;
-        let next_needs = campaign && u.spec.pair.is_none() && ends.contains(&u.spec.survey);
-        if stage.intermediate() && !next_needs {
-            freed += store.release(&unit_ref(plan, i), stage.kept())?;
-        }
-    }
+    let next_needs = campaign && u.spec.pair.is_none() && ends.contains(&u.spec.survey);
+    Ok((!next_needs).then(|| stage.kept()))
+}
+
+/// Tell the user how much releasing intermediate units freed, if anything.
+pub fn say_released(freed: u64) {
     if freed > 0 {
         eprintln!(
             "talus: released {:.1} MiB of intermediate units (tiles, M3C2 results: a later run \
@@ -53,7 +69,6 @@ fn release(store: &Store, plan: &Plan) -> Result<()> {
             freed as f64 / f64::from(1 << 20)
         );
     }
-    Ok(())
 }
 
 /// The plan's final unit (whose record lists what to publish).

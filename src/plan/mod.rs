@@ -199,6 +199,11 @@ pub struct Unit {
     /// a later plan compares to say why a unit is computed again ([`Plan::recomputed`]).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub parts: Vec<String>,
+    /// Units this one runs after without reading them (an order, not an input: not in its key,
+    /// never computed again for it): m3c2.laz is written once the pair's volumes are done, so
+    /// that the tiles the volumes read are released before it is on disk (issue 46, the peak).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub after: Vec<usize>,
 }
 
 impl Unit {
@@ -341,6 +346,7 @@ impl Plan {
             deps,
             spec,
             parts,
+            after: Vec::new(),
         });
         self.units.len() - 1
     }
@@ -481,6 +487,7 @@ mod tests {
             deps: Vec::new(),
             spec: Spec::run("m3c2"),
             parts: parts.iter().map(|p| p.to_string()).collect(),
+            after: Vec::new(),
         }
     }
 

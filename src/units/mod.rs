@@ -50,6 +50,9 @@ pub struct Ctx<'a> {
     pub progress: &'a (dyn Fn(u64) + Sync),
     /// The process's memory pool: reserve before holding anything large.
     pub pool: &'a crate::memory::Pool,
+    /// The unit running, whose files [`Ctx::input`] grants: its dependencies' only (None: a
+    /// reader outside any unit, such as the Python package reading a finished run).
+    pub reader: Option<usize>,
 }
 
 impl Ctx<'_> {
@@ -64,8 +67,24 @@ impl Ctx<'_> {
         unit_ref(self.plan, i)
     }
 
-    /// The path of `file` in finished unit `i` (a dependency).
+    /// The path of `file` in finished unit `i`, a dependency of the unit running, or one of the
+    /// files any unit's release keeps ([`stage::Stage::KEPT`]). Reading any other unit's files is
+    /// refused: the executor releases a unit's files once every unit that depends on it is done
+    /// (`exec::EarlyRelease`), so a file read beyond the declared dependencies could be gone.
     pub fn input(&self, i: usize, file: &str) -> Result<PathBuf> {
+        if let Some(r) = self.reader {
+            let kept = || {
+                stage::registry()
+                    .get(self.plan.units[i].kind())
+                    .is_ok_and(|s| s.kept().contains(&file))
+            };
+            if !self.plan.units[r].deps.contains(&i) && !kept() {
+                return Err(Error::Internal(format!(
+                    "unit {} reads {file} of unit {}, which it does not depend on",
+                    self.plan.units[r].name, self.plan.units[i].name
+                )));
+            }
+        }
         Ok(self.store.unit_dir(&self.unit_ref(i))?.join(file))
     }
 

@@ -220,8 +220,8 @@ pub fn default_stages() -> Vec<&'static dyn Registered> {
         entry::<stable::StableStage>(),
         entry::<events::EventsStage>(),
         entry::<series::SeriesStage>(),
-        entry::<outputs::points::PointsStage>(),
         entry::<volumes::VolumesStage>(),
+        entry::<outputs::points::PointsStage>(),
         entry::<outputs::OutputsStage>(),
         entry::<campaign::CampaignStage>(),
     ]
@@ -330,6 +330,11 @@ impl Planner<'_> {
         self.plan.find(spec)
     }
 
+    /// Run unit `unit` after units `after` without reading them ([`crate::plan::Unit::after`]).
+    pub fn order_after(&mut self, unit: usize, after: Vec<usize>) {
+        self.plan.units[unit].after = after;
+    }
+
     /// The unit of `spec`, which an earlier stage must have planned.
     pub fn the(&self, spec: &Spec) -> Result<usize> {
         self.find(spec)
@@ -416,8 +421,51 @@ pub fn plan_units(plan: &mut Plan, cores: CoreSource, campaign: Option<&str>) ->
     for s in registry().stages() {
         s.plan(&mut p)?;
     }
+    check_plan(p.plan)?;
     let last = final_unit(p.plan)?;
     p.plan.run = p.plan.units[last].key.clone();
+    Ok(())
+}
+
+/// Check what every executor relies on, once the stages have planned: each unit's stage is
+/// registered and its spec names what the stage's [`Scope`] says (a survey, a pair, a pair's
+/// tile, or nothing), and each unit depends only on units of earlier stages — so the stages in
+/// registry order are a valid order to run them in (Slurm's arrays, `plan-stats`), and no
+/// stage's planning can make a cycle.
+pub fn check_plan(plan: &Plan) -> Result<()> {
+    let reg = registry();
+    let mut ranks = Vec::with_capacity(plan.units.len());
+    for u in &plan.units {
+        let stage = reg.get(u.kind())?;
+        let s = &u.spec;
+        let fits = match stage.scope() {
+            Scope::Survey => s.survey.is_some() && s.pair.is_none() && s.tile.is_none(),
+            Scope::Pair => s.survey.is_none() && s.pair.is_some() && s.tile.is_none(),
+            Scope::Tile => s.survey.is_none() && s.pair.is_some() && s.tile.is_some(),
+            Scope::Run => s.survey.is_none() && s.pair.is_none() && s.tile.is_none(),
+        };
+        if !fits {
+            return Err(Error::Internal(format!(
+                "unit {} of stage {} is planned as {s:?}, not one per {:?}",
+                u.name,
+                u.kind(),
+                stage.scope()
+            )));
+        }
+        ranks.push(reg.rank(u.kind()).unwrap_or(usize::MAX));
+    }
+    for (i, u) in plan.units.iter().enumerate() {
+        let before = u.deps.iter().chain(&u.after);
+        if let Some(&d) = before.clone().find(|&&d| d >= i || ranks[d] >= ranks[i]) {
+            return Err(Error::Internal(format!(
+                "unit {} ({}) depends on {} ({}), not of an earlier stage",
+                u.name,
+                u.kind(),
+                plan.units[d].name,
+                plan.units[d].kind()
+            )));
+        }
+    }
     Ok(())
 }
 

@@ -103,14 +103,8 @@ pub fn stages(plan: &Plan, done: &[bool], tiles_per_task: usize) -> Result<Vec<S
             })
         })
         .collect::<Result<_>>()?;
-    for (i, u) in plan.units.iter().enumerate() {
-        if let Some(&d) = u.deps.iter().find(|&&d| ranks[d] >= ranks[i]) {
-            return Err(Error::Internal(format!(
-                "unit {} depends on {} of the same or a later stage",
-                u.name, plan.units[d].name
-            )));
-        }
-    }
+    // A plan read back from DIR (a task's) is checked as a new one is.
+    crate::units::stage::check_plan(plan)?;
     let mut out = Vec::new();
     for (r, stage) in stage_order().enumerate() {
         let todo: Vec<usize> = (0..plan.units.len())

@@ -87,7 +87,11 @@ impl Stage for PointsStage {
             let mut deps = vec![p.the(&Spec::pair(StableStage::KIND, pair))?];
             deps.extend(p.pair_results(pair));
             deps.extend(p.find(&Spec::pair(EventsStage::KIND, pair)));
-            p.add_pair(Self::KIND, pair, &version, deps);
+            let unit = p.add_pair(Self::KIND, pair, &version, deps);
+            // After the pair's volumes: they read the tiles, m3c2.laz is made from the M3C2
+            // results; one after the other, the tiles go before m3c2.laz comes (issue 46).
+            let volumes = p.of_pair(crate::units::volumes::VolumesStage::KIND, pair);
+            p.order_after(unit, volumes);
         }
         Ok(())
     }
