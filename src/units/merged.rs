@@ -78,7 +78,7 @@ pub struct MergedMeta {
 impl Stage for MergedStage {
     const KIND: &'static str = "merged";
     const SCOPE: Scope = Scope::Pair;
-    const VERSION: u32 = 1;
+    const VERSION: u32 = 2;
     const INTERMEDIATE: bool = true;
     const LINE: Line = Line {
         name: "merging tiles",
@@ -112,6 +112,7 @@ impl Stage for MergedStage {
         let _held = ctx.reserve(need(), "merging the pair's results in rounds")?;
         // The tiles' chunks first (the M3C2 units' own files), then each round's runs.
         let mut runs: Vec<Vec<PathBuf>> = super::m3c2::tile_chunks(ctx, pair)?;
+        let opts = super::m3c2::chunk_options(ctx)?;
         let mut rounds = 0;
         loop {
             let groups: Vec<Vec<Vec<PathBuf>>> = runs.chunks(FAN_IN).map(<[_]>::to_vec).collect();
@@ -120,7 +121,7 @@ impl Stage for MergedStage {
             let last = groups.len() <= FAN_IN;
             let mut next = Vec::with_capacity(groups.len());
             for (g, group) in groups.into_iter().enumerate() {
-                let (files, n) = write_run(Merged::of_runs(group)?, |k, bytes| {
+                let (files, n) = write_run(Merged::of_runs(group)?, &opts, |k, bytes| {
                     if last {
                         let name = run_file(g, k);
                         super::write_bytes(out, &name, &bytes)?;
@@ -154,10 +155,12 @@ impl Stage for MergedStage {
     }
 }
 
-/// Write `merged` as a sorted run of chunk files, [`GROUP`] chunks encoded at a time:
+/// Write `merged` as a sorted run of chunk files (encoded with `opts`), [`GROUP`] chunks encoded
+/// at a time:
 /// `write(k, bytes)` stores chunk `k` and says where. Returns the files and the results written.
 fn write_run(
     mut merged: Merged,
+    opts: &talus_tiling::WriteOptions,
     mut write: impl FnMut(usize, Vec<u8>) -> Result<PathBuf>,
 ) -> Result<(Vec<PathBuf>, u64)> {
     let (mut files, mut n) = (Vec::new(), 0u64);
@@ -177,7 +180,7 @@ fn write_run(
             ));
         }
         if batch.len() == GROUP || (done && !batch.is_empty()) {
-            for bytes in super::m3c2::encode_chunks(&batch)? {
+            for bytes in super::m3c2::encode_chunks(&batch, opts)? {
                 files.push(write(files.len(), bytes)?);
             }
             batch.clear();

@@ -46,7 +46,7 @@ pub fn frame_points(plan: &crate::plan::Plan, tiles: usize) -> usize {
 /// (first) file's coordinate transform, which is exact (a value that does not come back bit for
 /// bit keeps its column as f64) and takes a third of the bytes, so that tiles compress, are
 /// written and read in a fraction of the time (`talus_tiling::tile_file`'s measurements).
-fn write_options(transform: Option<[[f64; 2]; 3]>) -> WriteOptions {
+pub fn write_options(transform: Option<[[f64; 2]; 3]>) -> WriteOptions {
     WriteOptions {
         quantise: transform.map(|t| Quantisation {
             scale: t.map(|a| a[0]),

@@ -244,7 +244,9 @@ mod tests {
                     .map(|(k, w)| {
                         let part: Vec<KeyedResult> =
                             keys[w[0]..w[1]].iter().map(|&k| result(k)).collect();
-                        let bytes = super::super::encode_chunks(&[part]).unwrap().remove(0);
+                        let bytes = super::super::encode_chunks(&[part], &Default::default())
+                            .unwrap()
+                            .remove(0);
                         let path = dir.join(format!("run{r}_{k}.tile"));
                         std::fs::write(&path, bytes).unwrap();
                         path

@@ -67,7 +67,7 @@ pub struct M3c2Meta {
 impl Stage for M3c2Stage {
     const KIND: &'static str = "m3c2";
     const SCOPE: Scope = Scope::Tile;
-    const VERSION: u32 = 1;
+    const VERSION: u32 = 2;
     const INTERMEDIATE: bool = true;
     const LINE: Line = Line {
         name: "pass 2: normals and M3C2",
@@ -196,7 +196,7 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<M3c2Meta> {
             results[i] = r;
         }
     }
-    let chunks = write_chunks(out, &results)?;
+    let chunks = write_chunks(out, &results, &chunk_options(ctx)?)?;
     (ctx.progress)(points);
     let count = |reach: Reach| results.iter().filter(|k| k.r.reach == reach).count();
     Ok(M3c2Meta {
@@ -300,14 +300,28 @@ fn gather_along(
     Ok(out)
 }
 
+/// How result chunks are encoded: the core points' coordinates as the integers of the first
+/// survey's coordinate transform, where the core points come from (its thinned tiles, or a
+/// campaign's thinned first survey). Exact or not at all: an axis whose values do not all come
+/// back bit for bit stays f64 (user core points, an aligned frame), so the results read back
+/// are the same either way. 6 bytes less a core point than f64 coordinates (of ≈ 61; issue 46,
+/// the peak disk of a run holds every tile's results).
+pub fn chunk_options(ctx: &Ctx) -> Result<talus_tiling::WriteOptions> {
+    Ok(super::tiling::write_options(ctx.quantum(0)?))
+}
+
 /// Write `results` as chunk files of [`CHUNK_ROWS`] rows; returns how many. Chunks are encoded in
 /// parallel, a group at a time (the encoded bytes of a group are held until written), and
 /// written plainly: the unit's commit makes them durable.
-fn write_chunks(out: &mut UnitWriter, results: &[KeyedResult]) -> Result<usize> {
+fn write_chunks(
+    out: &mut UnitWriter,
+    results: &[KeyedResult],
+    opts: &talus_tiling::WriteOptions,
+) -> Result<usize> {
     const GROUP: usize = 16;
     let parts: Vec<&[KeyedResult]> = results.chunks(CHUNK_ROWS).collect();
     for (g, group) in parts.chunks(GROUP).enumerate() {
-        for (i, bytes) in encode_chunks(group)?.into_iter().enumerate() {
+        for (i, bytes) in encode_chunks(group, opts)?.into_iter().enumerate() {
             super::write_bytes(out, &chunk_file(g * GROUP + i), &bytes)?;
         }
     }
@@ -315,12 +329,15 @@ fn write_chunks(out: &mut UnitWriter, results: &[KeyedResult]) -> Result<usize> 
 }
 
 /// Result chunks encoded as chunk files' bytes, in parallel.
-pub fn encode_chunks<C: AsRef<[KeyedResult]> + Sync>(chunks: &[C]) -> Result<Vec<Vec<u8>>> {
+pub fn encode_chunks<C: AsRef<[KeyedResult]> + Sync>(
+    chunks: &[C],
+    opts: &talus_tiling::WriteOptions,
+) -> Result<Vec<Vec<u8>>> {
     use rayon::prelude::*;
     chunks
         .par_iter()
         .map(|part| {
-            talus_tiling::encode_tile(&to_columns(part.as_ref()), &Default::default())
+            talus_tiling::encode_tile(&to_columns(part.as_ref()), opts)
                 .map_err(|p| Error::Internal(format!("a result chunk: {p}")))
         })
         .collect()
