@@ -302,6 +302,34 @@ pub fn slug(s: &str) -> String {
 }
 
 impl Plan {
+    /// A plan of `surveys` and `pairs` with no units yet (the stages add them:
+    /// `units::stage::plan_units`), no run id, and none of the options: no core-point file,
+    /// stable areas or meshes, every stage, the intermediate units released.
+    pub fn new(
+        surveys: Vec<Survey>,
+        pairs: Vec<Pair>,
+        params: Params,
+        spacing: Spacing,
+        layout: Layout,
+    ) -> Plan {
+        Plan {
+            version: PLAN_VERSION,
+            run: String::new(),
+            surveys,
+            pairs,
+            params,
+            spacing,
+            layout,
+            core_points: None,
+            stable_areas: None,
+            meshes: None,
+            m3c2_only: false,
+            keep_units: false,
+            recomputed: Vec::new(),
+            units: Vec::new(),
+        }
+    }
+
     /// Pair `pair` for messages: "BEFORE and AFTER" (the arguments) in a one-pair plan, "pair
     /// LABEL (BEFORE and AFTER)" in a campaign.
     pub fn pair_name(&self, pair: usize) -> String {

@@ -68,6 +68,10 @@ pub use writer::UnitWriter;
 use crate::error::{Error, Result};
 use fsops::out_err;
 
+/// The file name of a run's plan: in `.talus` ([`Store::plan_path`]) and in a Slurm
+/// submission's folder. Every process that executes the run's units reads it.
+pub const PLAN_FILE: &str = "plan.json";
+
 /// How long a claim from another host (whose pid cannot be checked) holds without renewal.
 pub const DEFAULT_LEASE: Duration = Duration::from_secs(6 * 3600);
 
@@ -212,6 +216,11 @@ impl Store {
     /// DIR/.talus.
     pub fn work(&self) -> &Path {
         &self.work
+    }
+
+    /// DIR/.talus/plan.json: the plan of DIR's run ([`PLAN_FILE`]).
+    pub fn plan_path(&self) -> PathBuf {
+        self.work.join(PLAN_FILE)
     }
 
     fn units(&self) -> PathBuf {
