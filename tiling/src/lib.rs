@@ -15,7 +15,6 @@
 
 pub mod atomic;
 pub mod error;
-pub mod framed;
 pub mod grid;
 pub mod hash;
 pub mod rng;
@@ -28,6 +27,7 @@ pub use grid::{BoundsXY, TileGrid, TileId};
 pub use hash::{hash64, Fnv64};
 pub use rng::SplitMix64;
 pub use splitter::{empty_columns, tile_path, TileSplitter, OWNED_COLUMN};
+pub use tile_file::framed;
 pub use tile_file::{
     encode_tile, read_tile, read_tile_frames, read_tile_header, write_tile, write_tile_with,
     Bounds3, Column, ColumnData, FileDigest, Quantisation, TileColumns, TileFrames, TileHeader,
