@@ -19,9 +19,9 @@
 
 use rayon::prelude::*;
 
-use super::rng::Rng;
 use super::scenes::ModelEvent;
 use super::surface::{bump_volume, V3};
+use crate::rng::Rng;
 
 /// Strike length and up-dip height of the face (m).
 const WIDTH: f64 = 60.0;

@@ -29,7 +29,6 @@ pub mod face;
 mod output;
 pub mod owned;
 mod plants;
-pub(crate) mod rng;
 mod sampling;
 pub mod scenes;
 mod surface;

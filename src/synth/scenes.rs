@@ -10,7 +10,7 @@
 use std::f64::consts::{PI, TAU};
 
 use super::plants::{Plant, PlantKind, Standing};
-use super::rng::Rng;
+use crate::rng::Rng;
 use super::surface::{
     box_walls, box_walls_on, bump_volume, cap_footprint, cap_volume, Base, Feature, Heightfield,
     Hole, Patch, Wave,
