@@ -58,7 +58,7 @@ pub fn morton(c: &Cell) -> u64 {
 /// The points come in file order, which on a scanner's file (or a random sample) is all over
 /// the tile, so a single map of the tile's cells (≈ 500k on the 120M-point pair's tiles, 20 MB)
 /// missed the cache at nearly every point. The candidates are first counted into bands of
-/// rows of cells holding about [`BAND_POINTS`] candidates (a stable counting sort of their
+/// rows of cells holding about `BAND_POINTS` candidates (a stable counting sort of their
 /// indices, 4 bytes a candidate), then each band is thinned with a map small enough to stay cached, reused from
 /// band to band. A cell lies in one band, and its candidates keep their order, so the choice
 /// (nearest the centre, ties to the earlier point) is the one map's.

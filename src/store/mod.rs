@@ -6,6 +6,7 @@
 //! ```text
 //! DIR/.talus/
 //!   lock                          one run per DIR                      (lock.rs)
+//!   plan.json                     the run's plan (PLAN_FILE), written by the commands
 //!   units/<kind>/<name>/          one finished unit: files + record.json (writer.rs, units.rs);
 //!                                 an intermediate one released: its record alone (release.rs)
 //!   tmp/                          units being written, trash, temporaries (fsops.rs, gc.rs)
@@ -90,7 +91,7 @@ impl Store {
     /// `create`. Writability is probed now (a file in `tmp/`), before any work is spent: a file
     /// where DIR should be, a missing store without `create`, or an unwritable DIR is
     /// `Error::Output` naming the path. A symbolic link or a special file in `.talus/` is refused
-    /// ([`Store::check_work_area`]).
+    /// (`Store::check_work_area`).
     pub fn open(dir: &Path, create: bool) -> Result<Store> {
         match std::fs::metadata(dir) {
             Ok(m) if !m.is_dir() => {

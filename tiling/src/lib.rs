@@ -2,13 +2,15 @@
 //!
 //! A 120M-point epoch does not fit in a 2 GiB budget together with its kd-trees, so talus cuts
 //! both epochs into the same grid of square XY tiles, each stored on disk with a halo wide enough
-//! for every neighbourhood computed inside it, and processes one tile at a time. Every finished unit
-//! is an immutable file plus an entry in a manifest replaced atomically, so a run killed with
-//! SIGKILL resumes where it stopped.
+//! for every neighbourhood computed inside it, and processes one tile at a time. Every file here
+//! is written whole and atomically and checked whole when read, so a run killed with SIGKILL
+//! leaves either a complete tile file or none; what is finished and where a run resumes is
+//! talus's store (`talus::store`: a unit directory committed by one rename), not this crate's.
 //!
-//! Modules: [`grid`] (tile geometry and planning), [`tile_file`] (compact checksummed tile files),
-//! [`splitter`] (stream points into tiles with bounded memory), [`manifest`] (resume state),
-//! [`atomic`] (crash-safe file replacement) and [`hash`] (stable 64-bit keys).
+//! Modules: [`grid`] (tile geometry and planning), [`tile_file`] (compact checksummed tile files,
+//! [`framed`] among them), [`splitter`] (stream points into tiles with bounded memory),
+//! [`atomic`] (crash-safe file replacement), [`hash`] (stable 64-bit keys) and [`rng`] (a
+//! reproducible random stream).
 //!
 //! This crate does not depend on the root `talus` crate; its [`Error`] carries the path and the
 //! problem so the caller can map it onto `talus::Error`.

@@ -4,7 +4,7 @@
 //! All scenes are built in local metres (x east, y north, z up, ground at z ≈ 100) and shifted to
 //! UTM-like coordinates when written. Change features never overlap and stay at least a few metres
 //! from the scene edges. Volumes (signed: loss < 0) follow from the formulas in
-//! [`surface`](super::surface): bump h·R²(π/2 − 2/π), spherical cap πh²(3R − h)/3, box w·d·h,
+//! `surface`: bump h·R²(π/2 − 2/π), spherical cap πh²(3R − h)/3, box w·d·h,
 //! half-cone (a cone cut in half by the cliff face) πR²H/6, half-ellipsoid (2/3)πabc.
 //!
 //! Here the model of a scene and what the scenes share; the scenes themselves by family in
