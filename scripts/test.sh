@@ -20,6 +20,9 @@ export TALUS_PYTHON="$repo/tests/py/.venv/bin/python"
 
 cargo test --workspace --no-fail-fast
 
+# The documentation builds without a warning (broken or private intra-doc links, bad HTML).
+RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps
+
 # The Python package (python/, README.md "Python"): its wheel built and installed into a fresh
 # venv with numpy, pandas, laspy and py4dgeo from PyPI; its numbers checked against the talus
 # binary `cargo test` built and against py4dgeo. About 6 min on a fresh machine: the wheel's cold

@@ -249,7 +249,7 @@ impl UserParams {
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct Resolved<T> {
     pub value: T,
-    /// "user" (flag or config file) or "derived: <rule>" or "default".
+    /// "user" (flag or config file) or `"derived: <rule>"` or "default".
     pub source: String,
 }
 

@@ -6,7 +6,7 @@
 //! [`WINDOW_TARGET`] points (grown when it falls on a hole, shrunk when it is denser than
 //! expected): each try is one streaming pass, so memory stays bounded whatever the file's size
 //! and point order. Only points in the inner half of the window are measured, so that their
-//! nearest neighbour is inside the window. Exact duplicates are measured once (see [`distinct`]).
+//! nearest neighbour is inside the window. Exact duplicates are measured once (see `distinct`).
 
 use std::path::Path;
 

@@ -143,7 +143,7 @@ fn ks_distance(tail: &[f64], x_min: f64, alpha: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::synth::rng::Rng;
+    use crate::rng::Rng;
 
     /// `n` values of a power law by inverse transform: x = x_min (1 − u)^(−1/(α − 1)).
     fn power_law(rng: &mut Rng, n: usize, alpha: f64, x_min: f64) -> Vec<f64> {

@@ -4,18 +4,17 @@
 //! unit chain per pair, and the campaign unit over them — executed and published like `compare`.
 //! Appending a survey and running again with `--resume` computes only what the new survey adds:
 //! the grid, the parameters and the core points come from what does not change (the surveys'
-//! union, the first survey), and every other unit's key is what it was.
+//! union, the first survey), and every other unit's key is what it was. DIR, the store, executing
+//! and publishing: [`super::run`], as for `compare`.
 
 use std::path::{Path, PathBuf};
 
+use super::run::{keeps_decoded, measure_spacing, stable_areas, survey, RunOptions};
 use crate::campaign::epochs::{self, EpochEntry};
-use crate::commands::compare::{
-    check_out_dir, forget_if_input_error, open_store, run_planned, survey,
-};
 use crate::error::{Error, Result};
 use crate::params::{Params, UserParams};
 use crate::plan::inputs::SurveyFiles;
-use crate::plan::{Layout, Pair, Plan, PLAN_VERSION};
+use crate::plan::{Layout, Pair, Plan};
 use crate::store::Store;
 
 /// Everything `campaign` needs.
@@ -95,39 +94,23 @@ pub fn campaign(opts: &CampaignOptions) -> Result<Option<Done>> {
     Params::resolve(&user, 1.0)?;
     let bounds: Vec<_> = files.iter().map(|f| f.bounds()).collect();
     user.check_lengths_within(&bounds)?;
-    let given: Vec<&std::path::Path> = files
+    let given: Vec<&Path> = files
         .iter()
         .flat_map(|f| f.infos.iter().map(|i| i.path.as_path()))
         .collect();
-    check_out_dir(
-        &opts.out,
-        opts.resume,
-        opts.force,
-        &crate::units::campaign::is_output,
-        &given,
-    )?;
-    let (store, created) = open_store(
-        &opts.out,
-        opts.resume,
-        opts.force,
-        &crate::units::campaign::is_output,
-    )?;
-    let mut decoded = None;
-    let result = run_planned(
-        &store,
-        opts.force,
-        &crate::units::campaign::is_output,
-        &opts.executor,
-        |store| plan(store, opts, &user, &epochs, &files, &mut decoded),
-    );
-    drop(decoded);
-    let Some(marker) = forget_if_input_error(result, created, &opts.out)? else {
+    let run = RunOptions {
+        out: &opts.out,
+        resume: opts.resume,
+        force: opts.force,
+        executor: &opts.executor,
+        ours: &crate::units::campaign::is_output,
+    };
+    let summary: Option<serde_json::Value> = super::run::run(&run, &given, |store, decoded| {
+        plan(store, opts, &user, &epochs, &files, decoded)
+    })?;
+    let Some(summary) = summary else {
         return Ok(None);
     };
-    super::compare::say_removed_vegetation(&store)?;
-    let text = std::fs::read(&marker).map_err(|e| Error::output(&marker, e))?;
-    let summary: serde_json::Value =
-        serde_json::from_slice(&text).map_err(|e| Error::Internal(format!("summary.json: {e}")))?;
     Ok(Some(Done {
         surveys: epochs.len(),
         pairs: summary["pairs"].as_array().map_or(0, |p| p.len()),
@@ -144,11 +127,11 @@ fn plan(
     decoded: &mut Option<crate::io::replay::Replay>,
 ) -> Result<Plan> {
     // One parameter set: from the first survey, which an appended survey does not change.
-    let (spacing, density_grid) = super::compare::measure_spacing(
+    let (spacing, density_grid) = measure_spacing(
         store,
         files[0].first(),
         user,
-        super::compare::keeps_decoded(opts.resume, &opts.executor).then_some(decoded),
+        keeps_decoded(opts.resume, &opts.executor).then_some(decoded),
     )?;
     let params = Params::resolve(user, spacing.effective_spacing)?;
     params.check_core_spacing(user)?;
@@ -184,23 +167,9 @@ fn plan(
             after: a,
         })
         .collect();
-    let mut plan = Plan {
-        version: PLAN_VERSION,
-        run: String::new(),
-        surveys,
-        pairs,
-        params,
-        spacing,
-        layout,
-        core_points: None,
-        stable_areas: None,
-        meshes: None,
-        m3c2_only: false,
-        keep_units: opts.keep_units,
-        recomputed: Vec::new(),
-        units: Vec::new(),
-    };
-    plan.stable_areas = super::compare::stable_areas(store, user, &plan.surveys)?;
+    let mut plan = Plan::new(surveys, pairs, params, spacing, layout);
+    plan.keep_units = opts.keep_units;
+    plan.stable_areas = stable_areas(store, user, &plan.surveys)?;
     // The core points are the first survey's: within its bounds.
     let what = format!("the core points (from {})", epochs[0].arg.display());
     crate::plan::reach::check(&plan, Some((&what, &bounds[0])))?;

@@ -7,6 +7,7 @@ pub mod compare;
 pub mod demo;
 pub mod info;
 pub mod removed;
+pub mod run;
 pub mod status;
 pub mod synth;
 pub mod view;

@@ -59,7 +59,7 @@ const IO_TIMEOUT: Duration = Duration::from_secs(15);
 pub const ANSWER_GRACE: Duration = Duration::from_secs(1);
 
 /// ... whose client lately read less than this many bytes a second gives its place up. A
-/// browser on this machine reads hundreds of MiB/s. "Lately": over the last [`RATE_WINDOW`]
+/// browser on this machine reads hundreds of MiB/s. "Lately": over the last `RATE_WINDOW`
 /// (not since the start: the socket buffers take megabytes at once, whatever the client reads).
 pub const MIN_RATE: f64 = 1024.0 * 1024.0;
 

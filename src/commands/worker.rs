@@ -1,4 +1,5 @@
-//! `talus worker DIR`: one more executor of a run's plan.
+//! `talus worker DIR`: one more executor of a run's plan (the execution step of
+//! [`super::run`]).
 
 use std::path::Path;
 
@@ -13,18 +14,14 @@ pub fn worker(dir: &Path, slots: usize, threads: Option<usize>) -> Result<()> {
         ));
     }
     let store = crate::store::Store::open(dir, false)?;
-    let plan = crate::plan::Plan::load(&crate::commands::compare::plan_path(&store))?;
+    let plan = crate::plan::Plan::load(&store.plan_path())?;
     let threads = match threads {
         Some(0) => return Err(Error::Usage("--threads: must be at least 1".into())),
         Some(t) => t.min(1024),
         None => std::thread::available_parallelism().map_or(1, |n| n.get()),
     };
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .map_err(|e| Error::Internal(format!("thread pool: {e}")))?;
     let label = format!("worker {}", std::process::id());
-    let report = pool.install(|| crate::exec::run(&store, &plan, slots, &label))?;
+    let report = super::run::execute(&store, &plan, threads, slots, &label)?;
     eprintln!(
         "talus worker: {} unit(s) computed, {} found done, in {}",
         report.computed,

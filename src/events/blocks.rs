@@ -1,5 +1,5 @@
 //! A pair's kept core points cut into cubes of space ("blocks"), each processed with the 26
-//! around it: smoothing ([`smooth`]: the k nearest within a reach) and signed DBSCAN
+//! around it: smoothing ([`smooth`](fn@smooth): the k nearest within a reach) and signed DBSCAN
 //! ([`cluster`]: Ester et al. 1996, in the tiled form of [`super::dbscan`], a block owning its
 //! points and seeing the blocks around as its halo). A block's neighbourhood is held at a time,
 //! never a kd-tree or clustering lists over every kept point of the pair (those were most of the

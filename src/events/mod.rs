@@ -5,7 +5,7 @@
 //! tiles and writes outputs):
 //! [`filter`] (keep significant points) → [`smooth`] (normalised Gaussian smoothing of the
 //! distances over the k nearest kept neighbours) → [`dbscan`] (signed DBSCAN, tile-mergeable
-//! through the global [`union_find`]) → [`describe`] (centroid, statistics, PCA box).
+//! through the global [`union_find`]) → [`describe`](fn@describe) (centroid, statistics, PCA box).
 //! [`blocks`] runs smoothing and DBSCAN over a pair's kept points a cube of space at a time;
 //! [`pieces`], a piece of space at a time when they are more than the budget holds.
 

@@ -511,7 +511,7 @@ fn fit_spherical(obs: &[(f64, f64, f64)], h0: f64, max_d: f64) -> Variogram {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::synth::rng::Rng;
+    use crate::rng::Rng;
 
     /// A 100 m × 100 m field of core points every metre, normals up except a band of slopes.
     fn field(shift: Point3, noise: f64, correlated: f64, seed: u64) -> Vec<Sample> {

@@ -11,7 +11,7 @@
 //! chunks). A side effect is that decoding overlaps with the consumer's work.
 //!
 //! Checks up front: a readable header, at least one point, scale factors a survey could have
-//! (see [`MAX_SCALE`]), finite offsets, finite ordered bounds, and for uncompressed LAS that the
+//! (see `MAX_SCALE`), finite offsets, finite ordered bounds, and for uncompressed LAS that the
 //! file is long enough for the number of points the header promises (LAS 1.4 R15 §2.4: point
 //! data starts at `offset_to_point_data`, `point_data_record_length` bytes each). A truncated
 //! LAZ is only found while decompressing and is reported as a read error naming the point index

@@ -642,9 +642,9 @@ fn int_value(d: &ExtraDim, v: f64, lo: f64, hi: f64) -> Result<f64> {
 }
 
 /// The Extra Bytes VLR payload: one 192-byte descriptor per dim (LAS 1.4 R15 Table 24):
-/// reserved[2], data_type, options, name[32], unused[4], no_data[24], deprecated[16], min[24],
+/// `reserved[2], data_type, options, name[32], unused[4], no_data[24], deprecated[16], min[24],
 /// deprecated[16], max[24], deprecated[16], scale[24], deprecated[16], offset[24],
-/// deprecated[16], description[32]. options = 0: no no_data/min/max/scale/offset.
+/// deprecated[16], description[32]`. options = 0: no no_data/min/max/scale/offset.
 pub fn extra_bytes_descriptors(dims: &[ExtraDim]) -> Vec<u8> {
     let mut data = vec![0u8; 192 * dims.len()];
     for (d, rec) in dims.iter().zip(data.chunks_exact_mut(192)) {

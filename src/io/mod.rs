@@ -2,7 +2,7 @@
 //!
 //! Every reader yields global coordinates as `[f64; 3]` (UTM-sized values keep millimetre
 //! precision in f64), checks each point for NaN/infinity, and reports problems as
-//! [`Error::Input`](crate::Error::Input) naming the file.
+//! [`Error::Input`] naming the file.
 
 use std::path::{Path, PathBuf};
 
@@ -275,7 +275,7 @@ pub(crate) fn open_file(path: &Path) -> Result<std::fs::File> {
     }
 }
 
-/// The error for an input that is not a regular file (see [`open_file`]).
+/// The error for an input that is not a regular file (see `open_file`).
 pub fn not_regular(path: &Path) -> Error {
     Error::input(
         path,

@@ -58,7 +58,7 @@ pub fn morton(c: &Cell) -> u64 {
 /// The points come in file order, which on a scanner's file (or a random sample) is all over
 /// the tile, so a single map of the tile's cells (≈ 500k on the 120M-point pair's tiles, 20 MB)
 /// missed the cache at nearly every point. The candidates are first counted into bands of
-/// rows of cells holding about [`BAND_POINTS`] candidates (a stable counting sort of their
+/// rows of cells holding about `BAND_POINTS` candidates (a stable counting sort of their
 /// indices, 4 bytes a candidate), then each band is thinned with a map small enough to stay cached, reused from
 /// band to band. A cell lies in one band, and its candidates keep their order, so the choice
 /// (nearest the centre, ties to the earlier point) is the one map's.
@@ -177,7 +177,7 @@ mod tests {
 
     #[test]
     fn bands_choose_the_points_one_map_chooses() {
-        let mut rng = crate::synth::rng::Rng::new(11, 0);
+        let mut rng = crate::rng::Rng::new(11, 0);
         // Coordinates on a 1 cm lattice, so that many points tie for their cell's centre.
         let mut q = |scale: f64| (rng.uniform() * scale * 100.0).round() / 100.0;
         // Terrain 300 × 200 m (many bands), a cliff 2 m wide and 150 m high (few rows, many
@@ -226,7 +226,7 @@ mod tests {
             f64::NAN,
             -f64::NAN,
         ];
-        let mut rng = crate::synth::rng::Rng::new(3, 0);
+        let mut rng = crate::rng::Rng::new(3, 0);
         let random = (0..100_000).map(|k| (rng.uniform() - 0.5) * 10f64.powi(k % 40 - 20));
         for v in edges.into_iter().chain(random) {
             assert_eq!(floor_i64(v), v.floor() as i64, "{v:e}");

@@ -207,7 +207,7 @@ mod tests {
 
     /// Pseudo-random points in a box, deterministic.
     fn cloud(n: usize, seed: u64) -> Vec<Point3> {
-        let mut rng = crate::synth::rng::Rng::new(seed, 0);
+        let mut rng = crate::rng::Rng::new(seed, 0);
         (0..n)
             .map(|_| {
                 let u = [rng.uniform(), rng.uniform(), rng.uniform()];

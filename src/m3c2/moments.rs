@@ -407,7 +407,7 @@ mod tests {
     /// one) give the sums of one-at-a-time adds, bit for bit, across flushes.
     #[test]
     fn values_added_at_once_equal_the_adds_one_at_a_time() {
-        let mut rng = crate::synth::rng::Rng::new(9, 0);
+        let mut rng = crate::rng::Rng::new(9, 0);
         let h = 3.0;
         let v: Vec<f64> = (0..3 * FLUSH as usize + 311)
             .map(|_| (rng.uniform() - 0.5) * 2.0 * h)
@@ -451,7 +451,7 @@ mod tests {
     /// for bit, across flushes and with candidates far outside.
     #[test]
     fn sums_within_a_radius_equal_the_adds_one_at_a_time() {
-        let mut rng = crate::synth::rng::Rng::new(5, 0);
+        let mut rng = crate::rng::Rng::new(5, 0);
         let q = [0.3, -0.2, 0.1];
         let radius = 1.0;
         let points: Vec<Point3> = (0..3 * FLUSH as usize + 77)

@@ -139,29 +139,6 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_smallest_budget_holds_the_fixed_needs() {
-        let pool = pool_bytes(MIN_BUDGET);
-        assert!(
-            crate::units::outputs::points::need(1) <= pool,
-            "m3c2.laz does not fit"
-        );
-        assert!(
-            crate::units::outputs::NEED <= pool,
-            "the outputs do not fit"
-        );
-        // The stable ground's fixed sample, beside the largest merge a later stage holds.
-        let stable =
-            crate::units::stable::need(crate::units::stable::SAMPLES, crate::units::merged::FAN_IN);
-        assert!(stable <= pool, "the stable sample does not fit");
-        let split = (MIN_BUDGET / crate::units::tiling::SPLIT_BUDGET_SHARE).max(8 << 20);
-        // Two tilings run at once (one per survey of a pair).
-        assert!(
-            2 * crate::units::tiling::need(split) <= pool,
-            "two tilings do not fit"
-        );
-    }
-
-    #[test]
     fn budget_for_inverts_pool_bytes() {
         for need in [1u64 << 20, 100 << 20, 3 << 30] {
             let b = budget_for(need);

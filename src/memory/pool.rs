@@ -3,7 +3,7 @@
 //! that would not fit beside each other run one after the other instead of at once.
 //!
 //! The pool is the budget less what the process holds whatever runs (see
-//! [`super::process_base`]). A unit needing more than the whole pool is refused before it runs
+//! [`super::BASE`]). A unit needing more than the whole pool is refused before it runs
 //! (the budget is the user's to raise), never started to be killed later.
 
 use std::sync::{Condvar, Mutex};

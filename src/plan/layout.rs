@@ -204,7 +204,7 @@ mod tests {
         // Radii of a 0.25-unit spacing: a halo of about 8.5 units, the smallest tile 34 wide.
         let params = Params::resolve(&user, 0.25).unwrap();
         let halo = tile_halo(&params);
-        let mut rng = crate::synth::rng::Rng::new(1, 0);
+        let mut rng = crate::rng::Rng::new(1, 0);
         let mut uniform = || rng.uniform();
         let mut points = Vec::new();
         for _ in 0..4_000_000 {

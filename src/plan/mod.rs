@@ -16,6 +16,7 @@ pub mod inputs;
 pub mod layout;
 pub mod reach;
 
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
@@ -241,6 +242,39 @@ pub struct Plan {
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub recomputed: Vec<Recomputed>,
     pub units: Vec<Unit>,
+    /// Where each spec's unit sits in `units`, for [`Plan::find`]: not part of plan.json.
+    #[serde(skip)]
+    index: SpecIndex,
+}
+
+/// The index of each spec's unit in [`Plan::units`] (the first, should two units share one),
+/// and how many units it covers. Built on the first [`Plan::find`] (a plan read from plan.json
+/// starts without), kept in step by [`Plan::push`]; a plan whose units were changed another way
+/// is searched unit by unit. Never part of a plan's equality.
+#[derive(Clone, Default)]
+struct SpecIndex(std::sync::OnceLock<(HashMap<Spec, usize>, usize)>);
+
+impl SpecIndex {
+    /// The index of `units`.
+    fn of(units: &[Unit]) -> (HashMap<Spec, usize>, usize) {
+        let mut map = HashMap::with_capacity(units.len());
+        for (i, u) in units.iter().enumerate() {
+            map.entry(u.spec.clone()).or_insert(i);
+        }
+        (map, units.len())
+    }
+}
+
+impl PartialEq for SpecIndex {
+    fn eq(&self, _: &SpecIndex) -> bool {
+        true
+    }
+}
+
+impl std::fmt::Debug for SpecIndex {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("SpecIndex")
+    }
 }
 
 /// Why unit `u` is computed again where `o` (a previous plan's unit of the same spec) had
@@ -307,6 +341,35 @@ pub fn slug(s: &str) -> String {
 }
 
 impl Plan {
+    /// A plan of `surveys` and `pairs` with no units yet (the stages add them:
+    /// `units::stage::plan_units`), no run id, and none of the options: no core-point file,
+    /// stable areas or meshes, every stage, the intermediate units released.
+    pub fn new(
+        surveys: Vec<Survey>,
+        pairs: Vec<Pair>,
+        params: Params,
+        spacing: Spacing,
+        layout: Layout,
+    ) -> Plan {
+        Plan {
+            version: PLAN_VERSION,
+            run: String::new(),
+            surveys,
+            pairs,
+            params,
+            spacing,
+            layout,
+            core_points: None,
+            stable_areas: None,
+            meshes: None,
+            m3c2_only: false,
+            keep_units: false,
+            recomputed: Vec::new(),
+            units: Vec::new(),
+            index: SpecIndex::default(),
+        }
+    }
+
     /// Pair `pair` for messages: "BEFORE and AFTER" (the arguments) in a one-pair plan, "pair
     /// LABEL (BEFORE and AFTER)" in a campaign.
     pub fn pair_name(&self, pair: usize) -> String {
@@ -340,6 +403,13 @@ impl Plan {
                 }
             })
             .collect();
+        let i = self.units.len();
+        if let Some((map, covered)) = self.index.0.get_mut() {
+            if *covered == i {
+                map.entry(spec.clone()).or_insert(i);
+                *covered += 1;
+            }
+        }
         self.units.push(Unit {
             name: format!("{}-{key}", slug(label)),
             key,
@@ -348,7 +418,7 @@ impl Plan {
             parts,
             after: Vec::new(),
         });
-        self.units.len() - 1
+        i
     }
 
     /// Why units not `done` (by index) are computed again where `old` (the plan of DIR's
@@ -356,8 +426,7 @@ impl Plan {
     /// reason, how many — the stage's version changed, a parameter or input it computes from
     /// changed (shown when short), or a unit it reads is computed again.
     pub fn recomputed(&self, old: &Plan, done: impl Fn(usize) -> bool) -> Vec<Recomputed> {
-        let by_spec: std::collections::HashMap<&Spec, &Unit> =
-            old.units.iter().map(|u| (&u.spec, u)).collect();
+        let by_spec: HashMap<&Spec, &Unit> = old.units.iter().map(|u| (&u.spec, u)).collect();
         let mut out: Vec<Recomputed> = Vec::new();
         for (i, u) in self.units.iter().enumerate() {
             // The key first (in memory); the store is asked only about a unit whose key changed.
@@ -383,9 +452,14 @@ impl Plan {
         out
     }
 
-    /// The index of the unit of `spec`.
+    /// The index of the unit of `spec` (the first, should two units share it).
     pub fn find(&self, spec: &Spec) -> Option<usize> {
-        self.units.iter().position(|u| &u.spec == spec)
+        let (map, covered) = self.index.0.get_or_init(|| SpecIndex::of(&self.units));
+        if *covered == self.units.len() {
+            map.get(spec).copied()
+        } else {
+            self.units.iter().position(|u| &u.spec == spec)
+        }
     }
 
     /// The units of `kind` for `pair` (every pair for kinds without one), in plan order.
@@ -489,6 +563,71 @@ mod tests {
             parts: parts.iter().map(|p| p.to_string()).collect(),
             after: Vec::new(),
         }
+    }
+
+    /// A plan with no surveys, pairs or units, for the index's tests.
+    fn empty_plan() -> Plan {
+        let params = Params::resolve(&crate::params::UserParams::default(), 0.25).unwrap();
+        let spacing = Spacing {
+            spacing: 0.25,
+            density: 16.0,
+            effective_spacing: 0.25,
+            measured_points: 0,
+            method: String::new(),
+        };
+        let mut extent = Bounds::empty();
+        extent.grow(&[0.0; 3]);
+        extent.grow(&[20.0, 20.0, 1.0]);
+        let layout = Layout {
+            origin: [0.0; 2],
+            tile_size: 10.0,
+            cols: 2,
+            rows: 2,
+            halo: 1.0,
+            anchor: [0.0; 3],
+            core_spacing: 1.0,
+            extent,
+        };
+        Plan::new(Vec::new(), Vec::new(), params, spacing, layout)
+    }
+
+    #[test]
+    fn find_is_indexed_and_agrees_with_a_scan() {
+        let mut plan = empty_plan();
+        // Asked before any unit: the index is built empty, then kept in step by push.
+        assert_eq!(plan.find(&Spec::run("a")), None);
+        let specs = [
+            Spec::run("a"),
+            Spec::survey("t", 0),
+            Spec::pair("p", 0),
+            Spec::tile("m", 0, TileId { col: 1, row: 0 }),
+            Spec::run("a"),
+        ];
+        for s in &specs {
+            plan.push(s.clone(), "u", &[], Vec::new());
+        }
+        let scan = |p: &Plan, s: &Spec| p.units.iter().position(|u| &u.spec == s);
+        for s in &specs {
+            assert_eq!(plan.find(s), scan(&plan, s));
+        }
+        assert_eq!(plan.find(&Spec::run("b")), None);
+        // Read back from its JSON: the same bytes, no index among them, and the index built
+        // again on the first find.
+        let text = serde_json::to_vec_pretty(&plan).unwrap();
+        assert!(!String::from_utf8_lossy(&text).contains("index"));
+        let back: Plan = serde_json::from_slice(&text).unwrap();
+        assert_eq!(serde_json::to_vec_pretty(&back).unwrap(), text);
+        assert_eq!(back, plan);
+        for s in &specs {
+            assert_eq!(back.find(s), scan(&plan, s));
+        }
+        // Units changed other than by push: searched one by one.
+        let mut changed = back.clone();
+        changed.units.remove(0);
+        assert_eq!(changed.find(&Spec::survey("t", 0)), Some(0));
+        assert_eq!(changed.find(&Spec::run("a")), Some(3));
+        changed.units.pop();
+        assert_eq!(changed.find(&Spec::run("a")), None);
     }
 
     #[test]

@@ -431,7 +431,7 @@ mod tests {
 
     /// Pseudo-random points, each `f` of three uniform numbers, deterministic.
     fn cloud(n: usize, seed: u64, f: impl Fn([f64; 3]) -> Point3) -> Vec<Point3> {
-        let mut rng = crate::synth::rng::Rng::new(seed, 0);
+        let mut rng = crate::rng::Rng::new(seed, 0);
         (0..n)
             .map(|_| f([rng.uniform(), rng.uniform(), rng.uniform()]))
             .collect()

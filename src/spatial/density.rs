@@ -119,7 +119,7 @@ mod tests {
     fn the_densest_square_is_never_undercounted_and_close() {
         // A sparse strip with a dense patch: the mean over the bounds is far below the patch.
         let mut points = Vec::new();
-        let mut rng = crate::synth::rng::Rng::new(7, 0);
+        let mut rng = crate::rng::Rng::new(7, 0);
         let mut rnd = || rng.uniform();
         for _ in 0..100 {
             points.push([1000.0 * rnd(), 200.0 * rnd(), 0.0]);

@@ -117,7 +117,7 @@ mod tests {
 
     #[test]
     fn the_pairs_are_those_of_a_brute_force_search() {
-        let mut rng = crate::synth::rng::Rng::new(3, 0);
+        let mut rng = crate::rng::Rng::new(3, 0);
         // Clustered and spread points, a duplicate, points on the reach exactly.
         let mut pts: Vec<Point3> = (0..3000)
             .map(|k| {

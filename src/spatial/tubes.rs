@@ -138,7 +138,7 @@ mod tests {
         axes.push(([3.0, 3.0, 0.0], [0.0, 0.0, 1.0], -1.0, 12.0));
         let r = 0.05;
         let tubes = Tubes::new(&axes, r);
-        let mut rng = crate::synth::rng::Rng::new(3, 0);
+        let mut rng = crate::rng::Rng::new(3, 0);
         let (mut inside, mut n) = (0, 0);
         for _ in 0..200_000 {
             let p = [

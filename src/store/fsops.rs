@@ -156,7 +156,7 @@ pub fn move_to_trash(tmp: &Path, path: &Path) -> Result<Option<PathBuf>> {
     Ok(Some(dest))
 }
 
-/// Trash directories ([`move_to_trash`]) deleted on a thread of their own while the caller goes
+/// Trash directories (`move_to_trash`) deleted on a thread of their own while the caller goes
 /// on; dropping it waits for the deletion. What a failed or interrupted deletion leaves is a trash
 /// directory in `tmp/`, which gc clears.
 pub struct Sweep(Option<std::thread::JoinHandle<()>>);

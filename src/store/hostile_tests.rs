@@ -119,10 +119,14 @@ fn hostile(r: &mut SplitMix64, s: &Store, outside: &Path) -> String {
             .join("outputs/planted/secret.txt")
             .display()
             .to_string(),
-        s.units().join("../plan.json").display().to_string(),
+        s.units()
+            .join("..")
+            .join(super::PLAN_FILE)
+            .display()
+            .to_string(),
         "outputs/pair0-abc".into(),
         "outputs".into(),
-        ".talus/plan.json".into(),
+        format!(".talus/{}", super::PLAN_FILE),
         ".talus".into(),
         ".talus/units/outputs/pair0-abc/m3c2.laz".into(),
         "notes.txt".into(),
@@ -253,7 +257,7 @@ fn hostile_journals_stay_inside_dir() {
 #[test]
 fn the_issues_journal_is_refused() {
     let (_t, s, outside, _files) = scene();
-    let plan = s.work().join("plan.json");
+    let plan = s.plan_path();
     std::fs::write(&plan, "{}").unwrap();
     let j = serde_json::json!({
         "files": [[outside.join("secret.txt"), "stolen.txt"], [plan, "../outside/escape.txt"]],

@@ -6,6 +6,7 @@
 //! ```text
 //! DIR/.talus/
 //!   lock                          one run per DIR                      (lock.rs)
+//!   plan.json                     the run's plan (PLAN_FILE), written by the commands
 //!   units/<kind>/<name>/          one finished unit: files + record.json (writer.rs, units.rs);
 //!                                 an intermediate one released: its record alone (release.rs)
 //!   tmp/                          units being written, trash, temporaries (fsops.rs, gc.rs)
@@ -68,6 +69,10 @@ pub use writer::UnitWriter;
 use crate::error::{Error, Result};
 use fsops::out_err;
 
+/// The file name of a run's plan: in `.talus` ([`Store::plan_path`]) and in a Slurm
+/// submission's folder. Every process that executes the run's units reads it.
+pub const PLAN_FILE: &str = "plan.json";
+
 /// How long a claim from another host (whose pid cannot be checked) holds without renewal.
 pub const DEFAULT_LEASE: Duration = Duration::from_secs(6 * 3600);
 
@@ -86,7 +91,7 @@ impl Store {
     /// `create`. Writability is probed now (a file in `tmp/`), before any work is spent: a file
     /// where DIR should be, a missing store without `create`, or an unwritable DIR is
     /// `Error::Output` naming the path. A symbolic link or a special file in `.talus/` is refused
-    /// ([`Store::check_work_area`]).
+    /// (`Store::check_work_area`).
     pub fn open(dir: &Path, create: bool) -> Result<Store> {
         match std::fs::metadata(dir) {
             Ok(m) if !m.is_dir() => {
@@ -212,6 +217,11 @@ impl Store {
     /// DIR/.talus.
     pub fn work(&self) -> &Path {
         &self.work
+    }
+
+    /// DIR/.talus/plan.json: the plan of DIR's run ([`PLAN_FILE`]).
+    pub fn plan_path(&self) -> PathBuf {
+        self.work.join(PLAN_FILE)
     }
 
     fn units(&self) -> PathBuf {

@@ -24,7 +24,7 @@
 //! So every interval has two or three events. The other volumes are fixed (the seed only draws the
 //! points): the j-th other change has |V| = 1.5 · 12^frac(0.5 + j/φ) m³, a low-discrepancy spread
 //! over [1.5, 18] m³, and its shape is solved for that volume from the fixed aspect. Truth volumes
-//! are the closed forms of [`surface`](super::surface) and [`scenes`](super::scenes): box w·d·h,
+//! are the closed forms of `surface` and [`scenes`](super::scenes): box w·d·h,
 //! half-ellipsoid (2/3)πabc, bump h·R²(π/2 − 2/π), cone πR²H/3, cap ±πh²(3R − h)/3; a pair
 //! (i, j)'s event at one place is the difference of its last shape up to survey j and up to
 //! survey i.
@@ -79,7 +79,7 @@ const RECURRING: [[f64; 3]; 2] = [[2.0, 0.8, 1.6], [3.0, 1.3, 2.4]];
 /// The recurring change's track.
 pub const RECURRING_TRACK: u32 = 1;
 
-/// Options of [`write`].
+/// Options of [`write`](fn@write).
 #[derive(Debug, Clone, PartialEq)]
 pub struct CampaignOptions {
     /// Number of surveys (3 to 401).
@@ -636,7 +636,7 @@ fn resolve(opts: &CampaignOptions) -> Result<Resolved> {
     })
 }
 
-/// The model [`write`] would build for `opts`.
+/// The model [`write`](fn@write) would build for `opts`.
 pub fn model(opts: &CampaignOptions) -> Result<CampaignModel> {
     Ok(resolve(opts)?.model)
 }
@@ -652,7 +652,7 @@ fn chunks_of(r: &Resolved, opts: &CampaignOptions, k: usize) -> Chunks {
     )
 }
 
-/// The points of survey k as [`write`] writes them (global coordinates, before 1 mm
+/// The points of survey k as [`write`](fn@write) writes them (global coordinates, before 1 mm
 /// quantisation), in chunks of at most [`CHUNK_POINTS`](super::CHUNK_POINTS).
 pub fn survey_chunks(opts: &CampaignOptions, k: usize) -> Result<Chunks> {
     let r = resolve(opts)?;

@@ -8,7 +8,7 @@
 //! and rough rock (a sum of plane waves from decimetres to metres). The change between the
 //! epochs is a sum of cos² bumps in that frame (scars into the rock, material gained), so each
 //! event's volume is exact: the material between two graphs over a plane is ∫ Δf da db, and a
-//! bump h·cos²(πr/2R) holds h·R²(π/2 − 2/π) ([`bump_volume`]).
+//! bump h·cos²(πr/2R) holds h·R²(π/2 − 2/π) (`surface::bump_volume`).
 //!
 //! The points are what a scanner records: rays from the scanner on a regular grid of azimuth
 //! and elevation (each epoch's grid offset by a fraction of a step, as two scans never repeat
@@ -19,9 +19,9 @@
 
 use rayon::prelude::*;
 
-use super::rng::Rng;
 use super::scenes::ModelEvent;
 use super::surface::{bump_volume, V3};
+use crate::rng::Rng;
 
 /// Strike length and up-dip height of the face (m).
 const WIDTH: f64 = 60.0;

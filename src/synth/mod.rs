@@ -6,7 +6,7 @@
 //! Gaussian noise of standard deviation `noise` applied along the surface normal (so a flat
 //! surface gets vertical noise and a cliff face horizontal noise, as a scanner's range noise
 //! would roughly do). Points are generated and written in chunks of at most
-//! [`CHUNK_POINTS`] ([`sampling`]), so the 120M-point scene never sits in memory.
+//! [`CHUNK_POINTS`] (`sampling`), so the 120M-point scene never sits in memory.
 //!
 //! Outputs in the directory: `before.laz` and `after.laz` (or `.las`): LAS 1.4, point format 6,
 //! scale 1 mm, offsets at the scene origin (x = 500 000, y = 5 000 000, z = 0: UTM-like, ground at
@@ -29,7 +29,6 @@ pub mod face;
 mod output;
 pub mod owned;
 mod plants;
-pub(crate) mod rng;
 mod sampling;
 pub mod scenes;
 mod surface;
@@ -169,7 +168,7 @@ pub struct SynthOptions {
     /// registration error with `shift_m`, not a change.
     pub turn_deg: [f64; 3],
     /// A slow landslide under the whole scene between the surveys (m): every epoch-2 point
-    /// settles by this times a smooth field between 0.25 and 1 ([`sampling::creep_share`]); not
+    /// settles by this times a smooth field between 0.25 and 1 (`sampling::creep_share`); not
     /// a change of the planted events (the truth volumes ignore it), nor rigid.
     pub creep_m: f64,
     /// Write LAZ (true) or LAS.

@@ -8,8 +8,8 @@
 //! thinned by a hash of their coordinates (so which ones are hidden does not depend on how the
 //! surfaces were chunked).
 
-use super::rng::Rng;
 use super::surface::V3;
+use crate::rng::Rng;
 
 /// What a plant is, for its shape and its LAS class when the delivery is classified (LAS 1.4
 /// R15 Table 17: 3 low, 4 medium, 5 high vegetation).

@@ -10,8 +10,8 @@
 
 use rayon::prelude::*;
 
-use super::rng::Rng;
 use super::surface::{Patch, V3};
+use crate::rng::Rng;
 
 /// Largest number of points generated (and held) at once.
 pub const CHUNK_POINTS: usize = 1_000_000;

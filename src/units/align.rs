@@ -20,7 +20,7 @@ use crate::plan::Spec;
 use crate::spatial::areas::Areas;
 use crate::store::UnitWriter;
 
-/// Windows across and along the first survey's footprint the fit samples (see [`windows`]):
+/// Windows across and along the first survey's footprint the fit samples (see `windows`):
 /// 64 patches of about 25 × 25 core points, spread so that the turn about every axis is seen.
 pub const WINDOWS: usize = 8;
 /// Core points the fit computes, about: every k-th core point of the sampled tiles. Enough for a

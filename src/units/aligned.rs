@@ -4,7 +4,7 @@
 //! to it, and recorded (`route.json`); every point mapped by the route's matrix and rounded to its file's
 //! coordinate quantum (so that the tiles keep their exact integer encoding), cut into the same
 //! layout. When the alignment does not apply, the unit writes no tile and the survey's own
-//! tiling is read in its place ([`super::Ctx::tiles_of`]): everything after it is then the same
+//! tiling is read in its place ([`super::Ctx::tiling`]): everything after it is then the same
 //! bytes as with `--align off`.
 
 use serde::{Deserialize, Serialize};

@@ -204,7 +204,7 @@ fn wall_seconds(ctx: &Ctx) -> f64 {
     if here {
         return crate::progress::since_start();
     }
-    std::fs::metadata(ctx.store.work().join("plan.json"))
+    std::fs::metadata(ctx.store.plan_path())
         .and_then(|m| m.modified())
         .ok()
         .and_then(|t| t.elapsed().ok())

@@ -441,3 +441,23 @@ pub fn read_columns(ctx: &Ctx, i: usize, file: &str) -> Result<talus_tiling::Til
     let path = ctx.input(i, file)?;
     talus_tiling::read_tile(&path).map_err(|e| damaged(&path, e))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::{merged, outputs, stable, tiling};
+
+    /// The units' fixed needs against the smallest budget (`memory::MIN_BUDGET`): here, not in
+    /// `memory`, which sits below the units and names none of them.
+    #[test]
+    fn the_smallest_budget_holds_the_fixed_needs() {
+        let pool = crate::memory::pool_bytes(crate::memory::MIN_BUDGET);
+        assert!(outputs::points::need(1) <= pool, "m3c2.laz does not fit");
+        assert!(outputs::NEED <= pool, "the outputs do not fit");
+        // The stable ground's fixed sample, beside the largest merge a later stage holds.
+        let stable = stable::need(stable::SAMPLES, merged::FAN_IN);
+        assert!(stable <= pool, "the stable sample does not fit");
+        let split = (crate::memory::MIN_BUDGET / tiling::SPLIT_BUDGET_SHARE).max(8 << 20);
+        // Two tilings run at once (one per survey of a pair).
+        assert!(2 * tiling::need(split) <= pool, "two tilings do not fit");
+    }
+}

@@ -6,8 +6,8 @@
 //! from the [`registry`]; none of them names a kind.
 //!
 //! Adding a stage is writing one module with a type that implements [`Stage`] and registering
-//! it: in [`DEFAULT`] (the pipeline's own stages, in pipeline order), or with [`register`] before
-//! anything reads the registry (`examples/survey_stage.rs` does so in its own `main`).
+//! it: in [`default_stages`] (the pipeline's own stages, in pipeline order), or with [`register`]
+//! before anything reads the registry (`examples/survey_stage.rs` does so in its own `main`).
 
 use std::sync::OnceLock;
 

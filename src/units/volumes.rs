@@ -511,7 +511,9 @@ impl Stage for VolumesStage {
     }
 }
 
-/// Measure the events of pair `pair` whose centroid tile `tile` owns, into `out`.
+/// Measure the events of pair `pair` whose centroid tile `tile` owns, into `out`: find them and
+/// the events near them, decide who owns each location, gather both surveys' points in their
+/// search boxes, and measure one event at a time ([`TileEvents::measure`]).
 fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<VolumesMeta> {
     let plan = ctx.plan;
     let p = &plan.pairs[pair];
@@ -531,20 +533,7 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
     let mut measured: Vec<Measured> = Vec::new();
     let (mut gathered, mut largest) = (0usize, 0usize);
     if !mine.is_empty() {
-        // Every event whose boxes overlap one of mine's reaches a tile that one of mine reaches.
-        let mut tiles: Vec<TileId> = mine
-            .iter()
-            .flat_map(|d| reached_tiles(d, params, &grid))
-            .collect();
-        tiles.sort_unstable();
-        tiles.dedup();
-        // This tile's line is already read.
-        let mut drafts: Vec<Draft> = here.clone();
-        for t in tiles.into_iter().filter(|&t| t != tile) {
-            drafts.extend(near_drafts.drafts(t)?);
-        }
-        drafts.sort_by_key(|d| d.event.id);
-        drafts.dedup_by_key(|d| d.event.id);
+        let drafts = drafts_near(&near_drafts, &here, &mine, tile, params, &grid)?;
         // Only the events whose claims can reach this tile's events decide ownership here: an
         // event owns a location only inside its claim, which lies inside its search boxes, so
         // the others are never asked (building every event's claim in every unit cost as much
@@ -556,31 +545,10 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
             .filter(|d| near.contains(&d.event.id))
             .collect();
         let ownership = ownership(&relevant, &members, params);
-        let user = match &plan.meshes {
-            Some([b, a]) => Some((
-                crate::io::mesh_ply::read_ply_mesh(&b.path)?,
-                crate::io::mesh_ply::read_ply_mesh(&a.path)?,
-            )),
-            None => None,
-        };
+        let user = user_surfaces(plan)?;
         let margin = margin(params);
         let spacing = params.point_spacing.value;
-        let boxes: Vec<Vec<SearchBox>> = mine
-            .iter()
-            .map(|d| {
-                let c: &[Obb] = if user.is_some() {
-                    &d.candidates[..1]
-                } else {
-                    &d.candidates
-                };
-                c.iter()
-                    .map(|o| {
-                        let (h, xy) = search_box(o, depth(d, params), params);
-                        (h, xy, *o)
-                    })
-                    .collect()
-            })
-            .collect();
+        let boxes = search_boxes(&mine, params, user.is_some());
         let [mut before, mut after] = match user {
             Some(_) => [vec![Vec::new(); mine.len()], vec![Vec::new(); mine.len()]],
             None => gather(ctx, tilings, &boxes)?,
@@ -594,6 +562,15 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
             largest = largest.max(b.len() + a.len());
         }
         let held = gathered as u64 * GATHERED_BYTES;
+        let events = TileEvents {
+            ownership: &ownership,
+            members: &members,
+            user: user.as_ref(),
+            params,
+            stable,
+            margin,
+            spacing,
+        };
         // Gathered tile by tile, the points come in an order that depends on the tiling;
         // `volume::epoch_local` sorts what it triangulates, so the volumes do not.
         // One event at a time, each with its reservation (the triangulations, grids and solids of
@@ -609,114 +586,7 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
                     mine.len()
                 ),
             )?;
-            let mut solids = None;
-            let m: Measured = {
-                let mut e: Event = d.event.clone();
-                let mut window = boxes[i].first().map_or(f64::INFINITY, |b| b.0[2]);
-                // The extrusion axis: the candidate in which both epochs have the fewest points
-                // on walls or fold-overs (volume::axis); the mean normal on a tie.
-                if boxes[i].len() > 1 {
-                    let walls = |(h, _, o): &SearchBox| {
-                        let frame = volume::Frame::of_obb(o);
-                        let r = volume::Footprint::of_obb(o, margin);
-                        volume::axis::wall_points(&frame, &r, h[2], &before[i], spacing)
-                            + volume::axis::wall_points(&frame, &r, h[2], &after[i], spacing)
-                    };
-                    let counts: Vec<usize> = boxes[i].iter().map(walls).collect();
-                    let best = (0..boxes[i].len())
-                        .min_by_key(|&k| (counts[k], k))
-                        .unwrap_or(0);
-                    e.obb = boxes[i][best].2;
-                    window = boxes[i][best].0[2];
-                }
-                let id = e.id;
-                let owned = |x: &Point3| ownership.owner(x) == Some(id);
-                let cells = volume::grid(&e.obb, margin, spacing);
-                let pieced = cells.len() > volume::PIECE_CELLS;
-                let sink = solids.insert(super::solids::EventSolids::new(out, id, pieced)?);
-                let mut send = |pair: [volume::Mesh; 2]| sink.push(pair);
-                let v = match &user {
-                    Some((mb, ma)) => {
-                        let frame = volume::Frame::of_obb(&e.obb);
-                        let r = volume::Footprint::of_obb(&e.obb, margin);
-                        let sb = volume::UserMesh::new(mb, &frame, &r);
-                        let sa = volume::UserMesh::new(ma, &frame, &r);
-                        volume::event_volume_from_surfaces(
-                            &e.obb, margin, &sb, &sa, spacing, &owned, &mut send,
-                        )
-                    }
-                    None => volume::event_volume_in(
-                        &e.obb,
-                        margin,
-                        window,
-                        [&before[i], &after[i]],
-                        spacing,
-                        &owned,
-                        CUTTING,
-                        &mut send,
-                    ),
-                };
-                let m = members.get(&id).map(|v| v.as_slice()).unwrap_or(&[]);
-                let vegetation_fraction = match &user {
-                    Some(_) => None,
-                    None => Some(vegetation_fraction(&e, m, &before[i], &after[i], params)),
-                };
-                match v {
-                    Ok(v) => {
-                        let model = error_model(&v, m, params, stable);
-                        let u = uncertainty::propagate(&v.region, &model);
-                        // A cell's difference on unchanged ground: both epochs' point noise and
-                        // the registration error.
-                        let noise = 2.24
-                            * ((model.variance[0] + model.variance[1]).sqrt() + model.systematic);
-                        let note = incomplete(d, &v, noise, params);
-                        Measured {
-                            id,
-                            obb: e.obb,
-                            volume_m3: Some(v.volume_m3),
-                            uncertainty: Some(u),
-                            gain_m3: Some(v.gain_m3),
-                            loss_m3: Some(v.loss_m3),
-                            footprint_area_m2: Some(v.footprint_area_m2),
-                            region_area_m2: Some(v.region_area_m2),
-                            coverage: Some(v.coverage),
-                            region: v.outline(),
-                            meshes: true,
-                            complete: note.is_none(),
-                            note,
-                            vegetation_fraction,
-                            sign_known: sign_known(d),
-                        }
-                    }
-                    Err(err) => Measured {
-                        id,
-                        obb: e.obb,
-                        volume_m3: None,
-                        uncertainty: None,
-                        gain_m3: None,
-                        loss_m3: None,
-                        footprint_area_m2: None,
-                        region_area_m2: None,
-                        coverage: None,
-                        region: Vec::new(),
-                        meshes: false,
-                        complete: false,
-                        note: Some(err.to_string()),
-                        vegetation_fraction,
-                        sign_known: sign_known(d),
-                    },
-                }
-            };
-            // Written plainly, the digest computed on the way: the unit's commit makes them
-            // durable (a sync and a read-back per file cost 2 × 1028 of each at 120M).
-            if let Some(solids) = solids {
-                if m.meshes {
-                    solids.finish(out)?;
-                } else {
-                    solids.discard()?;
-                }
-            }
-            measured.push(m);
+            measured.push(events.measure(out, d, &boxes[i], [&before[i], &after[i]])?);
         }
     }
     (ctx.progress)(measured.len() as u64);
@@ -726,6 +596,199 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
         points: gathered,
         largest_event_points: largest,
     })
+}
+
+/// The drafts of every event near `mine` (the events of `here`, tile `tile`'s line, whose
+/// centroid it owns): those of the tiles their boxes reach, in id order, each once. Every event
+/// whose boxes overlap one of mine's reaches a tile that one of mine reaches.
+fn drafts_near(
+    near_drafts: &super::events::NearDrafts,
+    here: &[Draft],
+    mine: &[&Draft],
+    tile: TileId,
+    params: &Params,
+    grid: &talus_tiling::TileGrid,
+) -> Result<Vec<Draft>> {
+    let mut tiles: Vec<TileId> = mine
+        .iter()
+        .flat_map(|d| reached_tiles(d, params, grid))
+        .collect();
+    tiles.sort_unstable();
+    tiles.dedup();
+    // This tile's line is already read.
+    let mut drafts: Vec<Draft> = here.to_vec();
+    for t in tiles.into_iter().filter(|&t| t != tile) {
+        drafts.extend(near_drafts.drafts(t)?);
+    }
+    drafts.sort_by_key(|d| d.event.id);
+    drafts.dedup_by_key(|d| d.event.id);
+    Ok(drafts)
+}
+
+/// The user's surfaces (before, after), read, when the plan has them.
+fn user_surfaces(plan: &crate::plan::Plan) -> Result<Option<(volume::Mesh, volume::Mesh)>> {
+    match &plan.meshes {
+        Some([b, a]) => Ok(Some((
+            crate::io::mesh_ply::read_ply_mesh(&b.path)?,
+            crate::io::mesh_ply::read_ply_mesh(&a.path)?,
+        ))),
+        None => Ok(None),
+    }
+}
+
+/// The search boxes of each of `mine`'s events: one per candidate box, or only the first
+/// (the mean normal's) with the user's surfaces (`surfaces`).
+fn search_boxes(mine: &[&Draft], params: &Params, surfaces: bool) -> Vec<Vec<SearchBox>> {
+    mine.iter()
+        .map(|d| {
+            let c: &[Obb] = if surfaces {
+                &d.candidates[..1]
+            } else {
+                &d.candidates
+            };
+            c.iter()
+                .map(|o| {
+                    let (h, xy) = search_box(o, depth(d, params), params);
+                    (h, xy, *o)
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// What every event of a volumes unit is measured with: who owns each location, the events'
+/// clustered core points, the user's surfaces if given, the pair's parameters and stable ground.
+struct TileEvents<'a> {
+    ownership: &'a volume::Ownership,
+    members: &'a HashMap<u32, Vec<Kept>>,
+    user: Option<&'a (volume::Mesh, volume::Mesh)>,
+    params: &'a Params,
+    stable: Option<&'a Stable>,
+    margin: f64,
+    spacing: f64,
+}
+
+impl TileEvents<'_> {
+    /// The volume of event `d` from `points` (before, after) in its search boxes `boxes`, its
+    /// solids written to `out` when it has one.
+    fn measure(
+        &self,
+        out: &mut UnitWriter,
+        d: &Draft,
+        boxes: &[SearchBox],
+        points: [&[Point3]; 2],
+    ) -> Result<Measured> {
+        let (margin, spacing, params) = (self.margin, self.spacing, self.params);
+        let mut e: Event = d.event.clone();
+        let (obb, window) = extrusion_box(boxes, points, margin, spacing);
+        if let Some(obb) = obb {
+            e.obb = obb;
+        }
+        let id = e.id;
+        let owned = |x: &Point3| self.ownership.owner(x) == Some(id);
+        let cells = volume::grid(&e.obb, margin, spacing);
+        let pieced = cells.len() > volume::PIECE_CELLS;
+        let mut solids = super::solids::EventSolids::new(out, id, pieced)?;
+        let mut send = |pair: [volume::Mesh; 2]| solids.push(pair);
+        let v = match self.user {
+            Some((mb, ma)) => {
+                let frame = volume::Frame::of_obb(&e.obb);
+                let r = volume::Footprint::of_obb(&e.obb, margin);
+                let sb = volume::UserMesh::new(mb, &frame, &r);
+                let sa = volume::UserMesh::new(ma, &frame, &r);
+                volume::event_volume_from_surfaces(
+                    &e.obb, margin, &sb, &sa, spacing, &owned, &mut send,
+                )
+            }
+            None => volume::event_volume_in(
+                &e.obb, margin, window, points, spacing, &owned, CUTTING, &mut send,
+            ),
+        };
+        let m = self.members.get(&id).map(|v| v.as_slice()).unwrap_or(&[]);
+        let vegetation_fraction = match self.user {
+            Some(_) => None,
+            None => Some(vegetation_fraction(&e, m, points[0], points[1], params)),
+        };
+        let measured = match v {
+            Ok(v) => {
+                let model = error_model(&v, m, params, self.stable);
+                let u = uncertainty::propagate(&v.region, &model);
+                // A cell's difference on unchanged ground: both epochs' point noise and the
+                // registration error.
+                let noise =
+                    2.24 * ((model.variance[0] + model.variance[1]).sqrt() + model.systematic);
+                let note = incomplete(d, &v, noise, params);
+                Measured {
+                    id,
+                    obb: e.obb,
+                    volume_m3: Some(v.volume_m3),
+                    uncertainty: Some(u),
+                    gain_m3: Some(v.gain_m3),
+                    loss_m3: Some(v.loss_m3),
+                    footprint_area_m2: Some(v.footprint_area_m2),
+                    region_area_m2: Some(v.region_area_m2),
+                    coverage: Some(v.coverage),
+                    region: v.outline(),
+                    meshes: true,
+                    complete: note.is_none(),
+                    note,
+                    vegetation_fraction,
+                    sign_known: sign_known(d),
+                }
+            }
+            Err(err) => Measured {
+                id,
+                obb: e.obb,
+                volume_m3: None,
+                uncertainty: None,
+                gain_m3: None,
+                loss_m3: None,
+                footprint_area_m2: None,
+                region_area_m2: None,
+                coverage: None,
+                region: Vec::new(),
+                meshes: false,
+                complete: false,
+                note: Some(err.to_string()),
+                vegetation_fraction,
+                sign_known: sign_known(d),
+            },
+        };
+        // Written plainly, the digest computed on the way: the unit's commit makes them
+        // durable (a sync and a read-back per file cost 2 × 1028 of each at 120M).
+        if measured.meshes {
+            solids.finish(out)?;
+        } else {
+            solids.discard()?;
+        }
+        Ok(measured)
+    }
+}
+
+/// The extrusion axis of an event with several candidate boxes `boxes`: the one in which both
+/// epochs (`points`) have the fewest points on walls or fold-overs (`volume::axis`), the mean
+/// normal's on a tie; its box (None with one candidate: the event's own) and search depth.
+fn extrusion_box(
+    boxes: &[SearchBox],
+    points: [&[Point3]; 2],
+    margin: f64,
+    spacing: f64,
+) -> (Option<Obb>, f64) {
+    let window = boxes.first().map_or(f64::INFINITY, |b| b.0[2]);
+    if boxes.len() <= 1 {
+        return (None, window);
+    }
+    let walls = |(h, _, o): &SearchBox| {
+        let frame = volume::Frame::of_obb(o);
+        let r = volume::Footprint::of_obb(o, margin);
+        volume::axis::wall_points(&frame, &r, h[2], points[0], spacing)
+            + volume::axis::wall_points(&frame, &r, h[2], points[1], spacing)
+    };
+    let counts: Vec<usize> = boxes.iter().map(walls).collect();
+    let best = (0..boxes.len())
+        .min_by_key(|&k| (counts[k], k))
+        .unwrap_or(0);
+    (Some(boxes[best].2), boxes[best].0[2])
 }
 
 #[cfg(test)]

@@ -285,7 +285,7 @@ impl Tin {
 
 impl Surface for Tin {
     /// Linear (barycentric) interpolation inside the hull, None outside (the search for the
-    /// point's triangle starting from this thread's last vertex found, [`ThreadHint`]).
+    /// point's triangle starting from this thread's last vertex found, `ThreadHint`).
     fn height_at(&self, u: f64, v: f64) -> Option<f64> {
         let p = Point2::new(snap(u), snap(v));
         self.tri.barycentric().interpolate(|h| h.data().w, p)

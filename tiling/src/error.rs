@@ -1,5 +1,5 @@
 //! Typed errors of the tiling crate: every variant names the file (or parameter) and the problem,
-//! so the caller can report it and decide (a `Corrupt` tile or manifest is rebuilt, not fatal).
+//! so the caller can report it and decide (a `Corrupt` tile is rebuilt, not fatal).
 
 use std::path::PathBuf;
 
@@ -16,7 +16,7 @@ pub enum Error {
         #[source]
         source: std::io::Error,
     },
-    /// A tile file, segment or manifest is damaged (bad magic, unknown version, checksum mismatch,
+    /// A tile file is damaged (bad magic, unknown version, checksum mismatch,
     /// truncation, undecodable JSON). The caller should delete it and rebuild the unit.
     #[error("{}: corrupt: {reason}", path.display())]
     Corrupt { path: PathBuf, reason: String },

@@ -4,8 +4,8 @@
 //!
 //! Why FNV-1a: it is a few lines written out here, so the value never changes with a dependency
 //! upgrade or platform (std's `DefaultHasher` is explicitly unstable across releases), which is
-//! what a key stored in a manifest on disk needs. It is not collision-resistant against an
-//! adversary; keys here only detect changed inputs and parameters. Multi-byte values are fed in
+//! what a key stored on disk (in a unit's name, a plan) needs. It is not collision-resistant
+//! against an adversary; keys here only detect changed inputs and parameters. Multi-byte values are fed in
 //! little-endian order and strings are length-prefixed, so ("ab","c") and ("a","bc") differ.
 
 const OFFSET_BASIS: u64 = 0xcbf2_9ce4_8422_2325;

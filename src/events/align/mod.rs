@@ -19,7 +19,7 @@
 //! vertical is seen but not both tilts (a single strip of stable ground), the fit is the
 //! vertical shift alone: the bias DEM-of-difference practice removes on stable ground.
 //!
-//! It is **applied** only when, in order ([`decide`]): (1) enough stable points for the
+//! It is **applied** only when, in order (`decide`): (1) enough stable points for the
 //! directions fitted, (2) the vertical at least is constrained, (3) the fitted motion is larger
 //! than its own uncertainty (χ² of p over its covariance above the 99.9 % quantile of its
 //! degrees of freedom), (4) the stable ground, the fit removed, holds still to within [`RIGID`]

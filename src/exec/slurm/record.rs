@@ -159,7 +159,7 @@ pub fn latest(store: &Store) -> Result<Option<(u32, Submission, Option<Jobs>)>> 
 pub fn load(store: &Store, n: u32) -> Result<(Submission, Plan)> {
     let d = checked_dir(store, n)?;
     let sub = read_json(&d.join("submission.json"))?;
-    let plan = Plan::load(&d.join("plan.json"))?;
+    let plan = Plan::load(&d.join(crate::store::PLAN_FILE))?;
     Ok((sub, plan))
 }
 
@@ -196,7 +196,7 @@ pub fn create(
     for sub in ["logs", "tasks"] {
         std::fs::create_dir_all(d.join(sub)).map_err(|e| Error::output(d.join(sub), e))?;
     }
-    plan.save(&d.join("plan.json"))?;
+    plan.save(&d.join(crate::store::PLAN_FILE))?;
     let name = |i: usize| plan.units[i].name.clone();
     let mut records: Vec<StageRecord> = stages
         .iter()

@@ -54,7 +54,7 @@ pub fn report(dir: &std::path::Path, nodes: &[usize], cores: usize, scale: f64) 
         return Err(Error::Usage("--scale: a factor of at least 1".into()));
     }
     let store = Store::inspect(dir)?;
-    let plan = Plan::load(&store.work().join("plan.json"))?;
+    let plan = Plan::load(&store.plan_path())?;
     let mut stages: Vec<StageWork> = Vec::new();
     let mut secs = vec![0.0; plan.units.len()];
     for (r, stage) in stage_order().enumerate() {

@@ -123,7 +123,7 @@ fn outcome(asked: bool, slurm: Option<&JobState>, report: Option<&TaskReport>) -
 impl Report {
     /// Look at DIR's store, its latest submission and Slurm.
     pub fn gather(store: &Store) -> Result<Report> {
-        let plan_path = store.work().join("plan.json");
+        let plan_path = store.plan_path();
         if !plan_path.is_file() {
             return Err(Error::Usage(format!(
                 "{}: no talus run here (no .talus/plan.json)",

@@ -33,7 +33,7 @@ mod pieces;
 
 pub const EVENTS: &str = "events.json";
 pub const KEPT: &str = "kept.tile";
-/// The drafts by tile (see [`write_near`]): the index, and the lines it points into.
+/// The drafts by tile (see `write_near`): the index, and the lines it points into.
 pub const NEAR: &str = "near.json";
 pub const NEAR_DRAFTS: &str = "near_drafts.jsonl";
 
@@ -500,7 +500,7 @@ fn write_near(
     super::write_json(out, NEAR, &index)
 }
 
-/// A pair's drafts by tile ([`write_near`]): the index held (a line per tile reached), a tile's
+/// A pair's drafts by tile (`write_near`): the index held (a line per tile reached), a tile's
 /// drafts read from their line when asked.
 pub struct NearDrafts {
     path: std::path::PathBuf,

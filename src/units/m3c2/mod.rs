@@ -1,5 +1,5 @@
 //! An M3C2 unit: normals and M3C2 for the core points one tile owns, for one pair (pass 2 of
-//! SPEC.md §3), from the pair's two tilings (and the user's core points, [`cores`]). Results are
+//! SPEC.md §3), from the pair's two tilings (and the user's core points, [`super::cores`]). Results are
 //! written as chunk files sorted by core-point key; [`Merged`] streams a pair's results in global
 //! key order (a k-way merge over the tiles), so everything downstream is the same whatever the
 //! tiling.

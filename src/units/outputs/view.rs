@@ -33,7 +33,7 @@ struct ViewJson<'a> {
     meshes: std::collections::BTreeMap<String, EventMeshes>,
 }
 
-/// What a campaign reads of a pair's view.json (written as [`ViewJson`]): the pair's colour range,
+/// What a campaign reads of a pair's view.json (written as `ViewJson`): the pair's colour range,
 /// from which the campaign's one scale for every pair is drawn.
 #[derive(Debug, Clone, Deserialize)]
 pub struct ViewRange {
