@@ -23,7 +23,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use talus::commands::campaign::CampaignOptions;
-use talus::commands::compare::{compare as run_compare, plan_path, CompareOptions};
+use talus::commands::compare::{compare as run_compare, CompareOptions};
 use talus::geom::{Bounds, Point3};
 use talus::io::{CloudFormat, CloudInfo, Crs, PointReader};
 use talus::m3c2::tile::{compute, EpochPoints, KeyedResult};
@@ -339,7 +339,7 @@ fn through_pipeline(
     };
     run_compare(&opts)?;
     let store = Store::open(&opts.out, false)?;
-    let plan = Plan::load(&plan_path(&store))?;
+    let plan = Plan::load(&store.plan_path())?;
     let pool = talus::memory::pool_for(plan.params.memory_bytes.value);
     let ctx = talus::units::Ctx {
         plan: &plan,
