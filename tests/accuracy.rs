@@ -1,7 +1,7 @@
 //! Accuracy of `talus compare` against ground truth we did not compute with the pipeline: the
 //! closed-form volumes of the `talus synth` scenes (bump h·R²(π/2 − 2/π), spherical caps
 //! πh²(3R − h)/3, boxes w·d·h, half-ellipsoid (2/3)πabc, half-cone πR²H/6; checked against
-//! numerical integration in tests/synth.rs), and a gain/loss pair of boxes built here.
+//! numerical integration in tests/synth/), and a gain/loss pair of boxes built here.
 //!
 //! Issue "Change events and their volumes", item 5: every event of the paper's four tests (hill,
 //! cube, spheres, cubes) and of the cliff scene within 2 % (Gorup & Bohak report 10 % on their

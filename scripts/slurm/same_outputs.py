@@ -2,7 +2,7 @@
 """same_outputs.py A B: exit 0 when directories A and B hold the same outputs, byte for byte.
 
 Every file under A and B but .talus/ is compared, with the one exception the campaign and
-resume tests make (tests/campaign.rs): the timings a run records of itself, the "seconds" values
+resume tests make (tests/campaign/): the timings a run records of itself, the "seconds" values
 of summary.json and campaign.json, the seconds column of campaign.csv and the run-time column
 of report.html's table (its last cell in each row), are blanked first.
 Prints one line per file and a verdict; exit 1 on any difference.

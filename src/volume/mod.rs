@@ -156,7 +156,7 @@ pub const PIECE_CELLS: usize = 1 << 14;
 
 /// How far (in spacings) beyond its band a piece triangulates the points: a band's triangles are
 /// the whole event's wherever their Delaunay circles stay within it. At 3 spacings (the whole
-/// footprint's own margin) a sampling of the face hollow of `tests/events_volume.rs` (walls, the
+/// footprint's own margin) a sampling of the face hollow of `tests/events_volume/` (walls, the
 /// after survey at half density) came out 2 × 10⁻⁶ off the whole in 14 bands; at 8, to rounding.
 const BAND_MARGIN_SPACINGS: f64 = 8.0;
 
