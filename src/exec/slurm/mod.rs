@@ -103,7 +103,7 @@ pub fn stages(plan: &Plan, done: &[bool], tiles_per_task: usize) -> Result<Vec<S
             })
         })
         .collect::<Result<_>>()?;
-    // A plan read back from DIR (a task's) is checked as a new one is.
+    // The arrays' order relies on it: checked here as when the plan was made.
     crate::units::stage::check_plan(plan)?;
     let mut out = Vec::new();
     for (r, stage) in stage_order().enumerate() {
