@@ -275,9 +275,7 @@ impl EarlyRelease {
         }
         Ok(EarlyRelease {
             dependents,
-            kept: (0..n)
-                .map(|i| publish::releasable(plan, i))
-                .collect::<Result<_>>()?,
+            kept: publish::releasable(plan)?,
             freed: Default::default(),
         })
     }

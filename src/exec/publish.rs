@@ -30,8 +30,8 @@ pub fn publish_and_gc(store: &Store, plan: &Plan, ours: &dyn Fn(&str) -> bool) -
 /// the small units the outputs are made from. Says how much it freed.
 fn release(store: &Store, plan: &Plan) -> Result<()> {
     let mut freed = 0u64;
-    for i in 0..plan.units.len() {
-        if let Some(kept) = releasable(plan, i)? {
+    for (i, kept) in releasable(plan)?.into_iter().enumerate() {
+        if let Some(kept) = kept {
             freed += store.release(&unit_ref(plan, i), kept)?;
         }
     }
@@ -39,25 +39,28 @@ fn release(store: &Store, plan: &Plan) -> Result<()> {
     Ok(())
 }
 
-/// Whether unit `i` of the plan is released once its dependents are done, and the files its
-/// release keeps ([`crate::units::stage::Stage::KEPT`]): the units of an intermediate stage
-/// (tiles, per-tile M3C2 results), which a later run that needs them computes again. A campaign
-/// keeps the units of its first and last surveys (their tiles, the last one's orientation
-/// field): the survey appended next is aligned onto the first and compared with the last.
-pub fn releasable(plan: &Plan, i: usize) -> Result<Option<&'static [&'static str]>> {
+/// For each unit of the plan, whether it is released once its dependents are done, and the
+/// files its release keeps ([`crate::units::stage::Stage::KEPT`]): the units of an intermediate
+/// stage (tiles, per-tile M3C2 results), which a later run that needs them computes again. A
+/// campaign keeps the units of its first and last surveys (their tiles, the last one's
+/// orientation field): the survey appended next is aligned onto the first and compared with
+/// the last.
+pub fn releasable(plan: &Plan) -> Result<Vec<Option<&'static [&'static str]>>> {
     use crate::units::stage::Stage;
-    let u = &plan.units[i];
-    let stage = registry().get(u.kind())?;
-    if !stage.intermediate() {
-        return Ok(None);
-    }
+    let stages = registry();
     let campaign = plan
         .of_kind(crate::units::campaign::CampaignStage::KIND)
         .next()
         .is_some();
     let ends = [Some(0), plan.surveys.len().checked_sub(1)];
-    let next_needs = campaign && u.spec.pair.is_none() && ends.contains(&u.spec.survey);
-    Ok((!next_needs).then(|| stage.kept()))
+    plan.units
+        .iter()
+        .map(|u| {
+            let stage = stages.get(u.kind())?;
+            let next_needs = campaign && u.spec.pair.is_none() && ends.contains(&u.spec.survey);
+            Ok((stage.intermediate() && !next_needs).then(|| stage.kept()))
+        })
+        .collect()
 }
 
 /// Tell the user how much releasing intermediate units freed, if anything.

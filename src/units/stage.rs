@@ -455,8 +455,8 @@ pub fn check_plan(plan: &Plan) -> Result<()> {
         ranks.push(reg.rank(u.kind()).unwrap_or(usize::MAX));
     }
     for (i, u) in plan.units.iter().enumerate() {
-        let before = u.deps.iter().chain(&u.after);
-        if let Some(&d) = before.clone().find(|&&d| d >= i || ranks[d] >= ranks[i]) {
+        let mut before = u.deps.iter().chain(&u.after);
+        if let Some(&d) = before.find(|&&d| d >= i || ranks[d] >= ranks[i]) {
             return Err(Error::Internal(format!(
                 "unit {} ({}) depends on {} ({}), not of an earlier stage",
                 u.name,
