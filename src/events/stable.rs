@@ -163,16 +163,27 @@ fn fit_translation(samples: &[Sample], idx: &[usize]) -> Point3 {
     }
 }
 
+/// σ_d of the stable ground `sel` found in `samples`: the robust standard deviation (1.4826 ×
+/// MAD) of its distances less the translation's share, what [`measure`] reports, without the
+/// variogram (the alignment needs the noise, not its spatial structure).
+pub fn spread(samples: &[Sample], sel: &Selected) -> f64 {
+    let mut r: Vec<f64> = sel
+        .keep
+        .iter()
+        .map(|&i| samples[i].distance - dot(&samples[i].normal, &sel.t))
+        .collect();
+    let centre = median(&mut r);
+    let mut dev: Vec<f64> = r.iter().map(|x| (x - centre).abs()).collect();
+    1.4826 * median(&mut dev)
+}
+
 /// Measure the stable ground from `samples` (computed core points, finite distances and unit
 /// normals). `spacing` is the core spacing (the variogram's shortest lag). None when fewer than
 /// [`MIN_STABLE`] points are stable.
 pub fn measure(samples: &[Sample], spacing: f64) -> Option<Stable> {
-    let Selected { finite, keep, t } = select(samples)?;
-    let residual = |t: &Point3, i: usize| samples[i].distance - dot(&samples[i].normal, t);
-    let mut r: Vec<f64> = keep.iter().map(|&i| residual(&t, i)).collect();
-    let centre = median(&mut r);
-    let mut dev: Vec<f64> = r.iter().map(|x| (x - centre).abs()).collect();
-    let sigma_d = 1.4826 * median(&mut dev);
+    let selected = select(samples)?;
+    let sigma_d = spread(samples, &selected);
+    let Selected { finite, keep, t } = selected;
     let reg_error = (keep
         .iter()
         .map(|&i| dot(&samples[i].normal, &t).powi(2))

@@ -123,12 +123,11 @@ impl Stage for AlignStage {
 /// the surveys' stable ground ([`crate::events::align::complete`]).
 fn fit_onto(ctx: &Ctx, onto: usize, s: usize) -> Result<(Alignment, usize)> {
     let plan = ctx.plan;
-    let spacing = plan.params.core_spacing.value;
     let limits = limits_onto(plan.params.align_limits(), onto);
     let windows = Region::Windows(windows(plan));
     let Some(areas) = &plan.stable_areas else {
         let (samples, n) = sample_of(ctx, onto, s, &windows, Picks::Cores(1))?;
-        return Ok((find(&samples, spacing, &limits, Ground::Automatic), n));
+        return Ok((find(&samples, &limits, Ground::Automatic), n));
     };
     let (inside, mut n) = sample_of(
         ctx,
@@ -137,14 +136,14 @@ fn fit_onto(ctx: &Ctx, onto: usize, s: usize) -> Result<(Alignment, usize)> {
         &Region::Areas(&areas.areas),
         Picks::Points(points_one_in(plan, onto, &areas.areas)),
     )?;
-    let user = find(&inside, spacing, &limits, Ground::User);
+    let user = find(&inside, &limits, Ground::User);
     if user.constrained >= 6 || !user.determined {
         return Ok((user, n));
     }
     let (rest, m) = sample_of(ctx, onto, s, &windows, Picks::Cores(1))?;
     n += m;
     Ok((
-        crate::events::align::complete(&user, &inside, &rest, spacing, &limits),
+        crate::events::align::complete(&user, &inside, &rest, &limits),
         n,
     ))
 }

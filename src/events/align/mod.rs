@@ -561,20 +561,20 @@ pub fn fit(
 /// The stable ground is first sought near zero distance ([`super::stable::select`]); where that
 /// finds none, or none that holds still, the surveys may be far apart (every distance large):
 /// the fit is tried again over every sample, its stable set re-selected from its own residuals,
-/// and taken when it applies or is a gross misregistration. `spacing` is the core spacing (the
-/// noise's variogram's shortest lag).
-pub fn find(samples: &[Sample], spacing: f64, limits: &Limits, ground: Ground) -> Alignment {
+/// and taken when it applies or is a gross misregistration. The noise of one distance, σ_d, is
+/// the stable ground's robust spread ([`super::stable::spread`]).
+pub fn find(samples: &[Sample], limits: &Limits, ground: Ground) -> Alignment {
     let finite: Vec<usize> = (0..samples.len())
         .filter(|&i| samples[i].distance.is_finite() && samples[i].normal[0].is_finite())
         .collect();
     let sel = super::stable::select(samples);
-    let sigma_d = super::stable::measure(samples, spacing).map_or_else(
+    let sigma_d = sel.as_ref().map_or_else(
         || {
             // No stable ground to measure the noise on: the distances' own LoDs say it.
             let mut l: Vec<f64> = finite.iter().map(|&i| samples[i].lod / 1.96).collect();
             median(&mut l)
         },
-        |m| m.sigma_d,
+        |sel| super::stable::spread(samples, sel),
     );
     let near = match &sel {
         Some(sel) => fit(samples, &sel.keep, &sel.finite, sigma_d, limits, ground),
@@ -608,10 +608,9 @@ pub fn complete(
     user: &Alignment,
     inside: &[Sample],
     rest: &[Sample],
-    spacing: f64,
     limits: &Limits,
 ) -> Alignment {
-    let other = find(rest, spacing, limits, Ground::Automatic);
+    let other = find(rest, limits, Ground::Automatic);
     let free: Vec<usize> = (0..6)
         .filter(|&k| {
             if k < 3 {
