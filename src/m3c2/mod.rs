@@ -268,9 +268,13 @@ fn core_result(
         // A post or a spike (no surface at the normal's scale) has no normal to follow: walked,
         // its axis ran 195 m across St Leonards' beach to a dune.
         let walking = params.walk != Walk::Off && surface;
+        // The present epoch's surface must hold the few points that show a surface's lie, as
+        // the group the walk finds must: a single point of it walked 53 m along a horizontal
+        // normal across St Leonards to a surface of the other epoch.
+        let lie = need.max(normals::MIN_NORMAL_POINTS as u32);
         let present = match (c1.count, c2.count) {
-            (k, 0) if k >= need && walking => Some((0, p1.range(), span1)),
-            (0, k) if k >= need && walking => Some((1, p2.range(), span2)),
+            (k, 0) if k >= lie && walking => Some((0, p1.range(), span1)),
+            (0, k) if k >= lie && walking => Some((1, p2.range(), span2)),
             _ => None,
         };
         let Some((which, (lo, hi), span)) = present else {

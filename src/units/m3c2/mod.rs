@@ -67,7 +67,7 @@ pub struct M3c2Meta {
 impl Stage for M3c2Stage {
     const KIND: &'static str = "m3c2";
     const SCOPE: Scope = Scope::Tile;
-    const VERSION: u32 = 2;
+    const VERSION: u32 = 3;
     const INTERMEDIATE: bool = true;
     const LINE: Line = Line {
         name: "pass 2: normals and M3C2",
