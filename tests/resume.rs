@@ -405,3 +405,57 @@ fn a_resumed_run_takes_the_spacing_its_store_measured() {
     resume(&["--classes", "all"]);
     assert_eq!(entries().len(), 2);
 }
+
+/// A record whose meta lacks a field is damaged, never read as a default (ARCHITECTURE.md, the
+/// unit contract): the unit that reads it — here the outputs unit, reading the timing of a
+/// tiling it depends on only through the M3C2 units — names the record, the executor computes
+/// that unit again and then the reader, and the outputs are those of an undamaged run.
+#[test]
+fn a_damaged_record_is_computed_again_not_read_as_a_default() {
+    let tmp = common::tempdir();
+    let (before, after) = cliff(&tmp.path().join("scene"), 20_000);
+    let keep = [ARGS, &["--keep-units"]].concat();
+    let dir = tmp.path().join("run");
+    compare(&before, &after, &dir, &keep);
+    let reference = tmp.path().join("reference");
+    compare(&before, &after, &reference, &keep);
+    let units = dir.join(".talus/units");
+    let tiling = std::fs::read_dir(units.join("tiling"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .min()
+        .unwrap();
+    let path = tiling.join("record.json");
+    let mut record: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    record["meta"].as_object_mut().unwrap().remove("seconds");
+    std::fs::write(&path, serde_json::to_vec(&record).unwrap()).unwrap();
+    // The outputs unit lost: it is computed again, and reads every timing.
+    std::fs::remove_dir_all(units.join("outputs")).unwrap();
+    let o = run_compare(
+        &before,
+        &after,
+        &dir,
+        &[ARGS, &["--keep-units", "--resume"]].concat(),
+    );
+    let said = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{said}");
+    assert!(
+        said.contains("record.json: damaged") && said.contains("missing field `seconds`"),
+        "{said}"
+    );
+    let fixed: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(
+            std::fs::read_dir(units.join("tiling"))
+                .unwrap()
+                .map(|e| e.unwrap().path())
+                .min()
+                .unwrap()
+                .join("record.json"),
+        )
+        .unwrap(),
+    )
+    .unwrap();
+    assert!(fixed["meta"]["seconds"].is_number(), "{fixed}");
+    assert_same_outputs(&reference, &dir);
+}

@@ -19,7 +19,7 @@ pub fn vegetation(store: &Store, plan: &Plan) -> Result<Option<String>> {
         let Some(record) = store.done(&unit_ref(plan, i)) else {
             continue;
         };
-        let m: ClearedMeta = typed_meta(&u.name, &record.meta)?;
+        let m: ClearedMeta = typed_meta(store, &unit_ref(plan, i), &record.meta)?;
         let compared = m.tiling.points + m.removed;
         let share = 100.0 * m.removed as f64 / compared.max(1) as f64;
         let label = u

@@ -52,6 +52,9 @@ struct Shared {
     elsewhere: Vec<bool>,
     /// Units this run released (or let go to be released) once their dependents were done.
     released: Vec<bool>,
+    /// A unit that read a damaged record of a unit it does not depend on directly waits for
+    /// that unit to be computed again.
+    waits: Vec<Option<usize>>,
 }
 
 /// What a run of the executor did.
@@ -188,6 +191,7 @@ pub fn run_units(
         error: None,
         elsewhere: vec![false; n],
         released: vec![false; n],
+        waits: vec![None; n],
     });
     let wake = Condvar::new();
     let stages = Stages::new(plan, &done);
@@ -346,6 +350,7 @@ fn slot(cx: &RunCtx) {
                             .iter()
                             .chain(&plan.units[i].after)
                             .all(|&d| sh.state[d] == State::Done)
+                        && sh.waits[i].is_none_or(|w| sh.state[w] == State::Done)
                         && !sh.elsewhere[i]
                 });
                 if let Some(i) = ready {
@@ -402,12 +407,20 @@ fn slot(cx: &RunCtx) {
                 sh.elsewhere[picked] = true;
             }
             Err(Error::Damaged { path, problem }) if sh.redone[picked] == 0 => {
-                // Throw away the dependency that holds the damaged file, redo both.
-                let dep = plan.units[picked].deps.iter().copied().find(|&d| {
+                // Throw away the dependency that holds the damaged file, redo both: a direct
+                // one, or one further up whose record the unit read (the outputs unit reads the
+                // timings of every unit it depends on through others).
+                let holds = |d: &usize| {
                     store
-                        .unit_dir(&unit_ref(plan, d))
+                        .unit_dir(&unit_ref(plan, *d))
                         .is_ok_and(|dir| path.starts_with(dir))
-                });
+                };
+                let dep = plan.units[picked]
+                    .deps
+                    .iter()
+                    .copied()
+                    .find(holds)
+                    .or_else(|| (0..picked).find(holds));
                 match dep {
                     Some(d) => {
                         eprintln!(
@@ -422,6 +435,7 @@ fn slot(cx: &RunCtx) {
                         sh.state[d] = State::Todo;
                         sh.withdrawn[d] += 1;
                         sh.state[picked] = State::Todo;
+                        sh.waits[picked] = Some(d);
                         stages.reopen(plan, d);
                     }
                     None => {

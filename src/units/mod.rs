@@ -33,7 +33,6 @@ pub mod volumes;
 
 use std::path::{Path, PathBuf};
 
-use serde::Deserialize;
 use talus_tiling::TileId;
 
 use crate::error::{Error, Result};
@@ -107,20 +106,26 @@ impl Ctx<'_> {
                 S::KIND
             )));
         }
+        self.record_meta(i)
+    }
+
+    /// What the executor recorded of finished unit `i`: its seconds and peak memory.
+    pub fn timing(&self, i: usize) -> Result<stage::Timing> {
+        self.record_meta(i)
+    }
+
+    /// Unit `i`'s record's meta as `M`. A record that lacks a field is damaged, naming the
+    /// record: the executor then computes unit `i` again and the unit that read it.
+    fn record_meta<M: serde::de::DeserializeOwned>(&self, i: usize) -> Result<M> {
         let rec = self.record(i)?;
-        S::Meta::deserialize(&rec.meta).map_err(|e| Error::Damaged {
+        M::deserialize(&rec.meta).map_err(|e| Error::Damaged {
             path: self
                 .store
                 .unit_dir(&self.unit_ref(i))
                 .map(|d| d.join(crate::store::RECORD_FILE))
                 .unwrap_or_default(),
-            problem: format!("unit {}: its record's meta: {e}", u.name),
+            problem: format!("unit {}: its record's meta: {e}", self.plan.units[i].name),
         })
-    }
-
-    /// What the executor recorded of finished unit `i`: its seconds and peak memory.
-    pub fn timing(&self, i: usize) -> Result<stage::Timing> {
-        stage::typed_meta(&self.plan.units[i].name, &self.record(i)?.meta)
     }
 
     /// The pair unit `i` is for.

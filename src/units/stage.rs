@@ -186,15 +186,27 @@ impl<S: Stage> Registered for Entry<S> {
         let Some(p) = S::publishes() else {
             return Ok(None);
         };
-        let m: S::Meta = typed_meta(unit, meta)?;
+        // The caller names the record ([`crate::exec::publish::listed_outputs`]).
+        let m = <S::Meta as serde::Deserialize>::deserialize(meta)
+            .map_err(|e| Error::Internal(format!("unit {unit}: its record's meta: {e}")))?;
         Ok(Some((p.list)(&m).to_vec()))
     }
 }
 
-/// `meta` (unit `unit`'s record) as `M`; an error naming the unit when a field is missing.
-pub fn typed_meta<M: DeserializeOwned>(unit: &str, meta: &serde_json::Value) -> Result<M> {
-    M::deserialize(meta)
-        .map_err(|e| Error::Internal(format!("unit {unit}: its record's meta: {e}")))
+/// `meta` (unit `unit`'s record, in `store`) as `M`. A record whose meta lacks a field is
+/// damaged ([`Error::Damaged`] naming the record): never read as a default.
+pub fn typed_meta<M: DeserializeOwned>(
+    store: &crate::store::Store,
+    unit: &crate::store::UnitRef,
+    meta: &serde_json::Value,
+) -> Result<M> {
+    M::deserialize(meta).map_err(|e| Error::Damaged {
+        path: store
+            .unit_dir(unit)
+            .map(|d| d.join(crate::store::RECORD_FILE))
+            .unwrap_or_default(),
+        problem: format!("unit {}: its record's meta: {e}", unit.name),
+    })
 }
 
 /// The stage `S` as the registry holds it.

@@ -75,7 +75,7 @@ pub fn report(dir: &std::path::Path, nodes: &[usize], cores: usize, scale: f64) 
                     plan.units[i].name
                 ))
             })?;
-            let t: Timing = typed_meta(&plan.units[i].name, &rec.meta)?;
+            let t: Timing = typed_meta(&store, &unit_ref(&plan, i), &rec.meta)?;
             secs[i] = t.seconds;
             tasks.push(t.seconds);
             peak = peak.max(t.peak_rss_bytes.unwrap_or(0));
