@@ -13,7 +13,7 @@ use rustc_hash::FxHashMap as HashMap;
 use serde::{Deserialize, Serialize};
 use talus_tiling::TileId;
 
-use super::events::{Draft, EventsStage, Kept};
+use super::events::{reached_tiles, search, search_xy, Draft, EventsStage, Kept};
 use super::stable::StableStage;
 use super::stage::{Line, Planner, Scope, Stage, Total};
 use super::Ctx;
@@ -162,63 +162,10 @@ fn incomplete(d: &Draft, v: &EventVolume, noise: f64, params: &Params) -> Option
     (!why.is_empty()).then(|| why.join("; "))
 }
 
-/// Volume margin of SPEC.md §1: cyl_radius + 2 × point spacing.
-pub fn margin(params: &Params) -> f64 {
-    params.cyl_radius.value + 2.0 * params.point_spacing.value
-}
-
-/// How far from the before surface, along the box's third axis, the volume of event `d` looks
-/// for the two surfaces: the M3C2 cylinder's half-length, or further where the event's
-/// distances reach further (a change deeper than the window, measured by M3C2's walk along the
-/// normal, `m3c2::reach`), with the volume margin beyond its deepest distance.
-pub fn depth(d: &Draft, params: &Params) -> f64 {
-    params
-        .cyl_halflen
-        .value
-        .max(d.event.max_abs_distance + margin(params))
-}
-
-/// The box (in the event's frame) whose points the volume needs, reaching `depth` beyond the
-/// box's own extent along its third axis, and its XY bounds.
-pub fn search_box(obb: &Obb, depth: f64, params: &Params) -> ([f64; 3], [f64; 4]) {
-    let s = params.point_spacing.value;
-    let m = margin(params);
-    let h = [
-        obb.half_extents[0] + m + 3.0 * s,
-        obb.half_extents[1] + m + 3.0 * s,
-        obb.half_extents[2] + depth,
-    ];
-    let xy = volume::Frame::of_obb(obb).bounds_xy(h.map(|x| -x), h);
-    (h, xy)
-}
-
-/// The tiles that the plan bounds of `d`'s search boxes reach, in order: each box's corners
-/// through the grid's `owner` (so clamped onto the grid), every tile between. Two events whose
-/// boxes overlap reach a common tile (the owner of a point of the overlap: `owner` is monotone
-/// along each axis), and an event reaches the tile owning its centroid.
-pub fn reached_tiles(d: &Draft, params: &Params, grid: &talus_tiling::TileGrid) -> Vec<TileId> {
-    let mut out = Vec::new();
-    for o in &d.candidates {
-        let b = search_box(o, depth(d, params), params).1;
-        let (lo, hi) = (grid.owner(b[0], b[1]), grid.owner(b[2], b[3]));
-        for col in lo.col..=hi.col {
-            out.extend((lo.row..=hi.row).map(|row| TileId { col, row }));
-        }
-    }
-    out.sort_unstable();
-    out.dedup();
-    out
-}
-
 /// The ids of the events with a candidate whose search box overlaps, in xy, one of `mine`'s:
 /// every event whose claim can contain a location of `mine`'s regions.
 fn near_events(drafts: &[Draft], mine: &[&Draft], params: &Params) -> rustc_hash::FxHashSet<u32> {
-    let xy = |d: &Draft| -> Vec<[f64; 4]> {
-        d.candidates
-            .iter()
-            .map(|o| search_box(o, depth(d, params), params).1)
-            .collect()
-    };
+    let xy = |d: &Draft| search_xy(d, params);
     let ours: Vec<[f64; 4]> = mine.iter().flat_map(|d| xy(d)).collect();
     let index = BoxIndex::new(&ours);
     drafts
@@ -280,6 +227,7 @@ pub fn ownership(
     members: &HashMap<u32, Vec<Kept>>,
     params: &Params,
 ) -> volume::Ownership {
+    let s = search(params);
     let claims = drafts
         .iter()
         .flat_map(|d| {
@@ -290,11 +238,11 @@ pub fn ownership(
             d.candidates
                 .iter()
                 .map(|o| {
-                    let (h, _) = search_box(o, depth(d, params), params);
+                    let (h, _) = s.search_box(o, s.depth(d.event.max_abs_distance));
                     volume::Claim::new(
                         d.event.id,
                         volume::Frame::of_obb(o),
-                        volume::Footprint::of_obb(o, margin(params)),
+                        volume::Footprint::of_obb(o, s.margin),
                         h[2],
                         &cores,
                     )
@@ -546,7 +494,7 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
             .collect();
         let ownership = ownership(&relevant, &members, params);
         let user = user_surfaces(plan)?;
-        let margin = margin(params);
+        let margin = search(params).margin;
         let spacing = params.point_spacing.value;
         let boxes = search_boxes(&mine, params, user.is_some());
         let [mut before, mut after] = match user {
@@ -639,6 +587,7 @@ fn user_surfaces(plan: &crate::plan::Plan) -> Result<Option<(volume::Mesh, volum
 /// The search boxes of each of `mine`'s events: one per candidate box, or only the first
 /// (the mean normal's) with the user's surfaces (`surfaces`).
 fn search_boxes(mine: &[&Draft], params: &Params, surfaces: bool) -> Vec<Vec<SearchBox>> {
+    let s = search(params);
     mine.iter()
         .map(|d| {
             let c: &[Obb] = if surfaces {
@@ -648,7 +597,7 @@ fn search_boxes(mine: &[&Draft], params: &Params, surfaces: bool) -> Vec<Vec<Sea
             };
             c.iter()
                 .map(|o| {
-                    let (h, xy) = search_box(o, depth(d, params), params);
+                    let (h, xy) = s.search_box(o, s.depth(d.event.max_abs_distance));
                     (h, xy, *o)
                 })
                 .collect()

@@ -459,7 +459,7 @@ struct NearLine {
 }
 
 /// File the drafts by tile, for the volumes units: for every tile that one of a draft's search
-/// boxes reaches (`volumes::reached_tiles`), one line of [`NEAR_DRAFTS`] (a JSON array of those
+/// boxes reaches ([`reached_tiles`]), one line of [`NEAR_DRAFTS`] (a JSON array of those
 /// drafts, in id order), found through [`NEAR`]. Two events whose search boxes overlap reach a
 /// common tile, so a volumes unit that reads the lines of the tiles its own events' boxes reach
 /// finds every event that can claim a location of theirs, and never parses the pair's whole
@@ -474,7 +474,7 @@ fn write_near(
     let mut by_tile: std::collections::BTreeMap<talus_tiling::TileId, Vec<usize>> =
         std::collections::BTreeMap::new();
     for (i, d) in drafts.iter().enumerate() {
-        for t in super::volumes::reached_tiles(d, params, grid) {
+        for t in reached_tiles(d, params, grid) {
             by_tile.entry(t).or_default().push(i);
         }
     }
@@ -724,4 +724,45 @@ fn from_columns(c: &TileColumns, path: &std::path::Path) -> Result<Vec<Kept>> {
         })
         .collect();
     Ok(kept)
+}
+
+/// The tiles that the plan bounds of `d`'s search boxes ([`crate::volume::Search`]) reach, in
+/// order: each box's corners through the grid's `owner` (so clamped onto the grid), every tile
+/// between. Two events whose boxes overlap reach a common tile (the owner of a point of the
+/// overlap: `owner` is monotone along each axis), and an event reaches the tile owning its
+/// centroid. The events unit files drafts by them, the volumes unit reads the tiles.
+pub fn reached_tiles(
+    d: &Draft,
+    params: &crate::params::Params,
+    grid: &talus_tiling::TileGrid,
+) -> Vec<talus_tiling::TileId> {
+    let mut out = Vec::new();
+    for b in search_xy(d, params) {
+        let (lo, hi) = (grid.owner(b[0], b[1]), grid.owner(b[2], b[3]));
+        for col in lo.col..=hi.col {
+            out.extend((lo.row..=hi.row).map(|row| talus_tiling::TileId { col, row }));
+        }
+    }
+    out.sort_unstable();
+    out.dedup();
+    out
+}
+
+/// The reach of the run's search boxes ([`crate::volume::Search`]).
+pub fn search(params: &crate::params::Params) -> crate::volume::Search {
+    crate::volume::Search::new(
+        params.cyl_radius.value,
+        params.point_spacing.value,
+        params.cyl_halflen.value,
+    )
+}
+
+/// The XY bounds of each of `d`'s search boxes, one a candidate box.
+pub fn search_xy(d: &Draft, params: &crate::params::Params) -> Vec<[f64; 4]> {
+    let s = search(params);
+    let depth = s.depth(d.event.max_abs_distance);
+    d.candidates
+        .iter()
+        .map(|o| s.search_box(o, depth).1)
+        .collect()
 }
