@@ -9,14 +9,15 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-/// The example program (`cargo test` builds the examples; built here when this test runs alone).
-fn survey_stage() -> PathBuf {
+/// The example program `name` (`cargo test` builds the examples; built here when this test
+/// runs alone).
+fn example(name: &str) -> PathBuf {
     let talus = PathBuf::from(env!("CARGO_BIN_EXE_talus"));
     let dir = talus.parent().unwrap();
-    let exe = dir.join("examples").join("survey_stage");
+    let exe = dir.join("examples").join(name);
     if !exe.is_file() {
         let mut c = Command::new(env!("CARGO"));
-        c.args(["build", "--example", "survey_stage"]);
+        c.args(["build", "--example", name]);
         if dir.ends_with("release") {
             c.arg("--release");
         }
@@ -69,7 +70,7 @@ fn direct(path: &Path) -> (u64, f64, f64, f64) {
 
 #[test]
 fn a_registered_stage_runs_locally_in_a_worker_and_in_a_slurm_plan() {
-    let exe = survey_stage();
+    let exe = example("survey_stage");
     let tmp = common::tempdir();
     let scene = tmp.path().join("scene");
     let s = scene.to_str().unwrap();
@@ -166,4 +167,72 @@ fn a_registered_stage_runs_locally_in_a_worker_and_in_a_slurm_plan() {
     // In a worker: the same plan's units, the stage's the same bytes as the local run's.
     run(&exe, &["worker", slurm.to_str().unwrap()]);
     assert_eq!(heights(&slurm), got);
+}
+
+/// A stage that provides tiles (`examples/datum_stage.rs`: the later survey's tiles lowered by
+/// 0.5 m, a datum's offset), added by its own module and its registration only: every later
+/// unit reads its tiles, because the stage says it provides them — none names it. Against
+/// plain talus on the same surveys, each core point's distance is lower by 0.5 m along its
+/// normal's vertical part.
+#[test]
+fn a_registered_stage_that_provides_tiles_is_read_by_every_later_unit() {
+    let exe = example("datum_stage");
+    let tmp = common::tempdir();
+    let data = tmp.path().join("scene");
+    run(
+        Path::new(env!("CARGO_BIN_EXE_talus")),
+        &[
+            "synth",
+            "cliff",
+            "--points",
+            "20000",
+            "--out",
+            data.to_str().unwrap(),
+        ],
+    );
+    let (b, a) = (data.join("before.laz"), data.join("after.laz"));
+    let compare = |exe: &Path, out: &Path| {
+        let args = [
+            "compare",
+            b.to_str().unwrap(),
+            a.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--align",
+            "off",
+        ];
+        run(exe, &args);
+        talus::io::result_table::read(&out.join("m3c2.laz")).unwrap()
+    };
+    let plain = compare(
+        Path::new(env!("CARGO_BIN_EXE_talus")),
+        &tmp.path().join("plain"),
+    );
+    let lowered = compare(&exe, &tmp.path().join("datum"));
+    let (d0, d1) = (
+        plain.column("m3c2_distance").unwrap(),
+        lowered.column("m3c2_distance").unwrap(),
+    );
+    let nz = plain.column("normal_z").unwrap();
+    assert_eq!(plain.xyz, lowered.xyz, "the same core points");
+    let mut offsets: Vec<f64> = (0..d0.len())
+        .filter(|&i| nz[i].abs() > 0.9 && d0[i].is_finite() && d1[i].is_finite())
+        .map(|i| (d1[i] - d0[i]) / nz[i])
+        .collect();
+    assert!(offsets.len() > 1000, "{} core points", offsets.len());
+    offsets.sort_by(f64::total_cmp);
+    let median = offsets[offsets.len() / 2];
+    assert!(
+        (median + 0.5).abs() < 0.01,
+        "median vertical offset {median}"
+    );
+    // The units that read tiles read the provider's: its units are in the plan, and nothing
+    // but the registration added them.
+    let units = tmp.path().join("datum/.talus/units/datum");
+    assert_eq!(
+        std::fs::read_dir(&units).unwrap().count(),
+        1,
+        "{}",
+        units.display()
+    );
 }

@@ -43,6 +43,12 @@ impl Stage for AlignedStage {
         total: Total::Unknown,
     };
     type Meta = AlignedMeta;
+    const PROVIDES_TILES: bool = true;
+
+    /// Its tiles hold the survey only where the alignment applied (else it wrote none).
+    fn tiles(meta: &AlignedMeta) -> Option<TilingMeta> {
+        meta.tiling.clone().filter(|_| meta.applied)
+    }
 
     /// One per survey with an align unit, over the align units of every survey up to it (its
     /// route may pass through them) and the survey's own tiling.

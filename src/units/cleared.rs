@@ -44,6 +44,11 @@ impl Stage for ClearedStage {
         total: Total::SurveyPoints,
     };
     type Meta = ClearedMeta;
+    const PROVIDES_TILES: bool = true;
+
+    fn tiles(meta: &ClearedMeta) -> Option<TilingMeta> {
+        Some(meta.tiling.clone())
+    }
 
     /// One per survey with `--vegetation remove`, over the units holding its tiles.
     fn plan(p: &mut Planner) -> Result<()> {
@@ -68,8 +73,7 @@ impl Stage for ClearedStage {
         use rayon::prelude::*;
         let plan = ctx.plan;
         let s = ctx.survey(unit)?;
-        let source = ctx.uncleared_tiling(s)?;
-        let meta = ctx.uncleared_tiling_meta(s)?;
+        let (source, meta) = ctx.tiles_before(s, Some(Self::KIND))?;
         let grid = plan.layout.grid()?;
         let spacing = plan.params.point_spacing.value;
         let cell = crate::events::vegetation::SCALES[0] * spacing;

@@ -118,14 +118,7 @@ impl Ctx<'_> {
     /// record: the executor then computes unit `i` again and the unit that read it.
     fn record_meta<M: serde::de::DeserializeOwned>(&self, i: usize) -> Result<M> {
         let rec = self.record(i)?;
-        M::deserialize(&rec.meta).map_err(|e| Error::Damaged {
-            path: self
-                .store
-                .unit_dir(&self.unit_ref(i))
-                .map(|d| d.join(crate::store::RECORD_FILE))
-                .unwrap_or_default(),
-            problem: format!("unit {}: its record's meta: {e}", self.plan.units[i].name),
-        })
+        M::deserialize(&rec.meta).map_err(|e| self.damaged_record(i, e))
     }
 
     /// The pair unit `i` is for.
@@ -153,31 +146,41 @@ impl Ctx<'_> {
             .ok_or_else(|| Error::Internal(format!("unit {} without a tile", u.name)))
     }
 
-    /// The unit whose tile files hold survey `survey` in the run's frame: its cleared tiling with
-    /// `--vegetation remove` ([`cleared`]), else its aligned tiling when its alignment applied
-    /// ([`aligned`]), else its own tiling.
-    pub fn tiling(&self, survey: usize) -> Result<usize> {
-        match self
-            .plan
-            .find(&Spec::survey(cleared::ClearedStage::KIND, survey))
-        {
-            Some(c) => Ok(c),
-            None => self.uncleared_tiling(survey),
-        }
+    /// The unit whose tile files hold survey `survey` in the run's frame, and their record:
+    /// the last stage in the registry that provides tiles ([`stage::Stage::tiles`]) and whose
+    /// unit of the survey holds them — its cleared tiling with `--vegetation remove`, else its
+    /// aligned tiling where the alignment applied, else its own tiling.
+    pub fn tiles(&self, survey: usize) -> Result<(usize, tiling::TilingMeta)> {
+        self.tiles_before(survey, None)
     }
 
-    /// The unit holding survey `survey`'s tiles in the run's frame before `--vegetation remove`
-    /// clears them: its aligned tiling where the alignment applies, else its own.
-    pub fn uncleared_tiling(&self, survey: usize) -> Result<usize> {
-        if let Some(a) = self
-            .plan
-            .find(&Spec::survey(aligned::AlignedStage::KIND, survey))
-        {
-            if self.meta::<aligned::AlignedStage>(a)?.applied {
-                return Ok(a);
+    /// [`Ctx::tiles`] as the stages before stage `kind` leave them (a stage that provides
+    /// tiles reads the ones it replaces), or all of them (`None`).
+    pub fn tiles_before(
+        &self,
+        survey: usize,
+        kind: Option<&str>,
+    ) -> Result<(usize, tiling::TilingMeta)> {
+        let stages = stage::registry().stages();
+        let end = kind
+            .and_then(|k| stages.iter().position(|s| s.kind() == k))
+            .unwrap_or(stages.len());
+        for st in stages[..end].iter().rev().filter(|s| s.provides_tiles()) {
+            let Some(u) = self.plan.find(&Spec::survey(st.kind(), survey)) else {
+                continue;
+            };
+            if let Some(m) = self.tiles_of(u)? {
+                return Ok((u, m));
             }
         }
-        self.unit(&Spec::survey(tiling::TilingStage::KIND, survey))
+        Err(Error::Internal(format!(
+            "no unit holds survey {survey}'s tiles"
+        )))
+    }
+
+    /// The unit whose tile files hold survey `survey` in the run's frame ([`Ctx::tiles`]).
+    pub fn tiling(&self, survey: usize) -> Result<usize> {
+        Ok(self.tiles(survey)?.0)
     }
 
     /// The coordinate quantum (scale, offset per axis) of survey `survey`'s first file, which
@@ -191,26 +194,38 @@ impl Ctx<'_> {
             .and_then(|r| r.info().transform))
     }
 
-    /// The tiling record of survey `survey` in the run's frame (see [`Ctx::tiling`]).
+    /// The tiling record of survey `survey` in the run's frame (see [`Ctx::tiles`]).
     pub fn tiling_meta(&self, survey: usize) -> Result<tiling::TilingMeta> {
-        self.tiling_meta_of(self.tiling(survey)?)
+        Ok(self.tiles(survey)?.1)
     }
 
-    /// The tiling record of [`Ctx::uncleared_tiling`].
-    pub fn uncleared_tiling_meta(&self, survey: usize) -> Result<tiling::TilingMeta> {
-        self.tiling_meta_of(self.uncleared_tiling(survey)?)
-    }
-
-    /// The tiling record of unit `u`, which holds a survey's tiles: a tiling, an aligned tiling
-    /// that applied, or a cleared one.
+    /// The tiling record of unit `u`, which holds a survey's tiles ([`stage::Stage::tiles`]).
     pub fn tiling_meta_of(&self, u: usize) -> Result<tiling::TilingMeta> {
-        match self.plan.units[u].kind() {
-            cleared::ClearedStage::KIND => Ok(self.meta::<cleared::ClearedStage>(u)?.tiling),
-            aligned::AlignedStage::KIND => self
-                .meta::<aligned::AlignedStage>(u)?
-                .tiling
-                .ok_or_else(|| Error::Internal("an aligned unit without tiles read".into())),
-            _ => self.meta::<tiling::TilingStage>(u),
+        self.tiles_of(u)?.ok_or_else(|| {
+            Error::Internal(format!("unit {} holds no tiles", self.plan.units[u].name))
+        })
+    }
+
+    /// The tiles' record unit `u` holds, if its stage provides tiles and its meta says it
+    /// holds them; a meta that does not read is damaged, naming the record.
+    fn tiles_of(&self, u: usize) -> Result<Option<tiling::TilingMeta>> {
+        let st = stage::registry().get(self.plan.units[u].kind())?;
+        if !st.provides_tiles() {
+            return Ok(None);
+        }
+        st.tiles(&self.record(u)?.meta)
+            .map_err(|e| self.damaged_record(u, e))
+    }
+
+    /// Unit `u`'s record is damaged: its meta does not read (`e`).
+    fn damaged_record(&self, u: usize, e: impl std::fmt::Display) -> Error {
+        Error::Damaged {
+            path: self
+                .store
+                .unit_dir(&self.unit_ref(u))
+                .map(|d| d.join(crate::store::RECORD_FILE))
+                .unwrap_or_default(),
+            problem: format!("unit {}: its record's meta: {e}", self.plan.units[u].name),
         }
     }
 

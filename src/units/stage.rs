@@ -110,6 +110,19 @@ pub trait Stage: Send + Sync + 'static {
     fn publishes() -> Option<Publishes<Self::Meta>> {
         None
     }
+
+    /// For a stage whose units hold a survey's tiles in the run's frame (the tiling; the
+    /// aligned tiling where the alignment applied; the cleared one with `--vegetation remove`):
+    /// the tiles' record, when unit's meta says it holds them. A later unit reads a survey's
+    /// tiles from the last stage in the registry that provides them for it ([`Ctx::tiling`]);
+    /// a new provider needs nothing more than this and its registration.
+    fn tiles(_meta: &Self::Meta) -> Option<super::tiling::TilingMeta> {
+        None
+    }
+
+    /// Whether the stage provides tiles at all ([`Stage::tiles`]): planning counts its unit of
+    /// a survey among the units holding the survey's tiles ([`Planner::survey_tiles`]).
+    const PROVIDES_TILES: bool = false;
 }
 
 /// What a publishing stage gives the executor.
@@ -144,6 +157,12 @@ pub trait Registered: Send + Sync {
         unit: &str,
         meta: &serde_json::Value,
     ) -> Result<Option<Vec<super::outputs::Publish>>>;
+    fn provides_tiles(&self) -> bool;
+    /// [`Stage::tiles`] of a record's meta (an error when the meta is not the stage's).
+    fn tiles(
+        &self,
+        meta: &serde_json::Value,
+    ) -> std::result::Result<Option<super::tiling::TilingMeta>, String>;
 }
 
 struct Entry<S>(std::marker::PhantomData<S>);
@@ -190,6 +209,16 @@ impl<S: Stage> Registered for Entry<S> {
         let m = <S::Meta as serde::Deserialize>::deserialize(meta)
             .map_err(|e| Error::Internal(format!("unit {unit}: its record's meta: {e}")))?;
         Ok(Some((p.list)(&m).to_vec()))
+    }
+    fn provides_tiles(&self) -> bool {
+        S::PROVIDES_TILES
+    }
+    fn tiles(
+        &self,
+        meta: &serde_json::Value,
+    ) -> std::result::Result<Option<super::tiling::TilingMeta>, String> {
+        let m = <S::Meta as serde::Deserialize>::deserialize(meta).map_err(|e| e.to_string())?;
+        Ok(S::tiles(&m))
     }
 }
 
@@ -411,13 +440,19 @@ impl Planner<'_> {
         self.plan.of_pair(kind, pair).collect()
     }
 
-    /// The units holding survey `s`'s tiles: its tiling, its aligned tiling when it has one
-    /// (which of the two holds them is known once the alignment ran: `Ctx::tiling`), and its
-    /// cleared tiling with `--vegetation remove`.
+    /// The units that may hold survey `s`'s tiles, in pipeline order: its unit of every stage
+    /// that provides tiles ([`Stage::tiles`]: the tiling, the aligned tiling, the cleared one).
+    /// Which of them does is known once they ran ([`Ctx::tiling`]).
     pub fn survey_tiles(&self, s: usize) -> Result<Vec<usize>> {
-        let mut out = vec![self.the(&Spec::survey(super::tiling::TilingStage::KIND, s))?];
-        out.extend(self.find(&Spec::survey(super::aligned::AlignedStage::KIND, s)));
-        out.extend(self.find(&Spec::survey(super::cleared::ClearedStage::KIND, s)));
+        let out: Vec<usize> = registry()
+            .stages()
+            .iter()
+            .filter(|st| st.provides_tiles())
+            .filter_map(|st| self.find(&Spec::survey(st.kind(), s)))
+            .collect();
+        if out.is_empty() {
+            return Err(Error::Internal(format!("no unit holds survey {s}'s tiles")));
+        }
         Ok(out)
     }
 }

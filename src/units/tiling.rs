@@ -83,6 +83,11 @@ impl Stage for TilingStage {
         total: Total::SurveyPoints,
     };
     type Meta = TilingMeta;
+    const PROVIDES_TILES: bool = true;
+
+    fn tiles(meta: &TilingMeta) -> Option<TilingMeta> {
+        Some(meta.clone())
+    }
 
     /// The tiling of each pair's two surveys, once each.
     fn plan(p: &mut Planner) -> Result<()> {
