@@ -41,24 +41,25 @@ fn release(store: &Store, plan: &Plan) -> Result<()> {
 
 /// For each unit of the plan, whether it is released once its dependents are done, and the
 /// files its release keeps ([`crate::units::stage::Stage::KEPT`]): the units of an intermediate
-/// stage (tiles, per-tile M3C2 results), which a later run that needs them computes again. A
-/// campaign keeps the units of its first and last surveys (their tiles, the last one's
-/// orientation field): the survey appended next is aligned onto the first and compared with
-/// the last.
+/// stage (tiles, per-tile M3C2 results), which a later run that needs them computes again, but
+/// those a stage of the plan keeps for a later run ([`crate::units::stage::Stage::keeps`]: a
+/// campaign's first and last surveys').
 pub fn releasable(plan: &Plan) -> Result<Vec<Option<&'static [&'static str]>>> {
-    use crate::units::stage::Stage;
     let stages = registry();
-    let campaign = plan
-        .of_kind(crate::units::campaign::CampaignStage::KIND)
-        .next()
-        .is_some();
-    let ends = [Some(0), plan.surveys.len().checked_sub(1)];
+    let mut kept = vec![false; plan.units.len()];
+    for s in stages.stages() {
+        if plan.of_kind(s.kind()).next().is_some() {
+            for i in s.keeps(plan) {
+                kept[i] = true;
+            }
+        }
+    }
     plan.units
         .iter()
-        .map(|u| {
+        .zip(kept)
+        .map(|(u, kept)| {
             let stage = stages.get(u.kind())?;
-            let next_needs = campaign && u.spec.pair.is_none() && ends.contains(&u.spec.survey);
-            Ok((stage.intermediate() && !next_needs).then(|| stage.kept()))
+            Ok((stage.intermediate() && !kept).then(|| stage.kept()))
         })
         .collect()
 }

@@ -158,6 +158,18 @@ impl Stage for CampaignStage {
     const LINE: Line = OutputsStage::LINE;
     type Meta = CampaignMeta;
 
+    /// The units of its first and last surveys (their tiles, the last one's orientation field):
+    /// the survey appended next is aligned onto the first and compared with the last.
+    fn keeps(plan: &crate::plan::Plan) -> Vec<usize> {
+        let ends = [Some(0), plan.surveys.len().checked_sub(1)];
+        (0..plan.units.len())
+            .filter(|&i| {
+                let u = &plan.units[i].spec;
+                u.pair.is_none() && u.survey.is_some() && ends.contains(&u.survey)
+            })
+            .collect()
+    }
+
     /// One per campaign, over every pair's outputs and column of the time series
     /// ([`super::series`]: not their M3C2 results, which are released after a run) and the
     /// campaign's core points.

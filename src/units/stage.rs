@@ -123,6 +123,13 @@ pub trait Stage: Send + Sync + 'static {
     /// Whether the stage provides tiles at all ([`Stage::tiles`]): planning counts its unit of
     /// a survey among the units holding the survey's tiles ([`Planner::survey_tiles`]).
     const PROVIDES_TILES: bool = false;
+
+    /// For a stage of the plan: the intermediate units of the plan that a later run will read
+    /// and that are therefore not released after this one (a campaign keeps its first and last
+    /// surveys' units for the survey appended next).
+    fn keeps(_plan: &Plan) -> Vec<usize> {
+        Vec::new()
+    }
 }
 
 /// What a publishing stage gives the executor.
@@ -158,6 +165,7 @@ pub trait Registered: Send + Sync {
         meta: &serde_json::Value,
     ) -> Result<Option<Vec<super::outputs::Publish>>>;
     fn provides_tiles(&self) -> bool;
+    fn keeps(&self, plan: &Plan) -> Vec<usize>;
     /// [`Stage::tiles`] of a record's meta (an error when the meta is not the stage's).
     fn tiles(
         &self,
@@ -212,6 +220,9 @@ impl<S: Stage> Registered for Entry<S> {
     }
     fn provides_tiles(&self) -> bool {
         S::PROVIDES_TILES
+    }
+    fn keeps(&self, plan: &Plan) -> Vec<usize> {
+        S::keeps(plan)
     }
     fn tiles(
         &self,
