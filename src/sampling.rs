@@ -16,7 +16,7 @@ use crate::io::{self, Bounds, Point3};
 use crate::spatial::{DensityGrid, Index};
 
 /// The version of what [`measure`] returns for a file: a store's cached measurements of another
-/// version are measured again (`Store::cached_spacing`). Change it with the measurement.
+/// version are measured again (`plan::measured::cached_spacing`). Change it with the measurement.
 pub const METHOD: u32 = 1;
 
 /// Clouds up to this many points are measured whole.

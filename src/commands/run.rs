@@ -123,7 +123,7 @@ pub fn stable_areas(
 /// read with `user`'s classes ([`sampling::measure`]). With `decoded` (see [`keeps_decoded`]),
 /// the points the pass decodes are kept there ([`io::replay`]) until it is dropped: the survey's
 /// tiling reads them instead of decoding the file a second time. Without, a measurement this
-/// store cached for the file's content is taken as it is (`Store::cached_spacing`): a resumed
+/// store cached for the file's content is taken as it is (`plan::measured::cached_spacing`): a resumed
 /// run does not decode the file for it again.
 pub fn measure_spacing(
     store: &Store,
@@ -135,7 +135,7 @@ pub fn measure_spacing(
     let (key, filter) = (store.content_key(path)?, classes.to_string());
     let measured = match decoded {
         None => {
-            if let Some(cached) = store.cached_spacing(&key, &filter) {
+            if let Some(cached) = crate::plan::measured::cached_spacing(store, &key, &filter) {
                 return Ok(cached);
             }
             sampling::measure(path, Some(&classes))?
@@ -150,7 +150,13 @@ pub fn measure_spacing(
             measured
         }
     };
-    store.cache_spacing(&key, &filter, &measured.spacing, &measured.density);
+    crate::plan::measured::cache_spacing(
+        store,
+        &key,
+        &filter,
+        &measured.spacing,
+        &measured.density,
+    );
     Ok((measured.spacing, measured.density))
 }
 

@@ -14,6 +14,7 @@
 
 pub mod inputs;
 pub mod layout;
+pub mod measured;
 pub mod reach;
 
 use std::collections::HashMap;
