@@ -57,6 +57,11 @@ impl Bounds {
     }
 }
 
+/// The dot product of two vectors.
+pub fn dot(a: &Point3, b: &Point3) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
 /// A coordinate or length for a message: three decimals, or scientific notation where those
 /// would run to hundreds of digits (coordinates of 1e295 in a damaged file).
 pub fn show(x: f64) -> String {

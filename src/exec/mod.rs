@@ -18,7 +18,6 @@ pub mod publish;
 pub mod resident;
 pub mod slurm;
 
-use std::collections::HashMap;
 use std::sync::{Condvar, Mutex};
 use std::time::{Duration, Instant};
 
@@ -524,17 +523,4 @@ fn claim_and_run(cx: &RunCtx, i: usize) -> Result<Ran> {
     crate::progress::trace(|| format!("unit {} committed", unit.name));
     drop(claim);
     Ok(Ran::Done)
-}
-
-/// The units of `plan` not done in `store`, by kind (for `talus status`).
-pub fn pending(store: &Store, plan: &Plan) -> HashMap<String, (usize, usize)> {
-    let mut m: HashMap<String, (usize, usize)> = HashMap::new();
-    for i in 0..plan.units.len() {
-        let e = m.entry(plan.units[i].kind().to_string()).or_default();
-        e.0 += 1;
-        if store.done(&unit_ref(plan, i)).is_some() {
-            e.1 += 1;
-        }
-    }
-    m
 }

@@ -90,7 +90,7 @@ pub fn memory_need(columns: usize, rows: u64) -> u64 {
     let groups = rows.div_ceil(rows_per_group(columns) as u64).max(1);
     let chunks = groups * columns as u64;
     let pages = chunks + rows.div_ceil(PAGE_ROWS as u64) * columns as u64;
-    let fixed = BATCH * (8 + 8 + 2) + 4 * (PAGE_ROWS * 8) + (8 << 20);
+    let fixed = BATCH * (8 + 8 + 2) + 4 * (PAGE_ROWS * 8) + crate::memory::IO_HEADROOM as usize;
     fixed as u64 + chunks * 1024 + pages * 64
 }
 

@@ -35,6 +35,15 @@ pub const SLACK: f64 = 0.05;
 /// is a share of the budget; see `units::tiling::need`).
 pub const MIN_BUDGET: u64 = 160 << 20;
 
+/// What a unit holds beside what its need counts per item (small vectors, a thread's locals,
+/// an index's fixed part): added to the need of every unit that computes over points in memory
+/// (a tile's M3C2, the orientation field, core points, an event's volume).
+pub const HEADROOM: u64 = 4 << 20;
+
+/// [`HEADROOM`] for a unit that also streams files through buffers of their own: a tiling's
+/// reader, decoder and writer, a merge of sorted runs, the Parquet writer.
+pub const IO_HEADROOM: u64 = 8 << 20;
+
 /// The pool of a budget of `budget` bytes: what is left after [`BASE`] and [`SLACK`].
 pub fn pool_for(budget: u64) -> Pool {
     Pool::new(pool_bytes(budget))
@@ -50,7 +59,8 @@ pub fn budget_for(need: u64) -> u64 {
     ((need + BASE) as f64 / (1.0 - SLACK)).ceil() as u64
 }
 
-/// A budget in MiB, rounded up, for messages.
+/// Bytes in MiB, rounded up (a budget, a need or a peak, for messages and reports: never shown
+/// below what it is).
 pub fn mib(bytes: u64) -> u64 {
     bytes.div_ceil(1 << 20)
 }

@@ -116,31 +116,3 @@ impl Index {
         out
     }
 }
-
-/// Median nearest-neighbour distance among `points` (each point's nearest *other* point).
-/// Returns None for fewer than two points.
-pub fn median_nn_distance(points: &[Point3]) -> Option<f64> {
-    if points.len() < 2 {
-        return None;
-    }
-    let origin = points[0];
-    let index = Index::new(points, origin);
-    let mut d: Vec<f64> = index
-        .points()
-        .iter()
-        .map(|p| {
-            index
-                .nearest(p, 2)
-                .get(1)
-                .map(|x| x.1.sqrt())
-                .unwrap_or(f64::NAN)
-        })
-        .filter(|x| x.is_finite())
-        .collect();
-    if d.is_empty() {
-        return None;
-    }
-    let mid = d.len() / 2;
-    let (_, m, _) = d.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
-    Some(*m)
-}

@@ -23,6 +23,6 @@ mod tubes;
 pub use boxes::BoxIndex;
 pub use columns::{in_cylinder, Columns};
 pub use density::DensityGrid;
-pub use kdtree::{median_nn_distance, Index};
+pub use kdtree::Index;
 pub use pairs::Pairs;
 pub use tubes::Tubes;

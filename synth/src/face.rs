@@ -21,6 +21,7 @@ use rayon::prelude::*;
 
 use super::scenes::ModelEvent;
 use super::surface::{bump_volume, V3};
+use talus_base::geom::dot;
 use talus_base::rng::Rng;
 
 /// Strike length and up-dip height of the face (m).
@@ -89,10 +90,6 @@ pub(crate) struct FaceScene {
     changes: Vec<Planted>,
     /// The scanner's position (local coordinates).
     pub scanner: V3,
-}
-
-fn dot(a: V3, b: V3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
 impl FaceScene {
@@ -226,7 +223,7 @@ impl FaceScene {
             p[1] - self.origin[1],
             p[2] - self.origin[2],
         ];
-        [dot(d, self.u), dot(d, self.w), dot(d, self.n)]
+        [dot(&d, &self.u), dot(&d, &self.w), dot(&d, &self.n)]
     }
 
     /// Centre of the face's footprint (the vertical axis `--rotate` turns about).
@@ -267,7 +264,7 @@ impl FaceScene {
     /// does within the face's outline.
     fn hit(&self, epoch: usize, d: V3) -> Option<V3> {
         let s = self.frame(self.scanner);
-        let df = [dot(d, self.u), dot(d, self.w), dot(d, self.n)];
+        let df = [dot(&d, &self.u), dot(&d, &self.w), dot(&d, &self.n)];
         if df[2] >= 0.0 {
             return None;
         }
@@ -433,8 +430,8 @@ mod tests {
     fn the_frame_is_orthonormal_and_round_trips() {
         for dip in [70.0, 90.0, 100.0] {
             let f = FaceScene::new(dip);
-            assert!((dot(f.u, f.w)).abs() < 1e-12 && dot(f.u, f.n).abs() < 1e-12);
-            assert!(dot(f.w, f.n).abs() < 1e-12);
+            assert!((dot(&f.u, &f.w)).abs() < 1e-12 && dot(&f.u, &f.n).abs() < 1e-12);
+            assert!(dot(&f.w, &f.n).abs() < 1e-12);
             let p = f.point(12.0, 7.0, -0.4);
             let q = f.frame(p);
             for (x, y) in q.iter().zip([12.0, 7.0, -0.4]) {

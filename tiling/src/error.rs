@@ -49,11 +49,6 @@ impl Error {
             problem: problem.into(),
         }
     }
-
-    /// True for damage the caller should repair by rebuilding the unit.
-    pub fn is_corrupt(&self) -> bool {
-        matches!(self, Error::Corrupt { .. })
-    }
 }
 
 /// A tiling error as talus's: a file it could not write is an output error naming the file; the

@@ -29,6 +29,6 @@ pub use splitter::{empty_columns, tile_path, TileSplitter, OWNED_COLUMN};
 pub use tile_file::framed;
 pub use tile_file::{
     encode_tile, read_tile, read_tile_frames, read_tile_header, write_tile, write_tile_with,
-    Bounds3, Column, ColumnData, FileDigest, Quantisation, TileColumns, TileFrames, TileHeader,
+    Column, ColumnData, FileDigest, Quantisation, TileColumns, TileFrames, TileHeader,
     WriteOptions,
 };

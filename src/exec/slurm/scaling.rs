@@ -44,10 +44,6 @@ fn makespan(tasks: &[f64], slots: usize) -> f64 {
     load.into_iter().fold(0.0, f64::max)
 }
 
-fn mib(b: u64) -> u64 {
-    b >> 20
-}
-
 /// The report `talus plan-stats` prints (Markdown tables).
 pub fn report(dir: &std::path::Path, nodes: &[usize], cores: usize, scale: f64) -> Result<String> {
     if !(scale.is_finite() && scale >= 1.0) {
@@ -137,11 +133,11 @@ pub fn report(dir: &std::path::Path, nodes: &[usize], cores: usize, scale: f64) 
         let peak = if st.scaled_peak {
             format!(
                 "{} (×{scale}: ≤ {})",
-                mib(st.peak),
-                (mib(st.peak) as f64 * scale) as u64
+                crate::memory::mib(st.peak),
+                (crate::memory::mib(st.peak) as f64 * scale) as u64
             )
         } else {
-            mib(st.peak).to_string()
+            crate::memory::mib(st.peak).to_string()
         };
         let _ = writeln!(
             s,
