@@ -120,7 +120,7 @@ pub fn stable_areas(
 }
 
 /// The spacing and density grid of the survey file `file` (its header as the inputs read it)
-/// read with `user`'s classes ([`sampling::measure`]). With `decoded` (see [`keeps_decoded`]),
+/// read with `user`'s classes (`sampling::measure`). With `decoded` (see [`keeps_decoded`]),
 /// the points the pass decodes are kept there ([`io::replay`]) until it is dropped: the survey's
 /// tiling reads them instead of decoding the file a second time. Without, a measurement this
 /// store cached for the file's content is taken as it is (`plan::measured::cached_spacing`): a resumed
@@ -412,7 +412,7 @@ fn run_planned(
 }
 
 /// Execute every unit of `plan` not done in `store` on a pool of `threads` threads, `slots`
-/// units at a time; `label` names this executor in the store's claims ([`crate::exec::run`]).
+/// units at a time; `label` names this executor in the store's claims (`crate::exec::run`).
 pub fn execute(
     store: &Store,
     plan: &Plan,

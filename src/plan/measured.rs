@@ -30,7 +30,11 @@ fn name(key: &str, classes: &str) -> String {
 
 /// The spacing and density grid measured on the file of content key `key` read with the class
 /// filter `classes` (its canonical text), when `store` has them.
-pub fn cached_spacing(store: &Store, key: &str, classes: &str) -> Option<(Spacing, DensityGrid)> {
+pub(crate) fn cached_spacing(
+    store: &Store,
+    key: &str,
+    classes: &str,
+) -> Option<(Spacing, DensityGrid)> {
     let bytes = store.cached(&name(key, classes))?;
     let e: Entry = serde_json::from_slice(&bytes).ok()?;
     (e.method == METHOD && e.key == key && e.classes == classes).then_some((e.spacing, e.density))
@@ -38,7 +42,7 @@ pub fn cached_spacing(store: &Store, key: &str, classes: &str) -> Option<(Spacin
 
 /// Keep what was measured on the file of content key `key` with `classes`. A cache only ever
 /// saves work: failing to write it is not an error.
-pub fn cache_spacing(
+pub(crate) fn cache_spacing(
     store: &Store,
     key: &str,
     classes: &str,

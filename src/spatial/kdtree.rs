@@ -25,7 +25,7 @@ impl Index {
     }
 
     /// Index points already expressed relative to `origin`.
-    pub fn from_local(points: Vec<Point3>, origin: Point3) -> Self {
+    pub(crate) fn from_local(points: Vec<Point3>, origin: Point3) -> Self {
         // kiddo refuses an empty slice; an index over nothing answers every query with nothing.
         let tree = if points.is_empty() {
             ImmutableKdTree::new_from_slice(&[[f64::MAX; 3]]).expect("one point always builds")
@@ -41,23 +41,8 @@ impl Index {
         }
     }
 
-    /// Number of indexed points.
-    pub fn len(&self) -> usize {
-        self.points.len()
-    }
-
-    /// True when nothing is indexed.
-    pub fn is_empty(&self) -> bool {
-        self.points.is_empty()
-    }
-
-    /// The local origin.
-    pub fn origin(&self) -> Point3 {
-        self.origin
-    }
-
     /// The indexed points, local coordinates.
-    pub fn points(&self) -> &[Point3] {
+    pub(crate) fn points(&self) -> &[Point3] {
         &self.points
     }
 
@@ -86,7 +71,7 @@ impl Index {
 
     /// The nearest point to `q` (local frame) as (index, squared distance); None when nothing is
     /// indexed. No allocation (a per-point lookup of the volume gather).
-    pub fn nearest_one(&self, q: &Point3) -> Option<(usize, f64)> {
+    pub(crate) fn nearest_one(&self, q: &Point3) -> Option<(usize, f64)> {
         if self.points.is_empty() {
             return None;
         }

@@ -20,7 +20,7 @@ use crate::units::unit_ref;
 
 /// Seconds from one array's end to the start of the next (afterok): 0.6–1 s measured on the test
 /// cluster (scripts/slurm/README.md, (b)).
-pub const STAGE_LATENCY: f64 = 1.0;
+pub(crate) const STAGE_LATENCY: f64 = 1.0;
 
 /// One stage's tasks (seconds each) and the highest peak resident memory of its units.
 struct StageWork {
@@ -45,7 +45,12 @@ fn makespan(tasks: &[f64], slots: usize) -> f64 {
 }
 
 /// The report `talus plan-stats` prints (Markdown tables).
-pub fn report(dir: &std::path::Path, nodes: &[usize], cores: usize, scale: f64) -> Result<String> {
+pub(crate) fn report(
+    dir: &std::path::Path,
+    nodes: &[usize],
+    cores: usize,
+    scale: f64,
+) -> Result<String> {
     if !(scale.is_finite() && scale >= 1.0) {
         return Err(Error::Usage("--scale: a factor of at least 1".into()));
     }
