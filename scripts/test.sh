@@ -20,6 +20,11 @@ export TALUS_PYTHON="$repo/tests/py/.venv/bin/python"
 
 cargo test --workspace --no-fail-fast
 
+# No warning anywhere (the crates' `pub(crate)` items make dead code a warning: ARCHITECTURE.md
+# "The crates"), in the Python crate either (its own workspace).
+cargo clippy --workspace --all-targets -- -D warnings
+(cd python && cargo clippy -- -D warnings)
+
 # The documentation builds without a warning (broken or private intra-doc links, bad HTML).
 RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps
 

@@ -20,7 +20,7 @@ extern "C" fn on_signal(sig: libc::c_int) {
 }
 
 /// Install the handler for SIGINT and SIGTERM (once, at the start of a command that runs units).
-pub fn install() {
+pub(crate) fn install() {
     unsafe {
         libc::signal(libc::SIGINT, on_signal as *const () as libc::sighandler_t);
         libc::signal(libc::SIGTERM, on_signal as *const () as libc::sighandler_t);
@@ -29,7 +29,7 @@ pub fn install() {
 
 /// Give SIGINT and SIGTERM their default action again (they end the process): for `talus view`
 /// after `talus demo`'s run, whose serving loop never looks at the flag.
-pub fn uninstall() {
+pub(crate) fn uninstall() {
     unsafe {
         libc::signal(libc::SIGINT, libc::SIG_DFL);
         libc::signal(libc::SIGTERM, libc::SIG_DFL);
@@ -49,12 +49,12 @@ pub fn reset() {
 }
 
 /// Has an interruption been asked for?
-pub fn requested() -> bool {
+pub(crate) fn requested() -> bool {
     REQUESTED.load(Ordering::Relaxed)
 }
 
 /// `Err(Error::Interrupted)` once an interruption has been asked for.
-pub fn check() -> Result<()> {
+pub(crate) fn check() -> Result<()> {
     if requested() {
         Err(Error::Interrupted)
     } else {

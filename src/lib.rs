@@ -13,14 +13,16 @@
 //! - the [`plan`] of a run's units, and the stages that plan and do them: [`units`];
 //! - drivers that execute a plan: [`exec`] (this process, `talus worker`, Slurm);
 //! - the [`commands`] and the command line over them, [`cli`].
+//!
+//! [`error`], [`geom`] and [`rng`] (the `talus-base` crate), the [`store`] (`talus-store`) and
+//! [`synth`] (`talus-synth`) are crates of their own beneath this one, re-exported here under
+//! their layers' names; `talus-tiling` is the tiling crate (ARCHITECTURE.md "The crates").
 
 pub mod campaign;
 pub mod cli;
 pub mod commands;
-pub mod error;
 pub mod events;
 pub mod exec;
-pub mod geom;
 pub mod interrupt;
 pub mod io;
 pub mod m3c2;
@@ -28,11 +30,8 @@ pub mod memory;
 pub mod params;
 pub mod plan;
 pub mod progress;
-pub mod rng;
 pub mod sampling;
 pub mod spatial;
-pub mod store;
-pub mod synth;
 pub mod units;
 pub mod volume;
 
@@ -41,3 +40,9 @@ pub mod volume;
 static ALLOCATOR: memory::large::Allocator = memory::large::Allocator;
 
 pub use error::{Error, Result};
+
+// The crates beneath this one, under the names the layers give them (`crate::store::Store`,
+// `talus::synth::synth`): base (error, rng, geom), store, synth.
+pub use talus_base::{error, geom, rng};
+pub use talus_store as store;
+pub use talus_synth as synth;

@@ -73,13 +73,16 @@ pub struct ConfigSource {
 
 impl UserParams {
     /// Read a TOML config file (same names as the flags, with underscores).
-    pub fn from_toml_file(path: &Path) -> Result<Self> {
+    pub(crate) fn from_toml_file(path: &Path) -> Result<Self> {
         Self::from_toml_file_with(path, &[]).map(|(u, _)| u)
     }
 
     /// Read a TOML config file whose top-level tables or arrays named in `sections` are not
     /// parameters (a campaign's `[[epoch]]` entries): they are returned apart, unparsed.
-    pub fn from_toml_file_with(path: &Path, sections: &[&str]) -> Result<(Self, toml::Table)> {
+    pub(crate) fn from_toml_file_with(
+        path: &Path,
+        sections: &[&str],
+    ) -> Result<(Self, toml::Table)> {
         // A regular file only: a FIFO would block, `<(…)` is read once (`io::open_file`).
         let mut text = String::new();
         std::io::Read::read_to_string(&mut crate::io::open_file(path)?, &mut text)
@@ -152,7 +155,7 @@ impl UserParams {
 
     /// The error for a bad value of `key`: it names the config file and the key when the value
     /// came from there, else the flag.
-    pub fn bad_value(&self, key: &str, problem: impl std::fmt::Display) -> Error {
+    pub(crate) fn bad_value(&self, key: &str, problem: impl std::fmt::Display) -> Error {
         match &self.config {
             Some(c) if c.keys.iter().any(|k| k == key) => {
                 Error::input(&c.path, format!("{key}: {problem}"))
@@ -163,14 +166,14 @@ impl UserParams {
 
     /// The LAS classes the user asked for (the default when none): known before the
     /// parameters are resolved, since the spacing they start from is measured on those points.
-    pub fn classes(&self) -> Result<Classes> {
+    pub(crate) fn classes(&self) -> Result<Classes> {
         match self.classes.as_deref() {
             None => Ok(Classes::default()),
             Some(c) => Classes::parse(c).map_err(|p| self.bad_value("classes", p)),
         }
     }
 
-    /// Refuse lengths far beyond the data: more than [`MAX_EXTENT_FACTOR`] times the diagonal of
+    /// Refuse lengths far beyond the data: more than `MAX_EXTENT_FACTOR` times the diagonal of
     /// the epochs' bounds. A neighbourhood that wide holds every point (no use), and the work
     /// that grows with it (the volume grid over a footprint grown by `cyl_radius`, neighbour
     /// lists) would run for hours instead of failing.
@@ -214,7 +217,7 @@ impl UserParams {
     }
 
     /// `self` (flags) over `base` (config file).
-    pub fn over(self, base: UserParams) -> UserParams {
+    pub(crate) fn over(self, base: UserParams) -> UserParams {
         let flags = self.keys_set();
         let config = base.config.map(|mut c| {
             c.keys.retain(|k| !flags.contains(k));
@@ -287,7 +290,7 @@ pub struct Params {
 }
 
 /// The source of a parameter the user gave (a flag or the config file).
-pub const USER: &str = "user";
+pub(crate) const USER: &str = "user";
 
 fn classes_all() -> Resolved<String> {
     Resolved {
@@ -320,7 +323,7 @@ pub enum Vegetation {
 impl Vegetation {
     /// Whether an event counts in totals, campaign sums, tracks and the magnitude–frequency fit:
     /// every event but a vegetation one kept apart (`flag`, `remove`).
-    pub fn counts(self, vegetation_event: bool) -> bool {
+    pub(crate) fn counts(self, vegetation_event: bool) -> bool {
         self == Vegetation::Keep || !vegetation_event
     }
 }
@@ -344,7 +347,7 @@ fn align_off() -> Resolved<String> {
 
 impl<T> Resolved<T> {
     /// A value the user gave.
-    pub fn user(value: T) -> Resolved<T> {
+    pub(crate) fn user(value: T) -> Resolved<T> {
         Resolved {
             value,
             source: USER.into(),
@@ -352,7 +355,7 @@ impl<T> Resolved<T> {
     }
 
     /// Whether the user gave it (else it was derived, measured or a default).
-    pub fn is_user(&self) -> bool {
+    pub(crate) fn is_user(&self) -> bool {
         self.source == USER
     }
 }
@@ -370,19 +373,19 @@ fn pick<T: Copy>(user: Option<T>, derived: T, rule: &str) -> Resolved<T> {
 /// The shortest length a user may give: a micrometre in metre units. Shorter ones are not a
 /// survey's scale, and they would push the exact sums' quantisation (`m3c2::moments`) and the
 /// column grid towards subnormal numbers.
-pub const MIN_LENGTH: f64 = 1e-6;
+pub(crate) const MIN_LENGTH: f64 = 1e-6;
 
 /// The longest length a user may give: a million kilometres in metre units, beyond any survey
 /// (longer ones overflow the halo and grid arithmetic to infinity).
-pub const MAX_LENGTH: f64 = 1e9;
+pub(crate) const MAX_LENGTH: f64 = 1e9;
 
 /// See [`UserParams::check_lengths_within`].
-pub const MAX_EXTENT_FACTOR: f64 = 10.0;
+pub(crate) const MAX_EXTENT_FACTOR: f64 = 10.0;
 
 /// The most worker threads accepted. Results do not depend on the thread count, so more threads
 /// than cores only cost memory (a stack and tile buffers each); 1024 is beyond any machine talus
 /// runs on, and a typo like 100000 is refused rather than obeyed (or silently changed).
-pub const MAX_THREADS: usize = 1024;
+pub(crate) const MAX_THREADS: usize = 1024;
 
 /// Check a length the user gave: finite and positive (or zero, when `zero_ok`), and within
 /// [`MIN_LENGTH`] (unless zero) ..= [`MAX_LENGTH`].
@@ -422,17 +425,13 @@ fn num(x: f64) -> String {
 
 /// The threshold τ in robust standard deviations of the stable ground's distances (see the
 /// table above).
-pub const THRESHOLD_SIGMAS: f64 = 3.0;
+pub(crate) const THRESHOLD_SIGMAS: f64 = 3.0;
 
 /// Default memory budget (SPEC.md §3).
-pub const DEFAULT_MEMORY: u64 = 2 << 30;
+pub(crate) const DEFAULT_MEMORY: u64 = 2 << 30;
 
-/// Parse a size like `2GiB`, `512MiB`, `1.5G`, `800M`, `4096` (bytes).
-pub fn parse_size(s: &str) -> Result<u64> {
-    parse_size_problem(s).map_err(|p| Error::Usage(format!("--memory: {p}")))
-}
-
-/// [`parse_size`] with the problem alone, for the caller to say whose value it was.
+/// Parse a size like `2GiB`, `512MiB`, `1.5G`, `800M`, `4096` (bytes); the problem alone, for
+/// the caller to say whose value it was.
 fn parse_size_problem(s: &str) -> std::result::Result<u64, String> {
     let t = s.trim();
     let split = t
@@ -611,7 +610,7 @@ impl Params {
     /// is shorter than the gap between points (one effective spacing), so it joins no two of
     /// them — every change would come out as no event, in silence. A core spacing below the
     /// point spacing with `--eps` given is the user's choice (every point a core point).
-    pub fn check_core_spacing(&self, user: &UserParams) -> Result<()> {
+    pub(crate) fn check_core_spacing(&self, user: &UserParams) -> Result<()> {
         let (c, s) = (self.core_spacing.value, self.point_spacing.value);
         if self.eps.is_user() || self.eps.value >= s {
             return Ok(());
@@ -631,7 +630,7 @@ impl Params {
 
     /// The registration error and threshold the user left out, from the stable ground's
     /// measurement (or, without one, 0 and half the effective spacing).
-    pub fn with_stable(mut self, stable: Option<&crate::events::stable::Stable>) -> Params {
+    pub(crate) fn with_stable(mut self, stable: Option<&crate::events::stable::Stable>) -> Params {
         if !self.reg_error.is_user() {
             self.reg_error = match stable {
                 Some(m) => Resolved {
@@ -685,20 +684,20 @@ impl Params {
     }
 
     /// The LAS classes compared.
-    pub fn classes(&self) -> Classes {
+    pub(crate) fn classes(&self) -> Classes {
         // Written by `resolve` from a parsed value (or "all" for an older plan).
         Classes::parse(&self.classes.value).unwrap_or_default()
     }
 
     /// Whether later surveys are aligned onto the first on the stable ground (`--align auto` or
     /// `on`).
-    pub fn align_enabled(&self) -> bool {
+    pub(crate) fn align_enabled(&self) -> bool {
         matches!(self.align.value.as_str(), "auto" | "on")
     }
 
     /// How far an alignment may move a survey: a plausible misregistration (`auto`), or any the
     /// stable ground fixes (`on`).
-    pub fn align_limits(&self) -> crate::events::align::Limits {
+    pub(crate) fn align_limits(&self) -> crate::events::align::Limits {
         if self.align.value == "on" {
             crate::events::align::Limits::FORCED
         } else {
@@ -709,7 +708,7 @@ impl Params {
     /// How M3C2 treats a cylinder that holds only one epoch ([`crate::m3c2::reach`]): a derived
     /// half-length is a search window and the other epoch is sought on along the normal; the
     /// user's half-length is kept, and what lies beyond it is flagged, not measured.
-    pub fn walk(&self) -> crate::m3c2::Walk {
+    pub(crate) fn walk(&self) -> crate::m3c2::Walk {
         if self.cyl_halflen.is_user() {
             crate::m3c2::Walk::Detect
         } else {
@@ -724,11 +723,11 @@ mod tests {
 
     #[test]
     fn sizes() {
-        assert_eq!(parse_size("2GiB").unwrap(), 2 << 30);
-        assert_eq!(parse_size("512MiB").unwrap(), 512 << 20);
-        assert_eq!(parse_size("1.5G").unwrap(), 3 << 29);
-        assert!(parse_size("abc").is_err());
-        assert!(parse_size("1MiB").is_err());
+        assert_eq!(parse_size_problem("2GiB").unwrap(), 2 << 30);
+        assert_eq!(parse_size_problem("512MiB").unwrap(), 512 << 20);
+        assert_eq!(parse_size_problem("1.5G").unwrap(), 3 << 29);
+        assert!(parse_size_problem("abc").is_err());
+        assert!(parse_size_problem("1MiB").is_err());
     }
 
     #[test]

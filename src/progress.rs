@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 /// One stage being run.
-pub struct Stage {
+pub(crate) struct Stage {
     name: String,
     unit: &'static str,
     bar: Option<ProgressBar>,
@@ -23,7 +23,7 @@ pub struct Stage {
 impl Stage {
     /// Start a stage expected to handle about `total` items (`unit`, e.g. "points"); `None` when
     /// the total is unknown (a spinner on a terminal).
-    pub fn start(name: &str, total: Option<u64>, unit: &'static str) -> Stage {
+    pub(crate) fn start(name: &str, total: Option<u64>, unit: &'static str) -> Stage {
         let bar = (std::io::stderr().is_terminal() && !has_sink()).then(|| {
             let target = ProgressDrawTarget::stderr();
             let bar = match total {
@@ -59,7 +59,7 @@ impl Stage {
     }
 
     /// A stage that draws no bar, only its line at the end (a stage nested in another one's bar).
-    pub fn log_only(name: &str, unit: &'static str) -> Stage {
+    pub(crate) fn log_only(name: &str, unit: &'static str) -> Stage {
         Stage {
             name: name.to_string(),
             unit,
@@ -70,7 +70,7 @@ impl Stage {
     }
 
     /// `n` more items done (callable from any thread).
-    pub fn inc(&self, n: u64) {
+    pub(crate) fn inc(&self, n: u64) {
         self.count.fetch_add(n, Ordering::Relaxed);
         if let Some(b) = &self.bar {
             b.inc(n);
@@ -78,24 +78,24 @@ impl Stage {
     }
 
     /// Items counted so far.
-    pub fn count(&self) -> u64 {
+    pub(crate) fn count(&self) -> u64 {
         self.count.load(Ordering::Relaxed)
     }
 
     /// Seconds since the stage started.
-    pub fn seconds(&self) -> f64 {
+    pub(crate) fn seconds(&self) -> f64 {
         self.start.elapsed().as_secs_f64()
     }
 
     /// End the stage: clear its bar and print its line, with `note` (e.g. "reused") appended.
     /// Clear the bar without printing the stage's line (the run failed).
-    pub fn abandon(self) {
+    pub(crate) fn abandon(self) {
         if let Some(b) = &self.bar {
             b.finish_and_clear();
         }
     }
 
-    pub fn finish(self, note: &str) -> f64 {
+    pub(crate) fn finish(self, note: &str) -> f64 {
         let secs = self.seconds();
         if let Some(b) = &self.bar {
             b.finish_and_clear();
@@ -155,19 +155,19 @@ fn line(text: &str) {
 static CLOCK: std::sync::OnceLock<Instant> = std::sync::OnceLock::new();
 
 /// Start the clock [`trace`] measures from (call first thing in `main`).
-pub fn start_clock() {
+pub(crate) fn start_clock() {
     CLOCK.get_or_init(Instant::now);
 }
 
 /// Seconds since the process started its clock ([`start_clock`]).
-pub fn since_start() -> f64 {
+pub(crate) fn since_start() -> f64 {
     CLOCK.get_or_init(Instant::now).elapsed().as_secs_f64()
 }
 
 /// With `TALUS_TRACE` set in the environment, print `talus: [+S.SSS s, R MiB resident] what` on
 /// stderr: when each phase of a run and each unit started and ended (and was trimmed), with the
 /// process's resident size then, for profiling a run's timeline.
-pub fn trace(what: impl FnOnce() -> String) {
+pub(crate) fn trace(what: impl FnOnce() -> String) {
     static ON: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
     if *ON.get_or_init(|| std::env::var_os("TALUS_TRACE").is_some()) {
         let t = CLOCK.get_or_init(Instant::now).elapsed().as_secs_f64();

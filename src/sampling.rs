@@ -3,7 +3,7 @@
 //!
 //! A cloud of up to [`WHOLE`] points is measured whole. A larger one is measured in a square
 //! window at the centre of its footprint, sized from the mean density to hold about
-//! [`WINDOW_TARGET`] points (grown when it falls on a hole, shrunk when it is denser than
+//! `WINDOW_TARGET` points (grown when it falls on a hole, shrunk when it is denser than
 //! expected): each try is one streaming pass, so memory stays bounded whatever the file's size
 //! and point order. Only points in the inner half of the window are measured, so that their
 //! nearest neighbour is inside the window. Exact duplicates are measured once (see `distinct`).
@@ -16,13 +16,13 @@ use crate::io::{self, Bounds, Point3};
 use crate::spatial::{DensityGrid, Index};
 
 /// The version of what [`measure`] returns for a file: a store's cached measurements of another
-/// version are measured again (`Store::cached_spacing`). Change it with the measurement.
-pub const METHOD: u32 = 1;
+/// version are measured again (`plan::measured::cached_spacing`). Change it with the measurement.
+pub(crate) const METHOD: u32 = 1;
 
 /// Clouds up to this many points are measured whole.
 pub const WHOLE: u64 = 400_000;
 /// Points a window aims for.
-pub const WINDOW_TARGET: f64 = 40_000.0;
+pub(crate) const WINDOW_TARGET: f64 = 40_000.0;
 
 /// The measured spacing and how it was measured.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -42,7 +42,7 @@ pub struct Spacing {
     pub method: String,
 }
 
-/// What [`measure`] finds in a cloud.
+/// What `measure` finds in a cloud.
 pub struct Measured {
     pub spacing: Spacing,
     /// Points per XY cell, counted on the way (one of the passes reads every point anyway).
@@ -56,11 +56,11 @@ pub struct Measured {
 
 /// Measure the point spacing of the cloud at `path` over the points of the classes `classes`
 /// keeps (those a comparison uses).
-pub fn measure(path: &Path, classes: Option<&Classes>) -> Result<Measured> {
+pub(crate) fn measure(path: &Path, classes: Option<&Classes>) -> Result<Measured> {
     measure_keeping(path, classes, &mut |_| {})
 }
 
-/// [`measure`], handing `keep` every point the pass over the whole file delivers, in the order
+/// `measure`, handing `keep` every point the pass over the whole file delivers, in the order
 /// the reader delivers them (for [`io::replay`]: the tiling then need not decode the file again).
 /// When this returns `Ok`, `keep` has seen them all, once.
 pub fn measure_keeping(
@@ -91,7 +91,7 @@ pub fn measure_opened<'a>(
 
 /// Why a readable file has no point spacing, with what was read of it (`talus info` describes
 /// such a file all the same).
-pub struct NoSpacing {
+pub(crate) struct NoSpacing {
     /// In the user's terms (after "cannot measure a point spacing: "): the classes compared
     /// leave none of its points (naming those it holds), too few distinct positions,
     /// coordinates so large that distances overflow.
@@ -102,7 +102,7 @@ pub struct NoSpacing {
 
 /// [`measure`], or why no spacing can be measured on a file that reads (errors reading it stay
 /// errors).
-pub fn measure_or_why(
+pub(crate) fn measure_or_why(
     path: &Path,
     classes: Option<&Classes>,
 ) -> Result<std::result::Result<Measured, NoSpacing>> {
@@ -242,7 +242,7 @@ fn measure_in<'a>(
 }
 
 /// Distinct positions a point spacing needs: a point and its 10 nearest neighbours.
-pub const MIN_DISTINCT: usize = 11;
+pub(crate) const MIN_DISTINCT: usize = 11;
 
 /// Why no spacing could be measured on `path`, in the user's terms: the classes compared leave
 /// none of its points (naming the classes it holds), or too few distinct positions are left

@@ -2,6 +2,12 @@
 //! [`LAYERS`], and a module names (`crate::X`) only modules placed before it, so the imports
 //! have no cycle and none goes upward (ARCHITECTURE.md "Layers"). Whole files are read, their
 //! test modules too; comments (doc comments among them) are not imports and are left out.
+//!
+//! Some layers are crates of their own beneath this one (`talus-base`: error, geom, rng;
+//! `talus-store`; `talus-synth`), re-exported under those names by `src/lib.rs`: the compiler
+//! keeps their own imports down (a crate sees only the crates it depends on), so here they are
+//! ranked for the imports of them, and [`CRATES`] checks that a crate depends only on the crates
+//! below it.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -9,26 +15,27 @@ use std::path::Path;
 /// From the bottom up: the shared base; the pure algorithms; the formats; the parameters; the
 /// store; the plan and the stages' units; the executors; the commands.
 const LAYERS: &[&str] = &[
-    // base
+    // base (error, geom and rng: the talus-base crate)
     "error",
+    "geom",
+    "rng",
     "interrupt",
     "memory",
     "progress",
-    "geom",
-    "rng",
     // algorithms
     "spatial",
     "m3c2",
     "events",
     "volume",
     "campaign",
+    // the talus-synth crate
     "synth",
     // formats
     "io",
     // parameters: the spacing measured on the input, the resolved parameters
     "sampling",
     "params",
-    // store
+    // store: the talus-store crate
     "store",
     // plan, then the units that do it
     "plan",
@@ -38,6 +45,17 @@ const LAYERS: &[&str] = &[
     // commands, and the command line over them
     "commands",
     "cli",
+];
+
+/// The workspace's crates from the bottom up, each with its folder: a crate may depend only on
+/// crates before it (cargo refuses a cycle; this refuses a dependency that goes up without one,
+/// e.g. the store on synth).
+const CRATES: &[(&str, &str)] = &[
+    ("talus-base", "base"),
+    ("talus-tiling", "tiling"),
+    ("talus-store", "store"),
+    ("talus-synth", "synth"),
+    ("talus", "."),
 ];
 
 /// The top-level module a file of `src/` belongs to.
@@ -168,4 +186,54 @@ fn the_check_sees_an_upward_import() {
                 use crate::{io::{self, Bounds}, plan};\n\
                 #[cfg(test)]\nmod tests {\n    use crate::cli;\n}\n";
     assert_eq!(named(&code(text)), vec!["units", "io", "plan", "cli"]);
+}
+
+/// The talus crates a manifest depends on (`talus-…` keys of its `[dependencies]`), by name.
+fn talus_dependencies(manifest: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut in_deps = false;
+    for line in manifest.lines() {
+        let line = line.trim();
+        if line.starts_with('[') {
+            in_deps = line == "[dependencies]";
+            continue;
+        }
+        if !in_deps {
+            continue;
+        }
+        let name = line.split(['=', ' ']).next().unwrap_or("");
+        if name.starts_with("talus") {
+            out.push(name.to_string());
+        }
+    }
+    out
+}
+
+#[test]
+fn every_crate_depends_only_on_crates_below_it() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let rank = |name: &str| CRATES.iter().position(|(n, _)| *n == name);
+    let members = std::fs::read_to_string(root.join("Cargo.toml")).unwrap();
+    let mut upward = Vec::new();
+    for (i, (name, dir)) in CRATES.iter().enumerate() {
+        assert!(
+            *dir == "." || members.contains(&format!("\"{dir}\"")),
+            "{name} ({dir}/) is not a member of the workspace"
+        );
+        let manifest = std::fs::read_to_string(root.join(dir).join("Cargo.toml")).unwrap();
+        assert!(
+            manifest.contains(&format!("name = \"{name}\"")),
+            "{dir}/Cargo.toml"
+        );
+        for dep in talus_dependencies(&manifest) {
+            match rank(&dep) {
+                Some(r) if r < i => {}
+                _ => upward.push(format!("{name} -> {dep}")),
+            }
+        }
+    }
+    assert!(
+        upward.is_empty(),
+        "crate dependencies that go up: {upward:?}"
+    );
 }

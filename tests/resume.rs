@@ -261,7 +261,7 @@ fn a_released_run_resumed_with_new_parameters_gives_a_fresh_runs_outputs() {
     assert_same_outputs(&fresh, &dir);
 }
 
-/// A resumed run takes the spacing its store measured on the same file (`Store::cached_spacing`:
+/// A resumed run takes the spacing its store measured on the same file (`plan::measured::cached_spacing`:
 /// by content key, class filter and the measurement's version) instead of decoding the before
 /// survey again; a fresh run measures and caches it. Seen on disk: an entry's count of measured
 /// points, changed by hand, is what the resumed run's plan says; an entry of another version,

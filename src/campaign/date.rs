@@ -3,7 +3,7 @@
 
 /// A calendar date (proleptic Gregorian).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
-pub struct Date {
+pub(crate) struct Date {
     pub year: i32,
     pub month: u32,
     pub day: u32,
@@ -12,7 +12,7 @@ pub struct Date {
 impl Date {
     /// A valid Gregorian date of a survey, or None. Years outside 1900–2200 are refused: a
     /// number like that in a file name is not a survey date.
-    pub fn new(year: i32, month: u32, day: u32) -> Option<Date> {
+    pub(crate) fn new(year: i32, month: u32, day: u32) -> Option<Date> {
         let leap = (year % 4 == 0 && year % 100 != 0) || year % 400 == 0;
         let days = match month {
             1 | 3 | 5 | 7 | 8 | 10 | 12 => 31,
@@ -29,7 +29,7 @@ impl Date {
     }
 
     /// `YYYY-MM-DD` or `YYYYMMDD`.
-    pub fn parse(s: &str) -> Option<Date> {
+    pub(crate) fn parse(s: &str) -> Option<Date> {
         let digits: String = s.chars().filter(|c| *c != '-').collect();
         let ok =
             (s.len() == 10 && s.as_bytes()[4] == b'-' && s.as_bytes()[7] == b'-') || s.len() == 8;
@@ -45,14 +45,14 @@ impl Date {
 
     /// The first date written `YYYYMMDD` or `YYYY-MM-DD` in `name` (not inside a longer run of
     /// digits, so a 10-digit id is not read as a date).
-    pub fn find_in(name: &str) -> Option<Date> {
+    pub(crate) fn find_in(name: &str) -> Option<Date> {
         tokens(name).find_map(Date::parse)
     }
 
     /// A `YYYYMMDD` or `YYYY-MM-DD` in `name` (where [`Date::find_in`] looks) of a survey's year
     /// that is no date, with why: "20210230 (2021-02 has 28 days)". For the message that a name
     /// holds a date, but an impossible one — not that it holds none.
-    pub fn impossible_in(name: &str) -> Option<String> {
+    pub(crate) fn impossible_in(name: &str) -> Option<String> {
         tokens(name).find_map(|token| {
             let t = token.as_bytes();
             let dashed = t.len() == 10 && t[4] == b'-' && t[7] == b'-';
@@ -79,7 +79,7 @@ impl Date {
     }
 
     /// Days since 1970-01-01 (proleptic Gregorian; Howard Hinnant's days_from_civil).
-    pub fn days(&self) -> i64 {
+    pub(crate) fn days(&self) -> i64 {
         let y = self.year as i64 - (self.month <= 2) as i64;
         let era = if y >= 0 { y } else { y - 399 } / 400;
         let yoe = y - era * 400;
@@ -92,7 +92,7 @@ impl Date {
     /// The date `days` days after 1970-01-01: the inverse of [`Date::days`] (Hinnant's
     /// civil_from_days). Not range-checked like [`Date::new`]: a chart's axis is laid out in
     /// days and may reach past the surveys' years.
-    pub fn from_days(days: i64) -> Date {
+    pub(crate) fn from_days(days: i64) -> Date {
         let z = days + 719_468;
         let era = z.div_euclid(146_097);
         let doe = z - era * 146_097;
@@ -109,7 +109,7 @@ impl Date {
     }
 
     /// The first day of the month after this date's.
-    pub fn next_month(&self) -> Date {
+    pub(crate) fn next_month(&self) -> Date {
         match self.month {
             12 => Date {
                 year: self.year + 1,
@@ -125,12 +125,12 @@ impl Date {
     }
 
     /// `YYYY-MM-DD`.
-    pub fn iso(&self) -> String {
+    pub(crate) fn iso(&self) -> String {
         format!("{:04}-{:02}-{:02}", self.year, self.month, self.day)
     }
 
     /// `YYYYMMDD`.
-    pub fn compact(&self) -> String {
+    pub(crate) fn compact(&self) -> String {
         format!("{:04}{:02}{:02}", self.year, self.month, self.day)
     }
 }

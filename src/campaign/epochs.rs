@@ -12,12 +12,12 @@ use crate::error::{Error, Result};
 
 /// A survey's date: defined in [`super::date`] (the report's time axis uses it too), named here
 /// as well, where it began, so that `epochs::Date` keeps working.
-pub use super::date::Date;
+pub(crate) use super::date::Date;
 
 /// An `[[epoch]]` entry of a campaign config.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct EpochEntry {
+pub(crate) struct EpochEntry {
     pub path: PathBuf,
     pub date: String,
     pub label: Option<String>,
@@ -25,7 +25,7 @@ pub struct EpochEntry {
 
 /// One epoch of the campaign, dated.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Epoch {
+pub(crate) struct Epoch {
     pub arg: PathBuf,
     pub date: Date,
     /// `YYYYMMDD`, or the config's label.
@@ -43,7 +43,7 @@ fn same_path(a: &Path, b: &Path) -> bool {
 
 /// Date the arguments (config entries first, then the names) and order them by date.
 /// `config` names the config file for errors about its entries.
-pub fn epochs(
+pub(crate) fn epochs(
     args: &[PathBuf],
     entries: &[EpochEntry],
     config: Option<&Path>,
@@ -180,7 +180,7 @@ pub fn epochs(
 
 /// The pairs of a campaign of `n` epochs in date order: (before, after) for each consecutive
 /// pair, then with `baseline` (0, k) for k ≥ 2.
-pub fn pairs(n: usize, baseline: bool) -> Vec<(usize, usize)> {
+pub(crate) fn pairs(n: usize, baseline: bool) -> Vec<(usize, usize)> {
     let mut p: Vec<(usize, usize)> = (1..n).map(|k| (k - 1, k)).collect();
     if baseline {
         p.extend((2..n).map(|k| (0, k)));

@@ -28,7 +28,7 @@
 /// fit. The floor seldom decides x_min itself: the expected distance of a fitted sample falls
 /// as 1/√n, so the minimisation shuns short tails on its own (on 400 samples of 40 values, pure
 /// power law or lognormal, floors of 2 and 5 chose a tail shorter than 10 in 0.25–2 % of them).
-pub const MIN_TAIL: usize = 10;
+pub(crate) const MIN_TAIL: usize = 10;
 
 /// A power law fitted to the tail x ≥ `x_min` of `n` positive values.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -48,10 +48,10 @@ pub struct PowerLawFit {
 }
 
 /// Fit p(x) ∝ x^−α for x ≥ x_min to the positive `values` (|event volumes|): for each candidate
-/// x_min (each distinct value leaving at least [`MIN_TAIL`] values in the tail), α by maximum
+/// x_min (each distinct value leaving at least `MIN_TAIL` values in the tail), α by maximum
 /// likelihood and the Kolmogorov–Smirnov distance of the tail to the fitted law; x_min
 /// minimises that distance. NaN, infinite, zero and negative values are ignored. `None` when
-/// fewer than [`MIN_TAIL`] values remain or all of them are equal.
+/// fewer than `MIN_TAIL` values remain or all of them are equal.
 pub fn fit(values: &[f64]) -> Option<PowerLawFit> {
     let x = valid_sorted(values);
     let n = x.len();
@@ -86,7 +86,7 @@ pub fn fit(values: &[f64]) -> Option<PowerLawFit> {
 /// descending, (value, number of values ≥ it, that number / n). Tied values share their count
 /// (all of them are ≥ each). The same values as [`fit`] uses: NaN, infinite, zero and negative
 /// ones are left out, and n counts the rest.
-pub fn exceedance(values: &[f64]) -> Vec<(f64, usize, f64)> {
+pub(crate) fn exceedance(values: &[f64]) -> Vec<(f64, usize, f64)> {
     let mut x = valid_sorted(values);
     x.reverse();
     let n = x.len();

@@ -11,7 +11,7 @@ use crate::volume::boundary;
 
 /// An event as tracking sees it.
 #[derive(Debug, Clone)]
-pub struct Placed {
+pub(crate) struct Placed {
     pub pair: usize,
     pub id: u32,
     pub gain: bool,
@@ -71,7 +71,7 @@ fn overlap(a: &Placed, ra: &[Vec<Vec<[f64; 2]>>], b: &Placed, rb: &[Vec<Vec<[f64
 }
 
 /// The track id of each event (same order as `events`), from 1.
-pub fn tracks(events: &[Placed]) -> Vec<u32> {
+pub(crate) fn tracks(events: &[Placed]) -> Vec<u32> {
     let n = events.len();
     let rings: Vec<_> = events.iter().map(Placed::rings_uv).collect();
     // Bounding spheres for a cheap first test.

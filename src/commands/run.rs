@@ -120,10 +120,10 @@ pub fn stable_areas(
 }
 
 /// The spacing and density grid of the survey file `file` (its header as the inputs read it)
-/// read with `user`'s classes ([`sampling::measure`]). With `decoded` (see [`keeps_decoded`]),
+/// read with `user`'s classes (`sampling::measure`). With `decoded` (see [`keeps_decoded`]),
 /// the points the pass decodes are kept there ([`io::replay`]) until it is dropped: the survey's
 /// tiling reads them instead of decoding the file a second time. Without, a measurement this
-/// store cached for the file's content is taken as it is (`Store::cached_spacing`): a resumed
+/// store cached for the file's content is taken as it is (`plan::measured::cached_spacing`): a resumed
 /// run does not decode the file for it again.
 pub fn measure_spacing(
     store: &Store,
@@ -135,7 +135,7 @@ pub fn measure_spacing(
     let (key, filter) = (store.content_key(path)?, classes.to_string());
     let measured = match decoded {
         None => {
-            if let Some(cached) = store.cached_spacing(&key, &filter) {
+            if let Some(cached) = crate::plan::measured::cached_spacing(store, &key, &filter) {
                 return Ok(cached);
             }
             sampling::measure(path, Some(&classes))?
@@ -150,7 +150,13 @@ pub fn measure_spacing(
             measured
         }
     };
-    store.cache_spacing(&key, &filter, &measured.spacing, &measured.density);
+    crate::plan::measured::cache_spacing(
+        store,
+        &key,
+        &filter,
+        &measured.spacing,
+        &measured.density,
+    );
     Ok((measured.spacing, measured.density))
 }
 
@@ -406,7 +412,7 @@ fn run_planned(
 }
 
 /// Execute every unit of `plan` not done in `store` on a pool of `threads` threads, `slots`
-/// units at a time; `label` names this executor in the store's claims ([`crate::exec::run`]).
+/// units at a time; `label` names this executor in the store's claims (`crate::exec::run`).
 pub fn execute(
     store: &Store,
     plan: &Plan,

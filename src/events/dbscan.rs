@@ -159,7 +159,6 @@ pub struct Labels {
     ids: Vec<u64>,
     /// Label of `ids[i]`, 1-based.
     labels: Vec<u32>,
-    n_clusters: u32,
 }
 
 impl Labels {
@@ -169,10 +168,6 @@ impl Labels {
             Ok(i) => self.labels[i],
             Err(_) => 0,
         }
-    }
-    /// Number of clusters (labels are 1..=n_clusters).
-    pub fn n_clusters(&self) -> u32 {
-        self.n_clusters
     }
     /// (global id, label) of every clustered point, ascending id.
     pub fn iter(&self) -> impl Iterator<Item = (u64, u32)> + '_ {
@@ -226,7 +221,6 @@ pub fn merge(tiles: impl IntoIterator<Item = TileLinks>) -> Labels {
     Labels {
         ids: members.iter().map(|m| m.0).collect(),
         labels: members.iter().map(|m| label_of_root[m.1]).collect(),
-        n_clusters: roots.len() as u32,
     }
 }
 

@@ -25,7 +25,7 @@
 //! Everything is deterministic: pairs are drawn with a fixed-seed generator from the points in
 //! the order given (the callers give them in core-point key order).
 
-use crate::geom::Point3;
+use crate::geom::{dot, Point3};
 use rayon::prelude::*;
 
 use crate::spatial::Pairs;
@@ -130,12 +130,8 @@ impl Stable {
     }
 }
 
-fn dot(a: &Point3, b: &Point3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
 /// The median of `v` (NaN-free), reordering it.
-fn median(v: &mut [f64]) -> f64 {
+pub(crate) fn median(v: &mut [f64]) -> f64 {
     if v.is_empty() {
         return f64::NAN;
     }

@@ -1,6 +1,6 @@
 //! Drivers: executing a plan's units (SPEC.md §3, §6).
 //!
-//! [`run`] executes, in this process, every unit of a plan that is not done: a few slot threads
+//! `run` executes, in this process, every unit of a plan that is not done: a few slot threads
 //! each take the first unit (in plan order) whose dependencies are done, claim it in the store (so
 //! that other processes working on the same DIR — `talus worker DIR`, Slurm array tasks — do not
 //! compute it too), run it and commit its files. Units use the rayon pool inside (M3C2 over core
@@ -10,15 +10,14 @@
 //! taken over (its claim is stale). A unit that finds a dependency's file damaged has that
 //! dependency thrown away and both redone, once.
 //!
-//! [`run`] never publishes: the process holding DIR's lock does, once every unit is done
-//! ([`publish`]; after a Slurm submission, its final job).
+//! `run` never publishes: the process holding DIR's lock does, once every unit is done
+//! (`publish`; after a Slurm submission, its final job).
 
-pub mod progress;
-pub mod publish;
+pub(crate) mod progress;
+pub(crate) mod publish;
 pub mod resident;
-pub mod slurm;
+pub(crate) mod slurm;
 
-use std::collections::HashMap;
 use std::sync::{Condvar, Mutex};
 use std::time::{Duration, Instant};
 
@@ -72,20 +71,20 @@ pub enum Executor {
     /// The plan's units in this process.
     #[default]
     Local,
-    /// The plan's units as Slurm job arrays ([`slurm`]).
+    /// The plan's units as Slurm job arrays (`slurm`).
     Slurm(slurm::Options),
 }
 
 /// Execute every unit of `plan` not yet done in `store`, with `slots` units at a time, as a
 /// process of run `plan.run` labelled `label` (for claims).
-pub fn run(store: &Store, plan: &Plan, slots: usize, label: &str) -> Result<Report> {
+pub(crate) fn run(store: &Store, plan: &Plan, slots: usize, label: &str) -> Result<Report> {
     run_units(store, plan, None, slots, label)
 }
 
 /// Like [`run`], but only the units `only` (indices into the plan) and whichever of their
 /// dependencies, transitively, are not done (normally none: a Slurm task runs after the stages it
 /// depends on). `None`: every unit.
-pub fn run_units(
+pub(crate) fn run_units(
     store: &Store,
     plan: &Plan,
     only: Option<&[usize]>,
@@ -538,17 +537,4 @@ fn claim_and_run(cx: &RunCtx, i: usize) -> Result<Ran> {
     crate::progress::trace(|| format!("unit {} committed", unit.name));
     drop(claim);
     Ok(Ran::Done)
-}
-
-/// The units of `plan` not done in `store`, by kind (for `talus status`).
-pub fn pending(store: &Store, plan: &Plan) -> HashMap<String, (usize, usize)> {
-    let mut m: HashMap<String, (usize, usize)> = HashMap::new();
-    for i in 0..plan.units.len() {
-        let e = m.entry(plan.units[i].kind().to_string()).or_default();
-        e.0 += 1;
-        if store.done(&unit_ref(plan, i)).is_some() {
-            e.1 += 1;
-        }
-    }
-    m
 }

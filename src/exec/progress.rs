@@ -20,7 +20,7 @@ struct Open {
     peak: u64,
 }
 
-pub struct Stages {
+pub(crate) struct Stages {
     /// The registry's progress lines, in pipeline order.
     lines: Vec<Line>,
     open: Mutex<Vec<Open>>,
@@ -37,7 +37,7 @@ fn line_of(lines: &[Line], kind: &str) -> usize {
 
 impl Stages {
     /// The stages of `plan`, `done[i]` telling which units were done before the run.
-    pub fn new(plan: &Plan, done: &[bool]) -> Stages {
+    pub(crate) fn new(plan: &Plan, done: &[bool]) -> Stages {
         let lines = registry().lines();
         let mut open: Vec<Open> = lines
             .iter()
@@ -78,7 +78,7 @@ impl Stages {
     }
 
     /// Unit `i` starts in this process.
-    pub fn unit_started(&self, plan: &Plan, i: usize) {
+    pub(crate) fn unit_started(&self, plan: &Plan, i: usize) {
         let k = line_of(&self.lines, plan.units[i].kind());
         let line = self.lines[k];
         self.with(|open| {
@@ -92,7 +92,7 @@ impl Stages {
     }
 
     /// Unit `i` handled `n` more items.
-    pub fn add(&self, plan: &Plan, i: usize, n: u64) {
+    pub(crate) fn add(&self, plan: &Plan, i: usize, n: u64) {
         let k = line_of(&self.lines, plan.units[i].kind());
         self.with(|open| {
             if let Some(s) = &open[k].stage {
@@ -102,13 +102,13 @@ impl Stages {
     }
 
     /// Unit `i` ran with at most `bytes` resident.
-    pub fn peak(&self, plan: &Plan, i: usize, bytes: u64) {
+    pub(crate) fn peak(&self, plan: &Plan, i: usize, bytes: u64) {
         let k = line_of(&self.lines, plan.units[i].kind());
         self.with(|open| open[k].peak = open[k].peak.max(bytes));
     }
 
     /// Unit `i` was committed; `done` says which units are done now.
-    pub fn unit_done(&self, plan: &Plan, i: usize, done: &[bool]) {
+    pub(crate) fn unit_done(&self, plan: &Plan, i: usize, done: &[bool]) {
         let k = line_of(&self.lines, plan.units[i].kind());
         let remaining = plan
             .units
@@ -129,7 +129,7 @@ impl Stages {
     }
 
     /// Unit `i` must be done again (its files were damaged).
-    pub fn reopen(&self, plan: &Plan, i: usize) {
+    pub(crate) fn reopen(&self, plan: &Plan, i: usize) {
         let k = line_of(&self.lines, plan.units[i].kind());
         self.with(|open| {
             open[k].remaining += 1;
@@ -138,7 +138,7 @@ impl Stages {
     }
 
     /// The run failed: clear the bars of unfinished stages without their lines.
-    pub fn abandon(&self) {
+    pub(crate) fn abandon(&self) {
         self.with(|open| {
             for s in open.iter_mut() {
                 if let Some(stage) = s.stage.take() {
@@ -149,7 +149,7 @@ impl Stages {
     }
 
     /// The run ended: close what is still open.
-    pub fn finish_all(&self) {
+    pub(crate) fn finish_all(&self) {
         self.with(|open| {
             let n = open.len();
             Self::close_reused(&self.lines, open, n);

@@ -14,7 +14,11 @@ use crate::units::unit_ref;
 
 /// Publish the plan's outputs ([`publish`]) and drop the units no longer in the plan; the caller
 /// holds DIR's lock. Returns the path of the published marker in its unit.
-pub fn publish_and_gc(store: &Store, plan: &Plan, ours: &dyn Fn(&str) -> bool) -> Result<PathBuf> {
+pub(crate) fn publish_and_gc(
+    store: &Store,
+    plan: &Plan,
+    ours: &dyn Fn(&str) -> bool,
+) -> Result<PathBuf> {
     let marker = publish(store, plan, ours)?;
     let keep = (0..plan.units.len()).map(|i| unit_ref(plan, i)).collect();
     store.gc(&keep)?;
@@ -44,7 +48,7 @@ fn release(store: &Store, plan: &Plan) -> Result<()> {
 /// stage (tiles, per-tile M3C2 results), which a later run that needs them computes again, but
 /// those a stage of the plan keeps for a later run ([`crate::units::stage::Stage::keeps`]: a
 /// campaign's first and last surveys').
-pub fn releasable(plan: &Plan) -> Result<Vec<Option<&'static [&'static str]>>> {
+pub(crate) fn releasable(plan: &Plan) -> Result<Vec<Option<&'static [&'static str]>>> {
     let stages = registry();
     let mut kept = vec![false; plan.units.len()];
     for s in stages.stages() {
@@ -65,7 +69,7 @@ pub fn releasable(plan: &Plan) -> Result<Vec<Option<&'static [&'static str]>>> {
 }
 
 /// Tell the user how much releasing intermediate units freed, if anything.
-pub fn say_released(freed: u64) {
+pub(crate) fn say_released(freed: u64) {
     if freed > 0 {
         eprintln!(
             "talus: released {:.1} MiB of intermediate units (tiles, M3C2 results: a later run \
@@ -81,13 +85,13 @@ fn last_unit(plan: &Plan) -> Result<crate::store::UnitRef> {
 }
 
 /// The path of the marker (the file published last) in the plan's last unit.
-pub fn marker_path(store: &Store, plan: &Plan) -> Result<PathBuf> {
+pub(crate) fn marker_path(store: &Store, plan: &Plan) -> Result<PathBuf> {
     Ok(store.unit_dir(&last_unit(plan)?)?.join(MARKER))
 }
 
 /// Which names in DIR are talus's outputs for this plan (a campaign's or a comparison's), so
 /// that publishing replaces them and nothing else.
-pub fn outputs_of(plan: &Plan) -> Result<fn(&str) -> bool> {
+pub(crate) fn outputs_of(plan: &Plan) -> Result<fn(&str) -> bool> {
     let last = &plan.units[final_unit(plan)?];
     registry()
         .get(last.kind())?
@@ -98,7 +102,7 @@ pub fn outputs_of(plan: &Plan) -> Result<fn(&str) -> bool> {
 /// Whether `name` in DIR is an output of any stage that publishes (a comparison's or a
 /// campaign's): what a command that does not know DIR's plan (`talus status`, `talus view`)
 /// lets an interrupted publish's journal remove or place.
-pub fn any_output(name: &str) -> bool {
+pub(crate) fn any_output(name: &str) -> bool {
     registry()
         .stages()
         .iter()
@@ -108,7 +112,7 @@ pub fn any_output(name: &str) -> bool {
 
 /// Publish the plan's last unit's `publish` list into DIR as one set; returns the path of the
 /// marker (the file published last) in its unit.
-pub fn publish(store: &Store, plan: &Plan, ours: &dyn Fn(&str) -> bool) -> Result<PathBuf> {
+pub(crate) fn publish(store: &Store, plan: &Plan, ours: &dyn Fn(&str) -> bool) -> Result<PathBuf> {
     let unit = last_unit(plan)?;
     let list = publish_list(store, plan)?;
     let files: Vec<(PathBuf, String)> = list
@@ -128,7 +132,7 @@ pub fn publish(store: &Store, plan: &Plan, ours: &dyn Fn(&str) -> bool) -> Resul
 /// The published files in DIR that are not what the plan's run published: missing, or whose
 /// size or CRC-32 differs from their source unit's record (a file edited or damaged in DIR).
 /// Reads every published file once (`talus status`).
-pub fn damaged_outputs(store: &Store, plan: &Plan) -> Result<Vec<String>> {
+pub(crate) fn damaged_outputs(store: &Store, plan: &Plan) -> Result<Vec<String>> {
     let list = publish_list(store, plan)?;
     let mut bad = Vec::new();
     for p in &list {
@@ -167,7 +171,7 @@ fn publish_list(store: &Store, plan: &Plan) -> Result<Vec<Publish>> {
 /// from anyone: one that lists anything else is damaged (`Error::Damaged`: the executor
 /// computes the unit again), and nothing of it is read or placed. None for a unit that
 /// publishes nothing.
-pub fn listed_outputs(
+pub(crate) fn listed_outputs(
     store: &Store,
     plan: &Plan,
     i: usize,

@@ -12,7 +12,7 @@
 use std::fmt;
 
 /// Classes left out by default: vegetation (3, 4, 5) and noise (7, 18).
-pub const LEFT_OUT_BY_DEFAULT: [u8; 5] = [3, 4, 5, 7, 18];
+pub(crate) const LEFT_OUT_BY_DEFAULT: [u8; 5] = [3, 4, 5, 7, 18];
 
 /// The classes a comparison keeps.
 #[derive(Clone, PartialEq, Eq)]
@@ -21,7 +21,7 @@ pub struct Classes {
 }
 
 impl Default for Classes {
-    /// Every class but [`LEFT_OUT_BY_DEFAULT`].
+    /// Every class but `LEFT_OUT_BY_DEFAULT`.
     fn default() -> Self {
         let mut keep = [true; 256];
         for c in LEFT_OUT_BY_DEFAULT {
@@ -64,12 +64,12 @@ impl Classes {
     }
 
     /// Whether points of class `c` are kept.
-    pub fn keeps(&self, c: u8) -> bool {
+    pub(crate) fn keeps(&self, c: u8) -> bool {
         self.keep[c as usize]
     }
 
     /// Whether every class is kept (nothing to decode or filter).
-    pub fn keeps_all(&self) -> bool {
+    pub(crate) fn keeps_all(&self) -> bool {
         self.keep.iter().all(|&k| k)
     }
 }
@@ -110,7 +110,7 @@ pub struct ClassCounts {
 
 impl ClassCounts {
     /// From per-class totals.
-    pub fn from_tables(read: &[u64; 256], left_out: &[u64; 256]) -> Self {
+    pub(crate) fn from_tables(read: &[u64; 256], left_out: &[u64; 256]) -> Self {
         ClassCounts {
             classes: (0..256)
                 .filter(|&c| read[c] > 0)
@@ -120,7 +120,7 @@ impl ClassCounts {
     }
 
     /// The sum of `self` and `other`.
-    pub fn merge(&self, other: &ClassCounts) -> ClassCounts {
+    pub(crate) fn merge(&self, other: &ClassCounts) -> ClassCounts {
         let (mut read, mut out) = ([0u64; 256], [0u64; 256]);
         for &(c, r, o) in self.classes.iter().chain(&other.classes) {
             read[c as usize] += r;
@@ -135,12 +135,12 @@ impl ClassCounts {
     }
 
     /// Points kept, in all.
-    pub fn kept(&self) -> u64 {
+    pub(crate) fn kept(&self) -> u64 {
         self.classes.iter().map(|c| c.1 - c.2).sum()
     }
 
     /// The classes read with their points: "class 2 (1000 points), class 7 (12 points)".
-    pub fn describe(&self) -> String {
+    pub(crate) fn describe(&self) -> String {
         let v: Vec<String> = self
             .classes
             .iter()
@@ -150,7 +150,7 @@ impl ClassCounts {
     }
 
     /// Why a file read with `classes` gave no point: what it holds and what was compared.
-    pub fn none_kept(&self, classes: &Classes) -> String {
+    pub(crate) fn none_kept(&self, classes: &Classes) -> String {
         let read: u64 = self.classes.iter().map(|c| c.1).sum();
         format!(
             "none of its {read} points is of the classes compared ({classes}): it holds {}; \

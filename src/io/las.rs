@@ -60,7 +60,7 @@ const PROJECTED_CS_TYPE_GEO_KEY: u16 = 3072;
 const GEOGRAPHIC_TYPE_GEO_KEY: u16 = 2048;
 
 /// A streaming LAS/LAZ reader; see the module doc.
-pub struct LasReader {
+pub(crate) struct LasReader {
     info: CloudInfo,
     rx: Receiver<Result<Vec<Point3>>>,
     recycle: Sender<Vec<Point3>>,
@@ -77,14 +77,10 @@ pub struct LasReader {
 type Tally = ([u64; 256], [u64; 256]);
 
 impl LasReader {
-    /// Open `path` (which starts with `LASF`), check its header and start the decoding thread.
-    pub fn open(path: &Path) -> Result<Self> {
-        Self::open_with(path, None)
-    }
-
-    /// [`LasReader::open`], delivering only the points of the classes `classes` keeps (None or
-    /// all classes: every point, the classification not even decoded).
-    pub fn open_with(path: &Path, classes: Option<&Classes>) -> Result<Self> {
+    /// Open `path` (which starts with `LASF`), check its header and start the decoding thread,
+    /// delivering only the points of the classes `classes` keeps (None or all classes: every
+    /// point, the classification not even decoded).
+    pub(crate) fn open_with(path: &Path, classes: Option<&Classes>) -> Result<Self> {
         let classes = classes.filter(|c| !c.keeps_all()).cloned();
         let file = open_file(path)?;
         let file_len = file
@@ -755,7 +751,7 @@ pub(crate) fn crs_from_header(header: &las::Header) -> Crs {
 /// The EPSG code in a GeoKeyDirectory record (LASF_Projection 34735): ProjectedCSTypeGeoKey
 /// (3072), else GeographicTypeGeoKey (2048), when stored inline and in the EPSG range
 /// 1024..=32766 (32767 = user-defined, 0 = undefined).
-pub fn epsg_from_geokeys(data: &[u8]) -> Option<u32> {
+pub(crate) fn epsg_from_geokeys(data: &[u8]) -> Option<u32> {
     let words: Vec<u16> = data
         .chunks_exact(2)
         .map(|c| u16::from_le_bytes([c[0], c[1]]))

@@ -28,7 +28,7 @@ use std::path::{Path, PathBuf};
 use super::Crs;
 use crate::error::{Error, Result};
 
-/// Storage type of an extra dimension (LAS 1.4 R15 Table 25 data_type codes in [`ExtraType::code`]).
+/// Storage type of an extra dimension (LAS 1.4 R15 Table 25 data_type codes in `ExtraType::code`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ExtraType {
     U8,
@@ -40,7 +40,7 @@ pub enum ExtraType {
 
 impl ExtraType {
     /// Bytes per value.
-    pub fn size(self) -> usize {
+    pub(crate) fn size(self) -> usize {
         match self {
             ExtraType::U8 => 1,
             ExtraType::U32 | ExtraType::I32 | ExtraType::F32 => 4,
@@ -49,7 +49,7 @@ impl ExtraType {
     }
 
     /// The `data_type` code of the Extra Bytes descriptor.
-    pub fn code(self) -> u8 {
+    pub(crate) fn code(self) -> u8 {
         match self {
             ExtraType::U8 => 1,
             ExtraType::U32 => 5,
@@ -98,7 +98,7 @@ pub fn laz_chunk_size(n: Option<u64>) -> u32 {
 }
 
 /// The coarsest coordinate scale written: millimetres.
-pub const SCALE: f64 = 0.001;
+pub(crate) const SCALE: f64 = 0.001;
 
 /// How coordinates are stored in the i32 records: per-axis scale and offset.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -123,7 +123,7 @@ impl CoordinateGrid {
     /// Offsets at the centre rounded to a whole kilometre (a multiple of every usual scale). An
     /// axis whose extent would overflow the i32 records at that scale is coarsened tenfold until
     /// it fits.
-    pub fn for_extent(min: [f64; 3], max: [f64; 3], input_scales: &[[f64; 3]]) -> Self {
+    pub(crate) fn for_extent(min: [f64; 3], max: [f64; 3], input_scales: &[[f64; 3]]) -> Self {
         let mut grid = CoordinateGrid::millimetre([0.0; 3]);
         for a in 0..3 {
             let finest = input_scales
@@ -149,7 +149,7 @@ impl CoordinateGrid {
 impl CoordinateGrid {
     /// The record of coordinate `v` of axis `axis` on the grid (the nearest step); None when it
     /// does not fit an i32.
-    pub fn record(&self, axis: usize, v: f64) -> Option<i32> {
+    pub(crate) fn record(&self, axis: usize, v: f64) -> Option<i32> {
         let r = ((v - self.offset[axis]) / self.scale[axis]).round();
         (r >= f64::from(i32::MIN) && r <= f64::from(i32::MAX)).then_some(r as i32)
     }
@@ -157,7 +157,7 @@ impl CoordinateGrid {
     /// `xyz` as a LAS reader decodes it once written on the grid: record · scale + offset per
     /// axis (LAS 1.4 R15 §2.4), in f64 as laspy and PDAL compute it. None when a record does not
     /// fit.
-    pub fn decoded(&self, xyz: [f64; 3]) -> Option<[f64; 3]> {
+    pub(crate) fn decoded(&self, xyz: [f64; 3]) -> Option<[f64; 3]> {
         let mut out = [0.0; 3];
         for (a, o) in out.iter_mut().enumerate() {
             *o = f64::from(self.record(a, xyz[a])?) * self.scale[a] + self.offset[a];
@@ -169,7 +169,7 @@ impl CoordinateGrid {
 /// The most extra dimensions whose descriptors (192 bytes each) fit the Extra Bytes VLR, whose
 /// record length is a u16 (LAS 1.4 R15 §2.5.1): 341. More go to an EVLR, which laspy does not
 /// read extra bytes from.
-pub const MAX_VLR_EXTRA_DIMS: usize = u16::MAX as usize / 192;
+pub(crate) const MAX_VLR_EXTRA_DIMS: usize = u16::MAX as usize / 192;
 
 /// `s` itself, or the power of ten it is within rounding of, written exactly as that decimal
 /// (1e-5, not 1.0000000000000002e-5, in the header a reader prints).
@@ -509,15 +509,6 @@ impl ResultWriter {
         })
     }
 
-    /// The LAS point format used (6, or 0 for a GeoTIFF CRS; see the module doc).
-    pub fn point_format(&self) -> u8 {
-        if self.extended {
-            6
-        } else {
-            0
-        }
-    }
-
     /// Append one point. `extra.len()` must equal the number of dims; each value is converted
     /// to its dim's type (integers rounded to nearest; NaN is allowed for floats only).
     pub fn write(&mut self, xyz: [f64; 3], extra: &[f64]) -> Result<()> {
@@ -645,7 +636,7 @@ fn int_value(d: &ExtraDim, v: f64, lo: f64, hi: f64) -> Result<f64> {
 /// `reserved[2], data_type, options, name[32], unused[4], no_data[24], deprecated[16], min[24],
 /// deprecated[16], max[24], deprecated[16], scale[24], deprecated[16], offset[24],
 /// deprecated[16], description[32]`. options = 0: no no_data/min/max/scale/offset.
-pub fn extra_bytes_descriptors(dims: &[ExtraDim]) -> Vec<u8> {
+pub(crate) fn extra_bytes_descriptors(dims: &[ExtraDim]) -> Vec<u8> {
     let mut data = vec![0u8; 192 * dims.len()];
     for (d, rec) in dims.iter().zip(data.chunks_exact_mut(192)) {
         rec[2] = d.ty.code();

@@ -17,7 +17,7 @@ use crate::io::ply::{self, Encoding, Property, Scalar};
 use crate::volume::Mesh;
 
 /// Write a mesh to `w` as binary little-endian PLY.
-pub fn write_ply_to(w: &mut impl Write, mesh: &Mesh) -> std::io::Result<()> {
+pub(crate) fn write_ply_to(w: &mut impl Write, mesh: &Mesh) -> std::io::Result<()> {
     write_header(w, mesh.vertices.len() as u64, mesh.faces.len() as u64)?;
     write_vertices(w, &mesh.vertices)?;
     write_faces(w, &mesh.faces, 0)
@@ -25,7 +25,7 @@ pub fn write_ply_to(w: &mut impl Write, mesh: &Mesh) -> std::io::Result<()> {
 
 /// The header of a PLY file of `vertices` and `faces` (a file written in parts: the header,
 /// every part's vertices, every part's faces).
-pub fn write_header(w: &mut impl Write, vertices: u64, faces: u64) -> std::io::Result<()> {
+pub(crate) fn write_header(w: &mut impl Write, vertices: u64, faces: u64) -> std::io::Result<()> {
     write!(
         w,
         "ply\nformat binary_little_endian 1.0\ncomment talus event solid\n\
@@ -35,7 +35,7 @@ pub fn write_header(w: &mut impl Write, vertices: u64, faces: u64) -> std::io::R
 }
 
 /// Vertices as the body of a PLY file of [`write_header`].
-pub fn write_vertices(w: &mut impl Write, vertices: &[[f64; 3]]) -> std::io::Result<()> {
+pub(crate) fn write_vertices(w: &mut impl Write, vertices: &[[f64; 3]]) -> std::io::Result<()> {
     for p in vertices {
         for c in p {
             w.write_all(&c.to_le_bytes())?;
@@ -46,7 +46,11 @@ pub fn write_vertices(w: &mut impl Write, vertices: &[[f64; 3]]) -> std::io::Res
 
 /// Faces as the body of a PLY file of [`write_header`], their vertex indices moved by `offset`
 /// (the vertices of the parts before). Fails on an index beyond a PLY `int`.
-pub fn write_faces(w: &mut impl Write, faces: &[[u32; 3]], offset: u64) -> std::io::Result<()> {
+pub(crate) fn write_faces(
+    w: &mut impl Write,
+    faces: &[[u32; 3]],
+    offset: u64,
+) -> std::io::Result<()> {
     for f in faces {
         w.write_all(&[3u8])?;
         for &i in f {

@@ -9,14 +9,14 @@ use std::path::{Path, PathBuf};
 use crate::error::{Error, Result};
 
 pub mod classes;
-pub mod las;
+pub(crate) mod las;
 pub mod las_out;
 pub mod mesh_ply;
-pub mod parquet_out;
-pub mod ply;
+pub(crate) mod parquet_out;
+pub(crate) mod ply;
 pub mod replay;
 pub mod result_table;
-pub mod text;
+pub(crate) mod text;
 
 pub use crate::geom::{Bounds, Point3};
 
@@ -276,7 +276,7 @@ pub(crate) fn open_file(path: &Path) -> Result<std::fs::File> {
 }
 
 /// The error for an input that is not a regular file (see `open_file`).
-pub fn not_regular(path: &Path) -> Error {
+pub(crate) fn not_regular(path: &Path) -> Error {
     Error::input(
         path,
         "not a regular file (a FIFO, pipe, socket or device): talus reads an input more than \

@@ -37,14 +37,14 @@ use parquet::schema::types::Type;
 use crate::error::{Error, Result};
 
 /// Values asked of the caller at a time, per column.
-pub const BATCH: usize = 1 << 16;
+pub(crate) const BATCH: usize = 1 << 16;
 /// Bytes of values (8 a value) a row group holds, about: rows per group are this over the row's
 /// width, so that a group's decoded size stays near it however many columns.
-pub const GROUP_BYTES: usize = 64 << 20;
+pub(crate) const GROUP_BYTES: usize = 64 << 20;
 /// Fewest rows per group (a table of more than 8,192 columns has groups above `GROUP_BYTES`).
-pub const MIN_GROUP_ROWS: usize = 1024;
+pub(crate) const MIN_GROUP_ROWS: usize = 1024;
 /// Most rows per group (the `parquet` crate's and pyarrow's default).
-pub const MAX_GROUP_ROWS: usize = 1 << 20;
+pub(crate) const MAX_GROUP_ROWS: usize = 1 << 20;
 /// Rows per data page, at most (the `parquet` crate's default; a page closes at 1 MiB too).
 const PAGE_ROWS: usize = 20_000;
 /// The zstd level of the pages (3: zstd's default; level 1 saves little time on doubles).
@@ -52,21 +52,21 @@ const ZSTD_LEVEL: i32 = 3;
 
 /// A column of the table.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Column {
+pub(crate) struct Column {
     pub name: String,
     /// OPTIONAL (NaN written as null) rather than REQUIRED (every value written; NaN refused).
     pub nullable: bool,
 }
 
 impl Column {
-    pub fn required(name: &str) -> Column {
+    pub(crate) fn required(name: &str) -> Column {
         Column {
             name: name.into(),
             nullable: false,
         }
     }
 
-    pub fn nullable(name: &str) -> Column {
+    pub(crate) fn nullable(name: &str) -> Column {
         Column {
             name: name.into(),
             nullable: true,
@@ -77,7 +77,7 @@ impl Column {
 /// Rows per row group for a table of `columns` DOUBLE columns: [`GROUP_BYTES`] over the row's
 /// 8 · `columns` bytes, rounded down to a multiple of 1024, within [`MIN_GROUP_ROWS`] and
 /// [`MAX_GROUP_ROWS`] (403 columns: 20,480 rows; 6 columns: 1,048,576).
-pub fn rows_per_group(columns: usize) -> usize {
+pub(crate) fn rows_per_group(columns: usize) -> usize {
     let rows = GROUP_BYTES / (8 * columns.max(1));
     (rows / 1024 * 1024).clamp(MIN_GROUP_ROWS, MAX_GROUP_ROWS)
 }
@@ -86,16 +86,16 @@ pub fn rows_per_group(columns: usize) -> usize {
 /// values, non-null values and definition levels, one page and its compressed copy, zstd's
 /// context, and the footer it keeps until the end (a column chunk's metadata,
 /// column index and offset index, per column and row group, and per page).
-pub fn memory_need(columns: usize, rows: u64) -> u64 {
+pub(crate) fn memory_need(columns: usize, rows: u64) -> u64 {
     let groups = rows.div_ceil(rows_per_group(columns) as u64).max(1);
     let chunks = groups * columns as u64;
     let pages = chunks + rows.div_ceil(PAGE_ROWS as u64) * columns as u64;
-    let fixed = BATCH * (8 + 8 + 2) + 4 * (PAGE_ROWS * 8) + (8 << 20);
+    let fixed = BATCH * (8 + 8 + 2) + 4 * (PAGE_ROWS * 8) + crate::memory::IO_HEADROOM as usize;
     fixed as u64 + chunks * 1024 + pages * 64
 }
 
 /// A Parquet file being written; see the module documentation.
-pub struct ParquetWriter {
+pub(crate) struct ParquetWriter {
     path: PathBuf,
     /// Written under its temporary name, renamed onto `path` by [`ParquetWriter::finish`];
     /// removed if never finished.
@@ -111,7 +111,11 @@ pub struct ParquetWriter {
 impl ParquetWriter {
     /// A new file at `path` (written as `<path>.tmp`, renamed by `finish`) of `columns`, with the
     /// key-value metadata `metadata` (in this order) in its footer.
-    pub fn create(path: &Path, columns: &[Column], metadata: &[(String, String)]) -> Result<Self> {
+    pub(crate) fn create(
+        path: &Path,
+        columns: &[Column],
+        metadata: &[(String, String)],
+    ) -> Result<Self> {
         let mut seen = std::collections::HashSet::new();
         for c in columns {
             if c.name.is_empty() || !seen.insert(c.name.as_str()) {
@@ -180,7 +184,7 @@ impl ParquetWriter {
     /// Write one row group of `rows` rows: column after column, each in batches of at most
     /// [`BATCH`] values, `fill(column, values)` filling `values` with the column's next values
     /// (so each column is asked for its values in order, a group after the other).
-    pub fn write_group(
+    pub(crate) fn write_group(
         &mut self,
         rows: usize,
         fill: &mut dyn FnMut(usize, &mut [f64]) -> Result<()>,
@@ -250,7 +254,7 @@ impl ParquetWriter {
     }
 
     /// Write the footer, sync and rename the file onto its name; the rows written.
-    pub fn finish(mut self) -> Result<u64> {
+    pub(crate) fn finish(mut self) -> Result<u64> {
         let writer = self
             .writer
             .take()

@@ -513,7 +513,7 @@ fn invalid(msg: String) -> std::io::Error {
 }
 
 /// A streaming PLY reader; see the module doc.
-pub struct PlyReader {
+pub(crate) struct PlyReader {
     info: CloudInfo,
     pass: Pass,
 }
@@ -521,7 +521,7 @@ pub struct PlyReader {
 impl PlyReader {
     /// Open `path` (which starts with `ply`), parse its header and scan the vertices once for
     /// the bounds.
-    pub fn open(path: &Path) -> Result<Self> {
+    pub(crate) fn open(path: &Path) -> Result<Self> {
         let mut scan = Pass::start(path)?;
         let count = scan.vertex_count();
         if count == 0 {

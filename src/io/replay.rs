@@ -10,7 +10,7 @@
 //! raw `f64` triples (24 bytes). Once the pass has
 //! read the whole file, [`Recorder::finish`] registers the copy in this process ([`Replay`],
 //! removed with its file when dropped), and [`super::open_with`] of the same file with the same
-//! class filter reads the copy ([`ReplayReader`]) instead: the same points in the same order,
+//! class filter reads the copy (`ReplayReader`) instead: the same points in the same order,
 //! the same header information and class counts, at the speed of reading a file.
 //!
 //! A copy is read once: removed as soon as a reader has read it whole (the tiling).
@@ -101,7 +101,7 @@ impl Layout {
     }
 }
 /// Bytes buffered by a copy's writer and reader.
-pub const BUFFER: usize = 1 << 20;
+pub(crate) const BUFFER: usize = 1 << 20;
 
 /// What identifies a recorded file and the way it was read.
 #[derive(Clone, PartialEq)]
@@ -284,7 +284,7 @@ impl Drop for Replay {
 }
 
 /// Reads a copy back: the points, header and class counts the file's own reader gave.
-pub struct ReplayReader {
+pub(crate) struct ReplayReader {
     copy: Recorded,
     file: BufReader<File>,
     bytes: Vec<u8>,

@@ -315,14 +315,14 @@ fn detect_layout(path: &Path) -> Result<Layout> {
 }
 
 /// A streaming text reader; see the module doc.
-pub struct TextReader {
+pub(crate) struct TextReader {
     info: CloudInfo,
     pass: Pass,
 }
 
 impl TextReader {
     /// Open `path`, find its layout and scan it once for count and bounds.
-    pub fn open(path: &Path) -> Result<Self> {
+    pub(crate) fn open(path: &Path) -> Result<Self> {
         let layout = detect_layout(path)?;
         let mut scan = Pass::start(path, layout)?;
         let mut bounds = Bounds::empty();

@@ -8,7 +8,7 @@
 //! A cylinder is not a kd-tree query shape. The usual way (CloudCompare, py4dgeo) queries the
 //! circumscribed sphere of radius √(r² + h²) and filters; on a surface that sphere cuts a disc of
 //! radius ≈ √(r² + h²), far more points than the cylinder's disc of radius r when h ≫ r. The
-//! column grid ([`Columns::for_each_in_cylinder`]) visits only the columns the cylinder crosses,
+//! column grid (`Columns::cylinder_candidates`) visits only the columns the cylinder crosses,
 //! and in each only the heights it can reach.
 //!
 //! **One surface per cylinder.** The cylinder is meant to meet one surface per epoch near the

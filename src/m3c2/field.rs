@@ -41,7 +41,7 @@
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
-use crate::geom::Point3;
+use crate::geom::{dot, Point3};
 use crate::spatial::Index;
 
 /// A connected part whose area-weighted mean n_z (oriented) is below this is undecided: a face
@@ -65,10 +65,6 @@ pub const REACH: f64 = 2.0;
 /// A core point's normal whose clearest agreement with the field is weaker than this (an angle
 /// near 90° to every field normal near it) takes that sign but is marked undecided.
 pub const WEAK: f64 = 0.25;
-
-fn dot(a: &Point3, b: &Point3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
 
 fn flip(n: &mut Point3) {
     *n = [-n[0], -n[1], -n[2]];

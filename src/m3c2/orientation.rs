@@ -13,7 +13,7 @@
 use std::str::FromStr;
 
 use super::field::Field;
-use crate::geom::Point3;
+use crate::geom::{dot, Point3};
 
 /// How normals are oriented (`--orientation`).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -72,9 +72,6 @@ impl FromStr for Orientation {
 
 /// A normal is steep (its "up" sign unreliable) when |n·z| is below this: about 60° from vertical.
 pub const STEEP_NZ: f64 = 0.5;
-fn dot(a: &Point3, b: &Point3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
 
 fn flip(n: &mut Point3) {
     n[0] = -n[0];

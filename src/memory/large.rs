@@ -27,7 +27,7 @@ const HUGE: usize = 2 << 20;
 const PAGE: usize = 4096;
 
 /// See the module doc.
-pub struct Allocator;
+pub(crate) struct Allocator;
 
 fn large(layout: &Layout) -> bool {
     cfg!(target_os = "linux") && layout.size() >= LARGE && layout.align() <= PAGE

@@ -29,7 +29,7 @@ pub struct Reservation<'a> {
 
 impl Pool {
     /// A pool of `limit` bytes.
-    pub fn new(limit: u64) -> Pool {
+    pub(crate) fn new(limit: u64) -> Pool {
         Pool {
             limit,
             used: Mutex::new(0),
@@ -38,18 +38,19 @@ impl Pool {
     }
 
     /// The pool's size.
-    pub fn limit(&self) -> u64 {
+    pub(crate) fn limit(&self) -> u64 {
         self.limit
     }
 
-    /// Bytes reserved now.
-    pub fn used(&self) -> u64 {
+    /// Bytes reserved now (the tests' check that a reservation is given back).
+    #[cfg(test)]
+    pub(crate) fn used(&self) -> u64 {
         *self.used.lock().unwrap_or_else(|e| e.into_inner())
     }
 
     /// Reserve `bytes` (at most [`Self::limit`]: the caller refuses larger units), waiting until
     /// they fit beside what others hold; `None` when `stop()` turned true while waiting.
-    pub fn reserve(&self, bytes: u64, stop: &dyn Fn() -> bool) -> Option<Reservation<'_>> {
+    pub(crate) fn reserve(&self, bytes: u64, stop: &dyn Fn() -> bool) -> Option<Reservation<'_>> {
         let bytes = bytes.min(self.limit);
         let mut used = self.used.lock().unwrap_or_else(|e| e.into_inner());
         while *used + bytes > self.limit {

@@ -23,7 +23,7 @@ fn is_cloud(p: &Path) -> bool {
 }
 
 /// Does `name` match the glob `pattern` (`*` any run, `?` any one character)?
-pub fn glob_match(pattern: &str, name: &str) -> bool {
+pub(crate) fn glob_match(pattern: &str, name: &str) -> bool {
     let (p, n): (Vec<char>, Vec<char>) = (pattern.chars().collect(), name.chars().collect());
     // Classic two-pointer match with backtracking to the last `*`.
     let (mut i, mut j, mut star, mut mark) = (0, 0, None, 0);
@@ -50,7 +50,7 @@ pub fn glob_match(pattern: &str, name: &str) -> bool {
 }
 
 /// The files a survey argument names, in name order.
-pub fn survey_files(arg: &Path) -> Result<Vec<PathBuf>> {
+pub(crate) fn survey_files(arg: &Path) -> Result<Vec<PathBuf>> {
     let text = arg.to_string_lossy();
     let name = arg.file_name().map(|n| n.to_string_lossy().into_owned());
     let pattern = name.filter(|n| n.contains('*') || n.contains('?'));
@@ -103,11 +103,11 @@ pub struct SurveyFiles {
 
 /// Fewest points a survey may have: a normal needs a neighbourhood, a volume a triangle of each
 /// epoch, and a handful of points can only give distances at the few core points they touch.
-pub const MIN_SURVEY_POINTS: u64 = 10;
+pub(crate) const MIN_SURVEY_POINTS: u64 = 10;
 
 impl SurveyFiles {
     /// Open the headers of every file of `arg`; its tiles must share one CRS.
-    pub fn open(arg: &Path) -> Result<SurveyFiles> {
+    pub(crate) fn open(arg: &Path) -> Result<SurveyFiles> {
         let files = survey_files(arg)?;
         let mut infos: Vec<CloudInfo> = Vec::with_capacity(files.len());
         for f in &files {
@@ -166,12 +166,12 @@ impl SurveyFiles {
     }
 
     /// Points of all files.
-    pub fn points(&self) -> u64 {
+    pub(crate) fn points(&self) -> u64 {
         self.infos.iter().map(|i| i.point_count).sum()
     }
 
     /// Bounds of all files.
-    pub fn bounds(&self) -> Bounds {
+    pub(crate) fn bounds(&self) -> Bounds {
         let mut b = Bounds::empty();
         for i in &self.infos {
             b.grow(&i.bounds.min);
@@ -181,12 +181,12 @@ impl SurveyFiles {
     }
 
     /// The first file's header (the CRS every file shares).
-    pub fn first(&self) -> &CloudInfo {
+    pub(crate) fn first(&self) -> &CloudInfo {
         &self.infos[0]
     }
 
     /// The finest LAS scale of the files, per axis (None when no file has one).
-    pub fn scale(&self) -> Option<[f64; 3]> {
+    pub(crate) fn scale(&self) -> Option<[f64; 3]> {
         self.infos
             .iter()
             .filter_map(|i| i.scale)
@@ -194,7 +194,7 @@ impl SurveyFiles {
     }
 
     /// The format, e.g. `LAZ 1.4 point format 6` or `LAZ 1.4 point format 6 (12 files)`.
-    pub fn format(&self) -> String {
+    pub(crate) fn format(&self) -> String {
         let f = &self.first().format_detail;
         match self.infos.len() {
             1 => f.clone(),

@@ -4,7 +4,7 @@
 //! The grid's origin and side are whole multiples of `core_spacing`, so a core-point cell never
 //! straddles two tiles and a tiled run thins C1 to exactly the core points of a whole-cloud run.
 //! Its side follows from the memory budget and the densest survey ([`TileGrid::plan`]); its halo
-//! holds every neighbourhood a tile's core points need ([`tile_halo`]).
+//! holds every neighbourhood a tile's core points need (`tile_halo`).
 
 use serde::{Deserialize, Serialize};
 use talus_tiling::grid::TILE_BUDGET_FRACTION;
@@ -18,14 +18,14 @@ use crate::spatial::DensityGrid;
 /// The size (input units) of the blocks the core-point lattice is anchored on: large next to a
 /// site, so that two runs over it share the anchor, small enough that local coordinates keep
 /// their precision (a picometre at 10 km) and Morton keys their 21 bits per axis.
-pub const ANCHOR_BLOCK: f64 = 10_000.0;
+pub(crate) const ANCHOR_BLOCK: f64 = 10_000.0;
 
 /// Resident bytes per point (both epochs, halo included) while a tile is computed: its
 /// coordinates and owned flags as read (25), the column index (≈ 40), the per-core-point results
 /// (a core point per ≈ 7 points, ≈ 120 each) and the tile file's bytes while decoding. Measured
 /// 89–101 bytes per point (unit peak less the process's base, over the tile's points with its
 /// halo) on the 5.2M-point cliff's tiles at 300 MiB and 1 GiB. Tiles are sized by it; the M3C2 unit reserves by it.
-pub const BYTES_PER_POINT: u64 = 104;
+pub(crate) const BYTES_PER_POINT: u64 = 104;
 
 /// The grid, halo and core-point anchor of a run.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -48,7 +48,7 @@ impl Layout {
     /// (both epochs of a pair), the halo and the memory budget; `tile_size` forces the side
     /// (tests of tiling invariance).
     ///
-    /// The core-point lattice is anchored at the corner of the [`ANCHOR_BLOCK`]-sized block
+    /// The core-point lattice is anchored at the corner of the `ANCHOR_BLOCK`-sized block
     /// (a power of two of core spacings) holding the minimum of `core` (a campaign's first
     /// survey; a pair's inputs): a corner that depends on the site, not on the files' exact
     /// extents, so a campaign's pairs and a `compare` of the same surveys share one local frame,
@@ -120,7 +120,7 @@ impl Layout {
     }
 
     /// A stable description for unit keys: everything a tile's content depends on.
-    pub fn key(&self) -> String {
+    pub(crate) fn key(&self) -> String {
         format!(
             "{:?}|{}|{}|{}|{}|{:?}",
             self.origin, self.tile_size, self.cols, self.rows, self.halo, self.anchor
@@ -128,13 +128,8 @@ impl Layout {
     }
 
     /// Number of tiles.
-    pub fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         self.cols as usize * self.rows as usize
-    }
-
-    /// True when the grid has no tile (never: a layout has at least one).
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
     }
 }
 
@@ -144,7 +139,7 @@ impl Layout {
 /// never below the bounds' `mean`. A tile is then sized for where the points are, not for their average over the
 /// bounds; where even the smallest tile (four halos) is denser than the budget allows, the
 /// result keeps the tiles at that smallest side and the M3C2 units' check refuses the budget.
-pub fn tile_density(grid: &DensityGrid, held: f64, mean: f64, params: &Params) -> f64 {
+pub(crate) fn tile_density(grid: &DensityGrid, held: f64, mean: f64, params: &Params) -> f64 {
     let scale = held / grid.total().max(1) as f64;
     let halo = tile_halo(params);
     let allowed = TILE_BUDGET_FRACTION * params.memory_bytes.value as f64 / BYTES_PER_POINT as f64;
@@ -181,7 +176,7 @@ pub fn tile_density(grid: &DensityGrid, held: f64, mean: f64, params: &Params) -
 /// sphere). The orientation field's normals fit within it (`units::orient::geometry`). The
 /// DBSCAN `eps` is not in it: the events unit clusters the kept core points with its own halo,
 /// so a changed `eps` must not cut the surveys again.
-pub fn tile_halo(params: &Params) -> f64 {
+pub(crate) fn tile_halo(params: &Params) -> f64 {
     let nr = params.normal_radius.value;
     let cyl = (params.cyl_radius.value.powi(2) + params.cyl_halflen.value.powi(2)).sqrt();
     nr.max(cyl) + 2.0 * params.core_spacing.value

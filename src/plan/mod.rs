@@ -12,9 +12,10 @@
 //! Slurm array task) can run any unit whose dependencies are done. A `compare` is a one-pair
 //! plan; a campaign is a bigger one with the same kinds of units.
 
-pub mod inputs;
+pub(crate) mod inputs;
 pub mod layout;
-pub mod reach;
+pub(crate) mod measured;
+pub(crate) mod reach;
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -26,10 +27,10 @@ use crate::error::{Error, Result};
 use crate::io::Bounds;
 use crate::params::Params;
 use crate::sampling::Spacing;
-pub use layout::Layout;
+pub(crate) use layout::Layout;
 
 /// The version of plan.json's layout (a plan of another version is planned again).
-pub const PLAN_VERSION: u32 = 1;
+pub(crate) const PLAN_VERSION: u32 = 1;
 
 /// An input file and its content key.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -49,7 +50,7 @@ pub struct StableAreas {
 impl StableAreas {
     /// Read `path` and check it against the surveys: its CRS (when both name an EPSG code) and
     /// every polygon meeting the surveys' footprint. `key` is the file's content key.
-    pub fn read(path: &Path, key: String, surveys: &[Survey]) -> Result<StableAreas> {
+    pub(crate) fn read(path: &Path, key: String, surveys: &[Survey]) -> Result<StableAreas> {
         let areas = crate::spatial::areas::Areas::read(path)?;
         if let Some(e) = areas.epsg {
             for s in surveys {
@@ -138,7 +139,7 @@ pub struct Spec {
 
 impl Spec {
     /// The one unit of `kind` in a run.
-    pub fn run(kind: &str) -> Spec {
+    pub(crate) fn run(kind: &str) -> Spec {
         Spec {
             kind: kind.into(),
             survey: None,
@@ -156,7 +157,7 @@ impl Spec {
     }
 
     /// The unit of `kind` for pair `pair`.
-    pub fn pair(kind: &str, pair: usize) -> Spec {
+    pub(crate) fn pair(kind: &str, pair: usize) -> Spec {
         Spec {
             pair: Some(pair),
             ..Spec::run(kind)
@@ -164,22 +165,17 @@ impl Spec {
     }
 
     /// The unit of `kind` for tile `tile` of pair `pair`.
-    pub fn tile(kind: &str, pair: usize, tile: TileId) -> Spec {
+    pub(crate) fn tile(kind: &str, pair: usize, tile: TileId) -> Spec {
         Spec {
             pair: Some(pair),
             tile: Some([tile.col, tile.row]),
             ..Spec::run(kind)
         }
     }
-
-    /// Whether this is a unit of `kind`.
-    pub fn is(&self, kind: &str) -> bool {
-        self.kind == kind
-    }
 }
 
 /// A tile id from the plan's [col, row].
-pub fn tile_id(t: [u32; 2]) -> TileId {
+pub(crate) fn tile_id(t: [u32; 2]) -> TileId {
     TileId {
         col: t[0],
         row: t[1],
@@ -195,9 +191,9 @@ pub struct Unit {
     /// Indices (into `Plan::units`) of the units whose results this one reads.
     pub deps: Vec<usize>,
     pub spec: Spec,
-    /// Its key's own parts ([`Plan::push`]'s `key_parts`: the stage's version first, then the
+    /// Its key's own parts (`Plan::push`'s `key_parts`: the stage's version first, then the
     /// parameters and inputs it computes from), each as itself when short, else as a hash: what
-    /// a later plan compares to say why a unit is computed again ([`Plan::recomputed`]).
+    /// a later plan compares to say why a unit is computed again (`Plan::recomputed`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub parts: Vec<String>,
     /// Units this one runs after without reading them (an order, not an input: not in its key,
@@ -208,7 +204,7 @@ pub struct Unit {
 }
 
 impl Unit {
-    pub fn kind(&self) -> &str {
+    pub(crate) fn kind(&self) -> &str {
         &self.spec.kind
     }
 }
@@ -310,7 +306,7 @@ fn reason(o: &Unit, u: &Unit) -> String {
 /// value, a stage's version; longer ones (a survey's description) as a hash.
 const PART_SHOWN: usize = 512;
 
-/// Units of one kind computed again for one reason ([`Plan::recomputed`]).
+/// Units of one kind computed again for one reason (`Plan::recomputed`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Recomputed {
     pub kind: String,
@@ -319,7 +315,7 @@ pub struct Recomputed {
 }
 
 /// A unit key: FNV-1a 64 over the parts, each length-prefixed (so ("ab","c") ≠ ("a","bc")).
-pub fn key_of(parts: &[&str]) -> String {
+pub(crate) fn key_of(parts: &[&str]) -> String {
     let mut h = Fnv64::new();
     for p in parts {
         h.write_str(p);
@@ -328,7 +324,7 @@ pub fn key_of(parts: &[&str]) -> String {
 }
 
 /// A name safe in file names: ASCII letters, digits, '-', '_', '.', the rest '_'.
-pub fn slug(s: &str) -> String {
+pub(crate) fn slug(s: &str) -> String {
     s.chars()
         .map(|c| {
             if c.is_ascii_alphanumeric() || c == '-' || c == '_' || c == '.' {
@@ -344,7 +340,7 @@ impl Plan {
     /// A plan of `surveys` and `pairs` with no units yet (the stages add them:
     /// `units::stage::plan_units`), no run id, and none of the options: no core-point file,
     /// stable areas or meshes, every stage, the intermediate units released.
-    pub fn new(
+    pub(crate) fn new(
         surveys: Vec<Survey>,
         pairs: Vec<Pair>,
         params: Params,
@@ -372,7 +368,7 @@ impl Plan {
 
     /// Pair `pair` for messages: "BEFORE and AFTER" (the arguments) in a one-pair plan, "pair
     /// LABEL (BEFORE and AFTER)" in a campaign.
-    pub fn pair_name(&self, pair: usize) -> String {
+    pub(crate) fn pair_name(&self, pair: usize) -> String {
         let p = &self.pairs[pair];
         let (b, a) = (&self.surveys[p.before], &self.surveys[p.after]);
         let files = format!("{} and {}", b.arg.display(), a.arg.display());
@@ -385,7 +381,13 @@ impl Plan {
 
     /// Add a unit: its key is over its spec, `key_parts` (what it computes from: parameters,
     /// input files' keys) and its dependencies' keys; returns its index.
-    pub fn push(&mut self, spec: Spec, label: &str, key_parts: &[&str], deps: Vec<usize>) -> usize {
+    pub(crate) fn push(
+        &mut self,
+        spec: Spec,
+        label: &str,
+        key_parts: &[&str],
+        deps: Vec<usize>,
+    ) -> usize {
         let dep_keys: Vec<&str> = deps.iter().map(|&d| self.units[d].key.as_str()).collect();
         // The spec itself (which survey, pair, tile) is part of what the unit computes.
         let what = serde_json::to_string(&spec).unwrap_or_default();
@@ -425,7 +427,7 @@ impl Plan {
     /// previous run) had a unit of the same spec under another key: by kind and
     /// reason, how many — the stage's version changed, a parameter or input it computes from
     /// changed (shown when short), or a unit it reads is computed again.
-    pub fn recomputed(&self, old: &Plan, done: impl Fn(usize) -> bool) -> Vec<Recomputed> {
+    pub(crate) fn recomputed(&self, old: &Plan, done: impl Fn(usize) -> bool) -> Vec<Recomputed> {
         let by_spec: HashMap<&Spec, &Unit> = old.units.iter().map(|u| (&u.spec, u)).collect();
         let mut out: Vec<Recomputed> = Vec::new();
         for (i, u) in self.units.iter().enumerate() {
@@ -453,7 +455,7 @@ impl Plan {
     }
 
     /// The index of the unit of `spec` (the first, should two units share it).
-    pub fn find(&self, spec: &Spec) -> Option<usize> {
+    pub(crate) fn find(&self, spec: &Spec) -> Option<usize> {
         let (map, covered) = self.index.0.get_or_init(|| SpecIndex::of(&self.units));
         if *covered == self.units.len() {
             map.get(spec).copied()
@@ -463,25 +465,29 @@ impl Plan {
     }
 
     /// The units of `kind` for `pair` (every pair for kinds without one), in plan order.
-    pub fn of_kind<'a>(&'a self, kind: &'a str) -> impl Iterator<Item = usize> + 'a {
+    pub(crate) fn of_kind<'a>(&'a self, kind: &'a str) -> impl Iterator<Item = usize> + 'a {
         (0..self.units.len()).filter(move |&i| self.units[i].kind() == kind)
     }
 
     /// The units of `kind` for pair `pair`, in plan order.
-    pub fn of_pair<'a>(&'a self, kind: &'a str, pair: usize) -> impl Iterator<Item = usize> + 'a {
+    pub(crate) fn of_pair<'a>(
+        &'a self,
+        kind: &'a str,
+        pair: usize,
+    ) -> impl Iterator<Item = usize> + 'a {
         self.of_kind(kind)
             .filter(move |&i| self.units[i].spec.pair == Some(pair))
     }
 
     /// Write the plan to `path` atomically.
-    pub fn save(&self, path: &Path) -> Result<()> {
+    pub(crate) fn save(&self, path: &Path) -> Result<()> {
         let text =
             serde_json::to_vec_pretty(self).map_err(|e| Error::Internal(format!("plan: {e}")))?;
         Ok(talus_tiling::atomic_write(path, &text)?)
     }
 
     /// Read the plan at `path` (in DIR's store: a regular file, not through a link), and
-    /// [`Plan::check`] it.
+    /// `Plan::check` it.
     pub fn load(path: &Path) -> Result<Plan> {
         let text = crate::store::read_store_file(path)
             .map_err(|e| Error::input(path, format!("cannot read the run's plan: {e}")))?;
@@ -509,7 +515,7 @@ impl Plan {
     /// kind and name are single path components (they name directories of the store: nothing
     /// read or written through them leaves it), every dependency an earlier unit, every survey,
     /// pair and tile index within the plan. The problem, if any.
-    pub fn check(&self) -> std::result::Result<(), String> {
+    pub(crate) fn check(&self) -> std::result::Result<(), String> {
         use crate::store::check_component;
         let n = self.surveys.len();
         if !self.run.is_empty() {

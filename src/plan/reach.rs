@@ -10,7 +10,7 @@ use crate::io::Bounds;
 use crate::plan::Plan;
 
 /// Per axis, how far apart `a` and `b` are (0 where their ranges meet).
-pub fn gap(a: &Bounds, b: &Bounds) -> [f64; 3] {
+pub(crate) fn gap(a: &Bounds, b: &Bounds) -> [f64; 3] {
     std::array::from_fn(|i| (a.min[i] - b.max[i]).max(b.min[i] - a.max[i]).max(0.0))
 }
 
@@ -43,7 +43,7 @@ fn beyond(gap: f64, reach: f64) -> bool {
 
 /// Refuse the plan when a pair's epochs, or the core points (`cores`: what they are, e.g. "the
 /// core points FILE", and their bounds), lie too far apart for any core point to get a distance.
-pub fn check(plan: &Plan, cores: Option<(&str, &Bounds)>) -> Result<()> {
+pub(crate) fn check(plan: &Plan, cores: Option<(&str, &Bounds)>) -> Result<()> {
     let p = &plan.params;
     let (nr, r, h) = (
         p.normal_radius.value,

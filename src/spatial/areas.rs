@@ -44,7 +44,7 @@ impl Polygon {
     }
 
     /// Whether (x, y) lies inside (the even–odd rule over all rings).
-    pub fn contains(&self, x: f64, y: f64) -> bool {
+    pub(crate) fn contains(&self, x: f64, y: f64) -> bool {
         let b = &self.bbox;
         if x < b[0] || x > b[2] || y < b[1] || y > b[3] {
             return false;
@@ -84,7 +84,7 @@ impl Areas {
 
     /// The share, at most 1, of the rectangle `within` ([x0, y0, x1, y1]) the polygons' boxes
     /// cover (overlaps counted twice): an upper bound of the share of its points inside them.
-    pub fn box_share(&self, within: [f64; 4]) -> f64 {
+    pub(crate) fn box_share(&self, within: [f64; 4]) -> f64 {
         let area = |b: [f64; 4]| (b[2] - b[0]).max(0.0) * (b[3] - b[1]).max(0.0);
         let covered: f64 = self
             .polygons
@@ -105,21 +105,21 @@ impl Areas {
     /// One core point in how many to take from the areas so that about `target` are taken,
     /// when `points` core points cover the rectangle `within`: its share the polygons' boxes
     /// cover bounds how many of them lie inside (at least 1: narrow areas give every one).
-    pub fn one_in(&self, within: [f64; 4], points: f64, target: u64) -> u64 {
+    pub(crate) fn one_in(&self, within: [f64; 4], points: f64, target: u64) -> u64 {
         ((self.box_share(within) * points / target as f64).ceil() as u64).max(1)
     }
 
     /// Whether the core point of `key` is one of the one in `n` taken ([`Areas::one_in`]): by a
     /// hash of the key (SplitMix64), so the choice has no pattern in space and is the same
     /// whatever the tiles.
-    pub fn takes(key: u64, n: u64) -> bool {
+    pub(crate) fn takes(key: u64, n: u64) -> bool {
         crate::rng::SplitMix64::new(key)
             .next_u64()
             .is_multiple_of(n)
     }
 
     /// [x0, y0, x1, y1] of every polygon.
-    pub fn boxes(&self) -> Vec<[f64; 4]> {
+    pub(crate) fn boxes(&self) -> Vec<[f64; 4]> {
         self.polygons.iter().map(|p| p.bbox).collect()
     }
 
@@ -134,7 +134,7 @@ impl Areas {
     }
 
     /// [`Areas::read`] of a parsed document; the problem in words.
-    pub fn parse(v: &serde_json::Value) -> std::result::Result<Areas, String> {
+    pub(crate) fn parse(v: &serde_json::Value) -> std::result::Result<Areas, String> {
         let kind = v.get("type").and_then(|t| t.as_str()).unwrap_or("");
         let geometries: Vec<(String, &serde_json::Value)> = match kind {
             "FeatureCollection" => v

@@ -5,7 +5,7 @@ use rustc_hash::FxHashMap as HashMap;
 
 /// Boxes [x0, y0, x1, y1] bucketed on a grid of cells the size of the median box: a box covers a
 /// few cells, a cell holds a few boxes.
-pub struct BoxIndex {
+pub(crate) struct BoxIndex {
     origin: [f64; 2],
     cell: f64,
     boxes: Vec<[f64; 4]>,
@@ -13,7 +13,7 @@ pub struct BoxIndex {
 }
 
 impl BoxIndex {
-    pub fn new(boxes: &[[f64; 4]]) -> Self {
+    pub(crate) fn new(boxes: &[[f64; 4]]) -> Self {
         let mut ext: Vec<f64> = boxes
             .iter()
             .map(|b| (b[2] - b[0]).max(b[3] - b[1]))
@@ -50,7 +50,7 @@ impl BoxIndex {
     }
 
     /// The indices of the boxes that contain (x, y) (closed), in the order given.
-    pub fn containing(&self, x: f64, y: f64) -> impl Iterator<Item = usize> + '_ {
+    pub(crate) fn containing(&self, x: f64, y: f64) -> impl Iterator<Item = usize> + '_ {
         self.cells
             .get(&self.key(x, y))
             .map(|v| v.as_slice())
@@ -64,7 +64,7 @@ impl BoxIndex {
     }
 
     /// True when any box overlaps [x0, y0, x1, y1].
-    pub fn any_overlaps(&self, r: &[f64; 4]) -> bool {
+    pub(crate) fn any_overlaps(&self, r: &[f64; 4]) -> bool {
         self.boxes
             .iter()
             .any(|b| b[0] <= r[2] && b[2] >= r[0] && b[1] <= r[3] && b[3] >= r[1])

@@ -69,7 +69,12 @@ impl Columns {
 
     /// [`Columns::new`] over the `n` points `point(0..n)`, whatever their storage (a tile keeps
     /// its coordinates as columns).
-    pub fn from_fn(n: usize, point: impl Fn(usize) -> Point3, origin: Point3, cell: f64) -> Self {
+    pub(crate) fn from_fn(
+        n: usize,
+        point: impl Fn(usize) -> Point3,
+        origin: Point3,
+        cell: f64,
+    ) -> Self {
         assert!(cell > 0.0 && cell.is_finite(), "column width {cell}");
         let local = |i: usize| {
             let p = point(i);
@@ -144,38 +149,23 @@ impl Columns {
         index
     }
 
-    /// Number of indexed points.
-    pub fn len(&self) -> usize {
-        self.points.len()
-    }
-
     /// True when nothing is indexed.
-    pub fn is_empty(&self) -> bool {
+    pub(crate) fn is_empty(&self) -> bool {
         self.points.is_empty()
     }
 
     /// The local origin.
-    pub fn origin(&self) -> Point3 {
+    pub(crate) fn origin(&self) -> Point3 {
         self.origin
     }
 
-    /// The column width actually used.
-    pub fn cell(&self) -> f64 {
-        self.cell
-    }
-
     /// A global point in this index's local frame.
-    pub fn to_local(&self, p: &Point3) -> Point3 {
+    pub(crate) fn to_local(&self, p: &Point3) -> Point3 {
         [
             p[0] - self.origin[0],
             p[1] - self.origin[1],
             p[2] - self.origin[2],
         ]
-    }
-
-    /// Every indexed point (local frame), in column order.
-    pub fn points(&self) -> &[Point3] {
-        &self.points
     }
 
     /// The column index along one axis of a local coordinate, clamped to the grid. Monotone in
@@ -247,8 +237,10 @@ impl Columns {
     /// Call `f(t)` with the position `t = (p − q)·n` along the axis for every point `p` of the
     /// closed cylinder of unit axis `n` through `q` (local frame), radius `r`, extending from
     /// `−h` to `+h` along the axis: |t| ≤ h and |p − q|² − t² ≤ r².
+    /// The plain walk the scans below are tested against.
     #[inline]
-    pub fn for_each_in_cylinder(
+    #[cfg(test)]
+    pub(crate) fn for_each_in_cylinder(
         &self,
         q: &Point3,
         n: &Point3,
@@ -267,7 +259,7 @@ impl Columns {
     /// give, with the exact test's verdict, so that a caller can accumulate without a branch
     /// (the verdicts follow no pattern a branch predictor could learn).
     #[inline]
-    pub fn visit_sphere(&self, q: &Point3, radius: f64, mut f: impl FnMut(Point3, bool)) {
+    pub(crate) fn visit_sphere(&self, q: &Point3, radius: f64, mut f: impl FnMut(Point3, bool)) {
         let r2 = radius * radius;
         self.sphere_candidates(q, radius, |points| {
             for p in points {
@@ -281,7 +273,7 @@ impl Columns {
     /// every point within the sphere is in one of the runs given to `f`, with others that are
     /// not (the caller tests |p − q|² ≤ radius² itself).
     #[inline]
-    pub fn sphere_candidates(&self, q: &Point3, radius: f64, mut f: impl FnMut(&[Point3])) {
+    pub(crate) fn sphere_candidates(&self, q: &Point3, radius: f64, mut f: impl FnMut(&[Point3])) {
         if self.is_empty() || radius.is_nan() || radius < 0.0 {
             return;
         }
@@ -314,10 +306,10 @@ impl Columns {
         }
     }
 
-    /// [`Columns::for_each_in_cylinder`] as a scan: `f(t, inside)` for every candidate, with the
+    /// `for_each_in_cylinder` (the tests' reference) as a scan: `f(t, inside)` for every candidate, with the
     /// exact test's verdict (see [`Columns::visit_sphere`]).
     #[inline]
-    pub fn visit_cylinder(
+    pub(crate) fn visit_cylinder(
         &self,
         q: &Point3,
         n: &Point3,
@@ -334,11 +326,11 @@ impl Columns {
         })
     }
 
-    /// The candidates of the cylinder of [`Columns::for_each_in_cylinder`], a column's run at a
+    /// The candidates of the cylinder of `for_each_in_cylinder` (the tests' reference), a column's run at a
     /// time: every point [`in_cylinder`] accepts is in one of the runs given to `f`, with others
     /// it rejects.
     #[inline]
-    pub fn cylinder_candidates(
+    pub(crate) fn cylinder_candidates(
         &self,
         q: &Point3,
         n: &Point3,
@@ -471,7 +463,7 @@ mod tests {
         for (s, pts) in shapes.iter().enumerate() {
             for cell in [0.1, 0.37, 1.0, 10.0] {
                 let idx = Columns::new(pts, [0.5, -0.25, 0.0], cell);
-                assert_eq!(idx.len(), pts.len());
+                assert_eq!(idx.points.len(), pts.len());
                 for (k, n) in axes.iter().enumerate() {
                     let q = idx.to_local(&pts[k * 97]);
                     let q = [q[0] + 0.03, q[1] - 0.02, q[2] + 0.01];
@@ -534,7 +526,7 @@ mod tests {
             pts.push([1.0 + 0.5 * off, 0.5, 999.0 + 0.02 * k as f64]);
         }
         let idx = Columns::new(&pts, [0.0; 3], 1.0);
-        assert_eq!(idx.cell(), 1.0);
+        assert_eq!(idx.cell, 1.0);
         for k in 0..40 {
             let q = [1.0 - 0.25 * k as f64 * 1e-6, 0.5, 0.0];
             let n = [0.0, 0.0, 1.0];
@@ -565,7 +557,7 @@ mod tests {
         let empty = Columns::new(&[], [0.0; 3], 0.5);
         // A subnormal width (the parameters forbid it; the index must still not hang).
         let line = Columns::new(&[[0.0; 3], [1.0, 0.0, 0.0]], [0.0; 3], 5e-324);
-        assert!(line.cell() > 0.0 && line.dims[0] * line.dims[1] <= 4);
+        assert!(line.cell > 0.0 && line.dims[0] * line.dims[1] <= 4);
         idx.for_each_in_cylinder(&[0.0; 3], &[0.0, 0.0, 1.0], 1.0, 1.0, |_| n += 1);
         empty.for_each_in_cylinder(&[0.0; 3], &[0.0, 0.0, 1.0], 1.0, 1.0, |_| n += 1);
         empty.for_each_within(&[0.0; 3], 1.0, |_| n += 1);

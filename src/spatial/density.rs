@@ -9,7 +9,7 @@ use crate::geom::{Bounds, Point3};
 
 /// Cells along the bounds' longer side: a square's count is bounded within about 1/CELLS of the
 /// bounds' extent per side, with 1 MiB of counts.
-pub const CELLS: usize = 512;
+pub(crate) const CELLS: usize = 512;
 
 /// Points per XY cell.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
@@ -24,7 +24,7 @@ pub struct DensityGrid {
 
 impl DensityGrid {
     /// An empty grid over `bounds`.
-    pub fn new(bounds: &Bounds) -> DensityGrid {
+    pub(crate) fn new(bounds: &Bounds) -> DensityGrid {
         let w = (bounds.max[0] - bounds.min[0]).max(0.0);
         let h = (bounds.max[1] - bounds.min[1]).max(0.0);
         let cell = (w.max(h) / CELLS as f64).max(1e-9);
@@ -41,7 +41,7 @@ impl DensityGrid {
     }
 
     /// Count `points` (points outside the bounds count in the nearest cell).
-    pub fn add(&mut self, points: &[Point3]) {
+    pub(crate) fn add(&mut self, points: &[Point3]) {
         let inv = 1.0 / self.cell;
         let (cmax, rmax) = (self.cols - 1, self.rows - 1);
         for p in points {
@@ -54,14 +54,14 @@ impl DensityGrid {
     }
 
     /// Points counted.
-    pub fn total(&self) -> u64 {
+    pub(crate) fn total(&self) -> u64 {
         self.total
     }
 
     /// The most points an axis-aligned square of side `side` can hold, wherever it is placed:
     /// the largest count over windows of ⌈side / cell⌉ + 1 cells (such a square meets at most
     /// that many cells a side), so never less than the truth.
-    pub fn densest(&self, side: f64) -> u64 {
+    pub(crate) fn densest(&self, side: f64) -> u64 {
         let k = ((side / self.cell).ceil().max(0.0) as usize).saturating_add(1);
         let (kc, kr) = (k.min(self.cols), k.min(self.rows));
         // Prefix sums: s[(r, c)] = points in cells [0, r) × [0, c).

@@ -6,7 +6,7 @@ use crate::geom::Point3;
 
 /// Cells of `cell` width from `corner`, `dims[0]` × `dims[1]` of them.
 #[derive(Debug, Clone, Copy)]
-pub struct XyGrid {
+pub(crate) struct XyGrid {
     pub corner: [f64; 2],
     pub cell: f64,
     pub dims: [usize; 2],
@@ -15,7 +15,7 @@ pub struct XyGrid {
 impl XyGrid {
     /// The grid over `points` (NaN coordinates ignored; none: one cell at the origin) with cells
     /// at least `cell` wide and at most about `most` of them.
-    pub fn fit(points: impl Iterator<Item = Point3>, cell: f64, most: usize) -> Self {
+    pub(crate) fn fit(points: impl Iterator<Item = Point3>, cell: f64, most: usize) -> Self {
         let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
         let mut any = false;
         for p in points {

@@ -25,7 +25,7 @@ impl Index {
     }
 
     /// Index points already expressed relative to `origin`.
-    pub fn from_local(points: Vec<Point3>, origin: Point3) -> Self {
+    pub(crate) fn from_local(points: Vec<Point3>, origin: Point3) -> Self {
         // kiddo refuses an empty slice; an index over nothing answers every query with nothing.
         let tree = if points.is_empty() {
             ImmutableKdTree::new_from_slice(&[[f64::MAX; 3]]).expect("one point always builds")
@@ -41,23 +41,8 @@ impl Index {
         }
     }
 
-    /// Number of indexed points.
-    pub fn len(&self) -> usize {
-        self.points.len()
-    }
-
-    /// True when nothing is indexed.
-    pub fn is_empty(&self) -> bool {
-        self.points.is_empty()
-    }
-
-    /// The local origin.
-    pub fn origin(&self) -> Point3 {
-        self.origin
-    }
-
     /// The indexed points, local coordinates.
-    pub fn points(&self) -> &[Point3] {
+    pub(crate) fn points(&self) -> &[Point3] {
         &self.points
     }
 
@@ -86,7 +71,7 @@ impl Index {
 
     /// The nearest point to `q` (local frame) as (index, squared distance); None when nothing is
     /// indexed. No allocation (a per-point lookup of the volume gather).
-    pub fn nearest_one(&self, q: &Point3) -> Option<(usize, f64)> {
+    pub(crate) fn nearest_one(&self, q: &Point3) -> Option<(usize, f64)> {
         if self.points.is_empty() {
             return None;
         }
@@ -115,32 +100,4 @@ impl Index {
         out.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
         out
     }
-}
-
-/// Median nearest-neighbour distance among `points` (each point's nearest *other* point).
-/// Returns None for fewer than two points.
-pub fn median_nn_distance(points: &[Point3]) -> Option<f64> {
-    if points.len() < 2 {
-        return None;
-    }
-    let origin = points[0];
-    let index = Index::new(points, origin);
-    let mut d: Vec<f64> = index
-        .points()
-        .iter()
-        .map(|p| {
-            index
-                .nearest(p, 2)
-                .get(1)
-                .map(|x| x.1.sqrt())
-                .unwrap_or(f64::NAN)
-        })
-        .filter(|x| x.is_finite())
-        .collect();
-    if d.is_empty() {
-        return None;
-    }
-    let mid = d.len() / 2;
-    let (_, m, _) = d.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
-    Some(*m)
 }

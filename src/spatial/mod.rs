@@ -5,10 +5,10 @@
 //!   (spacing, smoothing, DBSCAN, volumes).
 //! - [`Columns`]: a grid of vertical point columns sorted by height, for the two queries M3C2 makes
 //!   at every core point: a sphere (normals) and a cylinder along an arbitrary axis.
-//! - [`BoxIndex`]: which of many xy boxes contain a point (events' search boxes and claims).
-//! - [`DensityGrid`]: points per XY cell of a survey, and its densest square (tile sizes).
-//! - [`Pairs`]: the pairs of points within a distance (the stable ground's variogram).
-//! - [`Tubes`]: which of many long thin cylinders hold a point (M3C2's walk across tiles).
+//! - `BoxIndex`: which of many xy boxes contain a point (events' search boxes and claims).
+//! - `DensityGrid`: points per XY cell of a survey, and its densest square (tile sizes).
+//! - `Pairs`: the pairs of points within a distance (the stable ground's variogram).
+//! - `Tubes`: which of many long thin cylinders hold a point (M3C2's walk across tiles).
 //! - [`areas::Areas`]: the user's stable areas (`--stable`), polygons and point-in-polygon.
 
 pub mod areas;
@@ -20,9 +20,9 @@ mod kdtree;
 mod pairs;
 mod tubes;
 
-pub use boxes::BoxIndex;
+pub(crate) use boxes::BoxIndex;
 pub use columns::{in_cylinder, Columns};
-pub use density::DensityGrid;
-pub use kdtree::{median_nn_distance, Index};
-pub use pairs::Pairs;
-pub use tubes::Tubes;
+pub(crate) use density::DensityGrid;
+pub use kdtree::Index;
+pub(crate) use pairs::Pairs;
+pub(crate) use tubes::Tubes;

@@ -11,7 +11,7 @@ use super::grid::XyGrid;
 use crate::geom::Point3;
 
 /// Points bucketed by xy cell, with their positions in the caller's slice.
-pub struct Pairs {
+pub(crate) struct Pairs {
     reach2: f64,
     cell: f64,
     corner: [f64; 2],
@@ -29,7 +29,7 @@ pub struct Pairs {
 impl Pairs {
     /// Bucket `points` for the pairs within `reach` of each other (3-D distance, boundary
     /// included).
-    pub fn new(points: &[Point3], reach: f64) -> Self {
+    pub(crate) fn new(points: &[Point3], reach: f64) -> Self {
         assert!(points.len() < u32::MAX as usize, "{} points", points.len());
         let origin = points.first().copied().unwrap_or([0.0; 3]);
         let local: Vec<Point3> = points
@@ -79,7 +79,12 @@ impl Pairs {
     /// `f(b, squared distance)` for every point `b > a` within the reach of point `a` (positions
     /// in the slice given to [`Pairs::new`]), in a fixed order. `found` is scratch space (kept
     /// between calls: no allocation per point).
-    pub fn after(&self, a: usize, found: &mut Vec<(u32, f64)>, mut f: impl FnMut(usize, f64)) {
+    pub(crate) fn after(
+        &self,
+        a: usize,
+        found: &mut Vec<(u32, f64)>,
+        mut f: impl FnMut(usize, f64),
+    ) {
         let q = self.points[self.place[a] as usize];
         let c = self.cell_of(&q);
         let (ci, cj) = (c % self.dims[0], c / self.dims[0]);

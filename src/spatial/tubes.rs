@@ -26,7 +26,7 @@ struct Tube {
 }
 
 /// Tubes of one radius, indexed by the cells their axes cross.
-pub struct Tubes {
+pub(crate) struct Tubes {
     r: f64,
     cell: f64,
     origin: Point3,
@@ -40,7 +40,7 @@ pub struct Tubes {
 impl Tubes {
     /// Tubes of radius `r` along the unit axes `n` through `q`, from t = lo to t = hi:
     /// `(q, n, lo, hi)` each.
-    pub fn new(axes: &[(Point3, Point3, f64, f64)], r: f64) -> Tubes {
+    pub(crate) fn new(axes: &[(Point3, Point3, f64, f64)], r: f64) -> Tubes {
         let total: f64 = axes.iter().map(|a| (a.3 - a.2).abs()).sum();
         let cell = (2.0 * r)
             .max(2.0 * total / MAX_ENTRIES)
@@ -85,7 +85,7 @@ impl Tubes {
 
     /// Does any tube hold `p` (its radius widened by `slack`, for the roundings of callers that
     /// test again exactly)?
-    pub fn any_holds(&self, p: &Point3, slack: f64) -> bool {
+    pub(crate) fn any_holds(&self, p: &Point3, slack: f64) -> bool {
         if (0..3).any(|a| p[a] < self.min[a] - slack || p[a] > self.max[a] + slack) {
             return false;
         }
@@ -113,7 +113,7 @@ impl Tubes {
     }
 
     /// The xy bounds of every tube: [x0, y0, x1, y1].
-    pub fn xy_bounds(&self) -> [f64; 4] {
+    pub(crate) fn xy_bounds(&self) -> [f64; 4] {
         [self.min[0], self.min[1], self.max[0], self.max[1]]
     }
 }

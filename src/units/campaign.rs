@@ -648,7 +648,7 @@ fn write_timeseries(ctx: &Ctx, out: &mut UnitWriter, crs: &io::CloudInfo) -> Res
     let parquet_columns = plan.pairs.len() + 3;
     let _held = ctx.reserve(
         (parquet_columns * super::scratch::BUFFER) as u64
-            + (8 << 20)
+            + crate::memory::IO_HEADROOM
             + parquet_out::memory_need(parquet_columns, n),
         "the time series (every pair's column, then the Parquet a column at a time)",
     )?;

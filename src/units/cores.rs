@@ -129,7 +129,7 @@ fn cut(ctx: &Ctx, out: &mut UnitWriter) -> Result<CoresMeta> {
     if total * CORE_POINT_BYTES <= share {
         // All of them fit: one pass.
         let _held = ctx.reserve(
-            total * CORE_POINT_BYTES + (4 << 20),
+            total * CORE_POINT_BYTES + crate::memory::HEADROOM,
             &format!("{total} core points of {}", input.path.display()),
         )?;
         let mut by_tile: Vec<Vec<(u64, Point3)>> = vec![Vec::new(); grid.len()];
@@ -159,7 +159,7 @@ fn cut(ctx: &Ctx, out: &mut UnitWriter) -> Result<CoresMeta> {
             end += 1;
         }
         let _held = ctx.reserve(
-            points * CORE_POINT_BYTES + (4 << 20),
+            points * CORE_POINT_BYTES + crate::memory::HEADROOM,
             &format!("{points} core points of {}", input.path.display()),
         )?;
         let mut by_tile: Vec<Vec<(u64, Point3)>> = vec![Vec::new(); end - start];
@@ -193,7 +193,7 @@ fn thin(ctx: &Ctx, survey: usize, out: &mut UnitWriter) -> Result<CoresMeta> {
             .point_count;
         // The tile as read (25 bytes a point), its file's bytes, the thinning's cells.
         let _held = ctx.reserve(
-            count * 64 + (4 << 20),
+            count * 64 + crate::memory::HEADROOM,
             &format!("thinning tile {} ({count} points)", id.name()),
         )?;
         let t = read_tile(ctx, tiling, id)?;

@@ -349,7 +349,7 @@ pub fn for_each_frame_near(
 ) -> Result<()> {
     let path = ctx.input(tiling, &tiling::tile_file(id))?;
     let mut frames = talus_tiling::TileFrames::open(&path).map_err(|e| damaged(&path, e))?;
-    let want = |b: &talus_tiling::Bounds3| reaches(b, boxes);
+    let want = |b: &crate::geom::Bounds| reaches(b, boxes);
     while let Some(cols) = frames
         .next_frame_where(&want)
         .map_err(|e| damaged(&path, e))?
@@ -360,7 +360,7 @@ pub fn for_each_frame_near(
 }
 
 /// Do bounds `b` reach one of `boxes` ([x0, y0, x1, y1] each) in plan?
-pub fn reaches(b: &talus_tiling::Bounds3, boxes: &[[f64; 4]]) -> bool {
+pub fn reaches(b: &crate::geom::Bounds, boxes: &[[f64; 4]]) -> bool {
     boxes
         .iter()
         .any(|w| b.min[0] <= w[2] && w[0] <= b.max[0] && b.min[1] <= w[3] && w[1] <= b.max[1])

@@ -153,7 +153,7 @@ impl Stage for OrientStage {
                 continue;
             }
             let _held = ctx.reserve(
-                n * BYTES_PER_POINT + (4 << 20),
+                n * BYTES_PER_POINT + crate::memory::HEADROOM,
                 &format!("the orientation field: tile {} ({n} points)", id.name()),
             )?;
             let t = read_tile(ctx, tiling, id)?;

@@ -64,7 +64,7 @@ impl Stage for SeriesStage {
     fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<SeriesMeta> {
         let pair = ctx.pair(unit)?;
         let _held = ctx.reserve(
-            super::merged::pair_merge_need(ctx.plan) + (8 << 20),
+            super::merged::pair_merge_need(ctx.plan) + crate::memory::IO_HEADROOM,
             "a pair's column of the time series (its merge)",
         )?;
         let path = out.path(FILE)?;

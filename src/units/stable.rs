@@ -104,7 +104,7 @@ impl Stage for StableStage {
 /// inputs (`merged::merge_inputs`). Fixed: at most SAMPLES and FAN_IN runs, which the smallest
 /// budget holds (`memory::MIN_BUDGET`'s test), so no budget talus accepts refuses it.
 pub fn need(most: u64, inputs: usize) -> u64 {
-    most * BYTES_PER_SAMPLE + (8 << 20) + super::m3c2::merge_need(inputs)
+    most * BYTES_PER_SAMPLE + crate::memory::IO_HEADROOM + super::m3c2::merge_need(inputs)
 }
 
 /// The key part of the user's stable areas: their file's content key, or `auto`.

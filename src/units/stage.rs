@@ -393,7 +393,7 @@ impl Planner<'_> {
             .ok_or_else(|| Error::Internal(format!("no unit {spec:?} planned before")))
     }
 
-    /// Add a unit (see [`Plan::push`]); the unit of `spec` if it is planned already (a survey
+    /// Add a unit (see `Plan::push`); the unit of `spec` if it is planned already (a survey
     /// tiled once serves every pair it is in).
     pub fn add(&mut self, spec: Spec, label: &str, key_parts: &[&str], deps: Vec<usize>) -> usize {
         if let Some(i) = self.find(&spec) {

@@ -28,7 +28,7 @@ pub const SPLIT_BUDGET_SHARE: u64 = 8;
 /// Measured: 115–120 MiB at a 300 MiB budget (37.5 MiB of buffers), i.e. about 2 × the buffers
 /// more; counted as that plus a fixed part.
 pub fn need(buffers: u64) -> u64 {
-    3 * buffers + (8 << 20)
+    3 * buffers + crate::memory::IO_HEADROOM
 }
 
 /// Bytes of a tiling unit's splitter buffers under the plan's memory budget.

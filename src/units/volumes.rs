@@ -77,7 +77,7 @@ fn event_need(boxes: &[SearchBox], points: [&[Point3]; 2], margin: f64, spacing:
         })
         .max()
         .unwrap_or(0)
-        + (4 << 20)
+        + crate::memory::HEADROOM
 }
 
 /// The mesh files of event `id`: (before, after).
@@ -189,8 +189,8 @@ fn near_members(
         expected.insert(d.event.id, d.event.n_points);
         boxes.push(plan_box(&d.event.obb));
     }
-    let reached = |b: &talus_tiling::Bounds3| super::reaches(b, &boxes);
-    let read = |want: &dyn Fn(&talus_tiling::Bounds3) -> bool| {
+    let reached = |b: &crate::geom::Bounds| super::reaches(b, &boxes);
+    let read = |want: &dyn Fn(&crate::geom::Bounds) -> bool| {
         let mut members: HashMap<u32, Vec<Kept>> = HashMap::default();
         let mut kept = super::events::KeptFrames::open(ctx, pair)?;
         while let Some(rows) = kept.next_frame_where(want)? {
@@ -520,7 +520,7 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
             spacing,
         };
         // Gathered tile by tile, the points come in an order that depends on the tiling;
-        // `volume::epoch_local` sorts what it triangulates, so the volumes do not.
+        // `volume::local_in` sorts what it triangulates, so the volumes do not.
         // One event at a time, each with its reservation (the triangulations, grids and solids of
         // a large event are most of the unit's memory); each event's own work is parallel.
         for (i, d) in mine.iter().enumerate() {

@@ -172,20 +172,9 @@ const WALL_REACH_SPACINGS: f64 = BAND_MARGIN_SPACINGS + 5.0;
 /// one a pair per band (their walls on the seams face each other).
 pub type Solids<'a> = &'a mut dyn FnMut([Mesh; 2]) -> Result<()>;
 
-/// One epoch's (global) points in the event frame, over `r`: points beyond `r` grown by 3
-/// spacings are dropped. The points may come in any order (a tiled run gathers them tile by
-/// tile): they are sorted, because the triangulation of ties (points sharing u, v) depends on
-/// the insertion order.
-pub fn epoch_local(
-    frame: &Frame,
-    r: &Footprint,
-    points: &[[f64; 3]],
-    spacing: f64,
-) -> Vec<[f64; 3]> {
-    local_in(frame, &r.grown(3.0 * spacing), points)
-}
-
-/// The points (global) inside `keep` in the event frame, sorted.
+/// The points (global) inside `keep` in the event frame, sorted. The points may come in any
+/// order (a tiled run gathers them tile by tile): they are sorted, because the triangulation of
+/// ties (points sharing u, v) depends on the insertion order.
 fn local_in(frame: &Frame, keep: &Footprint, points: &[[f64; 3]]) -> Vec<[f64; 3]> {
     let mut local: Vec<[f64; 3]> = points
         .iter()

@@ -7,9 +7,10 @@
 //! returns, coordinates quantised the way LAS stores them (integers × 0.001 + offset).
 
 use std::time::Instant;
+use talus_base::rng::SplitMix64;
 use talus_tiling::{
-    read_tile, write_tile_with, BoundsXY, Quantisation, SplitMix64, TileColumns, TileGrid,
-    TileSplitter, WriteOptions,
+    read_tile, write_tile_with, BoundsXY, Quantisation, TileColumns, TileGrid, TileSplitter,
+    WriteOptions,
 };
 
 const SCALE: [f64; 3] = [0.001, 0.001, 0.001];

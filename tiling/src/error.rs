@@ -49,9 +49,15 @@ impl Error {
             problem: problem.into(),
         }
     }
+}
 
-    /// True for damage the caller should repair by rebuilding the unit.
-    pub fn is_corrupt(&self) -> bool {
-        matches!(self, Error::Corrupt { .. })
+/// A tiling error as talus's: a file it could not write is an output error naming the file; the
+/// rest are ours. (A damaged tile file read back is `Error::Damaged`: see `talus::units::damaged`.)
+impl From<Error> for talus_base::Error {
+    fn from(e: Error) -> talus_base::Error {
+        match e {
+            Error::Io { path, source } => talus_base::Error::output(path, source),
+            other => talus_base::Error::Internal(other.to_string()),
+        }
     }
 }

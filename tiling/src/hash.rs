@@ -45,11 +45,6 @@ impl Fnv64 {
         self.write(&v.to_le_bytes())
     }
 
-    /// Feed an f64 by its bit pattern (so 0.1 always hashes the same; -0.0 differs from 0.0).
-    pub fn write_f64(&mut self, v: f64) -> &mut Self {
-        self.write_u64(v.to_bits())
-    }
-
     /// Feed a string, prefixed by its byte length.
     pub fn write_str(&mut self, s: &str) -> &mut Self {
         self.write_u64(s.len() as u64);

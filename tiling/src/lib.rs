@@ -9,17 +9,15 @@
 //!
 //! Modules: [`grid`] (tile geometry and planning), [`tile_file`] (compact checksummed tile files,
 //! [`framed`] among them), [`splitter`] (stream points into tiles with bounded memory),
-//! [`atomic`] (crash-safe file replacement), [`hash`] (stable 64-bit keys) and [`rng`] (a
-//! reproducible random stream).
+//! [`atomic`] (crash-safe file replacement) and [`hash`] (stable 64-bit keys).
 //!
-//! This crate does not depend on the root `talus` crate; its [`Error`] carries the path and the
-//! problem so the caller can map it onto `talus::Error`.
+//! This crate depends on `talus-base` alone (its bounds type, and the error its own [`Error`]
+//! converts into); its [`Error`] carries the path and the problem.
 
 pub mod atomic;
 pub mod error;
 pub mod grid;
 pub mod hash;
-pub mod rng;
 pub mod splitter;
 pub mod tile_file;
 
@@ -27,11 +25,10 @@ pub use atomic::{atomic_write, atomic_write_with, AtomicFile};
 pub use error::{Error, Result};
 pub use grid::{BoundsXY, TileGrid, TileId};
 pub use hash::{hash64, Fnv64};
-pub use rng::SplitMix64;
 pub use splitter::{empty_columns, tile_path, TileSplitter, OWNED_COLUMN};
 pub use tile_file::framed;
 pub use tile_file::{
     encode_tile, read_tile, read_tile_frames, read_tile_header, write_tile, write_tile_with,
-    Bounds3, Column, ColumnData, FileDigest, Quantisation, TileColumns, TileFrames, TileHeader,
+    Column, ColumnData, FileDigest, Quantisation, TileColumns, TileFrames, TileHeader,
     WriteOptions,
 };

@@ -57,7 +57,6 @@ pub struct TileSplitter {
     /// One buffer and one file per tile, indexed by [`TileGrid::index`].
     buffers: Vec<Buffer>,
     files: Vec<Framed>,
-    buffered_bytes: u64,
 }
 
 impl TileSplitter {
@@ -98,7 +97,6 @@ impl TileSplitter {
             opts: WriteOptions::default(),
             buffers: (0..n).map(|_| Buffer::default()).collect(),
             files,
-            buffered_bytes: 0,
         })
     }
 
@@ -118,11 +116,6 @@ impl TileSplitter {
         &self.grid
     }
 
-    /// Bytes currently allocated by the buffers (what the budget bounds).
-    pub fn buffered_bytes(&self) -> u64 {
-        self.buffered_bytes
-    }
-
     /// Route points to their tiles (in order), writing a frame whenever a tile's buffer is full.
     /// Points outside the grid go where [`TileGrid::owner`] clamps them (NaN x or y counts as the
     /// grid's min edge); callers should drop non-finite points before pushing.
@@ -140,7 +133,6 @@ impl TileSplitter {
                         b.y.reserve_exact(frame);
                         b.z.reserve_exact(frame);
                         b.owned.reserve_exact(frame);
-                        self.buffered_bytes += frame as u64 * BYTES_PER_POINT;
                     }
                     b.x.push(p[0]);
                     b.y.push(p[1]);
@@ -224,5 +216,25 @@ pub fn empty_columns() -> TileColumns {
             data: ColumnData::U8(Vec::new()),
         }],
         ..TileColumns::default()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every tile's buffer at once (a frame each, the most a split holds) fits the budget.
+    #[test]
+    fn all_buffers_fit_the_budget() {
+        for (budget, tiles) in [
+            (4096, 60),
+            (50_000, 60),
+            (300_000, 60),
+            (10_000, 1),
+            (1 << 30, 7),
+        ] {
+            let held = frame_points(budget, tiles) as u64 * BYTES_PER_POINT * tiles as u64;
+            assert!(held <= budget, "{held} > {budget} for {tiles} tiles");
+        }
     }
 }

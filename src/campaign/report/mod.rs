@@ -18,7 +18,7 @@
 //!    (`map.rs`).
 //!
 //! The charts share `chart.rs` (their colours, axes, ticks); every number and escaped string is
-//! written by `text.rs`, and dates are [`crate::campaign::date::Date`].
+//! written by `text.rs`, and dates are `crate::campaign::date::Date`.
 //!
 //! Colours: the viewer's convention (its distance ramp, ColorBrewer RdBu): gain red (#b2182b),
 //! loss blue (#2166ac), a diverging pair readers with any common colour-vision deficiency tell

@@ -39,7 +39,7 @@
 
 use nalgebra::{Matrix6, SymmetricEigen, Vector3, Vector6};
 
-use super::stable::Sample;
+use super::stable::{median, Sample};
 use crate::geom::Point3;
 
 pub mod holdout;
@@ -306,16 +306,6 @@ fn row(s: &Sample, o: &Vector3<f64>, scale: f64) -> Vector6<f64> {
     let c = Vector3::from(s.xyz) - o;
     let r = c.cross(&n) / scale;
     Vector6::new(r[0], r[1], r[2], n[0], n[1], n[2])
-}
-
-/// The median of `v` (NaN-free), reordering it.
-fn median(v: &mut [f64]) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    let k = v.len() / 2;
-    let (_, m, _) = v.select_nth_unstable_by(k, |a, b| a.total_cmp(b));
-    *m
 }
 
 /// The vertical shift alone over `idx` (least squares of d = n_z t_z), as the six-parameter

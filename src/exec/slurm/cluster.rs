@@ -14,11 +14,11 @@ use crate::error::{Error, Result};
 /// A Slurm job state as squeue's `%T` prints it (PENDING, RUNNING, COMPLETED, FAILED, CANCELLED,
 /// TIMEOUT, OUT_OF_MEMORY, NODE_FAIL, …).
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct TaskState(pub String);
+pub(crate) struct TaskState(pub String);
 
 impl TaskState {
     /// Not ended yet (queued, running, completing, suspended, requeued, …).
-    pub fn is_active(&self) -> bool {
+    pub(crate) fn is_active(&self) -> bool {
         !matches!(
             self.0.as_str(),
             "COMPLETED"
@@ -35,12 +35,12 @@ impl TaskState {
         )
     }
 
-    pub fn is_completed(&self) -> bool {
+    pub(crate) fn is_completed(&self) -> bool {
         self.0 == "COMPLETED"
     }
 
     /// Waiting in the queue (for resources, or for its dependency).
-    pub fn is_pending(&self) -> bool {
+    pub(crate) fn is_pending(&self) -> bool {
         self.0 == "PENDING"
     }
 }
@@ -53,7 +53,7 @@ impl std::fmt::Display for TaskState {
 
 /// What squeue says of one array task.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct JobState {
+pub(crate) struct JobState {
     pub state: TaskState,
     /// squeue's `%r`: Dependency, DependencyNeverSatisfied, TimeLimit, NonZeroExitCode, None, …
     pub reason: String,
@@ -63,7 +63,7 @@ pub struct JobState {
 
 /// Slurm could not be asked (no squeue on PATH, no controller).
 #[derive(Debug)]
-pub struct Unavailable(pub String);
+pub(crate) struct Unavailable(pub String);
 
 fn squeue(ids: &str) -> std::result::Result<std::process::Output, Unavailable> {
     Command::new("squeue")
@@ -90,7 +90,9 @@ fn parse(text: &str, into: &mut HashMap<String, JobState>) {
 
 /// The state of every task Slurm still knows of arrays `ids`, by `<array>_<task>`. A job id
 /// slurmctld has forgotten (or never had) is simply absent.
-pub fn states(ids: &[String]) -> std::result::Result<HashMap<String, JobState>, Unavailable> {
+pub(crate) fn states(
+    ids: &[String],
+) -> std::result::Result<HashMap<String, JobState>, Unavailable> {
     let mut out = HashMap::new();
     if ids.is_empty() {
         return Ok(out);
@@ -119,7 +121,7 @@ pub fn states(ids: &[String]) -> std::result::Result<HashMap<String, JobState>, 
 
 /// Submit every array of `sub` (scripts in `dir`), each `afterok` on the previous one; their job
 /// ids. If an sbatch fails, the arrays already submitted are cancelled: no half chain is left.
-pub fn submit_chain(dir: &Path, sub: &Submission) -> Result<Vec<String>> {
+pub(crate) fn submit_chain(dir: &Path, sub: &Submission) -> Result<Vec<String>> {
     let mut ids: Vec<String> = Vec::new();
     for k in 0..sub.stages.len() {
         let args = sbatch_args(sub, k, ids.last().map(String::as_str));

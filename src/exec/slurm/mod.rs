@@ -24,11 +24,11 @@
 //! it, and the publishing job takes it when it runs (waiting while the submitter still holds it).
 
 mod cluster;
-pub mod record;
-pub mod scaling;
+pub(crate) mod record;
+pub(crate) mod scaling;
 mod scripts;
-pub mod status;
-pub mod task;
+pub(crate) mod status;
+pub(crate) mod task;
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -40,13 +40,11 @@ use crate::store::{Lock, Store};
 use crate::units::stage::{registry, Registered, Scope};
 use crate::units::unit_ref;
 
-pub use cluster::TaskState;
-
 /// The name of the last job, which publishes the outputs.
-pub const PUBLISH: &str = "publish";
+pub(crate) const PUBLISH: &str = "publish";
 
 /// At most this many tasks in one array (Slurm's default MaxArraySize is 1001: indices 0..=1000).
-pub const MAX_TASKS: usize = 1000;
+pub(crate) const MAX_TASKS: usize = 1000;
 
 /// How `--executor slurm` runs.
 #[derive(Debug, Clone)]
@@ -74,18 +72,18 @@ impl Default for Options {
 
 /// One stage of a submission: the units (plan indices) of each array task.
 #[derive(Debug, Clone, PartialEq)]
-pub struct StagePlan {
+pub(crate) struct StagePlan {
     pub kind: &'static str,
     pub tasks: Vec<Vec<usize>>,
 }
 
 /// The stages in pipeline order (the registry's), each one job array.
-pub fn stage_order() -> impl Iterator<Item = &'static dyn Registered> {
+pub(crate) fn stage_order() -> impl Iterator<Item = &'static dyn Registered> {
     registry().stages().iter().copied()
 }
 
 /// The rank of a store kind in pipeline order.
-pub fn rank(kind: &str) -> Option<usize> {
+pub(crate) fn rank(kind: &str) -> Option<usize> {
     registry().rank(kind)
 }
 
@@ -93,7 +91,7 @@ pub fn rank(kind: &str) -> Option<usize> {
 /// in tasks of `tiles_per_task` (tile stages) or one (the others), at most [`MAX_TASKS`] tasks
 /// (more units per task when there are more). An error if a unit depends on a unit of its own or
 /// a later stage (the stages would not be a valid order).
-pub fn stages(plan: &Plan, done: &[bool], tiles_per_task: usize) -> Result<Vec<StagePlan>> {
+pub(crate) fn stages(plan: &Plan, done: &[bool], tiles_per_task: usize) -> Result<Vec<StagePlan>> {
     let ranks: Vec<usize> = plan
         .units
         .iter()
@@ -132,7 +130,7 @@ pub fn stages(plan: &Plan, done: &[bool], tiles_per_task: usize) -> Result<Vec<S
 /// Split `--slurm-args` like a POSIX shell would (blanks separate words; single quotes keep
 /// everything, double quotes everything but `\"` and `\\`, a backslash outside quotes keeps the
 /// next character). No expansion of any kind.
-pub fn split_args(s: &str) -> Result<Vec<String>> {
+pub(crate) fn split_args(s: &str) -> Result<Vec<String>> {
     let mut words = Vec::new();
     let mut cur = String::new();
     let mut in_word = false;
@@ -199,7 +197,7 @@ fn unclosed(s: &str) -> Error {
 /// Refuse to go on while jobs of DIR's latest Slurm submission are queued or running (they would
 /// compute beside this run, or on units `--force` throws away). Without Slurm's client commands
 /// on this machine, or with no submission in DIR, there is nothing to check.
-pub fn check_idle(store: &Store) -> Result<()> {
+pub(crate) fn check_idle(store: &Store) -> Result<()> {
     let Some((n, _sub, Some(jobs))) = record::latest(store)? else {
         return Ok(());
     };
@@ -246,7 +244,7 @@ pub fn check_idle(store: &Store) -> Result<()> {
 /// their job ids (stdout: one `stage job tasks` line each), release DIR's lock, and with `wait`
 /// follow the jobs until the last one ends. Returns the marker's path once the outputs are
 /// published (every unit was done already, or `wait` and the run succeeded), None otherwise.
-pub fn run(
+pub(crate) fn run(
     store: &Store,
     plan: &Plan,
     opts: &Options,
@@ -385,7 +383,7 @@ fn wait(store: &Store, sub: &record::Submission, ids: &[String]) -> Result<()> {
 }
 
 /// The absolute form of `dir` (scripts and tasks run elsewhere: no relative paths).
-pub fn absolute(dir: &Path) -> Result<PathBuf> {
+pub(crate) fn absolute(dir: &Path) -> Result<PathBuf> {
     std::fs::canonicalize(dir).map_err(|e| Error::output(dir, e))
 }
 

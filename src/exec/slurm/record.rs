@@ -22,7 +22,7 @@ use crate::store::Store;
 
 /// One submission's `submission.json`.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-pub struct Submission {
+pub(crate) struct Submission {
     pub number: u32,
     /// The plan's run id.
     pub run: String,
@@ -46,7 +46,7 @@ pub struct Submission {
 
 /// One array of a submission.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-pub struct StageRecord {
+pub(crate) struct StageRecord {
     /// A stage's kind (`super::stage_order`), or [`PUBLISH`].
     pub kind: String,
     /// Its sbatch script, in the submission's directory.
@@ -57,13 +57,13 @@ pub struct StageRecord {
 
 /// `jobs.json`: the job id of each array, in the order of [`Submission::stages`].
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-pub struct Jobs {
+pub(crate) struct Jobs {
     pub ids: Vec<String>,
 }
 
 /// What one task reports about itself (`tasks/<stage>-<i>.json`).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
-pub struct TaskReport {
+pub(crate) struct TaskReport {
     /// `running`, `done`, `failed` or `interrupted` (SIGTERM: scancel, time limit).
     pub state: String,
     /// `SLURM_ARRAY_JOB_ID`_`SLURM_ARRAY_TASK_ID` and the task's own `SLURM_JOB_ID`.
@@ -79,18 +79,18 @@ pub struct TaskReport {
 }
 
 /// `DIR/.talus/slurm`.
-pub fn root(store: &Store) -> PathBuf {
+pub(crate) fn root(store: &Store) -> PathBuf {
     store.work().join("slurm")
 }
 
 /// The directory of submission `n`.
-pub fn dir(store: &Store, n: u32) -> PathBuf {
+pub(crate) fn dir(store: &Store, n: u32) -> PathBuf {
     root(store).join(n.to_string())
 }
 
 /// [`dir`], refused when a link lies on the way to it or to its `tasks/` and `logs/` (what its
 /// tasks read and write must stay inside DIR).
-pub fn checked_dir(store: &Store, n: u32) -> Result<PathBuf> {
+pub(crate) fn checked_dir(store: &Store, n: u32) -> Result<PathBuf> {
     for sub in ["tasks", "logs"] {
         let rel = Path::new("slurm").join(n.to_string()).join(sub);
         crate::store::no_links(store.work(), &rel)?;
@@ -99,12 +99,12 @@ pub fn checked_dir(store: &Store, n: u32) -> Result<PathBuf> {
 }
 
 /// The file of task `task` of stage `kind`'s report in submission directory `dir`.
-pub fn task_report_path(dir: &Path, kind: &str, task: usize) -> PathBuf {
+pub(crate) fn task_report_path(dir: &Path, kind: &str, task: usize) -> PathBuf {
     dir.join("tasks").join(format!("{kind}-{task}.json"))
 }
 
 /// The output file of task `task` of stage `kind` in submission directory `dir`.
-pub fn task_log_path(dir: &Path, kind: &str, task: usize) -> PathBuf {
+pub(crate) fn task_log_path(dir: &Path, kind: &str, task: usize) -> PathBuf {
     dir.join("logs").join(format!("{kind}-{task}.out"))
 }
 
@@ -138,7 +138,7 @@ fn numbers(store: &Store) -> Result<Vec<u32>> {
 
 /// DIR's latest submission that has a `submission.json`, with its `jobs.json` if it was
 /// submitted (None with `--plan-only`, or while it is being submitted).
-pub fn latest(store: &Store) -> Result<Option<(u32, Submission, Option<Jobs>)>> {
+pub(crate) fn latest(store: &Store) -> Result<Option<(u32, Submission, Option<Jobs>)>> {
     for n in numbers(store)?.into_iter().rev() {
         let d = checked_dir(store, n)?;
         if !d.join("submission.json").is_file() {
@@ -156,7 +156,7 @@ pub fn latest(store: &Store) -> Result<Option<(u32, Submission, Option<Jobs>)>> 
 }
 
 /// Submission `n` of DIR and the plan its tasks execute.
-pub fn load(store: &Store, n: u32) -> Result<(Submission, Plan)> {
+pub(crate) fn load(store: &Store, n: u32) -> Result<(Submission, Plan)> {
     let d = checked_dir(store, n)?;
     let sub = read_json(&d.join("submission.json"))?;
     let plan = Plan::load(&d.join(crate::store::PLAN_FILE))?;
@@ -165,7 +165,7 @@ pub fn load(store: &Store, n: u32) -> Result<(Submission, Plan)> {
 
 /// Create the next submission's directory with its records and scripts, for `stages` of `plan`
 /// and then the publishing job.
-pub fn create(
+pub(crate) fn create(
     store: &Store,
     plan: &Plan,
     command: &str,
@@ -237,7 +237,7 @@ pub fn create(
 }
 
 /// Record the job ids of submission `n`'s arrays.
-pub fn save_jobs(store: &Store, n: u32, ids: &[String]) -> Result<()> {
+pub(crate) fn save_jobs(store: &Store, n: u32, ids: &[String]) -> Result<()> {
     write_json(
         &dir(store, n).join("jobs.json"),
         &Jobs { ids: ids.to_vec() },
@@ -245,11 +245,11 @@ pub fn save_jobs(store: &Store, n: u32, ids: &[String]) -> Result<()> {
 }
 
 /// Write a task's report (only that task writes its file).
-pub fn save_task_report(path: &Path, report: &TaskReport) -> Result<()> {
+pub(crate) fn save_task_report(path: &Path, report: &TaskReport) -> Result<()> {
     write_json(path, report)
 }
 
 /// A task's report, if it wrote one.
-pub fn task_report(path: &Path) -> Option<TaskReport> {
+pub(crate) fn task_report(path: &Path) -> Option<TaskReport> {
     serde_json::from_slice(&crate::store::read_store_file(path).ok()?).ok()
 }

@@ -20,7 +20,7 @@ use crate::units::unit_ref;
 
 /// Seconds from one array's end to the start of the next (afterok): 0.6–1 s measured on the test
 /// cluster (scripts/slurm/README.md, (b)).
-pub const STAGE_LATENCY: f64 = 1.0;
+pub(crate) const STAGE_LATENCY: f64 = 1.0;
 
 /// One stage's tasks (seconds each) and the highest peak resident memory of its units.
 struct StageWork {
@@ -44,12 +44,13 @@ fn makespan(tasks: &[f64], slots: usize) -> f64 {
     load.into_iter().fold(0.0, f64::max)
 }
 
-fn mib(b: u64) -> u64 {
-    b >> 20
-}
-
 /// The report `talus plan-stats` prints (Markdown tables).
-pub fn report(dir: &std::path::Path, nodes: &[usize], cores: usize, scale: f64) -> Result<String> {
+pub(crate) fn report(
+    dir: &std::path::Path,
+    nodes: &[usize],
+    cores: usize,
+    scale: f64,
+) -> Result<String> {
     if !(scale.is_finite() && scale >= 1.0) {
         return Err(Error::Usage("--scale: a factor of at least 1".into()));
     }
@@ -137,11 +138,11 @@ pub fn report(dir: &std::path::Path, nodes: &[usize], cores: usize, scale: f64) 
         let peak = if st.scaled_peak {
             format!(
                 "{} (×{scale}: ≤ {})",
-                mib(st.peak),
-                (mib(st.peak) as f64 * scale) as u64
+                crate::memory::mib(st.peak),
+                (crate::memory::mib(st.peak) as f64 * scale) as u64
             )
         } else {
-            mib(st.peak).to_string()
+            crate::memory::mib(st.peak).to_string()
         };
         let _ = writeln!(
             s,

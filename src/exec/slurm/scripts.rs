@@ -8,7 +8,7 @@ use super::record::{task_log_path, Submission};
 use crate::error::{Error, Result};
 
 /// A word quoted for a POSIX shell (as is when it needs no quotes).
-pub fn quote(s: &str) -> String {
+pub(crate) fn quote(s: &str) -> String {
     if !s.is_empty()
         && s.chars()
             .all(|c| c.is_ascii_alphanumeric() || "-_./=:,+%@".contains(c))
@@ -21,7 +21,7 @@ pub fn quote(s: &str) -> String {
 /// The arguments of sbatch for array `k` of `sub`, after `sbatch`: `--parsable`, the dependency
 /// on the previous array (`dependency`: its job id, or a shell variable in `submit.sh`), the
 /// user's `--slurm-args` (after talus's own `#SBATCH` lines, which they override), the script.
-pub fn sbatch_args(sub: &Submission, k: usize, dependency: Option<&str>) -> Vec<String> {
+pub(crate) fn sbatch_args(sub: &Submission, k: usize, dependency: Option<&str>) -> Vec<String> {
     let mut a = vec!["--parsable".to_string()];
     if let Some(d) = dependency {
         a.push(format!("--dependency=afterok:{d}"));
@@ -121,7 +121,7 @@ fn submit_sh(sub: &Submission) -> String {
 }
 
 /// Write every script of `sub` into its directory `dir`.
-pub fn write(dir: &Path, sub: &Submission) -> Result<()> {
+pub(crate) fn write(dir: &Path, sub: &Submission) -> Result<()> {
     use std::os::unix::fs::PermissionsExt;
     let mut files: Vec<(String, String)> = (0..sub.stages.len())
         .map(|k| (sub.stages[k].script.clone(), script(sub, dir, k)))

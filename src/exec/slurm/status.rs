@@ -17,7 +17,7 @@ use crate::units::unit_ref;
 
 /// What became of one array task.
 #[derive(Debug, Clone, PartialEq)]
-pub enum Outcome {
+pub(crate) enum Outcome {
     /// Waiting in the queue (squeue's reason: Dependency, Resources, Priority, …).
     Queued(String),
     Running,
@@ -32,7 +32,7 @@ pub enum Outcome {
 
 /// One task of the latest submission.
 #[derive(Debug, Clone)]
-pub struct Task {
+pub(crate) struct Task {
     pub stage: String,
     pub index: usize,
     /// `<array>_<index>`, the name scancel and squeue take.
@@ -46,7 +46,7 @@ pub struct Task {
 
 /// A unit's state.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum UnitState {
+pub(crate) enum UnitState {
     Done,
     Running,
     Queued,
@@ -56,7 +56,7 @@ pub enum UnitState {
 }
 
 /// Everything `talus status` shows.
-pub struct Report {
+pub(crate) struct Report {
     pub dir: std::path::PathBuf,
     pub plan: Plan,
     pub units: Vec<UnitState>,
@@ -122,7 +122,7 @@ fn outcome(asked: bool, slurm: Option<&JobState>, report: Option<&TaskReport>) -
 
 impl Report {
     /// Look at DIR's store, its latest submission and Slurm.
-    pub fn gather(store: &Store) -> Result<Report> {
+    pub(crate) fn gather(store: &Store) -> Result<Report> {
         let plan_path = store.plan_path();
         if !plan_path.is_file() {
             return Err(Error::Usage(format!(
@@ -240,7 +240,7 @@ impl Report {
     }
 
     /// The latest submission's publishing task ended well and DIR holds this plan's outputs.
-    pub fn submission_ok(&self) -> bool {
+    pub(crate) fn submission_ok(&self) -> bool {
         self.published
             && self.submission.as_ref().is_some_and(|(_, _, tasks)| {
                 tasks
@@ -251,7 +251,7 @@ impl Report {
 
     /// One line per task that failed on its own, one per stage cancelled for a failed
     /// dependency.
-    pub fn failures(&self) -> Vec<String> {
+    pub(crate) fn failures(&self) -> Vec<String> {
         let mut out = Vec::new();
         let Some((_, _, tasks)) = &self.submission else {
             return out;
@@ -294,7 +294,7 @@ impl Report {
     }
 
     /// The text `talus status` prints.
-    pub fn render(&self) -> String {
+    pub(crate) fn render(&self) -> String {
         let mut s = String::new();
         let count = |st: UnitState| self.units.iter().filter(|&&u| u == st).count();
         let _ = writeln!(

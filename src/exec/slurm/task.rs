@@ -33,7 +33,7 @@ fn threads() -> usize {
 }
 
 /// Run task `task` (default `SLURM_ARRAY_TASK_ID`) of stage `stage` of submission `number`.
-pub fn run(dir: &Path, number: u32, stage: &str, task: Option<usize>) -> Result<()> {
+pub(crate) fn run(dir: &Path, number: u32, stage: &str, task: Option<usize>) -> Result<()> {
     let store = Store::open(dir, false)?;
     // The stage names the task's report file: a name, never a path.
     crate::store::check_component("stage", stage)

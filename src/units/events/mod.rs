@@ -636,7 +636,7 @@ impl KeptFrames {
     /// points are in key order, tile by tile, so a frame covers a strip of a few tiles).
     pub fn next_frame_where(
         &mut self,
-        want: &dyn Fn(&talus_tiling::Bounds3) -> bool,
+        want: &dyn Fn(&crate::geom::Bounds) -> bool,
     ) -> Result<Option<Vec<Kept>>> {
         match self.frames.next_frame_where(want) {
             Ok(Some(c)) => from_columns(&c, &self.path).map(Some),

@@ -272,7 +272,7 @@ mod tests {
     #[test]
     fn runs_merge_in_key_order_whatever_their_chunks() {
         let dir = tempfile::tempdir().unwrap();
-        let mut rng = talus_tiling::rng::SplitMix64::new(24);
+        let mut rng = crate::rng::SplitMix64::new(24);
         // Keys dealt to runs at random (runs interleave finely), chunks cut at random, with
         // empty chunks, an empty run, a run of one empty chunk and runs of one chunk.
         for (case, n_runs) in [1usize, 2, 3, 7, 40].into_iter().enumerate() {

@@ -37,7 +37,7 @@ pub const BYTES_PER_POINT: u64 = crate::plan::layout::BYTES_PER_POINT;
 
 /// Resident bytes of an M3C2 unit over `points` points.
 pub fn need(points: u64) -> u64 {
-    points * BYTES_PER_POINT + (4 << 20)
+    points * BYTES_PER_POINT + crate::memory::HEADROOM
 }
 
 /// Normals and M3C2 for the core points one tile owns, for one pair.

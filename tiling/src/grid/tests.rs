@@ -1,7 +1,7 @@
 use super::*;
 
 /// The crate's seeded generator, as the tests draw from it.
-struct Rng(crate::SplitMix64);
+struct Rng(talus_base::rng::SplitMix64);
 impl Rng {
     fn unit(&mut self) -> f64 {
         self.0.uniform()
@@ -79,7 +79,7 @@ fn grids() -> Vec<TileGrid> {
 
 #[test]
 fn ownership_partitions_points_exactly() {
-    let mut rng = Rng(crate::SplitMix64::new(7));
+    let mut rng = Rng(talus_base::rng::SplitMix64::new(7));
     for grid in grids() {
         for [x, y] in probe_points(&grid, 0.0, &mut rng) {
             let owners: Vec<TileId> = grid
@@ -114,7 +114,7 @@ fn ownership_partitions_points_exactly() {
 
 #[test]
 fn halo_membership_is_exactly_the_halo_box_set() {
-    let mut rng = Rng(crate::SplitMix64::new(11));
+    let mut rng = Rng(talus_base::rng::SplitMix64::new(11));
     for grid in grids() {
         for halo in [0.0, grid.tile_size() * 0.3, grid.tile_size() * 1.7] {
             for [x, y] in probe_points(&grid, halo, &mut rng) {

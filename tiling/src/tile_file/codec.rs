@@ -5,7 +5,7 @@
 use super::format::{
     parse_header, Header, FLAG_SHUFFLE, KIND_F64, KIND_QUANT, KIND_U32, KIND_U8, MAGIC, VERSION,
 };
-use super::{range, Bounds3, Column, ColumnData, TileColumns, WriteOptions};
+use super::{range, Bounds, Column, ColumnData, TileColumns, WriteOptions};
 
 /// Encode columns into the bytes of a tile file (also a frame of a framed tile).
 pub(crate) fn encode(cols: &TileColumns, opts: &WriteOptions) -> Result<Vec<u8>, String> {
@@ -16,7 +16,7 @@ pub(crate) fn encode(cols: &TileColumns, opts: &WriteOptions) -> Result<Vec<u8>,
 pub(crate) fn encode_with_bounds(
     cols: &TileColumns,
     opts: &WriteOptions,
-) -> Result<(Vec<u8>, Bounds3), String> {
+) -> Result<(Vec<u8>, Bounds), String> {
     if let Some(p) = cols.problem() {
         return Err(p);
     }
@@ -36,7 +36,7 @@ pub(crate) fn encode_with_bounds(
         }
     };
     let mut specs: Vec<Spec> = Vec::new();
-    let mut b = Bounds3 {
+    let mut b = Bounds {
         min: [f64::INFINITY; 3],
         max: [f64::NEG_INFINITY; 3],
     };

@@ -1,7 +1,7 @@
 //! Format version 1: the byte layout of a tile file's header (see [`super`]), parsed and
 //! checked. A version-1 encoding is also each frame of a framed tile ([`super::framed`]).
 
-use super::Bounds3;
+use super::Bounds;
 
 /// File signature.
 pub const MAGIC: &[u8; 8] = b"TALUSTIL";
@@ -29,7 +29,7 @@ pub(super) struct ColumnSpec {
 pub(super) struct Header {
     pub(super) header_len: usize,
     pub(super) point_count: u64,
-    pub(super) bounds: Bounds3,
+    pub(super) bounds: Bounds,
     pub(super) columns: Vec<ColumnSpec>,
     pub(super) payload_len: u64,
     pub(super) payload_crc: u32,
@@ -112,7 +112,7 @@ pub(super) fn parse_header(bytes: &[u8]) -> Result<Header, String> {
     }
     let point_count = c.u64()?;
     let ncols = c.u32()?;
-    let mut bounds = Bounds3 {
+    let mut bounds = Bounds {
         min: [0.0; 3],
         max: [0.0; 3],
     };

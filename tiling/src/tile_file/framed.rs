@@ -27,7 +27,7 @@ use std::path::{Path, PathBuf};
 
 use crate::atomic::{publish, tmp_path};
 use crate::error::{Error, Result};
-use crate::tile_file::{self, Bounds3, FileDigest, Frame, TileColumns, WriteOptions};
+use crate::tile_file::{self, Bounds, FileDigest, Frame, TileColumns, WriteOptions};
 
 /// The format version of framed tile files.
 pub const VERSION: u32 = 2;
@@ -40,7 +40,7 @@ pub struct Framed {
     path: PathBuf,
     frames: u32,
     points: u64,
-    bounds: Bounds3,
+    bounds: Bounds,
     /// CRC-32 and length of the frames written.
     crc: crc32fast::Hasher,
     len: u64,
@@ -53,7 +53,7 @@ impl Framed {
             path: path.to_path_buf(),
             frames: 0,
             points: 0,
-            bounds: Bounds3 {
+            bounds: Bounds {
                 min: [f64::INFINITY; 3],
                 max: [f64::NEG_INFINITY; 3],
             },
@@ -125,7 +125,7 @@ impl Framed {
 }
 
 /// The header of a framed tile.
-fn header_bytes(points: u64, frames: u32, bounds: &Bounds3) -> [u8; HEADER_LEN] {
+fn header_bytes(points: u64, frames: u32, bounds: &Bounds) -> [u8; HEADER_LEN] {
     let mut h = Vec::with_capacity(HEADER_LEN);
     h.extend_from_slice(tile_file::MAGIC);
     h.extend_from_slice(&VERSION.to_le_bytes());
@@ -147,7 +147,7 @@ fn header_bytes(points: u64, frames: u32, bounds: &Bounds3) -> [u8; HEADER_LEN] 
 pub(crate) struct Header {
     pub point_count: u64,
     pub frames: u32,
-    pub bounds: Bounds3,
+    pub bounds: Bounds,
 }
 
 /// Parse and check the header at the start of `bytes` (at least [`HEADER_LEN`] of them).
@@ -177,7 +177,7 @@ pub(crate) fn parse_header(bytes: &[u8]) -> Result<Header, String> {
     Ok(Header {
         point_count,
         frames,
-        bounds: Bounds3 {
+        bounds: Bounds {
             min: corner()?,
             max: corner()?,
         },
@@ -480,7 +480,7 @@ mod tests {
             w.append(&strip(k), &WriteOptions::default()).unwrap();
         }
         w.finish().unwrap();
-        let wanted = |b: &Bounds3| b.max[0] >= 15.0 && b.min[0] <= 35.0;
+        let wanted = |b: &Bounds| b.max[0] >= 15.0 && b.min[0] <= 35.0;
         let mut frames = crate::tile_file::TileFrames::open(&path).unwrap();
         let mut got = Vec::new();
         while let Some(f) = frames.next_frame_where(&wanted).unwrap() {

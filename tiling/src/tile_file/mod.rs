@@ -47,6 +47,7 @@ pub(crate) use codec::{encode_with_bounds, Frame};
 pub(crate) use format::{encoded_len, Cursor};
 pub use format::{MAGIC, VERSION};
 pub use read::{read_tile, read_tile_frames, read_tile_header, TileFrames};
+use talus_base::geom::Bounds;
 pub use write::{encode_tile, write_tile, write_tile_with};
 #[cfg(test)]
 use {
@@ -108,8 +109,8 @@ impl TileColumns {
         self.extra.iter().find(|c| c.name == name).map(|c| &c.data)
     }
     /// Bounds of the coordinates (`min = +inf`, `max = -inf` when empty; NaNs are ignored).
-    pub fn bounds(&self) -> Bounds3 {
-        let mut b = Bounds3 {
+    pub fn bounds(&self) -> Bounds {
+        let mut b = Bounds {
             min: [f64::INFINITY; 3],
             max: [f64::NEG_INFINITY; 3],
         };
@@ -171,13 +172,6 @@ fn range(v: &[f64]) -> (f64, f64) {
     (a, b)
 }
 
-/// Axis-aligned 3D bounds.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Bounds3 {
-    pub min: [f64; 3],
-    pub max: [f64; 3],
-}
-
 /// Quantised storage of x, y, z: each value is stored as the integer `q` with
 /// `value == scale * (q as f64) + offset` **bit for bit** (the exact expression the `las` crate
 /// uses to turn LAS integers into coordinates), as an unsigned offset from the column's smallest
@@ -224,7 +218,7 @@ impl Default for WriteOptions {
 pub struct TileHeader {
     pub version: u32,
     pub point_count: u64,
-    pub bounds: Bounds3,
+    pub bounds: Bounds,
     /// Column names, `x`, `y`, `z` first.
     pub columns: Vec<String>,
 }

@@ -7,7 +7,7 @@ use std::path::Path;
 
 use super::codec::decode;
 use super::format::{check_magic_version, parse_header, Header, VERSION};
-use super::{framed, Bounds3, TileColumns, TileHeader};
+use super::{framed, Bounds, TileColumns, TileHeader};
 use crate::error::{Error, Result};
 
 /// Read and verify a tile file.
@@ -108,7 +108,7 @@ impl TileFrames {
     /// or a grid's, so a frame covers a strip of the tile, not all of it.
     pub fn next_frame_where(
         &mut self,
-        want: &dyn Fn(&Bounds3) -> bool,
+        want: &dyn Fn(&Bounds) -> bool,
     ) -> Result<Option<TileColumns>> {
         if let Some(whole) = self.whole.take() {
             self.done = true;
