@@ -2,7 +2,7 @@
 //! adds one: one module (this file's [`Datum`]) and one registration (in `main`). The later
 //! surveys are taken to be delivered in another vertical datum, [`OFFSET`] metres above the
 //! first's (a fixed geoid separation): the stage writes their tiles lowered by it. It says so by
-//! `Stage::tiles` alone, and every later unit — orientation, M3C2, stable ground, events,
+//! `Stage::TILES` alone, and every later unit — orientation, M3C2, stable ground, events,
 //! volumes — reads its tiles instead of the tiling's: none of them, nor the planner, names it.
 //! `tests/stage_extension.rs` runs it against plain talus.
 //!
@@ -11,7 +11,7 @@
 //! ```
 
 use talus::units::cleared::ClearedStage;
-use talus::units::stage::{register, Line, Planner, Scope, Stage, Total};
+use talus::units::stage::{register, Line, Planner, Scope, Stage, TilesOf, Total};
 use talus::units::tiling::{split, TilingMeta};
 use talus::units::Ctx;
 
@@ -32,11 +32,7 @@ impl Stage for Datum {
         total: Total::Unknown,
     };
     type Meta = TilingMeta;
-    const PROVIDES_TILES: bool = true;
-
-    fn tiles(meta: &TilingMeta) -> Option<TilingMeta> {
-        Some(meta.clone())
-    }
+    const TILES: Option<TilesOf<TilingMeta>> = Some(|m| Some(m.clone()));
 
     /// One unit per later survey, after the units that tile it before (so that it runs after
     /// them and its key follows theirs).

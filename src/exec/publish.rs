@@ -189,10 +189,10 @@ pub(crate) fn listed_outputs(
             .unwrap_or_default(),
         problem,
     };
-    let list = match stage.publish_list(&unit.name, &record.meta) {
+    let list = match stage.publish_list(&record.meta) {
         Ok(Some(list)) => list,
         Ok(None) => return Ok(None),
-        Err(e) => return Err(damaged(e.to_string())),
+        Err(e) => return Err(crate::units::stage::damaged_record(store, &unit, e)),
     };
     for p in &list {
         let ok = crate::store::UnitRef::new(p.kind.clone(), p.unit.clone()).is_ok()

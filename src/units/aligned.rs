@@ -10,7 +10,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::align::AlignStage;
-use super::stage::{Line, Planner, Scope, Stage, Total};
+use super::stage::{Line, Planner, Scope, Stage, TilesOf, Total};
 use super::tiling::{split, TilingMeta, TilingStage};
 use super::Ctx;
 use crate::error::Result;
@@ -43,12 +43,8 @@ impl Stage for AlignedStage {
         total: Total::Unknown,
     };
     type Meta = AlignedMeta;
-    const PROVIDES_TILES: bool = true;
-
     /// Its tiles hold the survey only where the alignment applied (else it wrote none).
-    fn tiles(meta: &AlignedMeta) -> Option<TilingMeta> {
-        meta.tiling.clone().filter(|_| meta.applied)
-    }
+    const TILES: Option<TilesOf<AlignedMeta>> = Some(|m| m.tiling.clone().filter(|_| m.applied));
 
     /// One per survey with an align unit, over the align units of every survey up to it (its
     /// route may pass through them) and the survey's own tiling.

@@ -11,7 +11,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::stage::{Line, Planner, Scope, Stage, Total};
+use super::stage::{Line, Planner, Scope, Stage, TilesOf, Total};
 use super::tiling::{Splitting, TilingMeta};
 use super::{read_tile, Ctx};
 use crate::error::Result;
@@ -44,11 +44,7 @@ impl Stage for ClearedStage {
         total: Total::SurveyPoints,
     };
     type Meta = ClearedMeta;
-    const PROVIDES_TILES: bool = true;
-
-    fn tiles(meta: &ClearedMeta) -> Option<TilingMeta> {
-        Some(meta.tiling.clone())
-    }
+    const TILES: Option<TilesOf<ClearedMeta>> = Some(|m| Some(m.tiling.clone()));
 
     /// One per survey with `--vegetation remove`, over the units holding its tiles.
     fn plan(p: &mut Planner) -> Result<()> {

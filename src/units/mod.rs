@@ -147,7 +147,7 @@ impl Ctx<'_> {
     }
 
     /// The unit whose tile files hold survey `survey` in the run's frame, and their record:
-    /// the last stage in the registry that provides tiles ([`stage::Stage::tiles`]) and whose
+    /// the last stage in the registry that provides tiles ([`stage::Stage::TILES`]) and whose
     /// unit of the survey holds them — its cleared tiling with `--vegetation remove`, else its
     /// aligned tiling where the alignment applied, else its own tiling.
     pub fn tiles(&self, survey: usize) -> Result<(usize, tiling::TilingMeta)> {
@@ -199,7 +199,7 @@ impl Ctx<'_> {
         Ok(self.tiles(survey)?.1)
     }
 
-    /// The tiling record of unit `u`, which holds a survey's tiles ([`stage::Stage::tiles`]).
+    /// The tiling record of unit `u`, which holds a survey's tiles ([`stage::Stage::TILES`]).
     pub fn tiling_meta_of(&self, u: usize) -> Result<tiling::TilingMeta> {
         self.tiles_of(u)?.ok_or_else(|| {
             Error::Internal(format!("unit {} holds no tiles", self.plan.units[u].name))
@@ -219,14 +219,7 @@ impl Ctx<'_> {
 
     /// Unit `u`'s record is damaged: its meta does not read (`e`).
     fn damaged_record(&self, u: usize, e: impl std::fmt::Display) -> Error {
-        Error::Damaged {
-            path: self
-                .store
-                .unit_dir(&self.unit_ref(u))
-                .map(|d| d.join(crate::store::RECORD_FILE))
-                .unwrap_or_default(),
-            problem: format!("unit {}: its record's meta: {e}", self.plan.units[u].name),
-        }
+        stage::damaged_record(self.store, &self.unit_ref(u), e)
     }
 
     /// The dependency of unit `i` of stage `S`, if it has one.
@@ -476,7 +469,7 @@ mod tests {
         // The stable ground's fixed sample, beside the largest merge a later stage holds.
         let stable = stable::need(stable::SAMPLES, merged::FAN_IN);
         assert!(stable <= pool, "the stable sample does not fit");
-        let split = (crate::memory::MIN_BUDGET / tiling::SPLIT_BUDGET_SHARE).max(8 << 20);
+        let split = tiling::split_budget_of(crate::memory::MIN_BUDGET);
         // Two tilings run at once (one per survey of a pair).
         assert!(2 * tiling::need(split) <= pool, "two tilings do not fit");
     }

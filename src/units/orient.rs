@@ -142,8 +142,7 @@ impl Stage for OrientStage {
         let plan = ctx.plan;
         let s = ctx.survey(unit)?;
         let g = geometry(plan, s);
-        let tiling = ctx.tiling(s)?;
-        let meta = ctx.tiling_meta(s)?;
+        let (tiling, meta) = ctx.tiles(s)?;
         let grid = plan.layout.grid()?;
         let anchor = plan.layout.anchor;
         let mut sample: Vec<(u64, Point3, Point3)> = Vec::new();

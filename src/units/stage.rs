@@ -113,16 +113,12 @@ pub trait Stage: Send + Sync + 'static {
 
     /// For a stage whose units hold a survey's tiles in the run's frame (the tiling; the
     /// aligned tiling where the alignment applied; the cleared one with `--vegetation remove`):
-    /// the tiles' record, when unit's meta says it holds them. A later unit reads a survey's
-    /// tiles from the last stage in the registry that provides them for it ([`Ctx::tiling`]);
-    /// a new provider needs nothing more than this and its registration.
-    fn tiles(_meta: &Self::Meta) -> Option<super::tiling::TilingMeta> {
-        None
-    }
-
-    /// Whether the stage provides tiles at all ([`Stage::tiles`]): planning counts its unit of
-    /// a survey among the units holding the survey's tiles ([`Planner::survey_tiles`]).
-    const PROVIDES_TILES: bool = false;
+    /// the tiles' record, read from a unit's meta (None where that unit holds none). A later
+    /// unit reads a survey's tiles from the last stage in the registry that provides them for it
+    /// ([`Ctx::tiles`]), and planning counts every provider's unit of a survey among the units
+    /// its readers depend on ([`Planner::survey_tiles`]): a new provider needs nothing more than
+    /// this and its registration.
+    const TILES: Option<TilesOf<Self::Meta>> = None;
 
     /// For a stage of the plan: the intermediate units of the plan that a later run will read
     /// and that are therefore not released after this one (a campaign keeps its first and last
@@ -131,6 +127,9 @@ pub trait Stage: Send + Sync + 'static {
         Vec::new()
     }
 }
+
+/// The tiles' record a unit of a tile-providing stage holds, from its meta ([`Stage::TILES`]).
+pub type TilesOf<M> = fn(&M) -> Option<super::tiling::TilingMeta>;
 
 /// What a publishing stage gives the executor.
 pub struct Publishes<M> {
@@ -159,14 +158,15 @@ pub trait Registered: Send + Sync {
     fn plan(&self, p: &mut Planner) -> Result<()>;
     fn run(&self, ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<serde_json::Value>;
     fn is_output(&self) -> Option<fn(&str) -> bool>;
+    /// The outputs a unit's record lists (an error when its meta is not the stage's: the
+    /// caller names the record, [`damaged_record`]).
     fn publish_list(
         &self,
-        unit: &str,
         meta: &serde_json::Value,
-    ) -> Result<Option<Vec<super::outputs::Publish>>>;
+    ) -> std::result::Result<Option<Vec<super::outputs::Publish>>, String>;
     fn provides_tiles(&self) -> bool;
     fn keeps(&self, plan: &Plan) -> Vec<usize>;
-    /// [`Stage::tiles`] of a record's meta (an error when the meta is not the stage's).
+    /// [`Stage::TILES`] of a record's meta (an error when the meta is not the stage's).
     fn tiles(
         &self,
         meta: &serde_json::Value,
@@ -207,19 +207,15 @@ impl<S: Stage> Registered for Entry<S> {
     }
     fn publish_list(
         &self,
-        unit: &str,
         meta: &serde_json::Value,
-    ) -> Result<Option<Vec<super::outputs::Publish>>> {
+    ) -> std::result::Result<Option<Vec<super::outputs::Publish>>, String> {
         let Some(p) = S::publishes() else {
             return Ok(None);
         };
-        // The caller names the record ([`crate::exec::publish::listed_outputs`]).
-        let m = <S::Meta as serde::Deserialize>::deserialize(meta)
-            .map_err(|e| Error::Internal(format!("unit {unit}: its record's meta: {e}")))?;
-        Ok(Some((p.list)(&m).to_vec()))
+        Ok(Some((p.list)(&Self::read(meta)?).to_vec()))
     }
     fn provides_tiles(&self) -> bool {
-        S::PROVIDES_TILES
+        S::TILES.is_some()
     }
     fn keeps(&self, plan: &Plan) -> Vec<usize> {
         S::keeps(plan)
@@ -228,8 +224,17 @@ impl<S: Stage> Registered for Entry<S> {
         &self,
         meta: &serde_json::Value,
     ) -> std::result::Result<Option<super::tiling::TilingMeta>, String> {
-        let m = <S::Meta as serde::Deserialize>::deserialize(meta).map_err(|e| e.to_string())?;
-        Ok(S::tiles(&m))
+        match S::TILES {
+            Some(of) => Ok(of(&Self::read(meta)?)),
+            None => Ok(None),
+        }
+    }
+}
+
+impl<S: Stage> Entry<S> {
+    /// A record's meta as `S`'s.
+    fn read(meta: &serde_json::Value) -> std::result::Result<S::Meta, String> {
+        <S::Meta as serde::Deserialize>::deserialize(meta).map_err(|e| e.to_string())
     }
 }
 
@@ -240,13 +245,23 @@ pub fn typed_meta<M: DeserializeOwned>(
     unit: &crate::store::UnitRef,
     meta: &serde_json::Value,
 ) -> Result<M> {
-    M::deserialize(meta).map_err(|e| Error::Damaged {
+    M::deserialize(meta).map_err(|e| damaged_record(store, unit, e))
+}
+
+/// Unit `unit`'s record (in `store`) is damaged: its meta does not read (`e`). The executor
+/// finds the unit to compute again by the record's path.
+pub fn damaged_record(
+    store: &crate::store::Store,
+    unit: &crate::store::UnitRef,
+    e: impl std::fmt::Display,
+) -> Error {
+    Error::Damaged {
         path: store
             .unit_dir(unit)
             .map(|d| d.join(crate::store::RECORD_FILE))
             .unwrap_or_default(),
         problem: format!("unit {}: its record's meta: {e}", unit.name),
-    })
+    }
 }
 
 /// The stage `S` as the registry holds it.
@@ -452,7 +467,7 @@ impl Planner<'_> {
     }
 
     /// The units that may hold survey `s`'s tiles, in pipeline order: its unit of every stage
-    /// that provides tiles ([`Stage::tiles`]: the tiling, the aligned tiling, the cleared one).
+    /// that provides tiles ([`Stage::TILES`]: the tiling, the aligned tiling, the cleared one).
     /// Which of them does is known once they ran ([`Ctx::tiling`]).
     pub fn survey_tiles(&self, s: usize) -> Result<Vec<usize>> {
         let out: Vec<usize> = registry()

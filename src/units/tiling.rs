@@ -5,7 +5,7 @@
 
 use talus_tiling::{Quantisation, TileId, TileSplitter, WriteOptions};
 
-use super::stage::{Line, Planner, Scope, Stage, Total};
+use super::stage::{Line, Planner, Scope, Stage, TilesOf, Total};
 use super::Ctx;
 use crate::error::Result;
 use crate::io;
@@ -33,7 +33,12 @@ pub fn need(buffers: u64) -> u64 {
 
 /// Bytes of a tiling unit's splitter buffers under the plan's memory budget.
 pub fn split_budget(plan: &crate::plan::Plan) -> u64 {
-    (plan.params.memory_bytes.value / SPLIT_BUDGET_SHARE).max(8 << 20)
+    split_budget_of(plan.params.memory_bytes.value)
+}
+
+/// Bytes of a tiling unit's splitter buffers under a memory budget of `memory_bytes`.
+pub fn split_budget_of(memory_bytes: u64) -> u64 {
+    (memory_bytes / SPLIT_BUDGET_SHARE).max(8 << 20)
 }
 
 /// Points per frame of the tile files of a survey split into `tiles` tiles (see
@@ -83,11 +88,7 @@ impl Stage for TilingStage {
         total: Total::SurveyPoints,
     };
     type Meta = TilingMeta;
-    const PROVIDES_TILES: bool = true;
-
-    fn tiles(meta: &TilingMeta) -> Option<TilingMeta> {
-        Some(meta.clone())
-    }
+    const TILES: Option<TilesOf<TilingMeta>> = Some(|m| Some(m.clone()));
 
     /// The tiling of each pair's two surveys, once each.
     fn plan(p: &mut Planner) -> Result<()> {

@@ -126,14 +126,10 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<M3c2Meta> {
     let plan = ctx.plan;
     let (pair, tile) = (ctx.pair(unit)?, ctx.tile(unit)?);
     let p = &plan.pairs[pair];
-    let (tb, ta) = (ctx.tiling(p.before)?, ctx.tiling(p.after)?);
+    let ((tb, mb), (ta, ma)) = (ctx.tiles(p.before)?, ctx.tiles(p.after)?);
     // The pair's densest tile first: a budget that cannot hold it is refused by whichever M3C2
     // unit runs first, not after the tiles before it.
-    let points = fit::pair_tile_points(
-        plan,
-        &ctx.tiling_meta(p.before)?,
-        &ctx.tiling_meta(p.after)?,
-    )?;
+    let points = fit::pair_tile_points(plan, &mb, &ma)?;
     fit::check_tiled(plan, &points)?;
     let halo_points = points[plan.layout.grid()?.index(tile)];
     let _held = ctx.reserve(
