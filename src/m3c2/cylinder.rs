@@ -30,7 +30,7 @@ use crate::geom::Point3;
 use crate::spatial::{in_cylinder, Columns};
 
 /// Projections of one epoch's points inside one cylinder.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Default, Clone, Copy, PartialEq)]
 pub struct CylinderStats {
     pub count: u32,
     /// Mean position along the axis (relative to the core point).

@@ -10,6 +10,7 @@ pub mod normals;
 pub mod orientation;
 pub mod reach;
 pub mod tile;
+pub mod window;
 
 use rayon::prelude::*;
 

@@ -89,11 +89,21 @@ pub fn compute(
         params,
         &extent.local(&anchor),
     );
+    keyed_by(&keyed, results, &n.known)
+}
+
+/// The results at the core points `keyed` (key, global position), with whether each normal's
+/// sign is known, sorted by key.
+pub(super) fn keyed_by(
+    keyed: &[(u64, Point3)],
+    results: Vec<CoreResult>,
+    known: &[bool],
+) -> Vec<KeyedResult> {
     let mut out: Vec<KeyedResult> = keyed
         .iter()
         .zip(results)
-        .zip(n.known)
-        .map(|((&(key, xyz), r), sign_known)| KeyedResult {
+        .zip(known)
+        .map(|((&(key, xyz), r), &sign_known)| KeyedResult {
             key,
             xyz,
             r: CoreResult { sign_known, ..r },

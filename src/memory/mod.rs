@@ -23,7 +23,8 @@ pub(crate) use pool::{Pool, Reservation};
 use crate::error::{Error, Result};
 
 /// Resident bytes of the process whatever runs: the binary, thread stacks, the plan, the
-/// progress lines (measured: 10–12 MiB with no unit running; volumes units without events).
+/// progress lines (measured: 10–12 MiB with no unit running; volumes units without events), and
+/// the alignment sample's memo of the first survey (at most 4 MiB, `units::sample::MEMO`).
 pub(crate) const BASE: u64 = 16 << 20;
 
 /// Share of the budget left to the allocator's slack (freed memory not yet handed back, arena

@@ -267,7 +267,7 @@ fn sample_of(
         orientation: crate::m3c2::Orientation::Up,
         ..ctx.plan.params.m3c2()
     };
-    super::sample::sample(ctx, tilings, [onto, s], region, picks, &params)
+    super::sample::sample(ctx, tilings, region, picks, &params)
 }
 
 /// The fits of survey `s` (its align unit must be done), if it has them.

@@ -9,9 +9,9 @@ use super::{read_tile_near, Ctx, TilePoints};
 use crate::error::Result;
 use crate::events::stable::Sample;
 use crate::geom::Point3;
-use crate::m3c2::tile::compute;
-use crate::m3c2::{Extent, Reach};
+use crate::m3c2::{window, Reach};
 use crate::spatial::areas::Areas;
+use talus_tiling::TileId;
 
 /// Where the sample's points lie.
 pub enum Region<'a> {
@@ -60,14 +60,14 @@ fn point_key(p: &Point3) -> u64 {
     .next_u64()
 }
 
-/// M3C2 between the tilings `tilings` (units holding the before and the after survey's tiles,
-/// of surveys `surveys`) at the points `picks` chooses in `region`, with `params`: the samples
+/// M3C2 between the tilings `tilings` (units holding the before and the after survey's tiles) at the points `picks` chooses in `region`, with `params`: the samples
 /// measured within the cylinder (a walked distance may be finished in another tile, so it is
-/// left out), in key order, and how many points were computed.
+/// left out), in key order, and how many points were computed. The before survey's half of it
+/// ([`crate::m3c2::window`]) is computed once per process for every after survey sampled against
+/// it ([`Reference`]).
 pub fn sample(
     ctx: &Ctx,
     tilings: [usize; 2],
-    surveys: [usize; 2],
     region: &Region,
     picks: Picks,
     params: &crate::m3c2::M3c2Params,
@@ -82,95 +82,21 @@ pub fn sample(
     let pair_points = super::m3c2::fit::pair_tile_points(plan, &m0, &m1)?;
     super::m3c2::fit::check_tiled(plan, &pair_points)?;
     let counts = [m0.tile_points, m1.tile_points];
-    let grid = plan.layout.grid()?;
-    let (b, a) = (
-        &plan.surveys[surveys[0]].bounds,
-        &plan.surveys[surveys[1]].bounds,
-    );
-    let boxes = region.boxes();
-    // Every point a sampled point uses for its normal and its cylinder lies within `reach` of
-    // the region: only those points are indexed, and each result is the one the whole tile
-    // gives, at a fraction of the indexing.
-    let reach = (params.cyl_radius.powi(2) + params.cyl_halflen.powi(2))
-        .sqrt()
-        .max(params.normal_radius)
-        + plan.layout.core_spacing;
+    let reference = Reference::of(ctx, tilings[0], &counts, region, picks, params)?;
     let mut keyed: Vec<(u64, Sample)> = Vec::new();
     let mut computed = 0;
-    for tile in grid.tiles() {
-        let sq = grid.square(tile);
-        // The region's boxes meeting the tile, grown by `reach`.
-        let near: Vec<[f64; 4]> = boxes
-            .iter()
-            .filter(|w| {
-                w[0] <= sq.max[0] && sq.min[0] <= w[2] && w[1] <= sq.max[1] && sq.min[1] <= w[3]
-            })
-            .map(|w| [w[0] - reach, w[1] - reach, w[2] + reach, w[3] + reach])
-            .collect();
-        let n = counts[0][grid.index(tile)] + counts[1][grid.index(tile)];
-        if near.is_empty() || n == 0 {
-            continue;
-        }
+    for part in reference.tiles.iter() {
+        let n = counts[0][part.index] + counts[1][part.index];
         let _held = ctx.reserve(
             super::m3c2::need(n),
             &format!(
                 "a sample of M3C2: tile {} ({n} points with its halo)",
-                tile.name()
+                part.tile.name()
             ),
         )?;
-        // Only the frames that reach the boxes or their neighbourhoods: every point `within`
-        // keeps and every point of a core-point cell in a box is in them.
-        let reached: Vec<[f64; 4]> = near.iter().chain(&boxes).copied().collect();
-        let before = read_tile_near(ctx, tilings[0], tile, &reached)?;
-        let after = read_tile_near(ctx, tilings[1], tile, &reached)?;
-        let extent = Extent {
-            data_min: std::array::from_fn(|k| b.min[k].min(a.min[k])),
-            data_max: std::array::from_fn(|k| b.max[k].max(a.max[k])),
-            held: super::m3c2::open_box(&grid, tile, plan.layout.halo),
-        };
-        let cores: Vec<(u64, Point3)> = match picks {
-            Picks::Cores(n) => crate::m3c2::core_points::thin(
-                before.len(),
-                |i| before.point(i),
-                &plan.layout.anchor,
-                plan.layout.core_spacing,
-                |i| before.owned[i],
-            )
-            .into_iter()
-            .map(|(k, i)| (k, before.point(i)))
-            .filter(|(k, p)| region.contains(p) && Areas::takes(*k, n))
-            .collect(),
-            Picks::Points(n) => {
-                let mut c: Vec<(u64, Point3)> = (0..before.len())
-                    .filter(|&i| before.owned[i])
-                    .map(|i| before.point(i))
-                    .filter(|p| region.contains(p))
-                    .map(|p| (point_key(&p), p))
-                    .filter(|(k, _)| Areas::takes(*k, n))
-                    .collect();
-                // A point held twice (a survey's duplicate) is sampled once.
-                c.sort_by(|x, y| {
-                    x.0.cmp(&y.0)
-                        .then(x.1.map(f64::to_bits).cmp(&y.1.map(f64::to_bits)))
-                });
-                c.dedup_by_key(|x| x.0);
-                c
-            }
-        };
-        if cores.is_empty() {
-            continue;
-        }
-        let (before, after) = (within(&before, &near), within(&after, &near));
-        let results = compute(
-            &before.epoch(),
-            &after.epoch(),
-            plan.layout.anchor,
-            plan.layout.core_spacing,
-            Some(&cores),
-            params,
-            &extent,
-            None,
-        );
+        let after = read_tile_near(ctx, tilings[1], part.tile, &part.reached)?;
+        let after = within(&after, &part.near);
+        let results = window::against(&part.half, &after.epoch(), plan.layout.anchor, params);
         computed += results.len();
         keyed.extend(
             results
@@ -194,6 +120,200 @@ pub fn sample(
     // Key order: the same whatever order the tiles came in.
     keyed.sort_by_key(|(k, _)| *k);
     Ok((keyed.into_iter().map(|(_, s)| s).collect(), computed))
+}
+
+/// The before survey's half of a sample: per tile holding sampled points, its core points'
+/// normals and C1 ([`window::BeforeHalf`]), and which of the after survey's points the tile
+/// needs. It depends on the before tiling, the region, the picks and the parameters only, so
+/// every later survey sampled against the first (`super::align`: one align unit a survey) shares
+/// it: the process keeps the last one made ([`MEMO`]), found again by a key of all it depends on.
+struct Reference {
+    tiles: Vec<ReferenceTile>,
+}
+
+struct ReferenceTile {
+    tile: TileId,
+    /// The tile's index in the grid (its point counts).
+    index: usize,
+    /// The region's boxes meeting the tile, grown by the reach: the points the sample uses.
+    near: Vec<[f64; 4]>,
+    /// `near` and the boxes: the frames a read needs.
+    reached: Vec<[f64; 4]>,
+    half: window::BeforeHalf,
+}
+
+/// The [`Reference`]s last used in this process, with their keys, most recent last. A campaign's
+/// align units sample every later survey against the first (and, with the user's stable areas,
+/// in the areas and in the windows: two references). They outlive the unit that made them, so
+/// they are not reserved from the pool: at most [`MEMO_BYTES`] in all (a sample of about
+/// [`super::align::SAMPLE_CORES`] core points; a larger one is made again each time, when it is
+/// a small part of its survey's M3C2), within what [`crate::memory::BASE`] leaves above the
+/// process's measured base.
+static MEMO: std::sync::Mutex<Vec<(String, std::sync::Arc<Reference>)>> =
+    std::sync::Mutex::new(Vec::new());
+
+/// What [`MEMO`] holds at most.
+const MEMO_BYTES: u64 = 4 << 20;
+
+impl Reference {
+    /// The reference of before tiling `tiling` (points per tile `counts[0]`) for `region`,
+    /// `picks` and `params`: the memo's when it has it, else made (and memoised when small).
+    fn of(
+        ctx: &Ctx,
+        tiling: usize,
+        counts: &[Vec<u64>; 2],
+        region: &Region,
+        picks: Picks,
+        params: &crate::m3c2::M3c2Params,
+    ) -> Result<std::sync::Arc<Reference>> {
+        let plan = ctx.plan;
+        let boxes = region.boxes();
+        let key = crate::plan::key_of(&[
+            &plan.units[tiling].key,
+            &format!("{:?}", plan.layout),
+            &format!("{params:?}"),
+            &format!("{picks:?}"),
+            &format!(
+                "{:?}",
+                boxes
+                    .iter()
+                    .flatten()
+                    .map(|v| v.to_bits())
+                    .collect::<Vec<_>>()
+            ),
+            &match region {
+                Region::Windows(_) => String::new(),
+                Region::Areas(_) => super::stable::areas_key(plan),
+            },
+        ]);
+        let memo = || MEMO.lock().unwrap_or_else(|e| e.into_inner());
+        {
+            let mut m = memo();
+            if let Some(at) = m.iter().position(|(k, _)| *k == key) {
+                let hit = m.remove(at);
+                let r = hit.1.clone();
+                m.push(hit);
+                return Ok(r);
+            }
+        }
+        let made = std::sync::Arc::new(Self::make(ctx, tiling, counts, region, picks, params)?);
+        if made.bytes() <= MEMO_BYTES {
+            let mut m = memo();
+            // Two units may have made the same one at once: kept once.
+            m.retain(|(k, _)| *k != key);
+            m.push((key, made.clone()));
+            while m.iter().map(|(_, r)| r.bytes()).sum::<u64>() > MEMO_BYTES {
+                m.remove(0);
+            }
+        }
+        Ok(made)
+    }
+
+    /// What it holds in memory, about.
+    fn bytes(&self) -> u64 {
+        self.tiles.iter().map(|t| t.half.bytes()).sum()
+    }
+
+    fn make(
+        ctx: &Ctx,
+        tiling: usize,
+        counts: &[Vec<u64>; 2],
+        region: &Region,
+        picks: Picks,
+        params: &crate::m3c2::M3c2Params,
+    ) -> Result<Reference> {
+        let plan = ctx.plan;
+        let grid = plan.layout.grid()?;
+        let boxes = region.boxes();
+        // Every point a sampled point uses for its normal and its cylinder lies within `reach`
+        // of the region: only those points are indexed, and each result is the one the whole
+        // tile gives, at a fraction of the indexing.
+        let reach = (params.cyl_radius.powi(2) + params.cyl_halflen.powi(2))
+            .sqrt()
+            .max(params.normal_radius)
+            + plan.layout.core_spacing;
+        let mut tiles = Vec::new();
+        for tile in grid.tiles() {
+            let sq = grid.square(tile);
+            // The region's boxes meeting the tile, grown by `reach`.
+            let near: Vec<[f64; 4]> = boxes
+                .iter()
+                .filter(|w| {
+                    w[0] <= sq.max[0] && sq.min[0] <= w[2] && w[1] <= sq.max[1] && sq.min[1] <= w[3]
+                })
+                .map(|w| [w[0] - reach, w[1] - reach, w[2] + reach, w[3] + reach])
+                .collect();
+            let index = grid.index(tile);
+            let n = counts[0][index] + counts[1][index];
+            if near.is_empty() || n == 0 {
+                continue;
+            }
+            let _held = ctx.reserve(
+                super::m3c2::need(n),
+                &format!(
+                    "a sample of M3C2: tile {} ({n} points with its halo)",
+                    tile.name()
+                ),
+            )?;
+            // Only the frames that reach the boxes or their neighbourhoods: every point `within`
+            // keeps and every point of a core-point cell in a box is in them.
+            let reached: Vec<[f64; 4]> = near.iter().chain(&boxes).copied().collect();
+            let before = read_tile_near(ctx, tiling, tile, &reached)?;
+            let cores = picked(&before, region, picks, plan);
+            if cores.is_empty() {
+                continue;
+            }
+            let before = within(&before, &near);
+            let half = window::before_half(&before.epoch(), plan.layout.anchor, &cores, params);
+            tiles.push(ReferenceTile {
+                tile,
+                index,
+                near,
+                reached,
+                half,
+            });
+            crate::interrupt::check()?;
+        }
+        Ok(Reference { tiles })
+    }
+}
+
+/// The before points of a tile `picks` chooses in `region`, with their keys.
+fn picked(
+    before: &TilePoints,
+    region: &Region,
+    picks: Picks,
+    plan: &crate::plan::Plan,
+) -> Vec<(u64, Point3)> {
+    match picks {
+        Picks::Cores(n) => crate::m3c2::core_points::thin(
+            before.len(),
+            |i| before.point(i),
+            &plan.layout.anchor,
+            plan.layout.core_spacing,
+            |i| before.owned[i],
+        )
+        .into_iter()
+        .map(|(k, i)| (k, before.point(i)))
+        .filter(|(k, p)| region.contains(p) && Areas::takes(*k, n))
+        .collect(),
+        Picks::Points(n) => {
+            let mut c: Vec<(u64, Point3)> = (0..before.len())
+                .filter(|&i| before.owned[i])
+                .map(|i| before.point(i))
+                .filter(|p| region.contains(p))
+                .map(|p| (point_key(&p), p))
+                .filter(|(k, _)| Areas::takes(*k, n))
+                .collect();
+            // A point held twice (a survey's duplicate) is sampled once.
+            c.sort_by(|x, y| {
+                x.0.cmp(&y.0)
+                    .then(x.1.map(f64::to_bits).cmp(&y.1.map(f64::to_bits)))
+            });
+            c.dedup_by_key(|x| x.0);
+            c
+        }
+    }
 }
 
 /// The points of `t` inside any of `boxes` ([x0, y0, x1, y1]), in their order.

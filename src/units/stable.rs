@@ -235,7 +235,6 @@ fn areas_sample(ctx: &Ctx, pair: usize, areas: &Areas) -> Result<(Vec<Sample>, u
     super::sample::sample(
         ctx,
         [ctx.tiling(p.before)?, ctx.tiling(p.after)?],
-        [p.before, p.after],
         &super::sample::Region::Areas(areas),
         super::sample::Picks::Points(one_in),
         &params,
