@@ -3,7 +3,7 @@
 # and pyarrow for the independent-reader checks, the Python package's wheel in a fresh venv with
 # py4dgeo, Debian chromium and the viewer's npm packages for the browser tests, Debian's Slurm and
 # munge for the cluster test), then runs the Rust tests of the workspace, the Python package's tests,
-# the viewer's browser tests and the Slurm executor against a real one-node Slurm.
+# the viewer's browser tests and the Slurm executor against a real Slurm of one node, then two.
 # This is the test command README.md gives; .ci/run calls it.
 set -euo pipefail
 repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -47,4 +47,14 @@ if [[ -x "$target/debug/talus" ]]; then
   TALUS_BIN="$target/debug/talus" bash scripts/slurm/campaign.sh
 else
   bash scripts/slurm/campaign.sh
+fi
+
+# The Slurm executor on two slurmd nodes (multiple-slurmd mode, its own state dir): a run across
+# both, a node killed mid-task and the run finished by Slurm's requeue, and by --resume
+# (scripts/slurm/README.md, "Two nodes"). About 3 min; the release binary campaign.sh built, or
+# the debug one.
+if [[ -x "$target/debug/talus" ]]; then
+  TALUS_BIN="$target/debug/talus" bash scripts/slurm/nodes.sh
+else
+  TALUS_BIN="$target/release/talus" bash scripts/slurm/nodes.sh
 fi

@@ -1,3 +1,4 @@
+# shellcheck shell=bash
 # Shared by up.sh, down.sh and selftest.sh (sourced, not run). Defines the state-dir layout and the
 # pid-file helpers, so that the three scripts agree on where everything lives.
 # shellcheck disable=SC2034 # the paths are used by the scripts that source this file
@@ -91,6 +92,55 @@ stop_daemon() {
 ctld_pid="$rundir/slurmctld.pid"
 slurmd_pid="$rundir/slurmd.pid"
 munged_pid="$rundir/munged.pid"
+
+# TALUS_SLURM_NODES=N (default 1): with N >= 2, up.sh starts N slurmd daemons on this machine in
+# Slurm's multiple-slurmd mode (Debian's slurmd is built with it: `scontrol show config` says
+# MULTIPLE_SLURMD = Yes), as nodes node1..nodeN, each with its own port, spool dir, pid file
+# (slurmd_pid_of) and log (slurmd_log_of), and this machine's CPUs and memory split between
+# them. With 1, the cluster is the one node named after this host, exactly as before.
+slurm_nodes="${TALUS_SLURM_NODES:-1}"
+[[ "$slurm_nodes" =~ ^[1-9][0-9]?$ ]] || { echo "talus slurm: ERROR: TALUS_SLURM_NODES must be 1..99, not '$slurm_nodes'" >&2; exit 1; }
+# node_names: the Slurm names of the nodes of a multi-node cluster (node1 .. nodeN).
+node_names() { local i; for ((i = 1; i <= slurm_nodes; i++)); do echo "node$i"; done; }
+# slurmd_pid_of NODE / slurmd_log_of NODE: a multi-node cluster's slurmd NODE's pid file and log
+# (slurm.conf's SlurmdPidFile and SlurmdLogFile with %n, which slurmd replaces by its node name).
+slurmd_pid_of() { echo "$rundir/slurmd-$1.pid"; }
+slurmd_log_of() { echo "$logdir/slurmd-$1.log"; }
+# all_slurmd_pids: the pid files of every slurmd this state dir may have (one node or several).
+all_slurmd_pids() { compgen -G "$rundir/slurmd*.pid" || true; }
+
+# stepds_of LOG...: the slurmstepd processes of this machine that keep one of the slurmd logs LOG
+# open. slurmd's log is how a step daemon is told apart from another cluster's (or another
+# node's): it inherits slurmd's open log file and outlives slurmd when slurmd is killed.
+stepds_of() {
+  local p fd target log
+  for p in /proc/[0-9]*; do
+    [[ "$(cat "$p/comm" 2>/dev/null)" == slurmstepd ]] || continue
+    for fd in "$p"/fd/*; do
+      target="$(readlink "$fd" 2>/dev/null)" || continue
+      for log in "$@"; do
+        if [[ "$target" == "$log" ]]; then
+          echo "${p#/proc/}"
+          continue 3
+        fi
+      done
+    done
+  done
+}
+# descendants PID: all descendants of PID, deepest last, from one ps snapshot.
+descendants() {
+  local -A kids=()
+  local pid ppid queue=("$1") cur
+  while read -r pid ppid; do kids[$ppid]+="$pid "; done < <(ps -e -o pid=,ppid=)
+  while ((${#queue[@]})); do
+    cur="${queue[0]}"
+    queue=("${queue[@]:1}")
+    for pid in ${kids[$cur]:-}; do
+      echo "$pid"
+      queue+=("$pid")
+    done
+  done
+}
 
 # teardown_on_exit LABEL STOP: the EXIT trap of a test script (trap 'teardown_on_exit ... ' EXIT).
 # With STOP non-empty, stops the cluster (down.sh; a failure there fails the test); on a non-zero

@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
-# Stops the one-node cluster that up.sh started for $SLURM_STATE_DIR (default /tmp/talus-slurm):
+# Stops the cluster (one node, or several: TALUS_SLURM_NODES) that up.sh started for $SLURM_STATE_DIR (default /tmp/talus-slurm):
 #   1. cancels the jobs still queued or running, while slurmctld and slurmd are there to do it
 #      (slurmd does not kill running jobs when it stops: their slurmstepd would live on);
-#   2. stops slurmd, then slurmctld, by their pid files in the state dir;
+#   2. stops every slurmd, then slurmctld, by their pid files in the state dir;
 #   3. kills any slurmstepd of this state dir that outlived slurmd, with its job's processes;
 #   4. stops the private munged that up.sh started (same state dir).
 # Only processes named by this state dir's pid files (or stepds writing to its slurmd.log) are
@@ -17,7 +17,10 @@ source "$here/common.sh"
 export SLURM_CONF="$conf"
 
 # ---------------------------------------------------------------- 1. cancel jobs
-if pid_alive slurmctld "$ctld_pid" && pid_alive slurmd "$slurmd_pid" && [[ -f "$conf" ]]; then
+# A slurmd of any node (one, or several with TALUS_SLURM_NODES) alive: the jobs can be cancelled.
+any_slurmd=""
+for f in $(all_slurmd_pids); do pid_alive slurmd "$f" && any_slurmd=1; done
+if pid_alive slurmctld "$ctld_pid" && [[ -n "$any_slurmd" ]] && [[ -f "$conf" ]]; then
   # Without -t, squeue lists the unfinished jobs (pending, running, suspended, completing).
   # %A is each array task's own job id, so every task is named.
   ids="$(squeue -h -o '%A' 2>/dev/null | sort -u | tr '\n' ' ' || true)"
@@ -36,37 +39,19 @@ if pid_alive slurmctld "$ctld_pid" && pid_alive slurmd "$slurmd_pid" && [[ -f "$
 fi
 
 # ---------------------------------------------------------------- 2. slurm daemons
-stop_daemon slurmd "$slurmd_pid"
+# Every slurmd pid file of the state dir: slurmd.pid (one node), slurmd-nodeI.pid (several).
+for f in $(all_slurmd_pids); do stop_daemon slurmd "$f"; done
 stop_daemon slurmctld "$ctld_pid"
 
 # ---------------------------------------------------------------- 3. orphaned step daemons
-# A slurmstepd of this cluster keeps slurmd's log open (fd to $logdir/slurmd.log); that is how we
-# tell it from another cluster's. Its job's processes are its descendants: kill those first.
+# A slurmstepd of this cluster keeps its slurmd's log open ($logdir/slurmd.log, or
+# slurmd-nodeI.log of a multi-node cluster; common.sh stepds_of); that is how we tell it from
+# another cluster's. Its job's processes are its descendants (descendants): kill those first.
 our_stepds() {
-  local p fd
-  for p in /proc/[0-9]*; do
-    [[ "$(cat "$p/comm" 2>/dev/null)" == slurmstepd ]] || continue
-    for fd in "$p"/fd/*; do
-      if [[ "$(readlink "$fd" 2>/dev/null)" == "$logdir/slurmd.log" ]]; then
-        echo "${p#/proc/}"
-        break
-      fi
-    done
-  done
-}
-descendants() {
-  # All descendants of $1, deepest last, from one ps snapshot.
-  local -A kids=()
-  local pid ppid queue=("$1") cur
-  while read -r pid ppid; do kids[$ppid]+="$pid "; done < <(ps -e -o pid=,ppid=)
-  while ((${#queue[@]})); do
-    cur="${queue[0]}"
-    queue=("${queue[@]:1}")
-    for pid in ${kids[$cur]:-}; do
-      echo "$pid"
-      queue+=("$pid")
-    done
-  done
+  local logs
+  mapfile -t logs < <(compgen -G "$logdir/slurmd*.log" || true)
+  ((${#logs[@]})) || return 0
+  stepds_of "${logs[@]}"
 }
 stepds="$(our_stepds | tr '\n' ' ')"
 if [[ -n "${stepds// /}" ]]; then

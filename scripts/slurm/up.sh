@@ -1,5 +1,7 @@
 #!/usr/bin/env bash
-# Brings up a one-node Slurm cluster on this machine for talus's tests, idempotently:
+# Brings up a Slurm cluster on this machine for talus's tests, idempotently: one node, or with
+# TALUS_SLURM_NODES=N (N >= 2) N nodes node1..nodeN, N slurmd daemons of this machine in Slurm's
+# multiple-slurmd mode (its CPUs and memory split between them; see common.sh):
 #   - installs Debian's slurmctld, slurmd, slurm-client and munge when missing;
 #   - starts a private munged (own key and socket in the state dir, so it never clashes with, or
 #     depends on, a system munged);
@@ -14,7 +16,8 @@
 # Environment:
 #   SLURM_STATE_DIR       state dir (default /tmp/talus-slurm)
 #   TALUS_SLURMCTLD_PORT  slurmctld port (default 6817)
-#   TALUS_SLURMD_PORT     slurmd port (default 6818)
+#   TALUS_SLURMD_PORT     slurmd port (default 6818); node i of several listens on this + i - 1
+#   TALUS_SLURM_NODES     number of slurmd nodes (default 1)
 #   TALUS_SLURM_TIMEOUT   seconds to wait for the node to be idle (default 60)
 #   TALUS_SLURM_MIN_JOB_AGE  seconds a finished job stays queryable in squeue/scontrol (default 600)
 #
@@ -112,6 +115,20 @@ node_name="$(sed -E 's/^NodeName=([^ ]+).*/\1/' <<<"$node_line")"
 host_short="$(hostname -s)"
 [[ "$node_name" == "$host_short" ]] || note "warning: slurmd -C names the node $node_name, hostname -s says $host_short"
 
+# The nodes: this host (one node), or node1..nodeN, each its slurmd's pid file, log and port.
+if ((slurm_nodes == 1)); then
+  nodes=("$node_name")
+else
+  mapfile -t nodes < <(node_names)
+fi
+pid_file_of() { if ((slurm_nodes == 1)); then echo "$slurmd_pid"; else slurmd_pid_of "$1"; fi; }
+log_of() { if ((slurm_nodes == 1)); then echo "$logdir/slurmd.log"; else slurmd_log_of "$1"; fi; }
+any_slurmd_alive() {
+  local n
+  for n in "${nodes[@]}"; do pid_alive slurmd "$(pid_file_of "$n")" && return 0; done
+  return 1
+}
+
 # Ports: the defaults (or TALUS_SLURMCTLD_PORT / TALUS_SLURMD_PORT). When this script's own
 # daemons are not running and a default port is taken (another Slurm on this machine listens on
 # 6817/6818), a free port is picked instead and said; a port the caller set is used as given.
@@ -130,7 +147,8 @@ PY
 free_port() {
   python3 -c 'import socket; s = socket.socket(); s.bind(("", 0)); print(s.getsockname()[1])'
 }
-if ! pid_alive slurmctld "$ctld_pid" && ! pid_alive slurmd "$slurmd_pid"; then
+slurmd_ports=()
+if ! pid_alive slurmctld "$ctld_pid" && ! any_slurmd_alive; then
   if [[ -z "${TALUS_SLURMCTLD_PORT:-}" ]] && port_busy "$ctld_port"; then
     old="$ctld_port"; ctld_port="$(free_port)"
     note "port $old is taken (another Slurm?): slurmctld listens on $ctld_port instead"
@@ -140,10 +158,65 @@ if ! pid_alive slurmctld "$ctld_pid" && ! pid_alive slurmd "$slurmd_pid"; then
     while [[ "$slurmd_port" == "$ctld_port" ]]; do slurmd_port="$(free_port)"; done
     note "port $old is taken (another Slurm?): slurmd listens on $slurmd_port instead"
   fi
+  # Several nodes: the ports after slurmd_port, or free ones (as above) when one is taken.
+  slurmd_ports=()
+  for ((i = 0; i < slurm_nodes; i++)); do
+    p=$((slurmd_port + i))
+    if ((i > 0)) && [[ -z "${TALUS_SLURMD_PORT:-}" ]] && port_busy "$p"; then
+      p="$(free_port)"
+      while [[ " $ctld_port ${slurmd_ports[*]} " == *" $p "* ]]; do p="$(free_port)"; done
+      note "port $((slurmd_port + i)) is taken: slurmd of node$((i + 1)) listens on $p instead"
+    fi
+    slurmd_ports+=("$p")
+  done
 elif [[ -f "${conf:-}" ]]; then
   # Our daemons run: keep the ports they were started with.
   ctld_port="$(sed -n 's/^SlurmctldPort=//p' "$conf" | head -n 1)"
   slurmd_port="$(sed -n 's/^SlurmdPort=//p' "$conf" | head -n 1)"
+  mapfile -t slurmd_ports < <(sed -n -E 's/^NodeName=.* Port=([0-9]+).*/\1/p' "$conf")
+  ((${#slurmd_ports[@]} == slurm_nodes)) || slurmd_ports=()
+fi
+# A cluster of this state dir that runs with another number of nodes: fresh ports for all.
+if ((slurm_nodes > 1 && ${#slurmd_ports[@]} != slurm_nodes)); then
+  slurmd_ports=()
+  for ((i = 0; i < slurm_nodes; i++)); do slurmd_ports+=("$((slurmd_port + i))"); done
+fi
+
+# The slurmd settings and node lines of slurm.conf. One node: slurmd -C's line, as it is. Several:
+# each node gets an equal share of the CPUs (at least 1) and of the memory, and its own port;
+# %n in the file names is the node's name (slurmd replaces it). SlurmdTimeout=10 (default 300):
+# a node whose slurmd is killed is DOWN, and its jobs requeued, about 30 s later, not 5 min.
+# cred_expire=15 (default 120): a requeued job may start again cred_expire + 1 s after the requeue
+# (Reason=BeginTime); 121 s with the default. It is also the lifetime of a job's credential, the
+# time a launch may take: 15 s is ample on an idle machine.
+auth_extra=""
+if ((slurm_nodes == 1)); then
+  slurmd_conf="SlurmdSpoolDir=$state/spool/slurmd
+SlurmctldPidFile=$ctld_pid
+SlurmdPidFile=$slurmd_pid
+SlurmctldLogFile=$logdir/slurmctld.log
+SlurmdLogFile=$logdir/slurmd.log"
+  node_conf="$node_line State=UNKNOWN
+PartitionName=main Nodes=$node_name Default=YES MaxTime=INFINITE State=UP"
+else
+  cpus="$(sed -E 's/.* CPUs=([0-9]+).*/\1/' <<<"$node_line")"
+  mem="$(sed -E 's/.* RealMemory=([0-9]+).*/\1/' <<<"$node_line")"
+  [[ "$cpus" =~ ^[0-9]+$ && "$mem" =~ ^[0-9]+$ ]] || die "cannot read CPUs and RealMemory from: $node_line"
+  node_cpus=$((cpus / slurm_nodes)); ((node_cpus >= 1)) || node_cpus=1
+  node_mem=$((mem / slurm_nodes))
+  slurmd_conf="SlurmdSpoolDir=$state/spool/slurmd-%n
+SlurmctldPidFile=$ctld_pid
+SlurmdPidFile=$(slurmd_pid_of %n)
+SlurmctldLogFile=$logdir/slurmctld.log
+SlurmdLogFile=$(slurmd_log_of %n)
+SlurmdTimeout=10"
+  auth_extra=",cred_expire=15"
+  node_conf=""
+  for ((i = 0; i < slurm_nodes; i++)); do
+    node_conf+="NodeName=${nodes[i]} NodeHostname=$node_name Port=${slurmd_ports[i]} CPUs=$node_cpus RealMemory=$node_mem State=UNKNOWN
+"
+  done
+  node_conf+="PartitionName=main Nodes=$(IFS=,; echo "${nodes[*]}") Default=YES MaxTime=INFINITE State=UP"
 fi
 
 new_conf="$(cat <<EOF
@@ -158,7 +231,7 @@ SlurmdUser=root
 # Private munged (see up.sh); clients read the socket from here too, so they need SLURM_CONF.
 AuthType=auth/munge
 CredType=cred/munge
-AuthInfo=socket=$munge_socket
+AuthInfo=socket=$munge_socket$auth_extra
 # No cgroups: linuxproc tracks a job's processes by parent pid, task/none binds nothing.
 ProctrackType=proctrack/linuxproc
 TaskPlugin=task/none
@@ -191,15 +264,10 @@ KillWait=5
 ReturnToService=2
 # Everything in the state dir.
 StateSaveLocation=$state/spool/slurmctld
-SlurmdSpoolDir=$state/spool/slurmd
-SlurmctldPidFile=$ctld_pid
-SlurmdPidFile=$slurmd_pid
-SlurmctldLogFile=$logdir/slurmctld.log
-SlurmdLogFile=$logdir/slurmd.log
+$slurmd_conf
 SlurmctldDebug=info
 SlurmdDebug=info
-$node_line State=UNKNOWN
-PartitionName=main Nodes=$node_name Default=YES MaxTime=INFINITE State=UP
+$node_conf
 EOF
 )"
 conf_changed=""
@@ -211,9 +279,10 @@ fi
 export SLURM_CONF="$conf"
 
 # ---------------------------------------------------------------- slurm daemons
-if [[ -n "$conf_changed" ]] && { pid_alive slurmd "$slurmd_pid" || pid_alive slurmctld "$ctld_pid"; }; then
+if [[ -n "$conf_changed" ]] && { [[ -n "$(all_slurmd_pids)" ]] || pid_alive slurmctld "$ctld_pid"; }; then
   note "slurm.conf changed: restarting slurmd and slurmctld"
-  stop_daemon slurmd "$slurmd_pid"
+  # Every slurmd of the state dir, also those of a cluster with another number of nodes.
+  for f in $(all_slurmd_pids); do stop_daemon slurmd "$f"; done
   stop_daemon slurmctld "$ctld_pid"
 fi
 
@@ -231,39 +300,61 @@ else
   slurmctld -f "$conf" -c \
     || { tail -n 20 "$logdir/slurmctld.log" >&2 || true; die "slurmctld did not start (log: $logdir/slurmctld.log)"; }
 fi
-if pid_alive slurmd "$slurmd_pid"; then
-  note "slurmd already running (pid $(pid_of "$slurmd_pid"))"
-else
-  rm -f "$slurmd_pid"
-  note "starting slurmd"
-  slurmd -f "$conf" \
-    || { tail -n 20 "$logdir/slurmd.log" >&2 || true; die "slurmd did not start (log: $logdir/slurmd.log)"; }
-fi
-
-# ---------------------------------------------------------------- wait for the node
-# Up = slurmctld answers and the node takes jobs: idle, or mixed/allocated/completing when up.sh
-# runs again while jobs are running.
-start=$SECONDS
-node_state=""
-while :; do
-  node_state="$(sinfo -h -N -n "$node_name" -o '%T' 2>/dev/null | head -n 1 || true)"
-  case "$node_state" in
-    idle | mixed | allocated | completing) break ;;
-  esac
-  for d in slurmctld:"$ctld_pid" slurmd:"$slurmd_pid"; do
-    if ! pid_alive "${d%%:*}" "${d#*:}"; then
-      tail -n 20 "$logdir/${d%%:*}.log" >&2 || true
-      die "${d%%:*} exited during start-up (log: $logdir/${d%%:*}.log)"
+for n in "${nodes[@]}"; do
+  pf="$(pid_file_of "$n")"
+  what="slurmd"
+  ((slurm_nodes == 1)) || what="slurmd of $n"
+  if pid_alive slurmd "$pf"; then
+    note "$what already running (pid $(pid_of "$pf"))"
+  else
+    rm -f "$pf"
+    if ((slurm_nodes == 1)); then
+      note "starting slurmd"
+      slurmd -f "$conf" \
+        || { tail -n 20 "$(log_of "$n")" >&2 || true; die "slurmd did not start (log: $(log_of "$n"))"; }
+    else
+      note "starting slurmd of $n"
+      mkdir -p "$state/spool/slurmd-$n"
+      # -N: this slurmd is node $n (multiple-slurmd mode).
+      slurmd -f "$conf" -N "$n" \
+        || { tail -n 20 "$(log_of "$n")" >&2 || true; die "slurmd of $n did not start (log: $(log_of "$n"))"; }
     fi
-  done
-  if ((SECONDS - start >= timeout)); then
-    sinfo -R >&2 || true
-    tail -n 20 "$logdir/slurmctld.log" >&2 || true
-    die "node $node_name not idle after ${timeout}s (state: '${node_state:-no answer from slurmctld}'; logs in $logdir)"
   fi
-  sleep 0.5
 done
-note "cluster up: node $node_name is $node_state ($(sinfo -h -o '%c CPUs, %m MB' | head -n 1)) after $((SECONDS - start))s"
+
+# ---------------------------------------------------------------- wait for the nodes
+# Up = slurmctld answers and every node takes jobs: idle, or mixed/allocated/completing when
+# up.sh runs again while jobs are running.
+start=$SECONDS
+for n in "${nodes[@]}"; do
+  node_state=""
+  while :; do
+    node_state="$(sinfo -h -N -n "$n" -o '%T' 2>/dev/null | head -n 1 || true)"
+    case "$node_state" in
+      idle | mixed | allocated | completing) break ;;
+    esac
+    if ! pid_alive slurmctld "$ctld_pid"; then
+      tail -n 20 "$logdir/slurmctld.log" >&2 || true
+      die "slurmctld exited during start-up (log: $logdir/slurmctld.log)"
+    fi
+    if ! pid_alive slurmd "$(pid_file_of "$n")"; then
+      tail -n 20 "$(log_of "$n")" >&2 || true
+      die "slurmd exited during start-up (log: $(log_of "$n"))"
+    fi
+    if ((SECONDS - start >= timeout)); then
+      sinfo -R >&2 || true
+      tail -n 20 "$logdir/slurmctld.log" >&2 || true
+      die "node $n not idle after ${timeout}s (state: '${node_state:-no answer from slurmctld}'; logs in $logdir)"
+    fi
+    sleep 0.5
+  done
+  if ((slurm_nodes == 1)); then
+    note "cluster up: node $n is $node_state ($(sinfo -h -o '%c CPUs, %m MB' | head -n 1)) after $((SECONDS - start))s"
+  else
+    note "node $n is $node_state ($(sinfo -h -N -n "$n" -o '%c CPUs, %m MB' | head -n 1)) after $((SECONDS - start))s"
+  fi
+done
+((slurm_nodes == 1)) || note "cluster up: ${#nodes[@]} nodes (${nodes[*]}), multiple-slurmd mode"
 
 printf 'export SLURM_CONF=%q\n' "$conf" >"$state/env.sh"
 cat "$state/env.sh"
