@@ -406,10 +406,11 @@ fn a_resumed_run_takes_the_spacing_its_store_measured() {
     assert_eq!(entries().len(), 2);
 }
 
-/// A record whose meta lacks a field is damaged, never read as a default (ARCHITECTURE.md, the
-/// unit contract): the unit that reads it — here the outputs unit, reading the timing of a
-/// tiling it depends on only through the M3C2 units — names the record, the executor computes
-/// that unit again and then the reader, and the outputs are those of an undamaged run.
+/// A record that lacks a field is damaged, never read as a default (ARCHITECTURE.md, the unit
+/// contract): the unit that reads it — here the outputs unit, reading the timing of a tiling it
+/// depends on only through the M3C2 units — names the record, the executor computes that unit
+/// again and then the reader, and the outputs are those of an undamaged run. The timing lies
+/// beside the meta, not in it: a meta field named `seconds` is the stage's own.
 #[test]
 fn a_damaged_record_is_computed_again_not_read_as_a_default() {
     let tmp = common::tempdir();
@@ -428,7 +429,9 @@ fn a_damaged_record_is_computed_again_not_read_as_a_default() {
     let path = tiling.join("record.json");
     let mut record: serde_json::Value =
         serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
-    record["meta"].as_object_mut().unwrap().remove("seconds");
+    assert!(record["timing"]["seconds"].is_number(), "{record}");
+    assert!(record["meta"].get("seconds").is_none(), "{record}");
+    record.as_object_mut().unwrap().remove("timing");
     std::fs::write(&path, serde_json::to_vec(&record).unwrap()).unwrap();
     // The outputs unit lost: it is computed again, and reads every timing.
     std::fs::remove_dir_all(units.join("outputs")).unwrap();
@@ -441,7 +444,7 @@ fn a_damaged_record_is_computed_again_not_read_as_a_default() {
     let said = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{said}");
     assert!(
-        said.contains("record.json: damaged") && said.contains("missing field `seconds`"),
+        said.contains("record.json: damaged") && said.contains("its record has no timing"),
         "{said}"
     );
     let fixed: serde_json::Value = serde_json::from_slice(
@@ -456,6 +459,6 @@ fn a_damaged_record_is_computed_again_not_read_as_a_default() {
         .unwrap(),
     )
     .unwrap();
-    assert!(fixed["meta"]["seconds"].is_number(), "{fixed}");
+    assert!(fixed["timing"]["seconds"].is_number(), "{fixed}");
     assert_same_outputs(&reference, &dir);
 }

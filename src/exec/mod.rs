@@ -522,18 +522,15 @@ fn claim_and_run(cx: &RunCtx, i: usize) -> Result<Ran> {
     crate::memory::trim();
     crate::progress::trace(|| format!("unit {} trimmed", unit.name));
     let peak = watch.end(i);
-    let mut meta = ran?;
-    if let Some(m) = meta.as_object_mut() {
-        m.insert(
-            "seconds".into(),
-            serde_json::json!(started.elapsed().as_secs_f64()),
-        );
-        if let Some(p) = peak {
-            m.insert("peak_rss_bytes".into(), serde_json::json!(p));
-            stages.peak(plan, i, p);
-        }
+    let meta = ran?;
+    if let Some(p) = peak {
+        stages.peak(plan, i, p);
     }
-    out.commit(meta)?;
+    let timing = crate::store::Timing {
+        seconds: started.elapsed().as_secs_f64(),
+        peak_rss_bytes: peak,
+    };
+    out.commit(meta, Some(timing))?;
     crate::progress::trace(|| format!("unit {} committed", unit.name));
     drop(claim);
     Ok(Ran::Done)

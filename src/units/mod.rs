@@ -109,9 +109,10 @@ impl Ctx<'_> {
         self.record_meta(i)
     }
 
-    /// What the executor recorded of finished unit `i`: its seconds and peak memory.
+    /// What the executor recorded of finished unit `i` beside its meta: its seconds and peak
+    /// memory.
     pub fn timing(&self, i: usize) -> Result<stage::Timing> {
-        self.record_meta(i)
+        stage::timing_of(self.store, &self.unit_ref(i), &self.record(i)?)
     }
 
     /// Unit `i`'s record's meta as `M`. A record that lacks a field is damaged, naming the

@@ -212,6 +212,6 @@ mod tests {
         assert_eq!(read(&a9), bytes(&tetra(1.0)));
         let back = mesh_ply::read_ply_mesh(&out.path(&b7).unwrap()).unwrap();
         crate::volume::check_watertight(&back).unwrap();
-        out.commit(serde_json::Value::Null).unwrap();
+        out.commit(serde_json::Value::Null, None).unwrap();
     }
 }

@@ -92,7 +92,8 @@ pub trait Stage: Send + Sync + 'static {
     const KEPT: &'static [&'static str] = &[];
     /// The progress line (and summary.json stage) its units count on.
     const LINE: Line;
-    /// What its units record (their record's meta, beside the executor's [`Timing`]). A field
+    /// What its units record (their record's meta, beside the executor's [`Timing`], which is
+    /// not part of it: a field of any name is the stage's own). A field
     /// missing from a record is an error naming the unit, never a default.
     type Meta: Serialize + DeserializeOwned;
 
@@ -139,13 +140,9 @@ pub struct Publishes<M> {
     pub list: fn(&M) -> &[super::outputs::Publish],
 }
 
-/// What the executor adds to every unit's record: how long it ran and its peak resident memory.
-#[derive(Debug, Clone, Copy, Default, Serialize, serde::Deserialize)]
-pub struct Timing {
-    pub seconds: f64,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub peak_rss_bytes: Option<u64>,
-}
+/// What the executor keeps in every unit's record beside its meta: how long it ran and its peak
+/// resident memory.
+pub use crate::store::Timing;
 
 /// A stage as the drivers see it: [`Stage`] without its types.
 pub trait Registered: Send + Sync {
@@ -262,6 +259,22 @@ pub fn damaged_record(
             .unwrap_or_default(),
         problem: format!("unit {}: its record's meta: {e}", unit.name),
     }
+}
+
+/// The timing of `unit` in its record `rec` ([`crate::store::Record::timing`]); a record that
+/// holds none is damaged, naming it.
+pub fn timing_of(
+    store: &crate::store::Store,
+    unit: &crate::store::UnitRef,
+    rec: &crate::store::Record,
+) -> Result<Timing> {
+    rec.timing().ok_or_else(|| Error::Damaged {
+        path: store
+            .unit_dir(unit)
+            .map(|d| d.join(crate::store::RECORD_FILE))
+            .unwrap_or_default(),
+        problem: format!("unit {}: its record has no timing", unit.name),
+    })
 }
 
 /// The stage `S` as the registry holds it.

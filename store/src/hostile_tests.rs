@@ -96,7 +96,7 @@ fn scene() -> (tempfile::TempDir, Store, PathBuf, Vec<(String, String)>) {
         std::fs::write(w.path(name).unwrap(), format!("new {name}")).unwrap();
         w.add_file(name).unwrap();
     }
-    w.commit(serde_json::Value::Null).unwrap();
+    w.commit(serde_json::Value::Null, None).unwrap();
     symlink(&outside, s.units().join("outputs/planted")).unwrap();
     symlink(&outside, s.dir().join("links")).unwrap();
     let files = ["m3c2.laz", "meshes/event_0001_before.ply", "summary.json"]
@@ -319,7 +319,9 @@ fn hostile_records_name_only_files_inside_their_unit() {
     let mut r = SplitMix64::new(4401);
     let (_t, s, outside, _files) = scene();
     let u = unit("m3c2", "pair0-0123456789abcdef");
-    write_unit(&s, &u).commit(serde_json::Value::Null).unwrap();
+    write_unit(&s, &u)
+        .commit(serde_json::Value::Null, None)
+        .unwrap();
     let dir = s.unit_dir(&u).unwrap();
     // Links inside the unit: a file and a folder pointing outside.
     symlink(outside.join("secret.txt"), dir.join("linked.txt")).unwrap();

@@ -60,7 +60,7 @@ pub use fsops::{crc_and_size, link_error, no_links, open_store_file, read_store_
 pub use gc::GcReport;
 pub use lock::{Lock, LockInfo};
 pub use owner_file::Owner;
-pub use record::{Record, RecordFile, RECORD_FILE};
+pub use record::{Record, RecordFile, Timing, RECORD_FILE};
 pub use recover::Recovery;
 pub use unit_ref::{check_component, check_rel_path, UnitRef};
 pub use writer::UnitWriter;

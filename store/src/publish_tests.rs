@@ -62,7 +62,7 @@ fn setup() -> (tempfile::TempDir, Store, Vec<(PathBuf, String)>) {
         std::fs::write(w.path(name).unwrap(), format!("new {name}")).unwrap();
         w.add_file(name).unwrap();
     }
-    w.commit(serde_json::Value::Null).unwrap();
+    w.commit(serde_json::Value::Null, None).unwrap();
     let dir = s.unit_dir(&u).unwrap();
     let files = NEW.iter().map(|n| (dir.join(n), n.to_string())).collect();
     (t, s, files)

@@ -1,5 +1,6 @@
 //! `record.json`: what a finished unit holds (each file's size and CRC-32), what its producer
-//! wants kept (`meta`), and who wrote it when. It is written last, inside the unit's temporary
+//! wants kept (`meta`), how long it ran (`timing`, beside the meta: a producer's field of any
+//! name is its own), and who wrote it when. It is written last, inside the unit's temporary
 //! directory, before the directory is renamed into `units/`: a unit directory without a record
 //! that parses is damage, never a unit.
 
@@ -29,6 +30,10 @@ pub struct Record {
     pub files: Vec<RecordFile>,
     /// Whatever the producer keeps with the unit (counts, bounds, ...).
     pub meta: serde_json::Value,
+    /// How long the unit ran and its peak resident memory, as its executor measured them (none
+    /// in a record written without: [`Record::timing`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub timing: Option<Timing>,
     /// Unix seconds when the unit was committed.
     pub created: u64,
     /// `host:pid` of the process that committed it.
@@ -40,7 +45,22 @@ pub struct Record {
     pub released: bool,
 }
 
+/// How long a unit ran and the highest resident memory of its process meanwhile.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Timing {
+    pub seconds: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub peak_rss_bytes: Option<u64>,
+}
+
 impl Record {
+    /// The unit's timing: its own field, or — in a record written by talus 0.2.0 or earlier,
+    /// whose executor spliced it into the meta — the meta's `seconds` and `peak_rss_bytes`.
+    /// `None` when neither holds it (a damaged record).
+    pub fn timing(&self) -> Option<Timing> {
+        self.timing.or_else(|| Timing::deserialize(&self.meta).ok())
+    }
+
     /// Read the record of the unit directory `dir`, if it is a regular file (no link), parses,
     /// belongs to `unit` and names only files inside the directory (a damaged or crafted record
     /// must not point a reader elsewhere).

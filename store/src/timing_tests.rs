@@ -26,7 +26,7 @@ fn timing() {
     w.add_file("big.bin").unwrap();
     time("add_file (CRC read)", t0);
     let t0 = Instant::now();
-    let rec = w.commit(serde_json::Value::Null).unwrap();
+    let rec = w.commit(serde_json::Value::Null, None).unwrap();
     time("commit (fsync, rename)", t0);
     let t0 = Instant::now();
     for _ in 0..1000 {

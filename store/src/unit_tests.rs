@@ -82,7 +82,7 @@ fn child_role() {
         "commit" => {
             let w = write_unit(&s, &u);
             wait_for(&dir.join("go"));
-            w.commit(serde_json::json!({"n": 1})).unwrap();
+            w.commit(serde_json::json!({"n": 1}), None).unwrap();
         }
         // Start writing, then wait to be killed.
         "hold-writer" => {
@@ -107,7 +107,7 @@ fn commit_done_verify_invalidate_round_trip() {
     let u = unit("tiling", "survey0-3f2a9c01d4e5b6a7");
     assert!(s.done(&u).is_none());
     let w = write_unit(&s, &u);
-    let rec = w.commit(serde_json::json!({"points": 42})).unwrap();
+    let rec = w.commit(serde_json::json!({"points": 42}), None).unwrap();
     assert_eq!(rec.unit, u);
     let names: Vec<&str> = rec.files.iter().map(|f| f.name.as_str()).collect();
     assert_eq!(names, ["a.bin", "sub/b.txt"]);
@@ -128,7 +128,9 @@ fn commit_done_verify_invalidate_round_trip() {
 fn damage_is_seen_by_done_or_verify() {
     let (_t, s) = store();
     let u = unit("m3c2", "tile_3_4-00ff");
-    let rec = write_unit(&s, &u).commit(serde_json::Value::Null).unwrap();
+    let rec = write_unit(&s, &u)
+        .commit(serde_json::Value::Null, None)
+        .unwrap();
     let a = s.unit_dir(&u).unwrap().join("a.bin");
     // One byte flipped, same size: cheap `done` cannot tell, `verify` does.
     let mut bytes = std::fs::read(&a).unwrap();
@@ -161,14 +163,14 @@ fn writer_checks_its_files() {
     std::fs::write(w.path("stray").unwrap(), b"abc").unwrap();
     w.add("a", crc32fast::hash(b"abc"), 3);
     assert!(
-        matches!(w.commit(serde_json::Value::Null), Err(Error::Internal(m)) if m.contains("stray"))
+        matches!(w.commit(serde_json::Value::Null, None), Err(Error::Internal(m)) if m.contains("stray"))
     );
     // The failed writer's directory is gone with it.
     assert!(tmp_entries(&s).is_empty());
     let mut w = s.begin(&u).unwrap();
     std::fs::write(w.path("a").unwrap(), b"abc").unwrap();
     w.add("a", 0, 4);
-    assert!(w.commit(serde_json::Value::Null).is_err());
+    assert!(w.commit(serde_json::Value::Null, None).is_err());
     assert!(s.done(&u).is_none());
     // Dropping an uncommitted writer deletes its directory.
     drop(write_unit(&s, &u));
@@ -187,7 +189,7 @@ fn two_threads_commit_one_unit() {
                 sc.spawn(move || {
                     let w = write_unit(s, u);
                     b.wait();
-                    w.commit(serde_json::json!({"n": 1})).unwrap()
+                    w.commit(serde_json::json!({"n": 1}), None).unwrap()
                 })
             })
             .collect();
@@ -245,7 +247,7 @@ fn a_killed_writer_is_never_done_and_gc_clears_it() {
     assert_eq!(report.tmp, left);
     assert!(report.bytes > 0);
     assert_eq!(tmp_entries(&s).len(), 1);
-    mine.commit(serde_json::Value::Null).unwrap();
+    mine.commit(serde_json::Value::Null, None).unwrap();
     assert!(tmp_entries(&s).is_empty());
 }
 
@@ -255,10 +257,10 @@ fn gc_removes_units_not_kept_and_old_foreign_tmp() {
     let keep_u = unit("tiling", "survey0-1");
     let old_u = unit("tiling", "survey0-2");
     write_unit(&s, &keep_u)
-        .commit(serde_json::Value::Null)
+        .commit(serde_json::Value::Null, None)
         .unwrap();
     write_unit(&s, &old_u)
-        .commit(serde_json::Value::Null)
+        .commit(serde_json::Value::Null, None)
         .unwrap();
     // Left by a writer on another host: kept while recent, removed after an idle hour.
     let foreign = s.tmp().join("unit.x.y~elsewhere~123~456~0~0");

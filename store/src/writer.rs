@@ -12,7 +12,7 @@ use talus_base::{Error, Result};
 
 use super::fsops::{crc_and_size, out_err, remove_any, sync_dir, sync_files, tmp_name, trash};
 use super::process;
-use super::record::{Record, RecordFile, RECORD_FILE};
+use super::record::{Record, RecordFile, Timing, RECORD_FILE};
 use super::unit_ref::{check_rel_path, UnitRef};
 use super::Store;
 
@@ -77,7 +77,8 @@ impl UnitWriter {
     /// write `record.json`, fsync files and directories, and rename the directory into `units/`.
     /// If another process finished the same unit first (units are deterministic, so its content
     /// is ours) its directory is kept and ours deleted; a damaged one in the way is thrown away.
-    pub fn commit(self, meta: serde_json::Value) -> Result<Record> {
+    /// `timing` is kept beside the meta ([`Record::timing`]).
+    pub fn commit(self, meta: serde_json::Value, timing: Option<Timing>) -> Result<Record> {
         let mut files = Vec::with_capacity(self.files.len());
         for (name, &(crc32, size)) in &self.files {
             check_rel_path("unit file", name)?;
@@ -114,6 +115,7 @@ impl UnitWriter {
             unit: self.unit.clone(),
             files,
             meta,
+            timing,
             created: process::now_secs(),
             writer: format!("{}:{}", process::host(), std::process::id()),
             released: false,

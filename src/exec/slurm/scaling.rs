@@ -15,7 +15,7 @@ use super::{rank, stage_order};
 use crate::error::{Error, Result};
 use crate::plan::Plan;
 use crate::store::Store;
-use crate::units::stage::{typed_meta, Scope, Timing};
+use crate::units::stage::{timing_of, Scope, Timing};
 use crate::units::unit_ref;
 
 /// Seconds from one array's end to the start of the next (afterok): 0.6–1 s measured on the test
@@ -76,7 +76,7 @@ pub(crate) fn report(
                     plan.units[i].name
                 ))
             })?;
-            let t: Timing = typed_meta(&store, &unit_ref(&plan, i), &rec.meta)?;
+            let t: Timing = timing_of(&store, &unit_ref(&plan, i), &rec)?;
             secs[i] = t.seconds;
             tasks.push(t.seconds);
             peak = peak.max(t.peak_rss_bytes.unwrap_or(0));
