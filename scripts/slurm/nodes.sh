@@ -9,10 +9,13 @@
 #      in the middle of a unit (it holds the unit's claim, the unit is not done), that node's
 #      slurmd, its slurmstepd processes and their job processes (the talus task) are SIGKILLed.
 #      slurmctld marks the node DOWN (SlurmdTimeout) and requeues the task (JobRequeue, Slurm's
-#      default); it runs again on the other node, takes over the dead task's claim and the run
-#      (still in `--wait`) ends with exit 0 and the local run's outputs. The node is restarted;
+#      default); it runs again on the other node — another host name (up.sh) — takes over the
+#      dead task's claim (a later attempt of the same task: `store::Store::claim_attempt`) and
+#      the run (still in `--wait`) ends with exit 0 and the local run's outputs. The node is
+#      restarted;
 #   4. a node killed mid-task, no requeue: the same with `--slurm-args=--no-requeue`: the task
-#      ends NODE_FAIL, the run fails naming it, and the same command with `--resume` submits
+#      ends NODE_FAIL, the run fails naming it, and the same command with `--resume` drops the
+#      dead task's claim (Slurm says its jobs have ended: `exec::slurm::check_idle`), submits
 #      only what is missing and ends with the local run's outputs.
 # Prints the tasks per node of each run, what was killed, what Slurm requeued and what --resume
 # submitted. Stops the daemons it started (down.sh) on any exit. Fails loudly, never skips.
@@ -136,8 +139,8 @@ same_as_local slurm
 # kill_mid_task NAME: run the campaign into $work/NAME with --wait in the background (extra
 # options after NAME), catch an M3C2 task in the middle of a unit (freeze_claimer.py), SIGKILL its
 # node (slurmd, the node's slurmstepd processes and all their descendants). Sets victim (node),
-# m (the m3c2 array), k (the task), unit, killed_at (SECONDS), waiter (pid of the background run,
-# whose exit code goes to $work/NAME.rc).
+# m (the m3c2 array), k (the task), unit, claim_host (the host name in the unit's claim),
+# killed_at (SECONDS), waiter (pid of the background run, whose exit code goes to $work/NAME.rc).
 kill_mid_task() {
   local name="$1" i caught pid stepds all s d sd_pid pids
   shift
@@ -165,7 +168,9 @@ kill_mid_task() {
   all="$sd_pid $stepds"
   for s in $stepds; do all+=" $(descendants "$s" | tr '\n' ' ')"; done
   echo "caught m3c2 task $k ($task_name) on $victim in the middle of unit $unit: talus pid $pid stopped (SIGSTOP)"
-  echo "its unit's claim: $(tr -s '\n ' ' ' <"$(compgen -G "$work/$name/.talus/claims/*/m3c2/$unit")")"
+  claim_text="$(tr -s '\n ' ' ' <"$(compgen -G "$work/$name/.talus/claims/*/m3c2/$unit")")"
+  claim_host="$(sed -n -E 's/.*"host": "([^"]+)".*/\1/p' <<<"$claim_text")"
+  echo "its unit's claim: $claim_text"
   echo "SIGKILL to $victim: its slurmd, its slurmstepd processes and their descendants:"
   # shellcheck disable=SC2086
   read -ra pids <<<"$all"
@@ -226,6 +231,12 @@ report="$(tr -s '\n ' ' ' <"$work/requeue/.talus/slurm/1/tasks/m3c2-$k.json")"
 echo "resubmitted: Slurm requeued ${m}_$k (Restarts=$restarts); it ran again on $again_on and took over"
 echo "the dead task's claim; its task report: $report"
 grep -q '"computed": 1' <<<"$report" || fail "the requeued task did not compute unit $unit itself"
+# Every node has a host name of its own (up.sh): the claim it took over was another host's, whose
+# pid it could not check — a later attempt of the same task takes over an earlier one's claims.
+again_host="$(sed -n -E 's/.*"host": "([^"]+)".*/\1/p' <<<"$report")"
+[[ -n "$claim_host" && "$again_host" != "$claim_host" ]] \
+  || fail "the requeued task ran on host '$again_host', the dead claim's host is '$claim_host': not a take-over across hosts"
+echo "across hosts: the claim of $claim_host taken over on $again_host"
 [[ "${restarts:-0}" -ge 1 ]] || fail "scontrol shows Restarts=${restarts:-?} for ${m}_$k"
 [[ "$again_on" != "$victim" ]] || fail "the requeued task ran on the killed node $victim"
 [[ -d "$work/requeue/.talus/units/m3c2/$unit" ]] || fail "unit $unit is not done after the requeue"
@@ -260,6 +271,10 @@ echo "job arrays submitted (stage, job id, tasks):"
 sed 's/^/  /' "$work/resume.jobs"
 sed 's/^/  /' "$work/resume.err"
 [[ $rc == 0 ]] || fail "the resumed run exited $rc"
+# The killed task's claim (on host $claim_host) is dropped once Slurm says the submission's jobs
+# have all ended, not left to hold for the store's lease.
+grep -q "1 claim(s) left by ended tasks of submission 1 dropped" "$work/resume.err" \
+  || fail "--resume did not drop the claim the killed task left on $claim_host"
 ! grep -q '^tiling ' "$work/resume.jobs" || fail "--resume submitted the tiling again"
 resumed_m3c2="$(awk '$1 == "m3c2" { print $3 }' "$work/resume.jobs")"
 [[ -n "$resumed_m3c2" && "$resumed_m3c2" -lt "$ntasks" ]] \

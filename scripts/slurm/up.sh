@@ -315,9 +315,17 @@ for n in "${nodes[@]}"; do
     else
       note "starting slurmd of $n"
       mkdir -p "$state/spool/slurmd-$n"
-      # -N: this slurmd is node $n (multiple-slurmd mode).
-      slurmd -f "$conf" -N "$n" \
-        || { tail -n 20 "$(log_of "$n")" >&2 || true; die "slurmd of $n did not start (log: $(log_of "$n"))"; }
+      # -N: this slurmd is node $n (multiple-slurmd mode). Every node but the first runs in a UTS
+      # namespace of its own whose host name is "<host>-<node>", so that its jobs see another
+      # host, as on a real cluster: talus cannot check the pids of another host's claims.
+      if [[ "$n" == "${nodes[0]}" ]]; then
+        slurmd -f "$conf" -N "$n" \
+          || { tail -n 20 "$(log_of "$n")" >&2 || true; die "slurmd of $n did not start (log: $(log_of "$n"))"; }
+      else
+        # shellcheck disable=SC2016 # the positional parameters are the inner shell's
+        unshare --uts sh -c 'hostname "$1" && exec slurmd -f "$2" -N "$3"' sh "$(hostname)-$n" "$conf" "$n" \
+          || { tail -n 20 "$(log_of "$n")" >&2 || true; die "slurmd of $n did not start in a UTS namespace of its own (log: $(log_of "$n"))"; }
+      fi
     fi
   fi
 done

@@ -78,18 +78,21 @@ pub enum Executor {
 /// Execute every unit of `plan` not yet done in `store`, with `slots` units at a time, as a
 /// process of run `plan.run` labelled `label` (for claims).
 pub(crate) fn run(store: &Store, plan: &Plan, slots: usize, label: &str) -> Result<Report> {
-    run_units(store, plan, None, slots, label)
+    run_units(store, plan, None, slots, label, None)
 }
 
 /// Like [`run`], but only the units `only` (indices into the plan) and whichever of their
 /// dependencies, transitively, are not done (normally none: a Slurm task runs after the stages it
-/// depends on). `None`: every unit.
+/// depends on). `None`: every unit. `attempt`: which attempt of a task that runs one attempt at
+/// a time under `label` this is (a Slurm array task's restart count: it takes over the claims of
+/// its earlier attempts, `Store::claim_attempt`).
 pub(crate) fn run_units(
     store: &Store,
     plan: &Plan,
     only: Option<&[usize]>,
     slots: usize,
     label: &str,
+    attempt: Option<u32>,
 ) -> Result<Report> {
     let n = plan.units.len();
     let mut released = vec![false; n];
@@ -207,6 +210,7 @@ pub(crate) fn run_units(
                     store,
                     plan,
                     label,
+                    attempt,
                     shared: &shared,
                     wake: &wake,
                     stages: &stages,
@@ -240,6 +244,7 @@ struct RunCtx<'a> {
     store: &'a Store,
     plan: &'a Plan,
     label: &'a str,
+    attempt: Option<u32>,
     shared: &'a Mutex<Shared>,
     wake: &'a Condvar,
     stages: &'a Stages,
@@ -490,7 +495,10 @@ fn claim_and_run(cx: &RunCtx, i: usize) -> Result<Ran> {
     } = *cx;
     let revive = cx.revive[i];
     let unit = unit_ref(plan, i);
-    let claim: Option<Claim> = store.claim(&plan.run, &unit, label)?;
+    let claim: Option<Claim> = match cx.attempt {
+        Some(a) => store.claim_attempt(&plan.run, &unit, label, a)?,
+        None => store.claim(&plan.run, &unit, label)?,
+    };
     let Some(claim) = claim else {
         return Ok(Ran::Elsewhere);
     };

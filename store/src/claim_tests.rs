@@ -14,6 +14,7 @@ fn plant_claim(s: &Store, run: &str, u: &UnitRef, owner: Owner) -> std::path::Pa
     let info = ClaimInfo {
         owner,
         label: "planted".into(),
+        attempt: None,
     };
     std::fs::write(&path, serde_json::to_vec(&info).unwrap()).unwrap();
     path
@@ -152,4 +153,108 @@ fn a_claim_taken_over_by_another_is_not_released_by_us() {
         s.claim("bad/run", &u, "x"),
         Err(Error::Internal(_))
     ));
+}
+
+/// A Slurm task requeued after its node died runs again with the same label and a higher
+/// attempt: the claims of its earlier attempt, on a host whose pids it cannot check, are taken
+/// over at once; any other claim of another host holds for the lease.
+#[test]
+fn a_later_attempt_of_a_task_takes_over_its_earlier_attempts_claims() {
+    let (_t, s) = store();
+    let u = unit("m3c2", "tile_0_0-77");
+    let now = process::now_secs();
+    let plant = |label: &str, attempt: Option<u32>| {
+        let dir = s.work().join("claims").join("r").join(&u.kind);
+        std::fs::create_dir_all(&dir).unwrap();
+        let info = ClaimInfo {
+            owner: owner(1, "node-that-died", now - 5, None),
+            label: label.into(),
+            attempt,
+        };
+        std::fs::write(dir.join(&u.name), serde_json::to_vec(&info).unwrap()).unwrap();
+    };
+    // Not an earlier attempt of ours: another task, the same attempt, a later one, no attempt.
+    for (label, attempt) in [
+        ("slurm 88_3", Some(0)),
+        ("slurm 88_4", Some(1)),
+        ("slurm 88_4", Some(2)),
+        ("slurm 88_4", None),
+    ] {
+        plant(label, attempt);
+        let c = s.claim_attempt("r", &u, "slurm 88_4", 1).unwrap();
+        assert!(c.is_none(), "{label} attempt {attempt:?} holds");
+    }
+    // Plain claims never take over by label.
+    plant("slurm 88_4", Some(0));
+    assert!(s.claim("r", &u, "slurm 88_4").unwrap().is_none());
+    let c = s.claim_attempt("r", &u, "slurm 88_4", 1).unwrap();
+    let c = c.expect("the earlier attempt's claim is taken over");
+    let info: ClaimInfo = serde_json::from_slice(&std::fs::read(c.path()).unwrap()).unwrap();
+    assert_eq!((info.label.as_str(), info.attempt), ("slurm 88_4", Some(1)));
+}
+
+/// A renewal rewrites a claim that is still ours with its new time, and nothing once it is
+/// released or taken over by another.
+#[test]
+fn a_renewal_rewrites_only_a_claim_still_ours() {
+    let (_t, s) = store();
+    let u = unit("events", "pair0-5");
+    let c = s.claim("r", &u, "mine").unwrap().unwrap();
+    let mut info: ClaimInfo = serde_json::from_slice(&std::fs::read(c.path()).unwrap()).unwrap();
+    info.owner.renewed = Some(info.owner.started + 60);
+    let bytes = serde_json::to_vec(&info).unwrap();
+    let path = c.path().to_path_buf();
+    let token = info.owner.token.clone();
+    assert!(owner_file::renew(&path, &s.tmp(), &token, &bytes).unwrap());
+    let read: ClaimInfo = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    assert_eq!(read, info);
+    // Held by its renewed time: another host's view of it is fresh.
+    assert!(!read.owner.gone(Some(Duration::from_secs(120))));
+    drop(c);
+    assert!(!path.exists());
+    assert!(!owner_file::renew(&path, &s.tmp(), &token, &bytes).unwrap());
+    assert!(!path.exists(), "a released claim is not written again");
+    // Taken over by another (planted): not ours, left alone.
+    plant_claim(
+        &s,
+        "r",
+        &u,
+        owner(1, "elsewhere", process::now_secs(), None),
+    );
+    assert!(!owner_file::renew(&path, &s.tmp(), &token, &bytes).unwrap());
+    assert!(super::unit_tests::tmp_entries(&s).is_empty());
+}
+
+/// Claims of tasks known to have ended are dropped, whatever their host; others stay, and a
+/// planted link never leads the removal outside DIR.
+#[test]
+fn claims_of_ended_tasks_are_dropped_and_only_those() {
+    let (t, s) = store();
+    let now = process::now_secs();
+    let plant = |run: &str, u: &UnitRef, label: &str| {
+        let dir = s.work().join("claims").join(run).join(&u.kind);
+        std::fs::create_dir_all(&dir).unwrap();
+        let info = ClaimInfo {
+            owner: owner(1, "node-that-died", now, None),
+            label: label.into(),
+            attempt: Some(0),
+        };
+        std::fs::write(dir.join(&u.name), serde_json::to_vec(&info).unwrap()).unwrap();
+        dir.join(&u.name)
+    };
+    let a = plant("r1", &unit("m3c2", "tile_0_0-1"), "slurm 90_0");
+    let b = plant("r2", &unit("events", "pair0-1"), "slurm 90_3");
+    let c = plant("r1", &unit("m3c2", "tile_1_0-1"), "slurm 91_0");
+    // A link planted as a kind folder, to claim-like files outside DIR.
+    let outside = t.path().join("outside");
+    std::fs::create_dir_all(&outside).unwrap();
+    let victim = outside.join("tile_2_0-1");
+    std::fs::copy(&a, &victim).unwrap();
+    std::os::unix::fs::symlink(&outside, s.work().join("claims").join("r1").join("volumes"))
+        .unwrap();
+    let ended = |i: &ClaimInfo| i.label.starts_with("slurm 90_");
+    assert_eq!(s.drop_claims(ended).unwrap(), 2);
+    assert!(!a.exists() && !b.exists());
+    assert!(c.exists(), "another job's claim stays");
+    assert!(victim.exists(), "nothing outside DIR is removed");
 }

@@ -72,8 +72,10 @@ use talus_base::{Error, Result};
 /// submission's folder. Every process that executes the run's units reads it.
 pub const PLAN_FILE: &str = "plan.json";
 
-/// How long a claim from another host (whose pid cannot be checked) holds without renewal.
-pub const DEFAULT_LEASE: Duration = Duration::from_secs(6 * 3600);
+/// How long a claim from another host (whose pid cannot be checked) holds without renewal: ten
+/// renewals ([`claim::RENEW_EVERY`]) missed, room for hosts' clocks minutes apart. A task on a
+/// node that died leaves a claim another host takes over after this.
+pub const DEFAULT_LEASE: Duration = Duration::from_secs(10 * 60);
 
 /// The store of one DIR.
 #[derive(Clone, Debug)]
@@ -203,7 +205,7 @@ impl Store {
     }
 
     #[cfg(test)]
-    /// The same store with another lease for claims from other hosts (default 6 h).
+    /// The same store with another lease for claims from other hosts (default 10 min).
     pub(crate) fn with_lease(mut self, lease: Duration) -> Store {
         self.lease = lease;
         self

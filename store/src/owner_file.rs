@@ -207,6 +207,16 @@ pub(crate) fn is_ours(path: &Path, token: &str) -> bool {
         .is_some_and(|o| o.token == token)
 }
 
+/// Rewrite `path` with `content` if it is still the owner file with `token` (a renewal: see
+/// `claim::renewer`). True when rewritten.
+pub(crate) fn renew(path: &Path, tmp: &Path, token: &str, content: &[u8]) -> Result<bool> {
+    if !is_ours(path, token) {
+        return Ok(false);
+    }
+    super::fsops::replace_file(tmp, path, content)?;
+    Ok(true)
+}
+
 /// Remove `path` if it is still the owner file with `token` (a file taken over by another
 /// process after a lease ran out, or replaced by hand, is left alone). True when removed.
 pub(crate) fn release(path: &Path, token: &str) -> Result<bool> {

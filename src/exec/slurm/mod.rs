@@ -196,7 +196,9 @@ fn unclosed(s: &str) -> Error {
 
 /// Refuse to go on while jobs of DIR's latest Slurm submission are queued or running (they would
 /// compute beside this run, or on units `--force` throws away). Without Slurm's client commands
-/// on this machine, or with no submission in DIR, there is nothing to check.
+/// on this machine, or with no submission in DIR, there is nothing to check. Once Slurm says
+/// they have all ended, the claims their tasks left (a task on a node that died: another host
+/// cannot check its pid, so they would hold for the store's lease) are dropped.
 pub(crate) fn check_idle(store: &Store) -> Result<()> {
     let Some((n, _sub, Some(jobs))) = record::latest(store)? else {
         return Ok(());
@@ -228,6 +230,18 @@ pub(crate) fn check_idle(store: &Store) -> Result<()> {
         }
     }
     if active.is_empty() {
+        let ended = |c: &crate::store::ClaimInfo| {
+            let task = c.label.strip_prefix("slurm ").unwrap_or_default();
+            task.split('_')
+                .next()
+                .is_some_and(|job| jobs.ids.iter().any(|id| id == job))
+        };
+        let dropped = store.drop_claims(ended)?;
+        if dropped > 0 {
+            eprintln!(
+                "talus: slurm: {dropped} claim(s) left by ended tasks of submission {n} dropped"
+            );
+        }
         return Ok(());
     }
     Err(Error::Usage(format!(

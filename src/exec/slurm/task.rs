@@ -120,7 +120,13 @@ fn units(store: &Store, plan: &Plan, names: &[String], task_id: &str) -> Result<
         .build()
         .map_err(|e| Error::Internal(format!("thread pool: {e}")))?;
     let label = format!("slurm {task_id}");
-    let report = pool.install(|| crate::exec::run_units(store, plan, Some(&idx), 1, &label))?;
+    // Slurm counts a task's requeues (after its node failed, or by hand); the first run has none.
+    let attempt = std::env::var("SLURM_RESTART_COUNT")
+        .ok()
+        .and_then(|v| v.trim().parse().ok())
+        .unwrap_or(0);
+    let report =
+        pool.install(|| crate::exec::run_units(store, plan, Some(&idx), 1, &label, Some(attempt)))?;
     Ok(report.computed)
 }
 
