@@ -318,12 +318,23 @@ fn picked(
 
 /// The points of `t` inside any of `boxes` ([x0, y0, x1, y1]), in their order.
 fn within(t: &TilePoints, boxes: &[[f64; 4]]) -> TilePoints {
+    let inside = |b: &[f64; 4], x: f64, y: f64| x >= b[0] && x <= b[2] && y >= b[1] && y <= b[3];
+    // A tile's points come in spatially coherent frames: the box that held the last point most
+    // often holds the next (the sample's 64 windows, grown by the reach, were tested in turn).
+    let mut last = 0;
     let keep: Vec<usize> = (0..t.len())
         .filter(|&i| {
             let (x, y) = (t.x[i], t.y[i]);
-            boxes
-                .iter()
-                .any(|b| x >= b[0] && x <= b[2] && y >= b[1] && y <= b[3])
+            if boxes.get(last).is_some_and(|b| inside(b, x, y)) {
+                return true;
+            }
+            match boxes.iter().position(|b| inside(b, x, y)) {
+                Some(k) => {
+                    last = k;
+                    true
+                }
+                None => false,
+            }
         })
         .collect();
     TilePoints {
