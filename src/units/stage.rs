@@ -517,8 +517,9 @@ pub fn plan_units(plan: &mut Plan, cores: CoreSource, campaign: Option<&str>) ->
 /// registered and its spec names what the stage's [`Scope`] says (a survey, a pair, a pair's
 /// tile, or nothing), and each unit depends only on units of earlier stages — so the stages in
 /// registry order are a valid order to run them in (Slurm's arrays, `plan-stats`), and no
-/// stage's planning can make a cycle.
-pub fn check_plan(plan: &Plan) -> Result<()> {
+/// stage's planning can make a cycle. Returns each unit's stage rank (its stage's place in the
+/// registry: Slurm's array, `plan-stats`' stage).
+pub fn check_plan(plan: &Plan) -> Result<Vec<usize>> {
     let reg = registry();
     let mut ranks = Vec::with_capacity(plan.units.len());
     for u in &plan.units {
@@ -538,6 +539,7 @@ pub fn check_plan(plan: &Plan) -> Result<()> {
                 stage.scope()
             )));
         }
+        // Registered (`reg.get` above): it has a rank.
         ranks.push(reg.rank(u.kind()).unwrap_or(usize::MAX));
     }
     for (i, u) in plan.units.iter().enumerate() {
@@ -552,7 +554,7 @@ pub fn check_plan(plan: &Plan) -> Result<()> {
             )));
         }
     }
-    Ok(())
+    Ok(ranks)
 }
 
 /// The plan's final unit: the last unit of a stage that publishes DIR's outputs.

@@ -92,17 +92,9 @@ pub(crate) fn rank(kind: &str) -> Option<usize> {
 /// (more units per task when there are more). An error if a unit depends on a unit of its own or
 /// a later stage (the stages would not be a valid order).
 pub(crate) fn stages(plan: &Plan, done: &[bool], tiles_per_task: usize) -> Result<Vec<StagePlan>> {
-    let ranks: Vec<usize> = plan
-        .units
-        .iter()
-        .map(|u| {
-            rank(u.kind()).ok_or_else(|| {
-                Error::Internal(format!("unit {} of a kind with no Slurm stage", u.name))
-            })
-        })
-        .collect::<Result<_>>()?;
-    // The arrays' order relies on it: checked here as when the plan was made.
-    crate::units::stage::check_plan(plan)?;
+    // The arrays' order relies on it: checked here as when the plan was made (a plan read from
+    // a submission's folder), giving each unit's stage.
+    let ranks = crate::units::stage::check_plan(plan)?;
     let mut out = Vec::new();
     for (r, stage) in stage_order().enumerate() {
         let todo: Vec<usize> = (0..plan.units.len())
