@@ -88,6 +88,7 @@ pub fn survey(store: &Store, label: &str, files: &SurveyFiles) -> Result<Survey>
         crs: files.first().crs.describe(),
         scale: files.scale(),
         epsg: files.first().crs.epsg_code(),
+        transform: files.first().transform,
     })
 }
 

@@ -113,6 +113,11 @@ pub struct Survey {
     /// The EPSG code its CRS names, if any (checked against `--stable`'s).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub epsg: Option<u32>,
+    /// Its first file's LAS coordinate transform ([scale, offset] per axis), which the units
+    /// that write coordinates quantise to: read once when planning, not by every unit. None for
+    /// text and PLY (and in a plan written before 0.3: `units::Ctx::quantum` reads the header).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub transform: Option<[[f64; 2]; 3]>,
 }
 
 /// Two surveys compared.

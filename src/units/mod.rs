@@ -187,12 +187,17 @@ impl Ctx<'_> {
     /// The coordinate quantum (scale, offset per axis) of survey `survey`'s first file, which
     /// a stage that tiles the survey anew keeps (None for text and PLY).
     pub fn quantum(&self, survey: usize) -> Result<Option<[[f64; 2]; 3]>> {
-        Ok(self.plan.surveys[survey]
-            .files
-            .first()
-            .map(|f| crate::io::open(&f.path))
-            .transpose()?
-            .and_then(|r| r.info().transform))
+        let sv = &self.plan.surveys[survey];
+        // A LAS survey (it has a scale) planned before the plan kept the transform.
+        if sv.transform.is_none() && sv.scale.is_some() {
+            return Ok(sv
+                .files
+                .first()
+                .map(|f| crate::io::open(&f.path))
+                .transpose()?
+                .and_then(|r| r.info().transform));
+        }
+        Ok(sv.transform)
     }
 
     /// The tiling record of survey `survey` in the run's frame (see [`Ctx::tiles`]).
