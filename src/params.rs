@@ -11,7 +11,7 @@
 //! | normal_radius | 4 s | ≈ 50 points in the disc: a stable plane fit that still follows a metre-scale scar at 0.1 m spacing |
 //! | cyl_radius | 3 s | ≈ 28 points per cylinder and epoch, about the 30 Lague et al. recommend for a stable mean |
 //! | cyl_halflen | 10 × cyl_radius | reaches changes of ≈ 30 s along the normal without catching far surfaces |
-//! | reg_error | measured: RMS of n·t on the stable ground | the registration error the distances show where nothing changed ([`crate::events::stable`]) |
+//! | reg_error | measured: RMS of n·t on the stable ground | the registration error the distances show where nothing changed (`crate::events::stable`) |
 //! | min_points | 1 | SPEC.md §1 default |
 //! | threshold τ | 3 σ_d + 1.96 reg_error | a change must exceed the noise of one distance on stable ground (σ_d) and the registration error (the paper's §3.3); 3 σ because neighbouring distances share cylinder points, so 1.96 σ excursions form clusters of 10+ core points on stable ground (7 spurious events on the clean cliff scene, none at 3 σ); s / 2 when there is no stable ground to measure |
 //! | smooth_k | 30 | the paper's value |

@@ -5,7 +5,7 @@
 //! Appending a survey and running again with `--resume` computes only what the new survey adds:
 //! the grid, the parameters and the core points come from what does not change (the surveys'
 //! union, the first survey), and every other unit's key is what it was. DIR, the store, executing
-//! and publishing: [`super::run`], as for `compare`.
+//! and publishing: `super::run`, as for `compare`.
 
 use std::path::{Path, PathBuf};
 
@@ -38,9 +38,9 @@ pub struct CampaignOptions {
 
 /// What a finished campaign reports on the terminal.
 pub struct Done {
-    pub surveys: usize,
-    pub pairs: usize,
-    pub summary: serde_json::Value,
+    pub(crate) surveys: usize,
+    pub(crate) pairs: usize,
+    pub(crate) summary: serde_json::Value,
 }
 
 /// The epochs of the config file's `[[epoch]]` entries (paths relative to the config's folder).

@@ -5,7 +5,7 @@
 //! 2. measure the point spacing, resolve the parameters, key every input by its content, plan the
 //!    tiles and the units;
 //!
-//! in the lifecycle every planned command shares ([`super::run`]: DIR and its store, the plan
+//! in the lifecycle every planned command shares (`super::run`: DIR and its store, the plan
 //! written, executed and published).
 
 use std::path::{Path, PathBuf};
@@ -161,7 +161,7 @@ fn plan(
     Ok(plan)
 }
 
-/// Run a comparison ([`super::run::run`]). None when the run was submitted to Slurm and not
+/// Run a comparison (`super::run::run`). None when the run was submitted to Slurm and not
 /// waited for.
 pub fn compare(opts: &CompareOptions) -> Result<Option<Summary>> {
     let config = match &opts.config {

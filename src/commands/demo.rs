@@ -8,7 +8,7 @@ use crate::synth::{SceneKind, SynthOptions};
 
 /// `talus demo`: synthesize the cliff scene, compare it with derived parameters only, and print
 /// each event beside the planted truth it matches (nearest centre of the same kind).
-pub fn demo(out: &Path, view: bool) -> Result<()> {
+pub(crate) fn demo(out: &Path, view: bool) -> Result<()> {
     let scene = out.join("scene");
     let result = out.join("result");
     let truth = crate::synth::synth(SceneKind::Cliff, &SynthOptions::default(), &scene)?;

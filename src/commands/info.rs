@@ -12,32 +12,32 @@ use crate::sampling::{self, Spacing};
 
 /// The report for one file.
 #[derive(Debug, Serialize)]
-pub struct CloudReport {
-    pub path: PathBuf,
-    pub format: CloudFormat,
-    pub format_detail: String,
-    pub points: u64,
-    pub bounds: Bounds,
-    pub crs: String,
-    pub crs_wkt: Option<String>,
+pub(crate) struct CloudReport {
+    pub(crate) path: PathBuf,
+    pub(crate) format: CloudFormat,
+    pub(crate) format_detail: String,
+    pub(crate) points: u64,
+    pub(crate) bounds: Bounds,
+    pub(crate) crs: String,
+    pub(crate) crs_wkt: Option<String>,
     /// The points per LAS class, and those a comparison leaves out by default (null for text
     /// and PLY).
-    pub classes: Option<crate::units::outputs::SurveyClasses>,
+    pub(crate) classes: Option<crate::units::outputs::SurveyClasses>,
     /// None when it cannot be measured: `spacing_note` says why.
-    pub spacing: Option<Spacing>,
+    pub(crate) spacing: Option<Spacing>,
     /// Why there is no spacing (the classes a comparison keeps leave no point, too few distinct
     /// positions, coordinates so large that distances overflow); the file is described all the
     /// same, and a comparison with it as BEFORE would be refused so.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub spacing_note: Option<String>,
+    pub(crate) spacing_note: Option<String>,
     /// None without a spacing.
-    pub derived: Option<Params>,
+    pub(crate) derived: Option<Params>,
 }
 
 /// Inspect one cloud (reads it once or twice; never holds more than a window of it). The spacing
 /// is measured, as a comparison measures it, on the classes a comparison keeps by default; the
 /// classes are counted in the same pass.
-pub fn inspect(path: &Path) -> Result<CloudReport> {
+pub(crate) fn inspect(path: &Path) -> Result<CloudReport> {
     let reader = io::open(path)?;
     let info = reader.info().clone();
     drop(reader);
@@ -75,7 +75,7 @@ macro_rules! outln {
 }
 
 /// Print reports for `files` to stdout, as text or JSON.
-pub fn print(files: &[PathBuf], json: bool) -> Result<()> {
+pub(crate) fn print(files: &[PathBuf], json: bool) -> Result<()> {
     let mut reports = Vec::new();
     for f in files {
         reports.push(inspect(f)?);

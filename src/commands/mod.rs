@@ -4,11 +4,11 @@
 
 pub mod campaign;
 pub mod compare;
-pub mod demo;
-pub mod info;
-pub mod removed;
-pub mod run;
-pub mod status;
-pub mod synth;
+pub(crate) mod demo;
+pub(crate) mod info;
+pub(crate) mod removed;
+pub(crate) mod run;
+pub(crate) mod status;
+pub(crate) mod synth;
 pub mod view;
-pub mod worker;
+pub(crate) mod worker;

@@ -12,7 +12,7 @@ use crate::units::stage::{typed_meta, Stage};
 use crate::units::unit_ref;
 
 /// The note for a finished run of `plan` in `store`; None without `--vegetation remove`.
-pub fn vegetation(store: &Store, plan: &Plan) -> Result<Option<String>> {
+pub(crate) fn vegetation(store: &Store, plan: &Plan) -> Result<Option<String>> {
     let mut per_survey = Vec::new();
     for i in plan.of_kind(ClearedStage::KIND) {
         let u = &plan.units[i];

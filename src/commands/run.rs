@@ -29,15 +29,15 @@ use crate::units::unit_ref;
 
 /// How a planned command runs: where, with which flags, and which files in DIR are its
 /// outputs.
-pub struct RunOptions<'a> {
+pub(crate) struct RunOptions<'a> {
     /// DIR.
-    pub out: &'a Path,
-    pub resume: bool,
-    pub force: bool,
+    pub(crate) out: &'a Path,
+    pub(crate) resume: bool,
+    pub(crate) force: bool,
     /// Where the units run (SPEC.md §6).
-    pub executor: &'a Executor,
+    pub(crate) executor: &'a Executor,
     /// Tells talus's outputs (by their `/`-separated name in DIR) from the user's files.
-    pub ours: &'a dyn Fn(&str) -> bool,
+    pub(crate) ours: &'a dyn Fn(&str) -> bool,
 }
 
 /// Run a planned command into DIR: check DIR against `inputs` (the files the user gave), open
@@ -46,7 +46,7 @@ pub struct RunOptions<'a> {
 /// nothing is left under a final output name, and a DIR this run created is removed when the
 /// failure is the input's (nothing worth resuming). None when the run was submitted to Slurm
 /// and not waited for.
-pub fn run<T: DeserializeOwned>(
+pub(crate) fn run<T: DeserializeOwned>(
     opts: &RunOptions,
     inputs: &[&Path],
     plan: impl FnOnce(&Store, &mut Option<Replay>) -> Result<Plan>,
@@ -69,7 +69,7 @@ pub fn run<T: DeserializeOwned>(
 }
 
 /// A survey of the plan: its files keyed by content.
-pub fn survey(store: &Store, label: &str, files: &SurveyFiles) -> Result<Survey> {
+pub(crate) fn survey(store: &Store, label: &str, files: &SurveyFiles) -> Result<Survey> {
     let inputs: Vec<InputFile> = files
         .infos
         .iter()
@@ -93,7 +93,7 @@ pub fn survey(store: &Store, label: &str, files: &SurveyFiles) -> Result<Survey>
 }
 
 /// The input file at `path` (canonical when it can be), keyed by its content.
-pub fn input_file(store: &Store, path: &Path) -> Result<InputFile> {
+pub(crate) fn input_file(store: &Store, path: &Path) -> Result<InputFile> {
     Ok(InputFile {
         path: std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf()),
         key: store.content_key(path)?,
@@ -102,7 +102,7 @@ pub fn input_file(store: &Store, path: &Path) -> Result<InputFile> {
 
 /// The user's stable areas (`--stable`), read and checked against `surveys`, with their
 /// content's key.
-pub fn stable_areas(
+pub(crate) fn stable_areas(
     store: &Store,
     user: &UserParams,
     surveys: &[Survey],
@@ -126,7 +126,7 @@ pub fn stable_areas(
 /// tiling reads them instead of decoding the file a second time. Without, a measurement this
 /// store cached for the file's content is taken as it is (`plan::measured::cached_spacing`): a resumed
 /// run does not decode the file for it again.
-pub fn measure_spacing(
+pub(crate) fn measure_spacing(
     store: &Store,
     file: &io::CloudInfo,
     user: &UserParams,
@@ -164,7 +164,7 @@ pub fn measure_spacing(
 /// Whether a run keeps the points its spacing pass decodes for its tiling: when the units run in
 /// this process (a Slurm worker would decode the file itself), and the run starts anew (a
 /// resumed run has most likely tiled the survey already: the copy would be written for nothing).
-pub fn keeps_decoded(resume: bool, executor: &Executor) -> bool {
+pub(crate) fn keeps_decoded(resume: bool, executor: &Executor) -> bool {
     !resume && matches!(executor, Executor::Local)
 }
 
@@ -414,7 +414,7 @@ fn run_planned(
 
 /// Execute every unit of `plan` not done in `store` on a pool of `threads` threads, `slots`
 /// units at a time; `label` names this executor in the store's claims (`crate::exec::run`).
-pub fn execute(
+pub(crate) fn execute(
     store: &Store,
     plan: &Plan,
     threads: usize,

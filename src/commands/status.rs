@@ -6,7 +6,7 @@ use crate::exec::slurm::status::Report;
 use crate::store::{Recovery, Store};
 
 /// `talus status DIR`.
-pub fn print(dir: &std::path::Path) -> Result<()> {
+pub(crate) fn print(dir: &std::path::Path) -> Result<()> {
     // Reading only: a finished result on a read-only mount or a full disk can be inspected.
     let store = Store::inspect(dir)?;
     let recovery =
@@ -20,7 +20,7 @@ pub fn print(dir: &std::path::Path) -> Result<()> {
 }
 
 /// What a reading command says when it found a publish cut short and could not finish it.
-pub fn unfinished_note(dir: &std::path::Path, why: &str) -> String {
+pub(crate) fn unfinished_note(dir: &std::path::Path, why: &str) -> String {
     format!(
         "note: a publish into {} was cut short and could not be finished here ({why}): the \
          outputs may be part of a set; any talus command on it where it can be written (`talus \

@@ -8,7 +8,7 @@ use crate::synth::{SceneKind, SynthOptions};
 
 /// `talus synth SCENE --out DIR` with the pair scenes' `opts` (SCENE `campaign`: `--epochs`
 /// surveys, `--misregister`, no `--rotate`, `--density2`, `--shift`, `--turn` or `--creep`).
-pub fn synth(
+pub(crate) fn synth(
     scene: &str,
     out: &Path,
     epochs: Option<usize>,

@@ -22,10 +22,10 @@
 //! Bound to any other address, the server says on stderr that the network can read the result.
 //!
 //! Slow clients: a connection has [`HEAD_DEADLINE`] in total to send its request head (not per
-//! read, so trickling a byte at a time does not extend it), and when all [`MAX_CONNECTIONS`]
+//! read, so trickling a byte at a time does not extend it), and when all `MAX_CONNECTIONS`
 //! are taken, a new connection takes the place of the one that has been sending its head the
-//! longest, or else of the slowest reader of a response: one under way for [`ANSWER_GRACE`]
-//! that has averaged less than [`MIN_RATE`]. A crowd of trickling connections, or of
+//! longest, or else of the slowest reader of a response: one under way for `ANSWER_GRACE`
+//! that has averaged less than `MIN_RATE`. A crowd of trickling connections, or of
 //! connections that read their responses a little at a time (each write progresses, so no
 //! write times out), therefore cannot lock out a client that sends its request at once.
 
@@ -44,7 +44,7 @@ pub const DEFAULT_BIND: IpAddr = IpAddr::V4(std::net::Ipv4Addr::LOCALHOST);
 /// At most this many connections are served at once; more get `503` right away unless one
 /// still sending its head can be dropped. A browser opens about six per host, so this leaves
 /// room for a few tabs without letting a client exhaust threads.
-pub const MAX_CONNECTIONS: usize = 32;
+pub(crate) const MAX_CONNECTIONS: usize = 32;
 
 /// Largest request head (request line + headers) we read; GET requests have no body.
 const MAX_HEAD_BYTES: usize = 16 * 1024;
@@ -56,12 +56,12 @@ pub const HEAD_DEADLINE: Duration = Duration::from_secs(5);
 const IO_TIMEOUT: Duration = Duration::from_secs(15);
 
 /// When every place is taken, a response under way for this long ...
-pub const ANSWER_GRACE: Duration = Duration::from_secs(1);
+pub(crate) const ANSWER_GRACE: Duration = Duration::from_secs(1);
 
 /// ... whose client lately read less than this many bytes a second gives its place up. A
 /// browser on this machine reads hundreds of MiB/s. "Lately": over the last `RATE_WINDOW`
 /// (not since the start: the socket buffers take megabytes at once, whatever the client reads).
-pub const MIN_RATE: f64 = 1024.0 * 1024.0;
+pub(crate) const MIN_RATE: f64 = 1024.0 * 1024.0;
 
 /// The window a response's rate is measured over.
 const RATE_WINDOW: Duration = Duration::from_millis(250);
@@ -738,7 +738,7 @@ fn respond_error(
 }
 
 /// `talus view DIR`.
-pub fn command(dir: &Path, bind: IpAddr, port: u16) -> Result<()> {
+pub(crate) fn command(dir: &Path, bind: IpAddr, port: u16) -> Result<()> {
     // Serving has nothing to resume: Ctrl-C or SIGTERM end it at once.
     crate::interrupt::uninstall();
     serve(dir, bind, port, &Viewer::from_env(), |addr| {

@@ -7,7 +7,7 @@ use crate::error::{Error, Result};
 
 /// `talus worker DIR`: execute units of the run in DIR until every unit is done (the process
 /// that holds DIR's lock publishes).
-pub fn worker(dir: &Path, slots: usize, threads: Option<usize>) -> Result<()> {
+pub(crate) fn worker(dir: &Path, slots: usize, threads: Option<usize>) -> Result<()> {
     if slots == 0 {
         return Err(Error::Usage(
             "--slots: must be at least 1 (units the worker runs at a time)".into(),

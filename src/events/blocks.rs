@@ -24,7 +24,7 @@ const BATCH: usize = 64;
 /// The smoothing's reach, in smoothing σ: a neighbour beyond it would weigh less than
 /// e^(−12.5) ≈ 4 × 10⁻⁶ of the point itself (which is always among its nearest), so the k nearest
 /// are taken among those within it.
-pub const SMOOTH_REACH_SIGMAS: f64 = 5.0;
+pub(crate) const SMOOTH_REACH_SIGMAS: f64 = 5.0;
 
 /// How many reaches a block's side is: its neighbourhood (the block grown by the reach) then
 /// holds (1 + 2/4)² ≈ 2.3 times its own points on a surface, where blocks one reach wide would
@@ -32,7 +32,7 @@ pub const SMOOTH_REACH_SIGMAS: f64 = 5.0;
 const SIDE_IN_REACHES: f64 = 4.0;
 
 /// The side of the blocks that reach `reach`.
-pub fn side_for(reach: f64) -> f64 {
+pub(crate) fn side_for(reach: f64) -> f64 {
     if reach > 0.0 && reach.is_finite() {
         SIDE_IN_REACHES * reach
     } else {
@@ -41,12 +41,12 @@ pub fn side_for(reach: f64) -> f64 {
 }
 
 /// The block holding `p`, of side `side` anchored at `origin`.
-pub fn block_of(p: &Point3, origin: &Point3, side: f64) -> [i64; 3] {
+pub(crate) fn block_of(p: &Point3, origin: &Point3, side: f64) -> [i64; 3] {
     std::array::from_fn(|k| ((p[k] - origin[k]) / side).floor() as i64)
 }
 
 /// Which blocks (by their place in the grid of blocks) a pass looks at.
-pub type Chosen<'a> = dyn Fn([i64; 3]) -> bool + Sync + 'a;
+pub(crate) type Chosen<'a> = dyn Fn([i64; 3]) -> bool + Sync + 'a;
 
 /// Points cut into cubic blocks, each seen with every point within a reach of it.
 pub struct Blocks {
@@ -69,7 +69,7 @@ impl Blocks {
     /// [`Blocks::new`] anchored at `origin`: a part of a larger set of points (a piece of a
     /// pair's, `super::pieces`) cut along the very planes the whole set's blocks are, so that
     /// each of its blocks that holds all its surroundings sees what the whole set's does.
-    pub fn anchored(points: &[Point3], reach: f64, origin: Point3) -> Blocks {
+    pub(crate) fn anchored(points: &[Point3], reach: f64, origin: Point3) -> Blocks {
         assert!(points.len() <= u32::MAX as usize, "{} points", points.len());
         let side = side_for(reach);
         let block = |i: u32| block_of(&points[i as usize], &origin, side);
@@ -91,28 +91,18 @@ impl Blocks {
         }
     }
 
-    /// How far around a block [`Self::around`] reaches.
-    pub fn reach(&self) -> f64 {
-        self.reach
-    }
-
     /// Non-empty blocks.
-    pub fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         self.starts.len()
     }
 
-    /// True when there are no points.
-    pub fn is_empty(&self) -> bool {
-        self.starts.is_empty()
-    }
-
     /// Block `b`'s place in the grid of blocks.
-    pub fn coord(&self, b: usize) -> [i64; 3] {
+    pub(crate) fn coord(&self, b: usize) -> [i64; 3] {
         self.starts[b].0
     }
 
     /// The points of block `b`, ascending.
-    pub fn owned(&self, b: usize) -> &[u32] {
+    pub(crate) fn owned(&self, b: usize) -> &[u32] {
         let start = self.starts[b].1 as usize;
         let end = self
             .starts
@@ -124,7 +114,7 @@ impl Blocks {
     /// The points of `points` (those the blocks were made of) in block `b` grown by the reach
     /// (and a millionth of it against rounding), ascending: every point within the reach of a
     /// point of `b`. They lie in `b` and the 26 blocks around it (the side is over the reach).
-    pub fn around(&self, b: usize, points: &[Point3]) -> Vec<u32> {
+    pub(crate) fn around(&self, b: usize, points: &[Point3]) -> Vec<u32> {
         let c = self.starts[b].0;
         let h = self.reach * (1.0 + 1e-6);
         let lo: [f64; 3] = std::array::from_fn(|k| c[k] as f64 * self.side - h);
@@ -270,13 +260,13 @@ pub fn cluster(
 }
 
 /// What DBSCAN found over some blocks ([`cluster_chosen`]).
-pub struct Found {
+pub(crate) struct Found {
     /// The core flag of every point of the deciding blocks (false elsewhere).
-    pub core: Vec<bool>,
+    pub(crate) core: Vec<bool>,
     /// The sets of the core points linked by the linking blocks.
-    pub sets: UnionFind,
+    pub(crate) sets: UnionFind,
     /// (border point of a linking block, its core neighbour with the smallest index).
-    pub borders: Vec<(u32, u32)>,
+    pub(crate) borders: Vec<(u32, u32)>,
 }
 
 /// DBSCAN's two phases over chosen blocks: the core flags of the points of the blocks `decide`
@@ -284,7 +274,7 @@ pub struct Found {
 /// lie in deciding blocks). Over every block, the sets are those of one whole-cloud
 /// [`dbscan::dbscan`]; over part of the blocks of a piece of space whose points are all there
 /// (`super::pieces`), what the whole cloud's clustering finds in that part.
-pub fn cluster_chosen(
+pub(crate) fn cluster_chosen(
     points: &[Point3],
     member: &(dyn Fn(usize) -> bool + Sync),
     eps: f64,

@@ -28,25 +28,25 @@ use super::align::Alignment;
 /// The two fits of survey k ≥ 1: onto the first survey, and onto its predecessor (none for
 /// survey 1, whose predecessor is the first).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Fits {
-    pub onto_first: Alignment,
-    pub onto_previous: Option<Alignment>,
+pub(crate) struct Fits {
+    pub(crate) onto_first: Alignment,
+    pub(crate) onto_previous: Option<Alignment>,
 }
 
 /// How a survey reaches the first survey's frame.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Route {
+pub(crate) struct Route {
     /// The surveys it passes through, from the survey itself to the first (0).
-    pub surveys: Vec<usize>,
+    pub(crate) surveys: Vec<usize>,
     /// Stable core points of its weakest link (0 when no route is known).
-    pub shared: usize,
+    pub(crate) shared: usize,
     /// The transform of the whole route: the direct fit itself when it has one link.
-    pub alignment: Alignment,
+    pub(crate) alignment: Alignment,
 }
 
 /// The route of every survey, given each survey's fits (`fits[k]`; none for the first survey
 /// and for a survey the plan does not align).
-pub fn routes(fits: &[Option<Fits>]) -> Vec<Option<Route>> {
+pub(crate) fn routes(fits: &[Option<Fits>]) -> Vec<Option<Route>> {
     let mut out: Vec<Option<Route>> = Vec::with_capacity(fits.len());
     for (k, f) in fits.iter().enumerate() {
         let Some(f) = f else {

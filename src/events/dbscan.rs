@@ -14,13 +14,13 @@
 //!
 //! Tiled protocol (every tile = owned points + a halo at least `eps` wide, each point with a
 //! global id):
-//! 1. [`core_flags`] per tile decides the core status of the tile's owned points (exact,
+//! 1. `core_flags` per tile decides the core status of the tile's owned points (exact,
 //!    because the whole eps-ball of an owned point lies inside the tile);
-//! 2. [`tile_links`] per tile, given the core flag of every point in the tile (halo points'
+//! 2. `tile_links` per tile, given the core flag of every point in the tile (halo points'
 //!    flags come from their owning tiles), unites the owned core points with the core points
 //!    within eps and emits a spanning forest of those unions (an edge from each linked point to
 //!    its set's root) and the border assignments of the owned non-core points;
-//! 3. [`merge`] unions all edges over global ids (union-find, order independent) and numbers
+//! 3. `merge` unions all edges over global ids (union-find, order independent) and numbers
 //!    the clusters 1.. by the smallest global id of each cluster.
 //!
 //! Every edge of the whole-cloud eps-graph between two core points is emitted by the tile
@@ -38,7 +38,7 @@ use crate::error::Result;
 /// Phase 1: the core flag of each owned point (`false` for halo points, which their own
 /// tile decides). A neighbourhood counts the point itself and every point within `eps`
 /// (inclusive), owned or halo.
-pub fn core_flags(
+pub(crate) fn core_flags(
     points: &[[f64; 3]],
     owned: &[bool],
     eps: f64,
@@ -66,14 +66,14 @@ pub fn core_flags(
 
 /// What one tile contributes to the global merge; all in global ids.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
-pub struct TileLinks {
+pub(crate) struct TileLinks {
     /// The tile's owned core points.
-    pub cores: Vec<u64>,
+    pub(crate) cores: Vec<u64>,
     /// A spanning forest of the tile's unions of owned core points with core points within eps
     /// (owned or halo): (a linked core point, its set's root).
-    pub edges: Vec<(u64, u64)>,
+    pub(crate) edges: Vec<(u64, u64)>,
     /// (owned border point, its core neighbour with the smallest global id).
-    pub borders: Vec<(u64, u64)>,
+    pub(crate) borders: Vec<(u64, u64)>,
 }
 
 /// Phase 2: union edges and border assignments of one tile. `core` holds the core flag of
@@ -86,7 +86,7 @@ pub struct TileLinks {
 /// core point, where every link would be about ten per point at the derived eps (2.5 core
 /// spacings) — most of the events unit's memory on a large pair. The links are found a batch of
 /// points at a time, so they are never all held either.
-pub fn tile_links(
+pub(crate) fn tile_links(
     points: &[[f64; 3]],
     ids: &[u64],
     owned: &[bool],
@@ -154,7 +154,7 @@ pub fn tile_links(
 /// Cluster labels of the clustered points (cores and borders), by global id; every other
 /// id is noise (0).
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
-pub struct Labels {
+pub(crate) struct Labels {
     /// Sorted global ids of the clustered points.
     ids: Vec<u64>,
     /// Label of `ids[i]`, 1-based.
@@ -163,21 +163,17 @@ pub struct Labels {
 
 impl Labels {
     /// The label of a global id: 1.. for clusters, 0 for noise.
-    pub fn get(&self, id: u64) -> u32 {
+    pub(crate) fn get(&self, id: u64) -> u32 {
         match self.ids.binary_search(&id) {
             Ok(i) => self.labels[i],
             Err(_) => 0,
         }
     }
-    /// (global id, label) of every clustered point, ascending id.
-    pub fn iter(&self) -> impl Iterator<Item = (u64, u32)> + '_ {
-        self.ids.iter().copied().zip(self.labels.iter().copied())
-    }
 }
 
 /// Phase 3: merge the contributions of all tiles (any order) into cluster labels, numbered
 /// 1.. in the order of the smallest global id of each cluster (core or border).
-pub fn merge(tiles: impl IntoIterator<Item = TileLinks>) -> Labels {
+pub(crate) fn merge(tiles: impl IntoIterator<Item = TileLinks>) -> Labels {
     let mut cores = Vec::new();
     let mut edges = Vec::new();
     let mut borders = Vec::new();

@@ -6,7 +6,7 @@
 //! paper takes PCA's smallest-variance axis instead; for a small or elongated cluster (a dozen
 //! core points along a dune foot) the two smaller eigenvalues are about equal and that axis
 //! turns at random, up to 65° from the surface normal on the St Leonards beach. The volume stage
-//! may extrude along z instead ([`box_along`], `crate::volume::axis`). The first two axes are
+//! may extrude along z instead (`box_along`, `crate::volume::axis`). The first two axes are
 //! the principal components (Jolliffe 2002) of the points projected on the plane across the
 //! third, turned to the cluster's minimum-area rectangle; the first is given a deterministic
 //! sign and the second closes a right-handed orthonormal frame. Without usable normals the PCA
@@ -35,7 +35,7 @@ impl Kind {
         }
     }
     /// "gain" / "loss", as in the outputs.
-    pub fn as_str(self) -> &'static str {
+    pub(crate) fn as_str(self) -> &'static str {
         match self {
             Kind::Gain => "gain",
             Kind::Loss => "loss",
@@ -63,7 +63,9 @@ impl Obb {
         self.axes.map(|a| a[0] * d[0] + a[1] * d[1] + a[2] * d[2])
     }
     /// The global point of box-frame coordinates (u, v, w).
-    pub fn to_global(&self, l: &[f64; 3]) -> [f64; 3] {
+    #[cfg(test)]
+    #[allow(clippy::wrong_self_convention)] // &self: no copy per point mapped
+    pub(crate) fn to_global(&self, l: &[f64; 3]) -> [f64; 3] {
         let a = &self.axes;
         std::array::from_fn(|k| self.center[k] + l[0] * a[0][k] + l[1] * a[1][k] + l[2] * a[2][k])
     }
@@ -72,26 +74,26 @@ impl Obb {
 /// One change event.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Event {
-    pub id: u32,
-    pub kind: Kind,
+    pub(crate) id: u32,
+    pub(crate) kind: Kind,
     pub n_points: usize,
     pub centroid: [f64; 3],
     /// n_points × core_spacing².
     pub area_m2: f64,
     /// Mean M3C2 distance (signed).
-    pub mean_distance: f64,
+    pub(crate) mean_distance: f64,
     pub max_abs_distance: f64,
     pub mean_lod95: f64,
     pub obb: Obb,
     /// Mean of the cluster's normals, normalised (the outward direction).
-    pub mean_normal: [f64; 3],
+    pub(crate) mean_normal: [f64; 3],
 }
 
 /// What a description needs of a cluster's LoD95s and normals: their sums over the finite ones,
 /// taken in the members' order ([`Sums::add`]), so a caller can add them up as the members go
 /// by instead of holding them.
 #[derive(Debug, Clone, Copy)]
-pub struct Sums {
+pub(crate) struct Sums {
     lod: f64,
     lods: usize,
     normal: Vector3<f64>,
@@ -109,7 +111,7 @@ impl Default for Sums {
 
 impl Sums {
     /// The next member's LoD95 and normal.
-    pub fn add(&mut self, lod95: f64, normal: &[f64; 3]) {
+    pub(crate) fn add(&mut self, lod95: f64, normal: &[f64; 3]) {
         if lod95.is_finite() {
             self.lod += lod95;
             self.lods += 1;
@@ -139,7 +141,7 @@ pub fn describe(
 }
 
 /// [`describe`] with the members' LoD95s and normals given as their [`Sums`].
-pub fn describe_with(
+pub(crate) fn describe_with(
     id: u32,
     kind: Kind,
     points: &[[f64; 3]],
@@ -190,7 +192,7 @@ pub fn describe_with(
 
 /// The box of a cluster with `axis` (unit) as its third axis: the same construction as
 /// [`describe`]'s, for another extrusion direction.
-pub fn box_along(points: &[[f64; 3]], axis: [f64; 3]) -> Option<Obb> {
+pub(crate) fn box_along(points: &[[f64; 3]], axis: [f64; 3]) -> Option<Obb> {
     if points.is_empty() {
         return None;
     }

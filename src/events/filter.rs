@@ -4,7 +4,7 @@
 
 /// Is one core point kept? NaN distances (too few points in a cylinder) and NaN LoD95s are
 /// never kept: every comparison with NaN is false.
-pub fn is_kept(d: f64, lod95: f64, threshold: f64) -> bool {
+pub(crate) fn is_kept(d: f64, lod95: f64, threshold: f64) -> bool {
     d.is_finite() && d.abs() >= threshold && d.abs() > lod95
 }
 

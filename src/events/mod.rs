@@ -5,21 +5,21 @@
 //! tiles and writes outputs):
 //! [`filter`] (keep significant points) → [`smooth`] (normalised Gaussian smoothing of the
 //! distances over the k nearest kept neighbours) → [`dbscan`] (signed DBSCAN, tile-mergeable
-//! through the global [`union_find`]) → [`describe`](fn@describe) (centroid, statistics, PCA box).
+//! through the global `union_find`) → [`describe`](fn@describe) (centroid, statistics, PCA box).
 //! [`blocks`] runs smoothing and DBSCAN over a pair's kept points a cube of space at a time;
 //! [`pieces`], a piece of space at a time when they are more than the budget holds.
 
-pub mod align;
+pub(crate) mod align;
 pub mod blocks;
-pub mod chain;
+pub(crate) mod chain;
 pub mod dbscan;
 pub mod describe;
 pub mod filter;
 pub mod pieces;
 pub mod smooth;
-pub mod stable;
-pub mod union_find;
-pub mod vegetation;
+pub(crate) mod stable;
+pub(crate) mod union_find;
+pub(crate) mod vegetation;
 
 pub use describe::{describe, Event, Kind, Obb};
 

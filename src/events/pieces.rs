@@ -3,13 +3,13 @@
 //! grew with the change, 80 bytes a kept point).
 //!
 //! The pieces are rectangles of columns — the x and y of [`super::blocks`]' cubes, so a piece
-//! is a union of whole blocks — each loaded with [`HALO_COLUMNS`] columns around it. Within a
+//! is a union of whole blocks — each loaded with `HALO_COLUMNS` columns around it. Within a
 //! piece, the blocks of its own columns and of the ring around them hold all their surroundings,
 //! so their smoothing, core flags and links are what the whole pair's blocks find, to the bit;
 //! the piece keeps the smoothed distances and clusters of the points it owns. A cluster that
 //! crosses pieces is joined through its core points in the ring around a piece: a piece labels
 //! those as it links them to its own, their owner labels them too, and the two labels are the
-//! same cluster ([`Stitch`]). Every link of the pair's clustering starts at a core point some
+//! same cluster (`Stitch`). Every link of the pair's clustering starts at a core point some
 //! piece owns and ends within eps of it, inside that piece's ring; so the joined sets are the
 //! whole pair's (DBSCAN's merge of partitions with halos: Götz, Bodenstein & Riedel 2015,
 //! HPDBSCAN; the same merge as `super::dbscan`'s tiles).
@@ -28,7 +28,7 @@ use crate::geom::Point3;
 /// Columns loaded on each side of a piece's own: its own blocks and the ring of blocks around
 /// them then hold every point within their reach (blocks are wider than it), and the points
 /// those surroundings hold have every point within the smoothing's reach loaded too.
-pub const HALO_COLUMNS: i64 = 2;
+pub(crate) const HALO_COLUMNS: i64 = 2;
 
 /// The columns of a pair's kept points: the (x, y) of the blocks they lie in.
 #[derive(Debug, Clone, Copy)]
@@ -59,18 +59,18 @@ impl Columns {
 /// A piece: the columns it owns, x and y ranges inclusive.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Piece {
-    pub x: [i64; 2],
+    pub(crate) x: [i64; 2],
     pub y: [i64; 2],
 }
 
 impl Piece {
     /// Whether the piece owns column `c`.
-    pub fn owns(&self, c: [i64; 2]) -> bool {
+    pub(crate) fn owns(&self, c: [i64; 2]) -> bool {
         (self.x[0]..=self.x[1]).contains(&c[0]) && (self.y[0]..=self.y[1]).contains(&c[1])
     }
 
     /// Whether the piece loads the points of column `c` (its own, and the halo around).
-    pub fn loads(&self, c: [i64; 2]) -> bool {
+    pub(crate) fn loads(&self, c: [i64; 2]) -> bool {
         self.grown(HALO_COLUMNS).owns(c)
     }
 
@@ -84,7 +84,7 @@ impl Piece {
 }
 
 /// Points in the columns a piece owning `p` loads.
-pub fn load(counts: &BTreeMap<[i64; 2], u64>, p: &Piece) -> u64 {
+pub(crate) fn load(counts: &BTreeMap<[i64; 2], u64>, p: &Piece) -> u64 {
     let g = p.grown(HALO_COLUMNS);
     counts
         .range([g.x[0], i64::MIN]..=[g.x[1], i64::MAX])
@@ -171,20 +171,20 @@ pub struct Settings {
 
 /// What a piece found.
 #[derive(Debug, Default)]
-pub struct Labelled {
+pub(crate) struct Labelled {
     /// Each owned point's (position among the piece's points, smoothed distance, label: 0 in no
     /// cluster, else 1.. of this piece's).
-    pub owned: Vec<(u32, f64, u32)>,
+    pub(crate) owned: Vec<(u32, f64, u32)>,
     /// (position, label) of the core points the piece holds but does not own: their owner
     /// labels them too, and the two labels are one cluster.
-    pub shared: Vec<(u32, u32)>,
+    pub(crate) shared: Vec<(u32, u32)>,
     /// The kind of each label (label `l` at `l - 1`).
-    pub kinds: Vec<Kind>,
+    pub(crate) kinds: Vec<Kind>,
 }
 
 /// Smooth and cluster the points of one piece: `points` (with their distances `d`) are every
 /// kept point of the columns `piece` loads, in the pair's kept order.
-pub fn label_piece(
+pub(crate) fn label_piece(
     points: &[Point3],
     d: &[f64],
     piece: &Piece,
@@ -240,14 +240,14 @@ pub fn label_piece(
 
 /// The pieces' labels joined into the pair's clusters.
 #[derive(Debug, Default)]
-pub struct Stitch {
+pub(crate) struct Stitch {
     kinds: Vec<Kind>,
     sets: UnionFind,
 }
 
 impl Stitch {
     /// Take a piece's labels: the number to add to them to make them the pair's.
-    pub fn add(&mut self, kinds: &[Kind]) -> u32 {
+    pub(crate) fn add(&mut self, kinds: &[Kind]) -> u32 {
         let offset = self.kinds.len() as u32;
         self.kinds.extend_from_slice(kinds);
         self.sets.grow(self.kinds.len());
@@ -255,22 +255,17 @@ impl Stitch {
     }
 
     /// Labels taken.
-    pub fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         self.kinds.len()
     }
 
-    /// Whether none are.
-    pub fn is_empty(&self) -> bool {
-        self.kinds.is_empty()
-    }
-
     /// Two of the pair's labels (1..) name one cluster.
-    pub fn join(&mut self, a: u32, b: u32) {
+    pub(crate) fn join(&mut self, a: u32, b: u32) {
         self.sets.union(a as usize - 1, b as usize - 1);
     }
 
     /// The cluster of label `l` (1..): the smallest label joined to it, and its kind.
-    pub fn cluster(&mut self, l: u32) -> (u32, Kind) {
+    pub(crate) fn cluster(&mut self, l: u32) -> (u32, Kind) {
         let root = self.sets.find(l as usize - 1);
         (root as u32 + 1, self.kinds[root])
     }

@@ -31,7 +31,7 @@ use rayon::prelude::*;
 use crate::spatial::Pairs;
 
 /// Residuals beyond this many robust standard deviations are not stable ground.
-pub const KEEP_SIGMAS: f64 = 2.5;
+pub(crate) const KEEP_SIGMAS: f64 = 2.5;
 /// Re-selection rounds of the robust fit.
 const ROUNDS: usize = 6;
 /// Point pairs drawn at random for the variogram's long lags.
@@ -39,32 +39,32 @@ const RANDOM_PAIRS: usize = 300_000;
 /// Anchor points whose neighbours give the variogram's short lags.
 const ANCHORS: usize = 20_000;
 /// Fewest stable points for a measurement.
-pub const MIN_STABLE: usize = 50;
+pub(crate) const MIN_STABLE: usize = 50;
 
 /// One computed core point: position, oriented normal, M3C2 distance, and the standard deviation
 /// of each epoch's points along the normal in its cylinder.
 #[derive(Debug, Clone, Copy)]
-pub struct Sample {
-    pub xyz: Point3,
-    pub normal: Point3,
-    pub distance: f64,
-    pub std_dev: [f64; 2],
+pub(crate) struct Sample {
+    pub(crate) xyz: Point3,
+    pub(crate) normal: Point3,
+    pub(crate) distance: f64,
+    pub(crate) std_dev: [f64; 2],
     /// LoD95 without registration error: 1.96 √(σ₁²/n₁ + σ₂²/n₂).
-    pub lod: f64,
+    pub(crate) lod: f64,
 }
 
 /// A spherical variogram γ(h) = nugget + sill · Sph(h / range).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Variogram {
-    pub nugget: f64,
+pub(crate) struct Variogram {
+    pub(crate) nugget: f64,
     /// Partial sill: the variance of the spatially correlated part.
-    pub sill: f64,
-    pub range: f64,
+    pub(crate) sill: f64,
+    pub(crate) range: f64,
 }
 
 impl Variogram {
     /// Covariance of the correlated part at lag h: sill · (1 − Sph(h / range)).
-    pub fn covariance(&self, h: f64) -> f64 {
+    pub(crate) fn covariance(&self, h: f64) -> f64 {
         if self.sill <= 0.0 || self.range <= 0.0 {
             return 0.0;
         }
@@ -83,40 +83,40 @@ fn spherical(x: f64) -> f64 {
 
 /// What the stable ground says about the pair.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Stable {
+pub(crate) struct Stable {
     /// The fitted translation t between the epochs (input units).
-    pub translation: Point3,
+    pub(crate) translation: Point3,
     /// RMS of n·t over the stable points.
-    pub reg_error: f64,
+    pub(crate) reg_error: f64,
     /// Robust standard deviation of the residual distances.
-    pub sigma_d: f64,
+    pub(crate) sigma_d: f64,
     /// Per epoch: mean variance of the points along the normal in a cylinder, on stable ground
     /// (the per-point spread volumes propagate where a region has no event core point).
-    pub point_variance: [f64; 2],
-    pub variogram: Variogram,
+    pub(crate) point_variance: [f64; 2],
+    pub(crate) variogram: Variogram,
     /// Core points judged stable, of those given.
-    pub stable_points: usize,
-    pub sampled_points: usize,
-    pub method: String,
+    pub(crate) stable_points: usize,
+    pub(crate) sampled_points: usize,
+    pub(crate) method: String,
     /// Where the stable ground came from: `automatic` (found in the distances) or `user` (the
     /// points inside the user's polygons, `file`).
     #[serde(default = "automatic")]
-    pub source: String,
+    pub(crate) source: String,
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub file: Option<std::path::PathBuf>,
+    pub(crate) file: Option<std::path::PathBuf>,
 }
 
 /// What the user's stable areas held for a pair, and whether they gave the stable ground.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct AreasUse {
-    pub file: std::path::PathBuf,
+pub(crate) struct AreasUse {
+    pub(crate) file: std::path::PathBuf,
     /// Points of the before survey inside the polygons that were sampled, and those with a
     /// distance.
-    pub points_inside: usize,
-    pub with_distance: usize,
+    pub(crate) points_inside: usize,
+    pub(crate) with_distance: usize,
     /// Whether the measurement is theirs (else: the automatic stable ground, and `note` says why).
-    pub used: bool,
-    pub note: Option<String>,
+    pub(crate) used: bool,
+    pub(crate) note: Option<String>,
 }
 
 fn automatic() -> String {
@@ -125,7 +125,7 @@ fn automatic() -> String {
 
 impl Stable {
     /// The systematic displacement along `normal` (unit): |n·t|.
-    pub fn along(&self, normal: &Point3) -> f64 {
+    pub(crate) fn along(&self, normal: &Point3) -> f64 {
         dot(normal, &self.translation).abs()
     }
 }
@@ -162,7 +162,7 @@ fn fit_translation(samples: &[Sample], idx: &[usize]) -> Point3 {
 /// σ_d of the stable ground `sel` found in `samples`: the robust standard deviation (1.4826 ×
 /// MAD) of its distances less the translation's share, what [`measure`] reports, without the
 /// variogram (the alignment needs the noise, not its spatial structure).
-pub fn spread(samples: &[Sample], sel: &Selected) -> f64 {
+pub(crate) fn spread(samples: &[Sample], sel: &Selected) -> f64 {
     let mut r: Vec<f64> = sel
         .keep
         .iter()
@@ -176,7 +176,7 @@ pub fn spread(samples: &[Sample], sel: &Selected) -> f64 {
 /// Measure the stable ground from `samples` (computed core points, finite distances and unit
 /// normals). `spacing` is the core spacing (the variogram's shortest lag). None when fewer than
 /// [`MIN_STABLE`] points are stable.
-pub fn measure(samples: &[Sample], spacing: f64) -> Option<Stable> {
+pub(crate) fn measure(samples: &[Sample], spacing: f64) -> Option<Stable> {
     let selected = select(samples)?;
     let sigma_d = spread(samples, &selected);
     let Selected { finite, keep, t } = selected;
@@ -216,14 +216,14 @@ pub fn measure(samples: &[Sample], spacing: f64) -> Option<Stable> {
 
 /// The stable ground found among `samples`: the samples with a finite distance, the stable ones
 /// (indices into `samples`), and the translation fitted on them.
-pub struct Selected {
-    pub finite: Vec<usize>,
-    pub keep: Vec<usize>,
-    pub t: Point3,
+pub(crate) struct Selected {
+    pub(crate) finite: Vec<usize>,
+    pub(crate) keep: Vec<usize>,
+    pub(crate) t: Point3,
 }
 
 /// Find the stable ground (see the module doc): None with fewer than [`MIN_STABLE`] points.
-pub fn select(samples: &[Sample]) -> Option<Selected> {
+pub(crate) fn select(samples: &[Sample]) -> Option<Selected> {
     let finite: Vec<usize> = (0..samples.len())
         .filter(|&i| {
             let s = &samples[i];

@@ -5,37 +5,33 @@
 /// Union-find over dense indices `0..n` (n < 2³²: four bytes an element, as the events unit
 /// holds one over a pair's kept core points).
 #[derive(Debug, Clone, Default)]
-pub struct UnionFind {
+pub(crate) struct UnionFind {
     parent: Vec<u32>,
 }
 
 impl UnionFind {
     /// `n` singleton sets.
-    pub fn new(n: usize) -> Self {
+    pub(crate) fn new(n: usize) -> Self {
         let mut sets = UnionFind::default();
         sets.grow(n);
         sets
     }
 
     /// Add singletons until there are `n` elements (fewer: nothing).
-    pub fn grow(&mut self, n: usize) {
+    pub(crate) fn grow(&mut self, n: usize) {
         assert!(n <= u32::MAX as usize, "union-find over {n} elements");
         let len = self.parent.len() as u32;
         self.parent.extend(len..n as u32);
     }
 
     /// Number of elements.
-    pub fn len(&self) -> usize {
+    #[cfg(test)]
+    pub(crate) fn len(&self) -> usize {
         self.parent.len()
     }
 
-    /// True when there are no elements.
-    pub fn is_empty(&self) -> bool {
-        self.parent.is_empty()
-    }
-
     /// The root (smallest element) of `x`'s set.
-    pub fn find(&mut self, x: usize) -> usize {
+    pub(crate) fn find(&mut self, x: usize) -> usize {
         let mut x = x as u32;
         while self.parent[x as usize] != x {
             // Path halving: point to the grandparent while walking up.
@@ -46,7 +42,7 @@ impl UnionFind {
     }
 
     /// Merge the sets of `a` and `b`; the smaller root becomes the root.
-    pub fn union(&mut self, a: usize, b: usize) {
+    pub(crate) fn union(&mut self, a: usize, b: usize) {
         let (ra, rb) = (self.find(a), self.find(b));
         if ra < rb {
             self.parent[rb] = ra as u32;

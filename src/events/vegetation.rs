@@ -34,18 +34,18 @@ use crate::m3c2::moments::Moments3;
 use crate::spatial::Columns;
 
 /// The two ball radii, in point spacings (see the module's doc).
-pub const SCALES: [f64; 2] = [4.0, 8.0];
+pub(crate) const SCALES: [f64; 2] = [4.0, 8.0];
 
 /// Fewer points than this in a ball say nothing of its shape (a plane needs a handful; noise on
 /// a few points looks volumetric).
-pub const MIN_POINTS: usize = 10;
+pub(crate) const MIN_POINTS: usize = 10;
 
 /// An event is vegetation when more than this share of its core points look like it.
-pub const MOST: f64 = 0.5;
+pub(crate) const MOST: f64 = 0.5;
 
 /// The dimension a neighbourhood shows at one scale.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Dimension {
+pub(crate) enum Dimension {
     Linear,
     Planar,
     Volumetric,
@@ -53,7 +53,7 @@ pub enum Dimension {
 
 /// Demantké's shares (a₁, a₂, a₃) of a covariance given as its upper triangle (xx xy xz yy yz
 /// zz); None when it is not a finite, non-zero covariance.
-pub fn shares(c: &[f64; 6]) -> Option<[f64; 3]> {
+pub(crate) fn shares(c: &[f64; 6]) -> Option<[f64; 3]> {
     if c.iter().any(|v| !v.is_finite()) {
         return None;
     }
@@ -71,7 +71,7 @@ pub fn shares(c: &[f64; 6]) -> Option<[f64; 3]> {
 
 /// The dimension of the points of `index` within `radius` of `q` (the index's local frame);
 /// None when fewer than [`MIN_POINTS`] lie there.
-pub fn dimension_at(index: &Columns, q: &Point3, radius: f64) -> Option<Dimension> {
+pub(crate) fn dimension_at(index: &Columns, q: &Point3, radius: f64) -> Option<Dimension> {
     let mut m = Moments3::new(radius);
     let r2 = radius * radius;
     index.sphere_candidates(q, radius, |points| m.add_within(points, q, r2));
@@ -93,7 +93,7 @@ pub fn dimension_at(index: &Columns, q: &Point3, radius: f64) -> Option<Dimensio
 /// every scale of [`SCALES`] × `spacing`. The largest ball must hold [`MIN_POINTS`]; a smaller
 /// one that holds fewer counts as scattered, not as a surface (a surface sampled at the spacing
 /// puts about 50 points in a ball of 4 spacings; sparse leaves put a handful).
-pub fn looks_like_vegetation(index: &Columns, q: &Point3, spacing: f64) -> bool {
+pub(crate) fn looks_like_vegetation(index: &Columns, q: &Point3, spacing: f64) -> bool {
     let last = SCALES.len() - 1;
     SCALES
         .iter()
@@ -107,7 +107,7 @@ pub fn looks_like_vegetation(index: &Columns, q: &Point3, spacing: f64) -> bool 
 /// The share of `cores` that look like vegetation in either epoch: each is `(where the before
 /// surface is, where the after surface is)` in the indexes' local frame (the core point, and the
 /// core point moved along its normal by its distance). 0 for no core point.
-pub fn fraction(
+pub(crate) fn fraction(
     before: &Columns,
     after: &Columns,
     cores: &[(Point3, Point3)],

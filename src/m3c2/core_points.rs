@@ -10,10 +10,10 @@ use rustc_hash::FxHashMap as HashMap;
 use crate::geom::Point3;
 
 /// A cell of the core-point grid.
-pub type Cell = [i64; 3];
+pub(crate) type Cell = [i64; 3];
 
 /// The cell of `p` on the grid of size `spacing` anchored at `anchor`.
-pub fn cell_of(p: &Point3, anchor: &Point3, spacing: f64) -> Cell {
+pub(crate) fn cell_of(p: &Point3, anchor: &Point3, spacing: f64) -> Cell {
     [
         floor_i64((p[0] - anchor[0]) / spacing),
         floor_i64((p[1] - anchor[1]) / spacing),
@@ -25,7 +25,7 @@ pub fn cell_of(p: &Point3, anchor: &Point3, spacing: f64) -> Cell {
 /// is a library call on baseline x86-64 (a tenth of thinning): truncate, then step down where
 /// truncation went up.
 #[inline]
-pub fn floor_i64(v: f64) -> i64 {
+pub(crate) fn floor_i64(v: f64) -> i64 {
     let t = v as i64;
     if (t as f64) > v {
         t.saturating_sub(1)
@@ -36,7 +36,7 @@ pub fn floor_i64(v: f64) -> i64 {
 
 /// Interleave the low 21 bits of three cell indices (Morton / Z order): a global sort key that
 /// keeps neighbouring cells close, for cache-friendly queries and a canonical output order.
-pub fn morton(c: &Cell) -> u64 {
+pub(crate) fn morton(c: &Cell) -> u64 {
     fn spread(v: u64) -> u64 {
         let mut x = v & 0x1f_ffff;
         x = (x | x << 32) & 0x1f00000000ffff;
@@ -62,7 +62,7 @@ pub fn morton(c: &Cell) -> u64 {
 /// indices, 4 bytes a candidate), then each band is thinned with a map small enough to stay cached, reused from
 /// band to band. A cell lies in one band, and its candidates keep their order, so the choice
 /// (nearest the centre, ties to the earlier point) is the one map's.
-pub fn thin(
+pub(crate) fn thin(
     n: usize,
     point: impl Fn(usize) -> Point3,
     anchor: &Point3,

@@ -34,9 +34,9 @@ use crate::spatial::{in_cylinder, Columns};
 pub struct CylinderStats {
     pub count: u32,
     /// Mean position along the axis (relative to the core point).
-    pub mean: f64,
+    pub(crate) mean: f64,
     /// Population standard deviation of the positions along the axis.
-    pub std_dev: f64,
+    pub(crate) std_dev: f64,
 }
 
 /// Statistics of the points of `index` inside the cylinder at `q` (local frame of `index`) with
@@ -97,7 +97,7 @@ impl Projections {
     }
 
     /// The lowest and highest projection ((+∞, −∞) when there is none).
-    pub fn range(&self) -> (f64, f64) {
+    pub(crate) fn range(&self) -> (f64, f64) {
         range(&self.t[..self.len])
     }
 
@@ -175,7 +175,7 @@ fn keep_inside_of(points: &[Point3], room: &mut [f64], c: &Cylinder) -> usize {
 
 /// Split the sorted values at gaps wider than `gap`; the index range of the group nearest to
 /// the interval `near` (the gap between the two intervals; ties to the earlier group).
-pub fn nearest_group(sorted: &[f64], gap: f64, near: (f64, f64)) -> Range<usize> {
+pub(crate) fn nearest_group(sorted: &[f64], gap: f64, near: (f64, f64)) -> Range<usize> {
     let mut best = (f64::INFINITY, 0..0);
     let mut start = 0;
     for k in 0..sorted.len() {

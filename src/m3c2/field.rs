@@ -46,14 +46,14 @@ use crate::spatial::Index;
 
 /// A connected part whose area-weighted mean n_z (oriented) is below this is undecided: a face
 /// within about 6° of vertical on average.
-pub const MIN_MEAN_NZ: f64 = 0.1;
+pub(crate) const MIN_MEAN_NZ: f64 = 0.1;
 /// Fewest sample points of a part whose sign is decided (fewer: a scrap too small to say).
-pub const MIN_PART: usize = 10;
+pub(crate) const MIN_PART: usize = 10;
 /// A sample point whose neighbourhood's smallest eigenvalue is more than this share of the three
 /// (0 on a plane; about 0.1 where two planes meet at a right angle, 1/3 for scatter) is no
 /// surface at the field's scale — an edge, a crest, a cleft — and is left out: its normal tilts
 /// where the surface does not (a dune crest's came out 68° from vertical on St Leonards).
-pub const FLAT: f64 = 0.1;
+pub(crate) const FLAT: f64 = 0.1;
 /// Neighbours per sample point in the propagation graph.
 const GRAPH_K: usize = 10;
 /// Sample points further apart than this many field spacings are not neighbours: a gap that wide
@@ -61,10 +61,10 @@ const GRAPH_K: usize = 10;
 const LINK: f64 = 3.0;
 /// Field points a core point looks at, within [`REACH`] field spacings.
 const LOOK_K: usize = 4;
-pub const REACH: f64 = 2.0;
+pub(crate) const REACH: f64 = 2.0;
 /// A core point's normal whose clearest agreement with the field is weaker than this (an angle
 /// near 90° to every field normal near it) takes that sign but is marked undecided.
-pub const WEAK: f64 = 0.25;
+pub(crate) const WEAK: f64 = 0.25;
 
 fn flip(n: &mut Point3) {
     *n = [-n[0], -n[1], -n[2]];
@@ -81,7 +81,7 @@ fn flip(n: &mut Point3) {
 /// apart up a dune's scarp, their normals both tilted 30°: St Leonards' dunes came out upside
 /// down by it), so it speaks only where the dot product cannot. Points less than `thin` apart
 /// along `ni` are taken to lie on one surface and compared by nᵢ·nⱼ alone.
-pub fn agreement(pi: &Point3, ni: &Point3, pj: &Point3, nj: &Point3, thin: f64) -> f64 {
+pub(crate) fn agreement(pi: &Point3, ni: &Point3, pj: &Point3, nj: &Point3, thin: f64) -> f64 {
     let plain = dot(ni, nj);
     let d = [pj[0] - pi[0], pj[1] - pi[1], pj[2] - pi[2]];
     let len = dot(&d, &d).sqrt();
@@ -104,21 +104,21 @@ const THIN: f64 = 0.5;
 
 /// A connected part of the sampled surface and its sign.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Part {
+pub(crate) struct Part {
     /// Sample points in it.
-    pub points: usize,
+    pub(crate) points: usize,
     /// Area-weighted mean n_z of its outward normals, as oriented.
-    pub mean_nz: f64,
+    pub(crate) mean_nz: f64,
     /// Whether the data decides its sign ([`MIN_MEAN_NZ`], [`MIN_PART`]).
-    pub decided: bool,
+    pub(crate) decided: bool,
 }
 
 /// An oriented sample: the normals (turned in place), each point's part, and the parts.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Oriented {
-    pub normals: Vec<Point3>,
-    pub part: Vec<u32>,
-    pub parts: Vec<Part>,
+pub(crate) struct Oriented {
+    pub(crate) normals: Vec<Point3>,
+    pub(crate) part: Vec<u32>,
+    pub(crate) parts: Vec<Part>,
 }
 
 /// A candidate edge of the spanning tree: reach `to` from the oriented `from`.
@@ -176,7 +176,7 @@ fn graph(points: &[Point3], spacing: f64) -> Vec<Vec<u32>> {
 /// each connected part, then each part so that its mean n_z is positive (see the module doc).
 /// Points are visited in the order given (give them in a canonical order: the result is then
 /// deterministic).
-pub fn orient(points: &[Point3], normals: &[Point3], spacing: f64) -> Oriented {
+pub(crate) fn orient(points: &[Point3], normals: &[Point3], spacing: f64) -> Oriented {
     let n = points.len();
     let mut normals = normals.to_vec();
     let adj = graph(points, spacing);
@@ -290,7 +290,7 @@ pub struct Field {
 impl Field {
     /// The field points `points` (local frame of the core points), their oriented `normals` and
     /// whether each one's sign is decided; `spacing` is the field's cell.
-    pub fn new(
+    pub(crate) fn new(
         points: Vec<Point3>,
         normals: Vec<Point3>,
         decided: Vec<bool>,
@@ -308,7 +308,7 @@ impl Field {
     /// Turn normal `n` at core point `p` (local frame) to agree with the field; whether its
     /// sign is decided (the field there is, and agrees or disagrees with it clearly). With no
     /// field point within reach, `n` is turned up and undecided.
-    pub fn orient(&self, p: &Point3, n: &mut Point3) -> bool {
+    pub(crate) fn orient(&self, p: &Point3, n: &mut Point3) -> bool {
         let reach2 = self.reach * self.reach;
         let mut best: Option<(f64, usize)> = None;
         for (q, d2) in self.index.nearest(p, LOOK_K) {

@@ -2,15 +2,15 @@
 //! defines it: a normal per core point, then the signed distance between the two epochs' mean
 //! positions inside a cylinder along that normal, with its level of detection (LoD95).
 
-pub mod core_points;
+pub(crate) mod core_points;
 pub mod cylinder;
-pub mod field;
-pub mod moments;
+pub(crate) mod field;
+pub(crate) mod moments;
 pub mod normals;
-pub mod orientation;
-pub mod reach;
+pub(crate) mod orientation;
+pub(crate) mod reach;
 pub mod tile;
-pub mod window;
+pub(crate) mod window;
 
 use rayon::prelude::*;
 
@@ -30,7 +30,7 @@ pub struct M3c2Params {
     pub orientation: Orientation,
     /// The effective point spacing (1 / √density): how many points a column holds.
     pub point_spacing: f64,
-    /// Where one epoch has no point in the cylinder: search on along the axis ([`reach`]).
+    /// Where one epoch has no point in the cylinder: search on along the axis (`reach`).
     pub walk: Walk,
 }
 
@@ -38,7 +38,7 @@ pub struct M3c2Params {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CoreResult {
     /// `m3c2_distance`: t₂ − t₁ (NaN when not computable).
-    pub distance: f64,
+    pub(crate) distance: f64,
     /// `m3c2_uncertainty`: LoD95 = 1.96 (√(σ₁²/n₁ + σ₂²/n₂) + reg_error). M3C2 computes it with
     /// reg_error 0 (the registration error is measured afterwards, on all the distances:
     /// `events::stable`); [`CoreResult::with_registration`] adds it.
@@ -56,7 +56,7 @@ pub struct CoreResult {
     /// Whether the data decides which side of the surface is out here (the normal's sign, and
     /// so the distance's): false where the orientation field is undecided (a face near vertical
     /// scanned alone) or no field normal near the core point speaks clearly
-    /// ([`field::Field::orient`]).
+    /// (`field::Field::orient`).
     pub sign_known: bool,
 }
 
@@ -163,11 +163,11 @@ pub struct Normals {
     /// Oriented unit normals (NaN where undefined).
     pub normal: Vec<Point3>,
     /// Whether the data decides each one's sign ([`CoreResult::sign_known`]).
-    pub known: Vec<bool>,
+    pub(crate) known: Vec<bool>,
     /// Whether each one's neighbourhood is a surface (its smallest eigenvalue at most
     /// [`field::FLAT`] of the three): only a surface's normal is walked beyond the window
     /// ([`reach`]; a post or a spike has no normal to follow).
-    pub surface: Vec<bool>,
+    pub(crate) surface: Vec<bool>,
 }
 
 /// Normals at `cores` (local frame of `before`), oriented as `params.orientation` says (`auto`
@@ -203,7 +203,7 @@ pub fn normals(
 /// the local frame of `cores`, and hold every point of `extent.held`. Work is split over rayon's
 /// pool; the result does not depend on the thread count (each core point is computed alone,
 /// with exact sums).
-pub fn distances(
+pub(crate) fn distances(
     before: &Columns,
     after: &Columns,
     cores: &[Point3],

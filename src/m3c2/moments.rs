@@ -70,7 +70,7 @@ impl Quantiser {
 
 /// Count, mean and population variance of scalar values of magnitude up to the extent.
 #[derive(Debug, Clone, Copy)]
-pub struct Moments1 {
+pub(crate) struct Moments1 {
     q: Quantiser,
     pending: u32,
     n: i64,
@@ -81,7 +81,7 @@ pub struct Moments1 {
 
 impl Moments1 {
     /// Sums for values within ±`extent`.
-    pub fn new(extent: f64) -> Self {
+    pub(crate) fn new(extent: f64) -> Self {
         Moments1 {
             q: Quantiser::new(extent),
             pending: 0,
@@ -94,7 +94,7 @@ impl Moments1 {
 
     /// Add `v` when `keep`.
     #[inline(always)]
-    pub fn add(&mut self, v: f64, keep: bool) {
+    pub(crate) fn add(&mut self, v: f64, keep: bool) {
         let x = self.q.masked(v, keep);
         self.n += keep as i64;
         self.s += x;
@@ -108,7 +108,7 @@ impl Moments1 {
     /// [`Moments1::add`] of every value of `values` (each within the extent), kept: the same
     /// sums, a block at a time in a loop without a branch that the compiler turns into vector
     /// instructions (as [`Moments3::add_within`]).
-    pub fn add_all(&mut self, values: &[f64]) {
+    pub(crate) fn add_all(&mut self, values: &[f64]) {
         let mut rest = values;
         while !rest.is_empty() {
             let room = (FLUSH - self.pending) as usize;
@@ -139,12 +139,12 @@ impl Moments1 {
         m.total
     }
 
-    pub fn count(&self) -> u64 {
+    pub(crate) fn count(&self) -> u64 {
         self.totals()[0] as u64
     }
 
     /// (mean, population variance); NaN for no values.
-    pub fn mean_var(&self) -> (f64, f64) {
+    pub(crate) fn mean_var(&self) -> (f64, f64) {
         let [n, s, ss] = self.totals();
         if n == 0 {
             return (f64::NAN, f64::NAN);
@@ -158,7 +158,7 @@ impl Moments1 {
 
 /// Count, mean and covariance of 3-D offsets of magnitude up to the extent.
 #[derive(Clone, Copy)]
-pub struct Moments3 {
+pub(crate) struct Moments3 {
     q: Quantiser,
     pending: u32,
     n: i64,
@@ -261,7 +261,7 @@ fn block_sums_of(points: &[Point3], q: &Point3, r2: f64, factor: f64) -> (i64, [
 
 impl Moments3 {
     /// Sums for offsets within a ball of radius `extent`.
-    pub fn new(extent: f64) -> Self {
+    pub(crate) fn new(extent: f64) -> Self {
         Moments3 {
             q: Quantiser::new(extent),
             pending: 0,
@@ -275,8 +275,9 @@ impl Moments3 {
     }
 
     /// Add `p` when `keep`.
+    #[cfg(test)]
     #[inline(always)]
-    pub fn add(&mut self, p: [f64; 3], keep: bool) {
+    pub(crate) fn add(&mut self, p: [f64; 3], keep: bool) {
         let x = [
             self.q.masked(p[0], keep),
             self.q.masked(p[1], keep),
@@ -307,7 +308,7 @@ impl Moments3 {
         (self.n, self.s, self.ss, self.pending) = (0, [0; 3], [0; 6], 0);
     }
 
-    pub fn count(&self) -> usize {
+    pub(crate) fn count(&self) -> usize {
         (self.total_n + self.n as i128) as usize
     }
 
@@ -315,7 +316,7 @@ impl Moments3 {
     /// same sums, a block at a time in a loop without a branch, which the compiler turns into
     /// vector instructions (four points at a time where the CPU has AVX2, chosen when the
     /// program runs; two otherwise).
-    pub fn add_within(&mut self, points: &[Point3], q: &Point3, r2: f64) {
+    pub(crate) fn add_within(&mut self, points: &[Point3], q: &Point3, r2: f64) {
         let mut rest = points;
         while !rest.is_empty() {
             let room = (FLUSH - self.pending) as usize;
@@ -337,7 +338,7 @@ impl Moments3 {
     }
 
     /// The population covariance (xx xy xz yy yz zz), exact up to the final conversion.
-    pub fn covariance(&self) -> [f64; 6] {
+    pub(crate) fn covariance(&self) -> [f64; 6] {
         let mut m = *self;
         m.flush();
         let n = m.total_n;

@@ -4,7 +4,7 @@
 //! within `normal_radius` of the core point (Hoppe et al. 1992, "Surface reconstruction from
 //! unorganized points"; the M3C2 normal step of Lague et al. 2013). The covariance is centred on
 //! the neighbourhood mean, as CloudCompare, PDAL and py4dgeo do. The sign is left to
-//! [`super::orientation`].
+//! `super::orientation`.
 
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 
@@ -13,11 +13,11 @@ use crate::geom::Point3;
 use crate::spatial::Columns;
 
 /// Fewer neighbours than this leave the normal undefined (a plane needs three points).
-pub const MIN_NORMAL_POINTS: usize = 3;
+pub(crate) const MIN_NORMAL_POINTS: usize = 3;
 
 /// Unoriented unit normal at `q` (local frame of `index`) from the points within `radius`, plus
 /// the planarity measure λ₀/(λ₀+λ₁+λ₂) (0 = a perfect plane). None when fewer than
-/// [`MIN_NORMAL_POINTS`] neighbours exist or the neighbourhood is degenerate.
+/// `MIN_NORMAL_POINTS` neighbours exist or the neighbourhood is degenerate.
 pub fn normal_at(index: &Columns, q: &Point3, radius: f64) -> Option<(Point3, f64)> {
     // One pass: exact integer moments (see `moments`), so the result does not depend on the
     // order in which the index visits the neighbourhood, and no second query is needed.
@@ -32,7 +32,7 @@ pub fn normal_at(index: &Columns, q: &Point3, radius: f64) -> Option<(Point3, f6
 
 /// The symmetric 3×3 matrix whose upper triangle is `c` (xx xy xz yy yz zz), as
 /// [`super::moments::Moments3::covariance`] gives it.
-pub fn symmetric(c: &[f64; 6]) -> Matrix3<f64> {
+pub(crate) fn symmetric(c: &[f64; 6]) -> Matrix3<f64> {
     Matrix3::new(c[0], c[1], c[2], c[1], c[3], c[4], c[2], c[4], c[5])
 }
 
@@ -44,7 +44,7 @@ pub fn symmetric(c: &[f64; 6]) -> Matrix3<f64> {
 /// solver otherwise. The iterative solver was 12 of the M3C2 stage's 153 CPU-s on the 120M-point
 /// pair (one normal per core point); with the closed form the stage took 74.2 s instead of
 /// 79.4–80.0.
-pub fn smallest_eigenvector(c: &[f64; 6]) -> Option<(Point3, f64)> {
+pub(crate) fn smallest_eigenvector(c: &[f64; 6]) -> Option<(Point3, f64)> {
     let trace = c[0] + c[3] + c[5];
     if trace.is_nan() || trace <= 0.0 || !trace.is_finite() {
         return None;
@@ -78,7 +78,7 @@ fn smallest_iterative(c: &[f64; 6]) -> Option<(Point3, f64)> {
 /// §2.2). The vector's error grows as the gap λ_mid − λ_min shrinks; below a hundredth of the
 /// spread λ_max − λ_min it is not trusted (None: the caller solves iteratively). None for a
 /// multiple of the identity.
-pub fn smallest_closed_form(c: &[f64; 6]) -> Option<(Point3, f64)> {
+pub(crate) fn smallest_closed_form(c: &[f64; 6]) -> Option<(Point3, f64)> {
     let [a00, a01, a02, a11, a12, a22] = *c;
     let q = (a00 + a11 + a22) / 3.0;
     let (b00, b11, b22) = (a00 - q, a11 - q, a22 - q);

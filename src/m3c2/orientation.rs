@@ -18,7 +18,7 @@ use crate::geom::{dot, Point3};
 /// How normals are oriented (`--orientation`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Orientation {
-    /// From the survey's orientation field ([`super::field`]): out of the material, decided
+    /// From the survey's orientation field (`super::field`): out of the material, decided
     /// over the whole surface.
     Auto,
     /// n·z ≥ 0.
@@ -71,7 +71,7 @@ impl FromStr for Orientation {
 }
 
 /// A normal is steep (its "up" sign unreliable) when |n·z| is below this: about 60° from vertical.
-pub const STEEP_NZ: f64 = 0.5;
+pub(crate) const STEEP_NZ: f64 = 0.5;
 
 fn flip(n: &mut Point3) {
     n[0] = -n[0];
@@ -83,7 +83,7 @@ fn flip(n: &mut Point3) {
 /// `origin`, in global coordinates) in place; whether each sign is known. `auto` follows
 /// `field` (the orientation field near the cores, in their frame); without one it turns
 /// normals up and knows the signs of those that are not steep.
-pub fn orient(
+pub(crate) fn orient(
     cores: &[Point3],
     normals: &mut [Point3],
     origin: Point3,

@@ -47,7 +47,7 @@ use crate::spatial::{in_cylinder, Columns};
 /// points over 2r·tan θ, a standard deviation of about 0.58 r·tan θ; 2 r admits surfaces up to
 /// 74° from square to the axis (a 35° debris cone seen along a horizontal normal is 55°) and
 /// refuses a wall running along it.
-pub const ALONG: f64 = 2.0;
+pub(crate) const ALONG: f64 = 2.0;
 
 /// How the walk's finding is used.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -78,7 +78,7 @@ pub enum Reach {
 
 impl Reach {
     /// The reach of a stored code (a result chunk's column).
-    pub fn from_code(c: u8) -> Option<Reach> {
+    pub(crate) fn from_code(c: u8) -> Option<Reach> {
         [
             Reach::Window,
             Reach::Extended,
@@ -95,11 +95,11 @@ impl Reach {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Extent {
     /// The surveys' bounds (both epochs).
-    pub data_min: Point3,
-    pub data_max: Point3,
+    pub(crate) data_min: Point3,
+    pub(crate) data_max: Point3,
     /// [x0, y0, x1, y1]: every point of either epoch in this box is indexed (infinite sides for a
     /// tile at the grid's edge, whose file holds every point beyond it).
-    pub held: [f64; 4],
+    pub(crate) held: [f64; 4],
 }
 
 impl Extent {
@@ -118,7 +118,7 @@ impl Extent {
     }
 
     /// The same extent in a frame whose origin is at `origin`.
-    pub fn local(&self, origin: &Point3) -> Extent {
+    pub(crate) fn local(&self, origin: &Point3) -> Extent {
         let o = origin;
         Extent {
             data_min: std::array::from_fn(|k| self.data_min[k] - o[k]),
@@ -134,7 +134,7 @@ impl Extent {
 
     /// The axis positions t at which a cylinder of radius `r` along `n` through `q` can hold a
     /// point inside the data's bounds: (lo, hi), lo ≤ 0 ≤ hi for a `q` inside.
-    pub fn axis_limits(&self, q: &Point3, n: &Point3, r: f64) -> (f64, f64) {
+    pub(crate) fn axis_limits(&self, q: &Point3, n: &Point3, r: f64) -> (f64, f64) {
         let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
         for k in 0..3 {
             let (a, b) = (self.data_min[k] - r - q[k], self.data_max[k] + r - q[k]);
@@ -163,7 +163,7 @@ impl Extent {
 
 /// What the walk found.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Walked {
+pub(crate) enum Walked {
     /// The missing epoch's displaced surface: its statistics, positions measured from the core
     /// point along the axis.
     Found(CylinderStats),
@@ -176,31 +176,31 @@ pub enum Walked {
 /// The present epoch at the core point: the span of its surface's group along the axis and
 /// whether it has other points in the window beyond that group, below and above.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Present {
-    pub span: (f64, f64),
-    pub beyond: [bool; 2],
+pub(crate) struct Present {
+    pub(crate) span: (f64, f64),
+    pub(crate) beyond: [bool; 2],
 }
 
 /// One cylinder query: the core point `q` (local frame), unit axis `n`, radius `r`, window
 /// half-length `h`.
 #[derive(Debug, Clone, Copy)]
-pub struct Axis {
-    pub q: Point3,
-    pub n: Point3,
-    pub r: f64,
-    pub h: f64,
+pub(crate) struct Axis {
+    pub(crate) q: Point3,
+    pub(crate) n: Point3,
+    pub(crate) r: f64,
+    pub(crate) h: f64,
 }
 
 /// Reused buffers of a walk (no allocation per core point).
 #[derive(Debug, Default)]
-pub struct Scratch {
+pub(crate) struct Scratch {
     present: Vec<f64>,
     missing: Vec<f64>,
 }
 
 /// Walk from the present epoch's surface along `axis` both ways (see the module), over the
 /// points of `present` and `missing` (indexes in the local frame of `axis.q`).
-pub fn walk(
+pub(crate) fn walk(
     present: &Columns,
     missing: &Columns,
     axis: &Axis,

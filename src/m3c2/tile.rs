@@ -21,15 +21,12 @@ pub struct EpochPoints<'a> {
 }
 
 impl EpochPoints<'_> {
-    pub fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         self.owned.len()
-    }
-    pub fn is_empty(&self) -> bool {
-        self.owned.is_empty()
     }
     /// Point `i`.
     #[inline]
-    pub fn point(&self, i: usize) -> Point3 {
+    pub(crate) fn point(&self, i: usize) -> Point3 {
         [self.x[i], self.y[i], self.z[i]]
     }
 }
@@ -37,16 +34,16 @@ impl EpochPoints<'_> {
 /// One core point's result with its global sort key.
 #[derive(Debug, Clone, Copy)]
 pub struct KeyedResult {
-    pub key: u64,
-    pub xyz: Point3,
+    pub(crate) key: u64,
+    pub(crate) xyz: Point3,
     pub r: CoreResult,
 }
 
 /// Normals and M3C2 at the core points the tile owns — C1 thinned on the grid anchored at
 /// `anchor` with cells of `core_spacing` (keyed by cell), or the user's `cores` (keyed by input
 /// order) — sorted by key. `extent` (global coordinates) holds the data's bounds and the tile's
-/// halo box: a core point whose walk ([`super::reach`]) needs points beyond that box comes back
-/// [`Reach::Pending`](super::Reach::Pending), for [`distances_along`]. `field` is the before
+/// halo box: a core point whose walk (`super::reach`) needs points beyond that box comes back
+/// [`Reach::Pending`](super::Reach::Pending), for `distances_along`. `field` is the before
 /// survey's orientation field near the tile (`auto` orientation).
 #[allow(clippy::too_many_arguments)]
 pub fn compute(
@@ -117,7 +114,7 @@ pub(super) fn keyed_by(
 /// and `after` hold every point of each epoch within the cylinder's radius of those core points'
 /// axes, out to the data's bounds (`extent`, global coordinates), and the normals (and whether
 /// their signs are known) are the ones the tile computed. The result is the one a run over the whole surveys gives.
-pub fn distances_along(
+pub(crate) fn distances_along(
     before: &[Point3],
     after: &[Point3],
     anchor: Point3,

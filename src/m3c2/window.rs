@@ -20,7 +20,7 @@ use crate::geom::Point3;
 use crate::spatial::Columns;
 
 /// The before epoch's half at a set of core points.
-pub struct BeforeHalf {
+pub(crate) struct BeforeHalf {
     /// The core points (key, global position), in the order given.
     cores: Vec<(u64, Point3)>,
     normal: Vec<Point3>,
@@ -31,16 +31,12 @@ pub struct BeforeHalf {
 
 impl BeforeHalf {
     /// Core points held.
-    pub fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         self.cores.len()
     }
 
-    pub fn is_empty(&self) -> bool {
-        self.cores.is_empty()
-    }
-
     /// What it holds in memory, about.
-    pub fn bytes(&self) -> u64 {
+    pub(crate) fn bytes(&self) -> u64 {
         (self.len()
             * std::mem::size_of::<((u64, Point3), Point3, bool, (CylinderStats, (f64, f64)))>())
             as u64
@@ -50,7 +46,7 @@ impl BeforeHalf {
 /// The before half at `cores` (global positions, with their keys) of `before`'s points, in the
 /// local frame anchored at `anchor` (as [`super::tile::compute`] has it), normals oriented as
 /// `params.orientation` says without an orientation field.
-pub fn before_half(
+pub(crate) fn before_half(
     before: &EpochPoints,
     anchor: Point3,
     cores: &[(u64, Point3)],
@@ -82,7 +78,7 @@ pub fn before_half(
 /// M3C2 in the window at `half`'s core points against `after`'s points (the same `anchor`),
 /// sorted by key: what [`super::tile::compute`] gives where the distance is measured in the
 /// window, undefined (NaN) elsewhere.
-pub fn against(
+pub(crate) fn against(
     half: &BeforeHalf,
     after: &EpochPoints,
     anchor: Point3,

@@ -22,27 +22,27 @@ use crate::store::UnitWriter;
 
 /// Windows across and along the first survey's footprint the fit samples (see `windows`):
 /// 64 patches of about 25 × 25 core points, spread so that the turn about every axis is seen.
-pub const WINDOWS: usize = 8;
+pub(crate) const WINDOWS: usize = 8;
 /// Core points the fit computes, about: every k-th core point of the sampled tiles. Enough for a
 /// six-parameter fit whose uncertainty is far below the noise (σ/√n), few enough that the
 /// sample costs a fraction of one tile's M3C2.
-pub const SAMPLE_CORES: usize = 40_000;
+pub(crate) const SAMPLE_CORES: usize = 40_000;
 
 /// The file of an align unit: its [`Fits`].
-pub const FILE: &str = "align.json";
+pub(crate) const FILE: &str = "align.json";
 
 /// A later survey aligned onto the first on their stable ground.
-pub struct AlignStage;
+pub(crate) struct AlignStage;
 
 /// What an align unit records.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct AlignMeta {
+pub(crate) struct AlignMeta {
     /// The fit onto the first survey applies.
-    pub applied: bool,
+    pub(crate) applied: bool,
     /// Core points computed for the fits, and those on the stable ground of the fit onto the
     /// first.
-    pub sampled: usize,
-    pub stable_points: usize,
+    pub(crate) sampled: usize,
+    pub(crate) stable_points: usize,
 }
 
 impl Stage for AlignStage {
@@ -212,7 +212,7 @@ fn predecessor(later: &[usize], s: usize) -> Option<usize> {
 }
 
 /// The surveys of the plan's pairs other than the first, in order, each once.
-pub fn later_surveys(plan: &crate::plan::Plan) -> Vec<usize> {
+pub(crate) fn later_surveys(plan: &crate::plan::Plan) -> Vec<usize> {
     let mut s: Vec<usize> = plan
         .pairs
         .iter()
@@ -271,7 +271,7 @@ fn sample_of(
 }
 
 /// The fits of survey `s` (its align unit must be done), if it has them.
-pub fn read(ctx: &Ctx, s: usize) -> Result<Option<Fits>> {
+pub(crate) fn read(ctx: &Ctx, s: usize) -> Result<Option<Fits>> {
     match ctx.plan.find(&Spec::survey(AlignStage::KIND, s)) {
         Some(u) => Ok(Some(super::read_json(ctx, u, FILE)?)),
         None => Ok(None),

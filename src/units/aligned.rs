@@ -19,16 +19,16 @@ use crate::plan::Spec;
 use crate::store::UnitWriter;
 
 /// The file of an aligned unit: its [`Route`].
-pub const FILE: &str = "route.json";
+pub(crate) const FILE: &str = "route.json";
 
 /// A survey in the first survey's frame.
-pub struct AlignedStage;
+pub(crate) struct AlignedStage;
 
 /// What an aligned-tiling unit records: the tiling's, when the alignment applied.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct AlignedMeta {
-    pub applied: bool,
-    pub tiling: Option<TilingMeta>,
+pub(crate) struct AlignedMeta {
+    pub(crate) applied: bool,
+    pub(crate) tiling: Option<TilingMeta>,
 }
 
 impl Stage for AlignedStage {
@@ -108,7 +108,7 @@ impl Stage for AlignedStage {
 }
 
 /// The route of survey `s` onto the first (its aligned unit must be done), if it has one.
-pub fn route(ctx: &Ctx, s: usize) -> Result<Option<Route>> {
+pub(crate) fn route(ctx: &Ctx, s: usize) -> Result<Option<Route>> {
     match ctx.plan.find(&Spec::survey(AlignedStage::KIND, s)) {
         Some(u) => Ok(Some(super::read_json(ctx, u, FILE)?)),
         None => Ok(None),

@@ -33,10 +33,10 @@ use crate::plan::Spec;
 use crate::store::UnitWriter;
 
 /// The campaign's marker (written last, removed first when published).
-pub const MARKER: &str = "summary.json";
+pub(crate) const MARKER: &str = "summary.json";
 
 /// The names of the campaign files in DIR.
-pub const FILES: &[&str] = &[
+pub(crate) const FILES: &[&str] = &[
     "campaign.csv",
     "campaign.json",
     "events.geojson",
@@ -50,7 +50,7 @@ pub const FILES: &[&str] = &[
 
 /// Is `name` (in a campaign's DIR) a talus output? The campaign files, and a pair's outputs
 /// under `pairs/<label>/`.
-pub fn is_output(name: &str) -> bool {
+pub(crate) fn is_output(name: &str) -> bool {
     if FILES.contains(&name) || name == "pairs" {
         return true;
     }
@@ -140,15 +140,15 @@ struct Row {
 }
 
 /// The campaign's outputs: table, tracks, time series, magnitude–frequency, report.
-pub struct CampaignStage;
+pub(crate) struct CampaignStage;
 
 /// What the campaign unit records.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct CampaignMeta {
+pub(crate) struct CampaignMeta {
     /// The files to publish into DIR (the pairs' under `pairs/<label>/`).
-    pub publish: Vec<Publish>,
+    pub(crate) publish: Vec<Publish>,
     /// Events over all pairs.
-    pub events: usize,
+    pub(crate) events: usize,
 }
 
 impl Stage for CampaignStage {

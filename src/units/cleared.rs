@@ -21,7 +21,7 @@ use crate::store::UnitWriter;
 
 /// Resident bytes per point of a tile while its points are judged: the tile's columns and owned
 /// flags (25), the index's copy and cells (≈ 40), the verdicts.
-pub const BYTES_PER_POINT: u64 = 80;
+pub(crate) const BYTES_PER_POINT: u64 = 80;
 
 /// A survey cleared of its vegetation-like points.
 pub struct ClearedStage;
@@ -29,8 +29,8 @@ pub struct ClearedStage;
 /// What a cleared unit records: its tiling, and the points it removed.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ClearedMeta {
-    pub removed: u64,
-    pub tiling: TilingMeta,
+    pub(crate) removed: u64,
+    pub(crate) tiling: TilingMeta,
 }
 
 impl Stage for ClearedStage {

@@ -14,9 +14,9 @@ use crate::store::UnitWriter;
 
 /// What a core-point unit records.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
-pub struct CoresMeta {
+pub(crate) struct CoresMeta {
     /// Core points written.
-    pub points: u64,
+    pub(crate) points: u64,
 }
 
 /// The progress line both count on: cutting core points is part of pass 1.
@@ -29,7 +29,7 @@ const LINE: Line = Line {
 /// The user's core points (`--core-points`), cut into the layout's tiles once for every M3C2
 /// unit: each tile's file holds the points it owns, keyed by their order in the input (so
 /// m3c2.laz gives them back in that order).
-pub struct UserCoresStage;
+pub(crate) struct UserCoresStage;
 
 impl Stage for UserCoresStage {
     const KIND: &'static str = "cores";
@@ -57,7 +57,7 @@ impl Stage for UserCoresStage {
 }
 
 /// A campaign's core points: its first survey thinned on the core-point grid.
-pub struct ThinnedStage;
+pub(crate) struct ThinnedStage;
 
 impl Stage for ThinnedStage {
     const KIND: &'static str = "thinned";
@@ -91,13 +91,13 @@ fn u32col(name: &str, v: Vec<u32>) -> Column {
 }
 
 /// The file of tile `id`'s core points.
-pub fn file(id: TileId) -> String {
+pub(crate) fn file(id: TileId) -> String {
     format!("c_{}.tile", id.name())
 }
 
 /// Resident bytes per user core point while it is cut: the key and point (32), the columns
 /// written (32).
-pub const CORE_POINT_BYTES: u64 = 64;
+pub(crate) const CORE_POINT_BYTES: u64 = 64;
 
 /// Cut the plan's core-point file into `out`.
 fn cut(ctx: &Ctx, out: &mut UnitWriter) -> Result<CoresMeta> {
@@ -233,7 +233,7 @@ fn write(out: &mut UnitWriter, id: TileId, pts: &[(u64, Point3)]) -> Result<()> 
 }
 
 /// Tile `id`'s core points from the core-point unit `unit`.
-pub fn read(ctx: &Ctx, unit: usize, id: TileId) -> Result<Vec<(u64, Point3)>> {
+pub(crate) fn read(ctx: &Ctx, unit: usize, id: TileId) -> Result<Vec<(u64, Point3)>> {
     let c = super::read_columns(ctx, unit, &file(id))?;
     let (Some(ColumnData::U32(hi)), Some(ColumnData::U32(lo))) =
         (c.column("key_hi"), c.column("key_lo"))

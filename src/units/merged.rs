@@ -26,20 +26,20 @@ use crate::plan::Spec;
 use crate::store::UnitWriter;
 
 /// The most inputs one merge holds a chunk of, where the merge goes in rounds.
-pub const FAN_IN: usize = 32;
+pub(crate) const FAN_IN: usize = 32;
 
 /// Whether `plan`'s pairs are merged in rounds: its tiles are more than [`FAN_IN`] and their
 /// direct merge would hold more than an eighth of the budget. Below that, the direct merge costs
 /// less than a pass over every result (the 120M-point pair's 64 tiles at the default budget:
 /// 66 MiB of 2 GiB, against the pass's 12 s).
-pub fn in_rounds(plan: &crate::plan::Plan) -> bool {
+pub(crate) fn in_rounds(plan: &crate::plan::Plan) -> bool {
     let tiles = plan.layout.len();
     tiles > FAN_IN && merge_need(tiles) > plan.params.memory_bytes.value / 8
 }
 
 /// How many inputs a merge of one of `plan`'s pairs' results holds: its tiles, or at most
 /// [`FAN_IN`] runs.
-pub fn merge_inputs(plan: &crate::plan::Plan) -> usize {
+pub(crate) fn merge_inputs(plan: &crate::plan::Plan) -> usize {
     if in_rounds(plan) {
         FAN_IN
     } else {
@@ -48,7 +48,7 @@ pub fn merge_inputs(plan: &crate::plan::Plan) -> usize {
 }
 
 /// Resident bytes of a merge of one of `plan`'s pairs' results (its tiles, or its runs).
-pub fn pair_merge_need(plan: &crate::plan::Plan) -> u64 {
+pub(crate) fn pair_merge_need(plan: &crate::plan::Plan) -> u64 {
     merge_need(merge_inputs(plan))
 }
 
@@ -56,23 +56,23 @@ pub fn pair_merge_need(plan: &crate::plan::Plan) -> u64 {
 const GROUP: usize = 8;
 
 /// The file of chunk `k` of final run `r`.
-pub fn run_file(r: usize, k: usize) -> String {
+pub(crate) fn run_file(r: usize, k: usize) -> String {
     format!("m_{r:03}_{k:05}.tile")
 }
 
 /// Resident bytes of a merged unit: its merge of [`FAN_IN`] inputs and the chunks it encodes.
-pub fn need() -> u64 {
+pub(crate) fn need() -> u64 {
     merge_need(FAN_IN) + (GROUP * CHUNK_ROWS * std::mem::size_of::<KeyedResult>()) as u64 * 2
 }
 
 /// A pair's results as sorted runs.
-pub struct MergedStage;
+pub(crate) struct MergedStage;
 
 /// What a merged unit records: the chunks of each final run, and the rounds it took.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct MergedMeta {
-    pub runs: Vec<usize>,
-    pub rounds: usize,
+pub(crate) struct MergedMeta {
+    pub(crate) runs: Vec<usize>,
+    pub(crate) rounds: usize,
 }
 
 impl Stage for MergedStage {

@@ -1,10 +1,10 @@
 //! What each kind of unit does (SPEC.md §3 "Units"), one module per stage, in pipeline order:
-//! [`tiling`] (a survey → tile files) → [`cores`] (the user's core points, or a campaign's) →
+//! [`tiling`] (a survey → tile files) → `cores` (the user's core points, or a campaign's) →
 //! [`m3c2`] (a tile's normals and distances for a pair) → [`stable`] (a pair's noise and
-//! registration error) → [`events`] (a pair's filter, smoothing, clustering, description) →
-//! [`volumes`] (a tile's events' volumes) → [`outputs`] (a pair's files, ready to publish) →
-//! [`campaign`] (a campaign's files). Each module's stage type implements [`stage::Stage`] and is
-//! registered in [`stage::default_stages`].
+//! registration error) → `events` (a pair's filter, smoothing, clustering, description) →
+//! `volumes` (a tile's events' volumes) → `outputs` (a pair's files, ready to publish) →
+//! `campaign` (a campaign's files). Each module's stage type implements [`stage::Stage`] and is
+//! registered in `stage::default_stages`.
 //!
 //! The unit contract: a unit reads only the plan and the files of the units it depends on, and
 //! writes only into its own [`UnitWriter`]; it returns its stage's typed meta, kept in its record
@@ -12,24 +12,24 @@
 //! process, machine or run executes it, and in whatever order the units run, its files are the
 //! same bytes.
 
-pub mod align;
-pub mod aligned;
-pub mod campaign;
+pub(crate) mod align;
+pub(crate) mod aligned;
+pub(crate) mod campaign;
 pub mod cleared;
-pub mod cores;
-pub mod events;
+pub(crate) mod cores;
+pub(crate) mod events;
 pub mod m3c2;
-pub mod merged;
-pub mod orient;
-pub mod outputs;
-pub mod sample;
-pub mod scratch;
-pub mod series;
-pub mod solids;
+pub(crate) mod merged;
+pub(crate) mod orient;
+pub(crate) mod outputs;
+pub(crate) mod sample;
+pub(crate) mod scratch;
+pub(crate) mod series;
+pub(crate) mod solids;
 pub mod stable;
 pub mod stage;
 pub mod tiling;
-pub mod volumes;
+pub(crate) mod volumes;
 
 use std::path::{Path, PathBuf};
 
@@ -49,7 +49,7 @@ pub struct Ctx<'a> {
     pub progress: &'a (dyn Fn(u64) + Sync),
     /// The process's memory pool: reserve before holding anything large.
     pub pool: &'a crate::memory::Pool,
-    /// The unit running, whose files [`Ctx::input`] grants: its dependencies' only (None: a
+    /// The unit running, whose files `Ctx::input` grants: its dependencies' only (None: a
     /// reader outside any unit, such as the Python package reading a finished run).
     pub reader: Option<usize>,
 }
@@ -57,12 +57,12 @@ pub struct Ctx<'a> {
 impl Ctx<'_> {
     /// Reserve `need` bytes for `what` from the pool (waiting for other units; exit 2 when the
     /// budget could never hold it).
-    pub fn reserve(&self, need: u64, what: &str) -> Result<crate::memory::Reservation<'_>> {
+    pub(crate) fn reserve(&self, need: u64, what: &str) -> Result<crate::memory::Reservation<'_>> {
         crate::memory::reserve(self.pool, need, self.plan.params.memory_bytes.value, what)
     }
 
     /// The store's name of unit `i`.
-    pub fn unit_ref(&self, i: usize) -> UnitRef {
+    pub(crate) fn unit_ref(&self, i: usize) -> UnitRef {
         unit_ref(self.plan, i)
     }
 
@@ -70,7 +70,7 @@ impl Ctx<'_> {
     /// files any unit's release keeps ([`stage::Stage::KEPT`]). Reading any other unit's files is
     /// refused: the executor releases a unit's files once every unit that depends on it is done
     /// (`exec::EarlyRelease`), so a file read beyond the declared dependencies could be gone.
-    pub fn input(&self, i: usize, file: &str) -> Result<PathBuf> {
+    pub(crate) fn input(&self, i: usize, file: &str) -> Result<PathBuf> {
         if let Some(r) = self.reader {
             let kept = || {
                 stage::registry()
@@ -96,7 +96,7 @@ impl Ctx<'_> {
 
     /// The typed meta of finished unit `i`, of stage `S`. A record whose meta is not `S`'s (a
     /// field missing) is damaged: the executor redoes that unit.
-    pub fn meta<S: Stage>(&self, i: usize) -> Result<S::Meta> {
+    pub(crate) fn meta<S: Stage>(&self, i: usize) -> Result<S::Meta> {
         let u = &self.plan.units[i];
         if u.kind() != S::KIND {
             return Err(Error::Internal(format!(
@@ -111,7 +111,7 @@ impl Ctx<'_> {
 
     /// What the executor recorded of finished unit `i` beside its meta: its seconds and peak
     /// memory.
-    pub fn timing(&self, i: usize) -> Result<stage::Timing> {
+    pub(crate) fn timing(&self, i: usize) -> Result<stage::Timing> {
         stage::timing_of(self.store, &self.unit_ref(i), &self.record(i)?)
     }
 
@@ -123,7 +123,7 @@ impl Ctx<'_> {
     }
 
     /// The pair unit `i` is for.
-    pub fn pair(&self, i: usize) -> Result<usize> {
+    pub(crate) fn pair(&self, i: usize) -> Result<usize> {
         let u = &self.plan.units[i];
         u.spec
             .pair
@@ -139,7 +139,7 @@ impl Ctx<'_> {
     }
 
     /// The tile unit `i` is for.
-    pub fn tile(&self, i: usize) -> Result<TileId> {
+    pub(crate) fn tile(&self, i: usize) -> Result<TileId> {
         let u = &self.plan.units[i];
         u.spec
             .tile
@@ -151,13 +151,13 @@ impl Ctx<'_> {
     /// the last stage in the registry that provides tiles ([`stage::Stage::TILES`]) and whose
     /// unit of the survey holds them — its cleared tiling with `--vegetation remove`, else its
     /// aligned tiling where the alignment applied, else its own tiling.
-    pub fn tiles(&self, survey: usize) -> Result<(usize, tiling::TilingMeta)> {
+    pub(crate) fn tiles(&self, survey: usize) -> Result<(usize, tiling::TilingMeta)> {
         self.tiles_before(survey, None)
     }
 
     /// [`Ctx::tiles`] as the stages before stage `kind` leave them (a stage that provides
     /// tiles reads the ones it replaces), or all of them (`None`).
-    pub fn tiles_before(
+    pub(crate) fn tiles_before(
         &self,
         survey: usize,
         kind: Option<&str>,
@@ -180,7 +180,7 @@ impl Ctx<'_> {
     }
 
     /// The unit whose tile files hold survey `survey` in the run's frame ([`Ctx::tiles`]).
-    pub fn tiling(&self, survey: usize) -> Result<usize> {
+    pub(crate) fn tiling(&self, survey: usize) -> Result<usize> {
         Ok(self.tiles(survey)?.0)
     }
 
@@ -201,12 +201,12 @@ impl Ctx<'_> {
     }
 
     /// The tiling record of survey `survey` in the run's frame (see [`Ctx::tiles`]).
-    pub fn tiling_meta(&self, survey: usize) -> Result<tiling::TilingMeta> {
+    pub(crate) fn tiling_meta(&self, survey: usize) -> Result<tiling::TilingMeta> {
         Ok(self.tiles(survey)?.1)
     }
 
     /// The tiling record of unit `u`, which holds a survey's tiles ([`stage::Stage::TILES`]).
-    pub fn tiling_meta_of(&self, u: usize) -> Result<tiling::TilingMeta> {
+    pub(crate) fn tiling_meta_of(&self, u: usize) -> Result<tiling::TilingMeta> {
         self.tiles_of(u)?.ok_or_else(|| {
             Error::Internal(format!("unit {} holds no tiles", self.plan.units[u].name))
         })
@@ -229,7 +229,7 @@ impl Ctx<'_> {
     }
 
     /// The dependency of unit `i` of stage `S`, if it has one.
-    pub fn dep<S: Stage>(&self, i: usize) -> Option<usize> {
+    pub(crate) fn dep<S: Stage>(&self, i: usize) -> Option<usize> {
         self.plan.units[i]
             .deps
             .iter()
@@ -246,7 +246,7 @@ impl Ctx<'_> {
 }
 
 /// The store's name of the plan's unit `i`.
-pub fn unit_ref(plan: &Plan, i: usize) -> UnitRef {
+pub(crate) fn unit_ref(plan: &Plan, i: usize) -> UnitRef {
     let u = &plan.units[i];
     UnitRef {
         kind: u.kind().to_string(),
@@ -255,7 +255,7 @@ pub fn unit_ref(plan: &Plan, i: usize) -> UnitRef {
 }
 
 /// Run unit `i` of the plan, writing its files into `out`; returns the meta for its record.
-pub fn run(ctx: &Ctx, i: usize, out: &mut UnitWriter) -> Result<serde_json::Value> {
+pub(crate) fn run(ctx: &Ctx, i: usize, out: &mut UnitWriter) -> Result<serde_json::Value> {
     stage::registry()
         .get(ctx.plan.units[i].kind())?
         .run(ctx, i, out)
@@ -263,7 +263,7 @@ pub fn run(ctx: &Ctx, i: usize, out: &mut UnitWriter) -> Result<serde_json::Valu
 
 /// A damaged file of a finished unit: the executor throws that unit away and redoes it (a tile
 /// file's checksums do not match, it is truncated, ...).
-pub fn damaged(path: &Path, e: talus_tiling::Error) -> Error {
+pub(crate) fn damaged(path: &Path, e: talus_tiling::Error) -> Error {
     match e {
         talus_tiling::Error::Corrupt { reason, .. } => Error::Damaged {
             path: path.to_path_buf(),
@@ -277,8 +277,8 @@ pub fn damaged(path: &Path, e: talus_tiling::Error) -> Error {
 /// another layout), and whether the tile owns each one.
 #[derive(Default)]
 pub struct TilePoints {
-    pub x: Vec<f64>,
-    pub y: Vec<f64>,
+    pub(crate) x: Vec<f64>,
+    pub(crate) y: Vec<f64>,
     pub z: Vec<f64>,
     pub owned: Vec<bool>,
 }
@@ -296,12 +296,12 @@ impl TilePoints {
 
     /// Point `i`.
     #[inline]
-    pub fn point(&self, i: usize) -> Point3 {
+    pub(crate) fn point(&self, i: usize) -> Point3 {
         [self.x[i], self.y[i], self.z[i]]
     }
 
     /// The columns as M3C2's tile kernel reads an epoch.
-    pub fn epoch(&self) -> crate::m3c2::tile::EpochPoints<'_> {
+    pub(crate) fn epoch(&self) -> crate::m3c2::tile::EpochPoints<'_> {
         crate::m3c2::tile::EpochPoints {
             x: &self.x,
             y: &self.y,
@@ -321,7 +321,7 @@ pub fn read_tile(ctx: &Ctx, tiling: usize, id: TileId) -> Result<TilePoints> {
 /// The points of tile `id` of tiling unit `tiling` in the frames of its file that reach any of
 /// `boxes` ([x0, y0, x1, y1]), in their order: every point inside the boxes, and others beside
 /// them (the rest of those frames); the frames that do not reach them are not decoded.
-pub fn read_tile_near(
+pub(crate) fn read_tile_near(
     ctx: &Ctx,
     tiling: usize,
     id: TileId,
@@ -339,7 +339,7 @@ pub fn read_tile_near(
 
 /// [`read_tile_near`] a frame at a time, for a reader that keeps only some of each frame's
 /// points: `f` gets the points of each frame that reaches `boxes`, in order.
-pub fn for_each_frame_near(
+pub(crate) fn for_each_frame_near(
     ctx: &Ctx,
     tiling: usize,
     id: TileId,
@@ -359,7 +359,7 @@ pub fn for_each_frame_near(
 }
 
 /// Do bounds `b` reach one of `boxes` ([x0, y0, x1, y1] each) in plan?
-pub fn reaches(b: &crate::geom::Bounds, boxes: &[[f64; 4]]) -> bool {
+pub(crate) fn reaches(b: &crate::geom::Bounds, boxes: &[[f64; 4]]) -> bool {
     boxes
         .iter()
         .any(|w| b.min[0] <= w[2] && w[0] <= b.max[0] && b.min[1] <= w[3] && w[1] <= b.max[1])
@@ -386,13 +386,13 @@ pub fn write_json(out: &mut UnitWriter, file: &str, value: &impl serde::Serializ
 }
 
 /// Write `bytes` into `file` of `out`, recorded with its digest.
-pub fn write_bytes(out: &mut UnitWriter, file: &str, bytes: &[u8]) -> Result<()> {
+pub(crate) fn write_bytes(out: &mut UnitWriter, file: &str, bytes: &[u8]) -> Result<()> {
     write_streamed(out, file, |w| w.write_all(bytes))
 }
 
 /// Write `file` of `out` with `body` through a buffer, recorded with the CRC-32 and size computed
 /// on the way: plainly (the unit's commit makes it durable), never read back, never held whole.
-pub fn write_streamed(
+pub(crate) fn write_streamed(
     out: &mut UnitWriter,
     file: &str,
     body: impl FnOnce(&mut dyn std::io::Write) -> std::io::Result<()>,
@@ -431,7 +431,11 @@ pub fn write_streamed(
 }
 
 /// Read `file` of finished unit `i` as JSON.
-pub fn read_json<T: serde::de::DeserializeOwned>(ctx: &Ctx, i: usize, file: &str) -> Result<T> {
+pub(crate) fn read_json<T: serde::de::DeserializeOwned>(
+    ctx: &Ctx,
+    i: usize,
+    file: &str,
+) -> Result<T> {
     let path = ctx.input(i, file)?;
     let bytes = std::fs::read(&path).map_err(|e| Error::Damaged {
         path: path.clone(),
@@ -444,7 +448,7 @@ pub fn read_json<T: serde::de::DeserializeOwned>(ctx: &Ctx, i: usize, file: &str
 }
 
 /// Write tile-file columns into `file` of `out`, recorded with their digest.
-pub fn write_columns(
+pub(crate) fn write_columns(
     out: &mut UnitWriter,
     file: &str,
     cols: &talus_tiling::TileColumns,
@@ -456,7 +460,7 @@ pub fn write_columns(
 }
 
 /// Read tile-file columns `file` of finished unit `i`.
-pub fn read_columns(ctx: &Ctx, i: usize, file: &str) -> Result<talus_tiling::TileColumns> {
+pub(crate) fn read_columns(ctx: &Ctx, i: usize, file: &str) -> Result<talus_tiling::TileColumns> {
     let path = ctx.input(i, file)?;
     talus_tiling::read_tile(&path).map_err(|e| damaged(&path, e))
 }

@@ -29,29 +29,29 @@ use crate::store::UnitWriter;
 
 /// Most sample points of a survey's field (its spacing grows past that): the spanning tree and
 /// its graph then hold ≈ 40 MB at most.
-pub const FIELD_MAX: f64 = 200_000.0;
+pub(crate) const FIELD_MAX: f64 = 200_000.0;
 /// The field's spacing is at least this many core spacings.
 const CORE_CELLS: f64 = 2.0;
 /// Points of the ball's subset a field normal is fitted to, about.
 const BALL_POINTS: f64 = 50.0;
 /// Resident bytes per point of a tile while its field points are computed: the tile's columns
 /// (25), the subset's index, the thinning.
-pub const BYTES_PER_POINT: u64 = 48;
+pub(crate) const BYTES_PER_POINT: u64 = 48;
 
 /// The file of an orient unit: the oriented sample.
-pub const FILE: &str = "field.tile";
+pub(crate) const FILE: &str = "field.tile";
 
 /// The geometry of a survey's field: its cell, its normals' radius and the share of points
 /// they are fitted to (one in `every`).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Geometry {
-    pub spacing: f64,
-    pub radius: f64,
-    pub every: u64,
+pub(crate) struct Geometry {
+    pub(crate) spacing: f64,
+    pub(crate) radius: f64,
+    pub(crate) every: u64,
 }
 
 /// The field geometry of survey `s` of `plan`.
-pub fn geometry(plan: &crate::plan::Plan, s: usize) -> Geometry {
+pub(crate) fn geometry(plan: &crate::plan::Plan, s: usize) -> Geometry {
     let p = &plan.params;
     let (ps, core) = (p.point_spacing.value, p.core_spacing.value);
     let n = plan.surveys[s].points as f64;
@@ -88,20 +88,20 @@ fn chosen(p: &Point3, every: u64) -> bool {
 }
 
 /// The orientation field of a before survey.
-pub struct OrientStage;
+pub(crate) struct OrientStage;
 
 /// What an orient unit records.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct OrientMeta {
+pub(crate) struct OrientMeta {
     /// Sample points, and those in parts whose sign the data does not decide.
-    pub points: usize,
-    pub undecided: usize,
-    pub spacing: f64,
-    pub radius: f64,
+    pub(crate) points: usize,
+    pub(crate) undecided: usize,
+    pub(crate) spacing: f64,
+    pub(crate) radius: f64,
     /// The connected parts of the sample, largest first (at most ten).
-    pub parts: Vec<Part>,
+    pub(crate) parts: Vec<Part>,
     /// How many parts in all.
-    pub part_count: usize,
+    pub(crate) part_count: usize,
 }
 
 impl Stage for OrientStage {
@@ -251,7 +251,12 @@ fn write(
 /// The orientation field of pair `pair`'s before survey near the box `near` ([x0, y0, x1, y1],
 /// global), in the local frame of `anchor`; None when the plan has no field (an orientation
 /// other than `auto`).
-pub fn read_near(ctx: &Ctx, pair: usize, near: [f64; 4], anchor: Point3) -> Result<Option<Field>> {
+pub(crate) fn read_near(
+    ctx: &Ctx,
+    pair: usize,
+    near: [f64; 4],
+    anchor: Point3,
+) -> Result<Option<Field>> {
     let s = ctx.plan.pairs[pair].before;
     let Some(u) = ctx.plan.find(&Spec::survey(OrientStage::KIND, s)) else {
         return Ok(None);

@@ -14,7 +14,7 @@ use crate::spatial::areas::Areas;
 use talus_tiling::TileId;
 
 /// Where the sample's points lie.
-pub enum Region<'a> {
+pub(crate) enum Region<'a> {
     /// Rectangles [x0, y0, x1, y1].
     Windows(Vec<[f64; 4]>),
     /// The user's stable areas.
@@ -41,7 +41,7 @@ impl Region<'_> {
 
 /// Which points of the region are sampled.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Picks {
+pub(crate) enum Picks {
     /// The run's core points (the before survey thinned on the core grid), one in `n` by a
     /// hash of their keys.
     Cores(u64),
@@ -65,7 +65,7 @@ fn point_key(p: &Point3) -> u64 {
 /// left out), in key order, and how many points were computed. The before survey's half of it
 /// ([`crate::m3c2::window`]) is computed once per process for every after survey sampled against
 /// it ([`Reference`]).
-pub fn sample(
+pub(crate) fn sample(
     ctx: &Ctx,
     tilings: [usize; 2],
     region: &Region,

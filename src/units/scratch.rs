@@ -11,10 +11,10 @@ use crate::error::{Error, Result};
 use crate::store::UnitWriter;
 
 /// Bytes buffered by a writer or a reader (what a caller holding several reserves for each).
-pub const BUFFER: usize = 1 << 16;
+pub(crate) const BUFFER: usize = 1 << 16;
 
 /// Scratch rows being written.
-pub struct RowsWriter {
+pub(crate) struct RowsWriter {
     path: PathBuf,
     file: BufWriter<File>,
     width: usize,
@@ -23,7 +23,7 @@ pub struct RowsWriter {
 
 impl RowsWriter {
     /// A new scratch file `name` (ending in `.tmp`) of rows of `width` values in `out`'s directory.
-    pub fn create(out: &mut UnitWriter, name: &str, width: usize) -> Result<RowsWriter> {
+    pub(crate) fn create(out: &mut UnitWriter, name: &str, width: usize) -> Result<RowsWriter> {
         let path = out.path(name)?;
         let file = File::create(&path).map_err(|e| Error::output(&path, e))?;
         Ok(RowsWriter {
@@ -35,7 +35,7 @@ impl RowsWriter {
     }
 
     /// Append one row of `width` values.
-    pub fn push(&mut self, row: &[f64]) -> Result<()> {
+    pub(crate) fn push(&mut self, row: &[f64]) -> Result<()> {
         debug_assert_eq!(row.len(), self.width);
         for v in row {
             self.file
@@ -47,7 +47,7 @@ impl RowsWriter {
     }
 
     /// The rows written, ready to be read.
-    pub fn finish(mut self) -> Result<Rows> {
+    pub(crate) fn finish(mut self) -> Result<Rows> {
         self.file
             .flush()
             .map_err(|e| Error::output(&self.path, e))?;
@@ -60,7 +60,7 @@ impl RowsWriter {
 }
 
 /// Finished scratch rows.
-pub struct Rows {
+pub(crate) struct Rows {
     path: PathBuf,
     width: usize,
     rows: u64,
@@ -68,17 +68,12 @@ pub struct Rows {
 
 impl Rows {
     /// Rows in the file.
-    pub fn len(&self) -> u64 {
+    pub(crate) fn len(&self) -> u64 {
         self.rows
     }
 
-    /// Whether there are none.
-    pub fn is_empty(&self) -> bool {
-        self.rows == 0
-    }
-
     /// A reader from the first row.
-    pub fn reader(&self) -> Result<RowsReader> {
+    pub(crate) fn reader(&self) -> Result<RowsReader> {
         let file = File::open(&self.path).map_err(|e| Error::output(&self.path, e))?;
         Ok(RowsReader {
             path: self.path.clone(),
@@ -88,13 +83,13 @@ impl Rows {
     }
 
     /// Remove the file.
-    pub fn remove(self) -> Result<()> {
+    pub(crate) fn remove(self) -> Result<()> {
         std::fs::remove_file(&self.path).map_err(|e| Error::output(&self.path, e))
     }
 }
 
 /// Scratch rows read in order.
-pub struct RowsReader {
+pub(crate) struct RowsReader {
     path: PathBuf,
     file: BufReader<File>,
     row: Vec<f64>,
@@ -102,7 +97,7 @@ pub struct RowsReader {
 
 impl RowsReader {
     /// The next row (the caller knows how many there are).
-    pub fn next_row(&mut self) -> Result<&[f64]> {
+    pub(crate) fn next_row(&mut self) -> Result<&[f64]> {
         let mut b = [0u8; 8];
         for v in &mut self.row {
             self.file
@@ -114,7 +109,7 @@ impl RowsReader {
     }
 
     /// The next values in order, as many as `out` holds (rows × width).
-    pub fn next_values(&mut self, out: &mut [f64]) -> Result<()> {
+    pub(crate) fn next_values(&mut self, out: &mut [f64]) -> Result<()> {
         let mut bytes = [0u8; 8 * 512];
         for part in out.chunks_mut(512) {
             let b = &mut bytes[..8 * part.len()];

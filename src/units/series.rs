@@ -20,20 +20,20 @@ use crate::plan::Spec;
 use crate::store::UnitWriter;
 
 /// The file of a series unit.
-pub const FILE: &str = "series.f64";
+pub(crate) const FILE: &str = "series.f64";
 
 /// One pair's column of the campaign's time series.
-pub struct SeriesStage;
+pub(crate) struct SeriesStage;
 
 /// What a series unit records.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct SeriesMeta {
+pub(crate) struct SeriesMeta {
     /// Core points (rows).
-    pub core_points: u64,
+    pub(crate) core_points: u64,
     /// FNV-1a 64 over the core points' keys in order: every pair's must be the first's.
-    pub keys: String,
+    pub(crate) keys: String,
     /// Values a row: 4 (x, y, z, distance) for the first pair, 1 for the others.
-    pub width: usize,
+    pub(crate) width: usize,
 }
 
 impl Stage for SeriesStage {
@@ -103,7 +103,7 @@ impl Stage for SeriesStage {
 
 /// A column read in order, a batch of values at a time (the Parquet writer's sources: a series
 /// unit's column, the campaign's scratch columns).
-pub trait Values {
+pub(crate) trait Values {
     /// The next `out.len()` values.
     fn next_values(&mut self, out: &mut [f64]) -> Result<()>;
 }
@@ -125,7 +125,7 @@ impl Values for SeriesReader {
 }
 
 /// A series unit's rows, read in order.
-pub struct SeriesReader {
+pub(crate) struct SeriesReader {
     input: BufReader<std::fs::File>,
     path: std::path::PathBuf,
     row: Vec<f64>,
@@ -134,7 +134,7 @@ pub struct SeriesReader {
 
 impl SeriesReader {
     /// The rows of series unit `unit` (of the plan), `width` values each.
-    pub fn open(ctx: &Ctx, unit: usize, width: usize) -> Result<SeriesReader> {
+    pub(crate) fn open(ctx: &Ctx, unit: usize, width: usize) -> Result<SeriesReader> {
         let path = ctx.input(unit, FILE)?;
         let file = crate::store::open_store_file(&path).map_err(|e| Error::Damaged {
             path: path.clone(),
@@ -150,7 +150,7 @@ impl SeriesReader {
     }
 
     /// The next row (an error past the last: the caller knows the count).
-    pub fn next_row(&mut self) -> Result<&[f64]> {
+    pub(crate) fn next_row(&mut self) -> Result<&[f64]> {
         self.input
             .read_exact(&mut self.bytes)
             .map_err(|e| Error::Damaged {

@@ -22,7 +22,7 @@ struct Parts {
 }
 
 /// The solids of one event, before and after (`units::volumes::mesh_files`).
-pub struct EventSolids {
+pub(crate) struct EventSolids {
     id: u32,
     state: State,
 }
@@ -36,7 +36,7 @@ enum State {
 
 impl EventSolids {
     /// For event `id`, measured in one piece or in several (`pieced`).
-    pub fn new(out: &mut UnitWriter, id: u32, pieced: bool) -> Result<EventSolids> {
+    pub(crate) fn new(out: &mut UnitWriter, id: u32, pieced: bool) -> Result<EventSolids> {
         if !pieced {
             return Ok(EventSolids {
                 id,
@@ -64,7 +64,7 @@ impl EventSolids {
     }
 
     /// One piece's pair.
-    pub fn push(&mut self, solids: [Mesh; 2]) -> Result<()> {
+    pub(crate) fn push(&mut self, solids: [Mesh; 2]) -> Result<()> {
         match &mut self.state {
             State::Held(held) => {
                 if held.replace(solids).is_some() {
@@ -90,7 +90,7 @@ impl EventSolids {
     }
 
     /// Write the two files into `out`, and remove the temporary ones.
-    pub fn finish(self, out: &mut UnitWriter) -> Result<()> {
+    pub(crate) fn finish(self, out: &mut UnitWriter) -> Result<()> {
         let names = super::volumes::mesh_files(self.id);
         match self.state {
             State::Held(None) => Err(Error::Internal(format!(
@@ -125,7 +125,7 @@ impl EventSolids {
     }
 
     /// Remove what was written (an event whose volume failed has no solids).
-    pub fn discard(self) -> Result<()> {
+    pub(crate) fn discard(self) -> Result<()> {
         if let State::Parts(parts) = self.state {
             for p in *parts {
                 for body in [p.vertices, p.faces] {

@@ -27,37 +27,37 @@ pub const SAMPLES: u64 = 500_000;
 /// pair (481,675 samples): the unit's peak 112–117 MiB in a process of its own, of which the
 /// merge of the pair's runs holds up to 34 MiB and the process's base about 12: ≈ 155 bytes a
 /// sample (was counted as 256 from an older measurement, 185 MiB for 757 k).
-pub const BYTES_PER_SAMPLE: u64 = 176;
+pub(crate) const BYTES_PER_SAMPLE: u64 = 176;
 
 /// The file of a stable unit.
-pub const FILE: &str = "stable.json";
+pub(crate) const FILE: &str = "stable.json";
 
 /// What a stable unit writes: the measurement only. The parameters that follow from it are the
 /// current plan's with it (`params`): a unit reused from a run with other parameters (its key
 /// does not depend on the threshold, say) must not bring that run's values along.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct StableGround {
+pub(crate) struct StableGround {
     /// None: too few stable core points to measure.
-    pub stable: Option<Stable>,
+    pub(crate) stable: Option<Stable>,
     /// With the user's stable areas: what they held, and whether the measurement is theirs.
-    pub areas: Option<AreasUse>,
+    pub(crate) areas: Option<AreasUse>,
 }
 
 impl StableGround {
     /// The plan's parameters with reg_error and threshold resolved from the measurement.
-    pub fn params(&self, plan: &crate::plan::Plan) -> Params {
+    pub(crate) fn params(&self, plan: &crate::plan::Plan) -> Params {
         plan.params.clone().with_stable(self.stable.as_ref())
     }
 }
 
 /// The pair's stable ground: noise and registration error.
-pub struct StableStage;
+pub(crate) struct StableStage;
 
 /// What a stable-ground unit records.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct StableMeta {
+pub(crate) struct StableMeta {
     /// Core points sampled for the measurement.
-    pub sampled: usize,
+    pub(crate) sampled: usize,
 }
 
 impl Stage for StableStage {
@@ -103,12 +103,12 @@ impl Stage for StableStage {
 /// Resident bytes of a stable unit sampling `most` core points beside a merge of `inputs`
 /// inputs (`merged::merge_inputs`). Fixed: at most SAMPLES and FAN_IN runs, which the smallest
 /// budget holds (`memory::MIN_BUDGET`'s test), so no budget talus accepts refuses it.
-pub fn need(most: u64, inputs: usize) -> u64 {
+pub(crate) fn need(most: u64, inputs: usize) -> u64 {
     most * BYTES_PER_SAMPLE + crate::memory::IO_HEADROOM + super::m3c2::merge_need(inputs)
 }
 
 /// The key part of the user's stable areas: their file's content key, or `auto`.
-pub fn areas_key(plan: &crate::plan::Plan) -> String {
+pub(crate) fn areas_key(plan: &crate::plan::Plan) -> String {
     plan.stable_areas
         .as_ref()
         .map_or_else(|| "auto".into(), |a| format!("areas {}", a.file.key))
@@ -310,7 +310,7 @@ impl Reached {
 }
 
 /// The stable ground of pair `pair` (its unit must be done).
-pub fn read(ctx: &Ctx, pair: usize) -> Result<StableGround> {
+pub(crate) fn read(ctx: &Ctx, pair: usize) -> Result<StableGround> {
     let u = ctx.unit(&Spec::pair(StableStage::KIND, pair))?;
     super::read_json(ctx, u, FILE)
 }

@@ -6,7 +6,7 @@
 //! from the [`registry`]; none of them names a kind.
 //!
 //! Adding a stage is writing one module with a type that implements [`Stage`] and registering
-//! it: in [`default_stages`] (the pipeline's own stages, in pipeline order), or with [`register`]
+//! it: in `default_stages` (the pipeline's own stages, in pipeline order), or with [`register`]
 //! before anything reads the registry (`examples/survey_stage.rs` does so in its own `main`).
 
 use std::sync::OnceLock;
@@ -54,7 +54,7 @@ pub enum Total {
 
 impl Total {
     /// The total for `plan`.
-    pub fn of(&self, plan: &Plan) -> Option<u64> {
+    pub(crate) fn of(&self, plan: &Plan) -> Option<u64> {
         match self {
             Total::Unknown => None,
             Total::SurveyPoints => Some(plan.surveys.iter().map(|s| s.points).sum()),
@@ -116,7 +116,7 @@ pub trait Stage: Send + Sync + 'static {
     /// aligned tiling where the alignment applied; the cleared one with `--vegetation remove`):
     /// the tiles' record, read from a unit's meta (None where that unit holds none). A later
     /// unit reads a survey's tiles from the last stage in the registry that provides them for it
-    /// ([`Ctx::tiles`]), and planning counts every provider's unit of a survey among the units
+    /// (`Ctx::tiles`), and planning counts every provider's unit of a survey among the units
     /// its readers depend on ([`Planner::survey_tiles`]): a new provider needs nothing more than
     /// this and its registration.
     const TILES: Option<TilesOf<Self::Meta>> = None;
@@ -135,14 +135,14 @@ pub type TilesOf<M> = fn(&M) -> Option<super::tiling::TilingMeta>;
 /// What a publishing stage gives the executor.
 pub struct Publishes<M> {
     /// Whether a name in DIR is one of this stage's outputs.
-    pub is_output: fn(&str) -> bool,
+    pub(crate) is_output: fn(&str) -> bool,
     /// The files to publish, from a unit's meta.
-    pub list: fn(&M) -> &[super::outputs::Publish],
+    pub(crate) list: fn(&M) -> &[super::outputs::Publish],
 }
 
 /// What the executor keeps in every unit's record beside its meta: how long it ran and its peak
 /// resident memory.
-pub use crate::store::Timing;
+pub(crate) use crate::store::Timing;
 
 /// A stage as the drivers see it: [`Stage`] without its types.
 pub trait Registered: Send + Sync {
@@ -156,7 +156,7 @@ pub trait Registered: Send + Sync {
     fn run(&self, ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<serde_json::Value>;
     fn is_output(&self) -> Option<fn(&str) -> bool>;
     /// The outputs a unit's record lists (an error when its meta is not the stage's: the
-    /// caller names the record, [`damaged_record`]).
+    /// caller names the record, `damaged_record`).
     fn publish_list(
         &self,
         meta: &serde_json::Value,
@@ -237,7 +237,7 @@ impl<S: Stage> Entry<S> {
 
 /// `meta` (unit `unit`'s record, in `store`) as `M`. A record whose meta lacks a field is
 /// damaged ([`Error::Damaged`] naming the record): never read as a default.
-pub fn typed_meta<M: DeserializeOwned>(
+pub(crate) fn typed_meta<M: DeserializeOwned>(
     store: &crate::store::Store,
     unit: &crate::store::UnitRef,
     meta: &serde_json::Value,
@@ -247,7 +247,7 @@ pub fn typed_meta<M: DeserializeOwned>(
 
 /// Unit `unit`'s record (in `store`) is damaged: its meta does not read (`e`). The executor
 /// finds the unit to compute again by the record's path.
-pub fn damaged_record(
+pub(crate) fn damaged_record(
     store: &crate::store::Store,
     unit: &crate::store::UnitRef,
     e: impl std::fmt::Display,
@@ -263,7 +263,7 @@ pub fn damaged_record(
 
 /// The timing of `unit` in its record `rec` ([`crate::store::Record::timing`]); a record that
 /// holds none is damaged, naming it.
-pub fn timing_of(
+pub(crate) fn timing_of(
     store: &crate::store::Store,
     unit: &crate::store::UnitRef,
     rec: &crate::store::Record,
@@ -278,14 +278,14 @@ pub fn timing_of(
 }
 
 /// The stage `S` as the registry holds it.
-pub fn entry<S: Stage>() -> &'static dyn Registered {
+pub(crate) fn entry<S: Stage>() -> &'static dyn Registered {
     // A zero-sized entry per stage type: leaking it costs nothing.
     Box::leak(Box::new(Entry::<S>(std::marker::PhantomData)))
 }
 
 /// The pipeline's stages, in pipeline order: a stage's units depend only on units of stages
 /// before it (the Slurm executor runs one job array per stage in this order).
-pub fn default_stages() -> Vec<&'static dyn Registered> {
+pub(crate) fn default_stages() -> Vec<&'static dyn Registered> {
     use super::*;
     vec![
         entry::<tiling::TilingStage>(),
@@ -369,12 +369,12 @@ impl Registry {
     }
 
     /// The rank of `kind` in pipeline order.
-    pub fn rank(&self, kind: &str) -> Option<usize> {
+    pub(crate) fn rank(&self, kind: &str) -> Option<usize> {
         self.stages.iter().position(|s| s.kind() == kind)
     }
 
     /// The progress lines in pipeline order, each once.
-    pub fn lines(&self) -> Vec<Line> {
+    pub(crate) fn lines(&self) -> Vec<Line> {
         let mut out: Vec<Line> = Vec::new();
         for s in &self.stages {
             if !out.iter().any(|l| l.name == s.line().name) {
@@ -387,7 +387,7 @@ impl Registry {
 
 /// Where the run's core points come from, as planned.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum CoreSource {
+pub(crate) enum CoreSource {
     /// Each pair's before survey, thinned tile by tile inside its M3C2 units.
     PerPair,
     /// The user's core-point file (the plan's `core_points`).
@@ -399,9 +399,9 @@ pub enum CoreSource {
 /// What the stages add their units through.
 pub struct Planner<'a> {
     pub plan: &'a mut Plan,
-    pub cores: CoreSource,
+    pub(crate) cores: CoreSource,
     /// A campaign's title (None: a comparison).
-    pub campaign: Option<String>,
+    pub(crate) campaign: Option<String>,
 }
 
 impl Planner<'_> {
@@ -411,12 +411,12 @@ impl Planner<'_> {
     }
 
     /// Run unit `unit` after units `after` without reading them ([`crate::plan::Unit::after`]).
-    pub fn order_after(&mut self, unit: usize, after: Vec<usize>) {
+    pub(crate) fn order_after(&mut self, unit: usize, after: Vec<usize>) {
         self.plan.units[unit].after = after;
     }
 
     /// The unit of `spec`, which an earlier stage must have planned.
-    pub fn the(&self, spec: &Spec) -> Result<usize> {
+    pub(crate) fn the(&self, spec: &Spec) -> Result<usize> {
         self.find(spec)
             .ok_or_else(|| Error::Internal(format!("no unit {spec:?} planned before")))
     }
@@ -437,14 +437,14 @@ impl Planner<'_> {
 
     /// The unit the pairs' core points come from: the user's core points, or a campaign's
     /// thinned first survey (None: each M3C2 unit thins its tile of the before survey).
-    pub fn core_unit(&self) -> Option<usize> {
+    pub(crate) fn core_unit(&self) -> Option<usize> {
         self.find(&Spec::run(super::cores::UserCoresStage::KIND))
             .or_else(|| self.find(&Spec::survey(super::cores::ThinnedStage::KIND, 0)))
     }
 
     /// Add pair `pair`'s unit of `kind`, keyed by `version`, the pair's two surveys (as the plan
     /// holds them: files, counts, bounds) and where its core points come from.
-    pub fn add_pair(
+    pub(crate) fn add_pair(
         &mut self,
         kind: &'static str,
         pair: usize,
@@ -468,20 +468,20 @@ impl Planner<'_> {
 
     /// The units holding pair `pair`'s M3C2 results: its M3C2 units, and its merged runs when
     /// the layout has more tiles than one merge holds (`units::merged`).
-    pub fn pair_results(&self, pair: usize) -> Vec<usize> {
+    pub(crate) fn pair_results(&self, pair: usize) -> Vec<usize> {
         let mut out = self.of_pair(super::m3c2::M3c2Stage::KIND, pair);
         out.extend(self.find(&Spec::pair(super::merged::MergedStage::KIND, pair)));
         out
     }
 
     /// The units of `kind` for pair `pair`, in plan order.
-    pub fn of_pair(&self, kind: &str, pair: usize) -> Vec<usize> {
+    pub(crate) fn of_pair(&self, kind: &str, pair: usize) -> Vec<usize> {
         self.plan.of_pair(kind, pair).collect()
     }
 
     /// The units that may hold survey `s`'s tiles, in pipeline order: its unit of every stage
     /// that provides tiles ([`Stage::TILES`]: the tiling, the aligned tiling, the cleared one).
-    /// Which of them does is known once they ran ([`Ctx::tiling`]).
+    /// Which of them does is known once they ran (`Ctx::tiling`).
     pub fn survey_tiles(&self, s: usize) -> Result<Vec<usize>> {
         let out: Vec<usize> = registry()
             .stages()
@@ -498,7 +498,7 @@ impl Planner<'_> {
 
 /// Plan the units of every pair of `plan` (and of the campaign, when `campaign` names one):
 /// each stage in pipeline order adds its own. The final unit's key becomes the run's id.
-pub fn plan_units(plan: &mut Plan, cores: CoreSource, campaign: Option<&str>) -> Result<()> {
+pub(crate) fn plan_units(plan: &mut Plan, cores: CoreSource, campaign: Option<&str>) -> Result<()> {
     let mut p = Planner {
         plan,
         cores,
@@ -519,7 +519,7 @@ pub fn plan_units(plan: &mut Plan, cores: CoreSource, campaign: Option<&str>) ->
 /// registry order are a valid order to run them in (Slurm's arrays, `plan-stats`), and no
 /// stage's planning can make a cycle. Returns each unit's stage rank (its stage's place in the
 /// registry: Slurm's array, `plan-stats`' stage).
-pub fn check_plan(plan: &Plan) -> Result<Vec<usize>> {
+pub(crate) fn check_plan(plan: &Plan) -> Result<Vec<usize>> {
     let reg = registry();
     let mut ranks = Vec::with_capacity(plan.units.len());
     for u in &plan.units {
@@ -558,7 +558,7 @@ pub fn check_plan(plan: &Plan) -> Result<Vec<usize>> {
 }
 
 /// The plan's final unit: the last unit of a stage that publishes DIR's outputs.
-pub fn final_unit(plan: &Plan) -> Result<usize> {
+pub(crate) fn final_unit(plan: &Plan) -> Result<usize> {
     let reg = registry();
     (0..plan.units.len())
         .rev()

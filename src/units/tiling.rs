@@ -15,35 +15,35 @@ use crate::sampling::MIN_DISTINCT;
 use crate::store::UnitWriter;
 
 /// The file of tile `id` in a tiling unit.
-pub fn tile_file(id: TileId) -> String {
+pub(crate) fn tile_file(id: TileId) -> String {
     format!("{}.tile", id.name())
 }
 
 /// Share of the memory budget the splitter's buffers may take. Two tilings may run at once (one
 /// per survey of a pair: decoding is one thread's work, so on two cores that halves pass 1).
-pub const SPLIT_BUDGET_SHARE: u64 = 8;
+pub(crate) const SPLIT_BUDGET_SHARE: u64 = 8;
 
 /// Resident bytes of a tiling unit beside its splitter's buffers: the reader's chunk and
 /// decoder, a tile being encoded (its columns and compressed bytes), the writer's buffer.
 /// Measured: 115–120 MiB at a 300 MiB budget (37.5 MiB of buffers), i.e. about 2 × the buffers
 /// more; counted as that plus a fixed part.
-pub fn need(buffers: u64) -> u64 {
+pub(crate) fn need(buffers: u64) -> u64 {
     3 * buffers + crate::memory::IO_HEADROOM
 }
 
 /// Bytes of a tiling unit's splitter buffers under the plan's memory budget.
-pub fn split_budget(plan: &crate::plan::Plan) -> u64 {
+pub(crate) fn split_budget(plan: &crate::plan::Plan) -> u64 {
     split_budget_of(plan.params.memory_bytes.value)
 }
 
 /// Bytes of a tiling unit's splitter buffers under a memory budget of `memory_bytes`.
-pub fn split_budget_of(memory_bytes: u64) -> u64 {
+pub(crate) fn split_budget_of(memory_bytes: u64) -> u64 {
     (memory_bytes / SPLIT_BUDGET_SHARE).max(8 << 20)
 }
 
 /// Points per frame of the tile files of a survey split into `tiles` tiles (see
 /// `talus_tiling::splitter`): part of the tiling unit's key.
-pub fn frame_points(plan: &crate::plan::Plan, tiles: usize) -> usize {
+pub(crate) fn frame_points(plan: &crate::plan::Plan, tiles: usize) -> usize {
     talus_tiling::splitter::frame_points(split_budget(plan), tiles)
 }
 
@@ -51,7 +51,7 @@ pub fn frame_points(plan: &crate::plan::Plan, tiles: usize) -> usize {
 /// (first) file's coordinate transform, which is exact (a value that does not come back bit for
 /// bit keeps its column as f64) and takes a third of the bytes, so that tiles compress, are
 /// written and read in a fraction of the time (`talus_tiling::tile_file`'s measurements).
-pub fn write_options(transform: Option<[[f64; 2]; 3]>) -> WriteOptions {
+pub(crate) fn write_options(transform: Option<[[f64; 2]; 3]>) -> WriteOptions {
     WriteOptions {
         quantise: transform.map(|t| Quantisation {
             scale: t.map(|a| a[0]),
@@ -68,13 +68,13 @@ pub struct TilingStage;
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct TilingMeta {
     /// The survey's points.
-    pub points: u64,
+    pub(crate) points: u64,
     /// Points per tile (halo included), in grid order: what the pair's M3C2 units check the
     /// budget against before the first of them holds anything (`units::m3c2::fit`).
-    pub tile_points: Vec<u64>,
+    pub(crate) tile_points: Vec<u64>,
     /// Points read and left out per LAS class (`--classes`); None when no class was read (text
     /// or PLY input, or every class kept).
-    pub classes: Option<ClassCounts>,
+    pub(crate) classes: Option<ClassCounts>,
 }
 
 impl Stage for TilingStage {
@@ -125,7 +125,7 @@ impl Stage for TilingStage {
 }
 
 /// A change of every chunk of points before it is tiled (an alignment: `super::aligned`).
-pub type Transform<'a> = &'a dyn Fn(&mut [crate::geom::Point3]);
+pub(crate) type Transform<'a> = &'a dyn Fn(&mut [crate::geom::Point3]);
 
 /// Cut survey `survey` into `out`, each chunk of points passed through `transform` first.
 pub fn split(
@@ -230,7 +230,7 @@ impl FewPositions {
 /// Points being cut into the run's tiles (square + halo, owned flag) in a unit's directory,
 /// within the splitting budget reserved from the pool: [`split`]'s, and any stage that writes a
 /// survey's tiling of its own (`--vegetation remove`'s cleared survey).
-pub struct Splitting<'a> {
+pub(crate) struct Splitting<'a> {
     splitter: TileSplitter,
     points: u64,
     _held: crate::memory::Reservation<'a>,
@@ -238,14 +238,14 @@ pub struct Splitting<'a> {
 
 impl<'a> Splitting<'a> {
     /// Start the tiling of survey `survey` in `out`'s directory.
-    pub fn new(ctx: &'a Ctx, survey: usize, out: &mut UnitWriter) -> Result<Splitting<'a>> {
+    pub(crate) fn new(ctx: &'a Ctx, survey: usize, out: &mut UnitWriter) -> Result<Splitting<'a>> {
         Self::with(ctx, survey, out, 0, "")
     }
 
     /// [`Splitting::new`] for a unit that also holds up to `extra` bytes of its own while it
     /// splits (`what` they are for): reserved with the splitter's in one reservation, since a
     /// unit may wait only while it holds none.
-    pub fn with(
+    pub(crate) fn with(
         ctx: &'a Ctx,
         survey: usize,
         out: &mut UnitWriter,
@@ -274,11 +274,11 @@ impl<'a> Splitting<'a> {
 
     /// The coordinate quantum of the survey's file (scale, offset per axis), which the tiles
     /// keep as their exact integer encoding.
-    pub fn quantum(&mut self, transform: Option<[[f64; 2]; 3]>) {
+    pub(crate) fn quantum(&mut self, transform: Option<[[f64; 2]; 3]>) {
         self.splitter.set_options(write_options(transform));
     }
 
-    pub fn push(&mut self, points: &[crate::geom::Point3]) -> Result<()> {
+    pub(crate) fn push(&mut self, points: &[crate::geom::Point3]) -> Result<()> {
         self.splitter.push(points)?;
         self.points += points.len() as u64;
         Ok(())
@@ -286,7 +286,11 @@ impl<'a> Splitting<'a> {
 
     /// Write the last frames and record every tile file in `out` (an empty file for a tile
     /// without points).
-    pub fn finish(self, out: &mut UnitWriter, classes: Option<ClassCounts>) -> Result<TilingMeta> {
+    pub(crate) fn finish(
+        self,
+        out: &mut UnitWriter,
+        classes: Option<ClassCounts>,
+    ) -> Result<TilingMeta> {
         let grid = *self.splitter.grid();
         // Points per tile (halo included), in grid order. A tile without points has no file
         // from the splitter.

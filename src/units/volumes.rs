@@ -27,7 +27,7 @@ use crate::spatial::BoxIndex;
 use crate::store::UnitWriter;
 use crate::volume::{self, uncertainty, EventVolume};
 
-pub const FILE: &str = "volumes.json";
+pub(crate) const FILE: &str = "volumes.json";
 
 /// Resident bytes per cell of one piece of an event's volume (`volume::PIECE_CELLS` at most)
 /// while it is computed: the two tops clipped to the cells, their labels' tables while they are
@@ -41,7 +41,7 @@ pub const FILE: &str = "volumes.json";
 /// are cut (`volume::solid::clipped_top`) the tops hold about a quarter of the faces, so this
 /// is now an upper bound. Before large blocks were mapped on their own
 /// (`memory::MMAP_THRESHOLD`) the same events measured 1,360, 1,025 and 1,460.
-pub const BYTES_PER_CELL: u64 = 1024;
+pub(crate) const BYTES_PER_CELL: u64 = 1024;
 
 /// How a large event is cut into pieces (`volume::pieces`).
 const CUTTING: volume::Cutting = volume::Cutting::Fewest(volume::PIECE_CELLS);
@@ -50,16 +50,16 @@ const CUTTING: volume::Cutting = volume::Cutting::Fewest(volume::PIECE_CELLS);
 /// and whether it is in the region (2), the surfaces' difference at its centre (16), the open
 /// rim's sort of the region's changes (8), the uncertainty's list of region cells (16, after the
 /// rest is given back).
-pub const BYTES_PER_GRID_CELL: u64 = 32;
+pub(crate) const BYTES_PER_GRID_CELL: u64 = 32;
 
 /// Resident bytes per point (both epochs) a piece triangulates or tests for walls, beside its
 /// cells' cost: the points in the event's frame, a triangulation's share (spade is lean: ≈ 40),
 /// its mesh copied out for clipping (48).
-pub const BYTES_PER_POINT: u64 = 100;
+pub(crate) const BYTES_PER_POINT: u64 = 100;
 
 /// Resident bytes per point gathered around a unit's events (both epochs, global coordinates),
 /// held while all of them are measured: reserved with each event's need.
-pub const GATHERED_BYTES: u64 = 24;
+pub(crate) const GATHERED_BYTES: u64 = 24;
 
 /// What one event's volume holds at most, over its candidate boxes: [`BYTES_PER_CELL`] for the
 /// cells of its largest piece, [`BYTES_PER_GRID_CELL`] for all its cells, [`BYTES_PER_POINT`] for
@@ -81,43 +81,43 @@ fn event_need(boxes: &[SearchBox], points: [&[Point3]; 2], margin: f64, spacing:
 }
 
 /// The mesh files of event `id`: (before, after).
-pub fn mesh_files(id: u32) -> [String; 2] {
+pub(crate) fn mesh_files(id: u32) -> [String; 2] {
     ["before", "after"].map(|w| format!("event_{id:04}_{w}.ply"))
 }
 
 /// One event's volume as a volumes unit records it.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct Measured {
-    pub id: u32,
+pub(crate) struct Measured {
+    pub(crate) id: u32,
     /// The box of the axis the volume was extruded along.
-    pub obb: Obb,
-    pub volume_m3: Option<f64>,
-    pub uncertainty: Option<uncertainty::VolumeUncertainty>,
-    pub gain_m3: Option<f64>,
-    pub loss_m3: Option<f64>,
-    pub footprint_area_m2: Option<f64>,
-    pub region_area_m2: Option<f64>,
-    pub coverage: Option<f64>,
+    pub(crate) obb: Obb,
+    pub(crate) volume_m3: Option<f64>,
+    pub(crate) uncertainty: Option<uncertainty::VolumeUncertainty>,
+    pub(crate) gain_m3: Option<f64>,
+    pub(crate) loss_m3: Option<f64>,
+    pub(crate) footprint_area_m2: Option<f64>,
+    pub(crate) region_area_m2: Option<f64>,
+    pub(crate) coverage: Option<f64>,
     /// The region's outline: polygons of rings of global points (see `EventVolume::outline`).
-    pub region: Vec<Vec<Vec<Point3>>>,
+    pub(crate) region: Vec<Vec<Vec<Point3>>>,
     /// Whether the two solids were written.
-    pub meshes: bool,
+    pub(crate) meshes: bool,
     /// The volume covers the whole change: no core point beyond the M3C2 cylinder's reach, and
     /// no change running on past the region into ground that was not measured.
-    pub complete: bool,
+    pub(crate) complete: bool,
     /// Why there is no volume, or why it is incomplete.
-    pub note: Option<String>,
+    pub(crate) note: Option<String>,
     /// The share of the event's core points that look like vegetation in either epoch
     /// (`events::vegetation`); None when the volume came from the user's surfaces (no points).
-    pub vegetation_fraction: Option<f64>,
+    pub(crate) vegetation_fraction: Option<f64>,
     /// The data decides the event's sign: most of its core points' normals are oriented by a
     /// decided field ([`sign_known`]).
-    pub sign_known: bool,
+    pub(crate) sign_known: bool,
 }
 
 /// Whether the data decides event `d`'s sign: at most half its core points have a normal whose
 /// sign it does not decide (a face near vertical scanned alone: `m3c2::field`).
-pub fn sign_known(d: &Draft) -> bool {
+pub(crate) fn sign_known(d: &Draft) -> bool {
     2 * d.sign_unknown <= d.event.n_points
 }
 
@@ -222,7 +222,7 @@ fn plan_box(o: &Obb) -> [f64; 4] {
 }
 
 /// The claims of every event (one per candidate box) over their clustered core points.
-pub fn ownership(
+pub(crate) fn ownership(
     drafts: &[&Draft],
     members: &HashMap<u32, Vec<Kept>>,
     params: &Params,
@@ -388,17 +388,17 @@ fn gather(
 }
 
 /// The volumes of the pair's events whose centroid a tile owns.
-pub struct VolumesStage;
+pub(crate) struct VolumesStage;
 
 /// What a volumes unit records.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct VolumesMeta {
+pub(crate) struct VolumesMeta {
     /// Events measured.
-    pub events: usize,
+    pub(crate) events: usize,
     /// Points gathered for them, both surveys.
-    pub points: usize,
+    pub(crate) points: usize,
     /// The most points one event gathered.
-    pub largest_event_points: usize,
+    pub(crate) largest_event_points: usize,
 }
 
 impl Stage for VolumesStage {

@@ -22,11 +22,11 @@ use crate::spatial::Index;
 /// A pair of points whose w differs by more than this many times their (u, v) distance, plus one
 /// point spacing (so that noise on a flat surface never counts), lies on a part steeper than
 /// 75° in the frame (tan 75° ≈ 3.73).
-pub const WALL_SLOPE: f64 = 3.73;
+pub(crate) const WALL_SLOPE: f64 = 3.73;
 
 /// How many of `points` (global) within `r` grown by one spacing and within `depth` of the
 /// frame's (u, v) plane lie on a wall (see [`wall_flags`]).
-pub fn wall_points(
+pub(crate) fn wall_points(
     frame: &Frame,
     r: &Footprint,
     depth: f64,
@@ -44,7 +44,7 @@ pub fn wall_points(
 
 /// Per local point (u, v, w): does another point lie within one `spacing` in (u, v) with a w
 /// difference beyond [`WALL_SLOPE`] × their distance + `spacing`?
-pub fn wall_flags(local: &[[f64; 3]], spacing: f64) -> Vec<bool> {
+pub(crate) fn wall_flags(local: &[[f64; 3]], spacing: f64) -> Vec<bool> {
     if local.is_empty() || spacing.is_nan() || spacing <= 0.0 {
         return vec![false; local.len()];
     }
@@ -112,7 +112,7 @@ pub fn wall_flags(local: &[[f64; 3]], spacing: f64) -> Vec<bool> {
 /// as unchanged: the two surveys sample the same unchanged surface at about one spacing apart,
 /// so their nearest points are within a spacing or two; a change smaller than this is below
 /// what the surveys resolve there anyway.
-pub const UNCHANGED_WALL_SPACINGS: f64 = 2.0;
+pub(crate) const UNCHANGED_WALL_SPACINGS: f64 = 2.0;
 
 /// Per local point of each epoch: is it on a wall both epochs hold unchanged? A point is on a
 /// wall in the frame ([`wall_flags`] within its own epoch); such a point is *matched* when the
@@ -133,7 +133,7 @@ pub const UNCHANGED_WALL_SPACINGS: f64 = 2.0;
 /// `f64::INFINITY` when unknown). Near its faces a point's counterpart may lie just outside, so a
 /// wall point within reach of a face counts as matched (the box reaches past the event's
 /// footprint and deepest change: nothing there moved).
-pub fn unchanged_walls(
+pub(crate) fn unchanged_walls(
     local: [&[[f64; 3]]; 2],
     spacing: f64,
     gathered: &Footprint,

@@ -13,7 +13,10 @@ use rustc_hash::FxHashMap as HashMap;
 /// For every edge `edges[k] = (a, b)`, the index of the edge that follows it on its loop (an edge
 /// leaving `b`). `None` for an edge with no successor (an open chain: the edges do not form
 /// closed loops). `pos` gives a vertex's (u, v) position, for the pinch rule.
-pub fn successors(edges: &[(u32, u32)], pos: impl Fn(u32) -> [f64; 2]) -> Vec<Option<usize>> {
+pub(crate) fn successors(
+    edges: &[(u32, u32)],
+    pos: impl Fn(u32) -> [f64; 2],
+) -> Vec<Option<usize>> {
     let mut leaving: HashMap<u32, Vec<usize>> = HashMap::default();
     for (k, &(a, _)) in edges.iter().enumerate() {
         leaving.entry(a).or_default().push(k);
@@ -48,7 +51,7 @@ pub fn successors(edges: &[(u32, u32)], pos: impl Fn(u32) -> [f64; 2]) -> Vec<Op
 
 /// The closed loops the edges form, each as its vertices in order (first vertex not repeated),
 /// in a deterministic order (by their first edge). Edges on open chains are left out.
-pub fn loops(edges: &[(u32, u32)], pos: impl Fn(u32) -> [f64; 2]) -> Vec<Vec<u32>> {
+pub(crate) fn loops(edges: &[(u32, u32)], pos: impl Fn(u32) -> [f64; 2]) -> Vec<Vec<u32>> {
     let next = successors(edges, pos);
     let mut seen = vec![false; edges.len()];
     let mut out = Vec::new();
@@ -77,7 +80,7 @@ pub fn loops(edges: &[(u32, u32)], pos: impl Fn(u32) -> [f64; 2]) -> Vec<Vec<u32
 }
 
 /// Twice the signed area of a ring (positive counter-clockwise).
-pub fn signed_area2(ring: &[[f64; 2]]) -> f64 {
+pub(crate) fn signed_area2(ring: &[[f64; 2]]) -> f64 {
     let n = ring.len();
     (0..n)
         .map(|i| {
@@ -88,7 +91,7 @@ pub fn signed_area2(ring: &[[f64; 2]]) -> f64 {
 }
 
 /// Is `p` strictly inside `ring` (even–odd rule)? Points on the ring may go either way.
-pub fn contains(ring: &[[f64; 2]], p: [f64; 2]) -> bool {
+pub(crate) fn contains(ring: &[[f64; 2]], p: [f64; 2]) -> bool {
     let n = ring.len();
     let mut inside = false;
     for i in 0..n {

@@ -8,9 +8,9 @@ use crate::events::Obb;
 /// An orthonormal right-handed frame: global ↔ local (u, v, w).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Frame {
-    pub origin: [f64; 3],
+    pub(crate) origin: [f64; 3],
     /// Rows: the unit u, v, w axes in global coordinates.
-    pub axes: [[f64; 3]; 3],
+    pub(crate) axes: [[f64; 3]; 3],
 }
 
 impl Frame {
@@ -22,7 +22,8 @@ impl Frame {
         }
     }
     /// Global → local.
-    pub fn to_local(&self, p: &[f64; 3]) -> [f64; 3] {
+    #[allow(clippy::wrong_self_convention)] // &self: no copy per point mapped
+    pub(crate) fn to_local(&self, p: &[f64; 3]) -> [f64; 3] {
         let d = [
             p[0] - self.origin[0],
             p[1] - self.origin[1],
@@ -31,7 +32,7 @@ impl Frame {
         self.axes.map(|a| a[0] * d[0] + a[1] * d[1] + a[2] * d[2])
     }
     /// The xy bounds [x0, y0, x1, y1] of the box [lo, hi] given in this frame (its 8 corners).
-    pub fn bounds_xy(&self, lo: [f64; 3], hi: [f64; 3]) -> [f64; 4] {
+    pub(crate) fn bounds_xy(&self, lo: [f64; 3], hi: [f64; 3]) -> [f64; 4] {
         let mut b = [
             f64::INFINITY,
             f64::INFINITY,
@@ -52,7 +53,8 @@ impl Frame {
     }
 
     /// Local → global.
-    pub fn to_global(&self, l: &[f64; 3]) -> [f64; 3] {
+    #[allow(clippy::wrong_self_convention)] // &self: no copy per point mapped
+    pub(crate) fn to_global(&self, l: &[f64; 3]) -> [f64; 3] {
         let a = &self.axes;
         std::array::from_fn(|k| self.origin[k] + l[0] * a[0][k] + l[1] * a[1][k] + l[2] * a[2][k])
     }
@@ -61,10 +63,10 @@ impl Frame {
 /// The rectangle [u0, u1] × [v0, v1] in the frame over which both epochs are compared.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Footprint {
-    pub u0: f64,
-    pub u1: f64,
-    pub v0: f64,
-    pub v1: f64,
+    pub(crate) u0: f64,
+    pub(crate) u1: f64,
+    pub(crate) v0: f64,
+    pub(crate) v1: f64,
 }
 
 impl Footprint {
@@ -79,7 +81,7 @@ impl Footprint {
         }
     }
     /// The same rectangle grown by `d` on every side.
-    pub fn grown(&self, d: f64) -> Self {
+    pub(crate) fn grown(&self, d: f64) -> Self {
         Footprint {
             u0: self.u0 - d,
             u1: self.u1 + d,
@@ -88,11 +90,11 @@ impl Footprint {
         }
     }
     /// Area.
-    pub fn area(&self) -> f64 {
+    pub(crate) fn area(&self) -> f64 {
         (self.u1 - self.u0) * (self.v1 - self.v0)
     }
     /// Is (u, v) inside (closed)?
-    pub fn contains(&self, u: f64, v: f64) -> bool {
+    pub(crate) fn contains(&self, u: f64, v: f64) -> bool {
         u >= self.u0 && u <= self.u1 && v >= self.v0 && v <= self.v1
     }
 }

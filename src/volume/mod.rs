@@ -3,13 +3,13 @@
 //! event's region.
 //!
 //! Method, per event:
-//! 1. Frame: the event's OBB axes (u, v, w), w = outward normal ([`frame`]).
+//! 1. Frame: the event's OBB axes (u, v, w), w = outward normal (`frame`).
 //! 2. Footprint: the OBB's first two extents grown by `margin` on every side, so the rim of
 //!    the change lies inside; the same rectangle R for both epochs.
 //! 3. Surfaces: each epoch's points near the event, in (u, v, w), triangulated in (u, v)
-//!    (2.5-D Delaunay TIN, [`surface`]); no height outside the data's hull.
-//! 4. Region ([`region`]): the cells of R that both epochs cover (no hole, nothing beyond the
-//!    data) and that no other event owns ([`ownership`]).
+//!    (2.5-D Delaunay TIN, `surface`); no height outside the data's hull.
+//! 4. Region (`region`): the cells of R that both epochs cover (no hole, nothing beyond the
+//!    data) and that no other event owns (`ownership`).
 //! 5. Solids: each TIN clipped exactly to the region's cells, closed by walls down to one common
 //!    base plane below both surfaces and a bottom: two watertight solids ([`solid`]).
 //! 6. Volume of each solid by the divergence theorem; V = V(after) − V(before), positive for
@@ -33,24 +33,26 @@
 //! which locations the event owns. Everything here is a pure function of its inputs (Send +
 //! Sync), for rayon.
 
-pub mod axis;
-pub mod boundary;
-pub mod frame;
-pub mod ownership;
-pub mod region;
-pub mod search;
+pub(crate) mod axis;
+pub(crate) mod boundary;
+pub(crate) mod frame;
+pub(crate) mod ownership;
+pub(crate) mod region;
+pub(crate) mod search;
 pub mod solid;
-pub mod surface;
-pub mod uncertainty;
-pub mod user_mesh;
+pub(crate) mod surface;
+pub(crate) mod uncertainty;
+pub(crate) mod user_mesh;
 
 pub use frame::{Footprint, Frame};
-pub use ownership::{Claim, Ownership};
-pub use region::{Cells, Cut, OpenRim, Polygon, Region};
-pub use search::Search;
+pub(crate) use ownership::{Claim, Ownership};
+pub use region::Cut;
+pub(crate) use region::{Cells, Region};
+pub(crate) use search::Search;
 pub use solid::check_watertight;
 pub use solid::Mesh;
-pub use surface::{Lattice, Surface, Tin};
+pub use surface::Tin;
+pub(crate) use surface::{Lattice, Surface};
 pub use user_mesh::UserMesh;
 
 use rayon::prelude::*;
@@ -59,7 +61,7 @@ use crate::error::{Error, Result};
 use crate::events::Obb;
 
 /// Which locations (global coordinates, on the before surface) an event may count.
-pub type Owned<'a> = &'a (dyn Fn(&[f64; 3]) -> bool + Sync);
+pub(crate) type Owned<'a> = &'a (dyn Fn(&[f64; 3]) -> bool + Sync);
 
 /// The volume of one event and its two solids.
 #[derive(Debug, Clone, PartialEq)]
@@ -77,34 +79,34 @@ pub struct EventVolume {
     /// Share of the footprint both epochs cover (0..1).
     pub coverage: f64,
     /// The footprint in the event frame.
-    pub footprint: Footprint,
+    pub(crate) footprint: Footprint,
     /// The region's cells.
     pub region: Region,
     /// The frame (origin, axes) the footprint is expressed in.
-    pub frame: Frame,
+    pub(crate) frame: Frame,
     /// The common base plane, w = base_w in the frame (in pieces, the lowest of theirs).
-    pub base_w: f64,
+    pub(crate) base_w: f64,
     /// Volumes of the two solids above the base (summed over the pieces, each over its own
     /// base).
-    pub before_solid_m3: f64,
-    pub after_solid_m3: f64,
+    pub(crate) before_solid_m3: f64,
+    pub(crate) after_solid_m3: f64,
     /// Points of each epoch used (inside the footprint grown by 3 spacings; in pieces, summed
     /// over the bands grown by 3 spacings, so a point near a seam counts twice).
-    pub n_before: usize,
-    pub n_after: usize,
+    pub(crate) n_before: usize,
+    pub(crate) n_after: usize,
     /// Points of each epoch inside the region (0 for user meshes).
     pub region_points: [usize; 2],
     /// Where the region borders ground it could not measure, and how much changed there.
-    pub open_rim: region::OpenRim,
+    pub(crate) open_rim: region::OpenRim,
     /// The variance of the volume from where the points sample its steps (m⁶,
-    /// [`Region::step_variance`]).
+    /// `Region::step_variance`).
     pub step_variance_m6: f64,
 }
 
 impl EventVolume {
     /// The region's outline in global coordinates: polygons (outer ring, holes) in the
     /// footprint plane (w = 0 of the frame), each ring closed (first vertex repeated).
-    pub fn outline(&self) -> Vec<Vec<Vec<[f64; 3]>>> {
+    pub(crate) fn outline(&self) -> Vec<Vec<Vec<[f64; 3]>>> {
         let ring = |r: &[[f64; 2]]| -> Vec<[f64; 3]> {
             let mut g: Vec<[f64; 3]> = r
                 .iter()
@@ -170,7 +172,7 @@ const WALL_REACH_SPACINGS: f64 = BAND_MARGIN_SPACINGS + 5.0;
 /// Where each piece's two solids (before, after; global coordinates, each closed on its own) go,
 /// in the order of the pieces: an event of one piece has one pair of watertight solids, a larger
 /// one a pair per band (their walls on the seams face each other).
-pub type Solids<'a> = &'a mut dyn FnMut([Mesh; 2]) -> Result<()>;
+pub(crate) type Solids<'a> = &'a mut dyn FnMut([Mesh; 2]) -> Result<()>;
 
 /// The points (global) inside `keep` in the event frame, sorted. The points may come in any
 /// order (a tiled run gathers them tile by tile): they are sorted, because the triangulation of
@@ -300,7 +302,7 @@ pub fn event_volume(
 }
 
 /// [`event_volume`] of points gathered within |w| ≤ `window` of the box's centre along its third
-/// axis (the search box: the unchanged walls, [`axis::unchanged_walls`], know where the window
+/// axis (the search box: the unchanged walls, `axis::unchanged_walls`, know where the window
 /// cut them), in pieces cut as `cutting` says ([`Cutting::Fewest`] of [`PIECE_CELLS`] in a run).
 #[allow(clippy::too_many_arguments)]
 pub fn event_volume_in(
@@ -381,7 +383,7 @@ pub fn event_volume_in(
 
 /// Volume change of one event between two arbitrary surfaces (e.g. the user's meshes,
 /// [`UserMesh`]): the region is where both surfaces have a height and the event owns the
-/// location; the tops are sampled on squares of half a cell (see [`solid::grid_top`]).
+/// location; the tops are sampled on squares of half a cell (see `solid::grid_top`).
 pub fn event_volume_from_surfaces(
     obb: &Obb,
     margin: f64,
@@ -420,12 +422,12 @@ pub fn event_volume_from_surfaces(
 
 /// The grid of cells of the event of box `obb`: its footprint (the box grown by `margin`) in
 /// cells of about one `spacing`, the grid every piece and the whole region are cells of.
-pub fn grid(obb: &Obb, margin: f64, spacing: f64) -> Cells {
+pub(crate) fn grid(obb: &Obb, margin: f64, spacing: f64) -> Cells {
     Cells::new(&Footprint::of_obb(obb, margin), spacing)
 }
 
 /// The pieces of an event's grid: the columns and rows of each.
-pub type Pieces = Vec<(std::ops::Range<usize>, std::ops::Range<usize>)>;
+pub(crate) type Pieces = Vec<(std::ops::Range<usize>, std::ops::Range<usize>)>;
 
 /// How an event's grid is cut into pieces.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -436,7 +438,7 @@ pub enum Cutting {
     Along(usize, Cut),
 }
 
-/// The [`Pieces`] of the event of box `obb`, and the most points (both epochs) one of them takes
+/// The `Pieces` of the event of box `obb`, and the most points (both epochs) one of them takes
 /// from its gathered `points`: one piece when the grid has at most the cutting's cells, else
 /// bands of whole rows or of whole columns ([`Cutting::Fewest`]: whichever takes fewer points
 /// into its fullest band, rows on a tie). A band takes every point that projects into it grown

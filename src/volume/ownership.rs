@@ -15,19 +15,25 @@ use crate::geom::Point3;
 use crate::spatial::{BoxIndex, Index};
 
 /// One event's claim.
-pub struct Claim {
-    pub id: u32,
-    pub frame: Frame,
+pub(crate) struct Claim {
+    pub(crate) id: u32,
+    pub(crate) frame: Frame,
     /// The grown footprint, in `frame`.
-    pub footprint: Footprint,
+    pub(crate) footprint: Footprint,
     /// Half-depth of the box along the frame's w axis.
-    pub depth: f64,
+    pub(crate) depth: f64,
     cores: Index,
 }
 
 impl Claim {
     /// The claim of event `id` with its clustered core points (global coordinates).
-    pub fn new(id: u32, frame: Frame, footprint: Footprint, depth: f64, cores: &[Point3]) -> Self {
+    pub(crate) fn new(
+        id: u32,
+        frame: Frame,
+        footprint: Footprint,
+        depth: f64,
+        cores: &[Point3],
+    ) -> Self {
         Claim {
             id,
             frame,
@@ -38,7 +44,7 @@ impl Claim {
     }
 
     /// Is the global location `x` inside the claimed box?
-    pub fn contains(&self, x: &Point3) -> bool {
+    pub(crate) fn contains(&self, x: &Point3) -> bool {
         let l = self.frame.to_local(x);
         self.footprint.contains(l[0], l[1]) && l[2].abs() <= self.depth
     }
@@ -51,20 +57,20 @@ impl Claim {
     }
 
     /// The box's bounds in x and y: [x0, y0, x1, y1].
-    pub fn bounds_xy(&self) -> [f64; 4] {
+    pub(crate) fn bounds_xy(&self) -> [f64; 4] {
         let (r, h) = (&self.footprint, self.depth);
         self.frame.bounds_xy([r.u0, r.v0, -h], [r.u1, r.v1, h])
     }
 }
 
 /// The claims of all events, with a coarse xy grid to find the boxes a location may be in.
-pub struct Ownership {
+pub(crate) struct Ownership {
     claims: Vec<Claim>,
     boxes: BoxIndex,
 }
 
 impl Ownership {
-    pub fn new(claims: Vec<Claim>) -> Self {
+    pub(crate) fn new(claims: Vec<Claim>) -> Self {
         let boxes: Vec<[f64; 4]> = claims.iter().map(Claim::bounds_xy).collect();
         Ownership {
             boxes: BoxIndex::new(&boxes),
@@ -72,14 +78,9 @@ impl Ownership {
         }
     }
 
-    /// The claims, in the order given.
-    pub fn claims(&self) -> &[Claim] {
-        &self.claims
-    }
-
     /// The id of the event that owns `x`: of the events whose box contains it, the one with the
     /// nearest core point (ties: the smaller id). None when no box contains it.
-    pub fn owner(&self, x: &Point3) -> Option<u32> {
+    pub(crate) fn owner(&self, x: &Point3) -> Option<u32> {
         self.boxes
             .containing(x[0], x[1])
             .filter(|&k| self.claims[k].contains(x))

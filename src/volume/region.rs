@@ -22,12 +22,12 @@ use super::frame::Footprint;
 /// nearest point is s/√2; for random points of the same density a gap of 2 s occurs with
 /// probability e^{−4π} ≈ 3·10⁻⁶. So 2 s never cuts covered ground and finds every hole wider than
 /// about 4 s.
-pub const COVER_RADIUS: f64 = 2.0;
+pub(crate) const COVER_RADIUS: f64 = 2.0;
 
 /// Most cells per event: beyond this the cells grow (a 1-km footprint at 0.1 m spacing).
-pub const MAX_CELLS: usize = 4_000_000;
+pub(crate) const MAX_CELLS: usize = 4_000_000;
 
-/// Which way a grid is cut into bands ([`Cells::bands`]).
+/// Which way a grid is cut into bands (`Cells::bands`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Cut {
     Rows,
@@ -37,14 +37,14 @@ pub enum Cut {
 /// A grid of `nu × nv` cells that tiles the footprint `r` exactly.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Cells {
-    pub r: Footprint,
+    pub(crate) r: Footprint,
     pub nu: usize,
     pub nv: usize,
 }
 
 impl Cells {
     /// Cells of about `cell` a side (at most [`MAX_CELLS`]) over `r`.
-    pub fn new(r: &Footprint, cell: f64) -> Cells {
+    pub(crate) fn new(r: &Footprint, cell: f64) -> Cells {
         let (w, h) = (r.u1 - r.u0, r.v1 - r.v0);
         let cell = cell.max((w * h / MAX_CELLS as f64).sqrt());
         let n = |len: f64| (((len / cell).round()) as usize).max(1);
@@ -66,7 +66,7 @@ impl Cells {
     }
 
     /// The u of grid line `i` (0..=nu); the last line is exactly `r.u1`.
-    pub fn u(&self, i: usize) -> f64 {
+    pub(crate) fn u(&self, i: usize) -> f64 {
         if i >= self.nu {
             self.r.u1
         } else {
@@ -75,7 +75,7 @@ impl Cells {
     }
 
     /// The v of grid line `j` (0..=nv); the last line is exactly `r.v1`.
-    pub fn v(&self, j: usize) -> f64 {
+    pub(crate) fn v(&self, j: usize) -> f64 {
         if j >= self.nv {
             self.r.v1
         } else {
@@ -86,7 +86,7 @@ impl Cells {
     /// The cells of columns `cols` and rows `rows` as a grid of their own: the same lines (a
     /// part's first and last lines are the grid's), so parts side by side share their seams
     /// exactly.
-    pub fn part(&self, cols: Range<usize>, rows: Range<usize>) -> Cells {
+    pub(crate) fn part(&self, cols: Range<usize>, rows: Range<usize>) -> Cells {
         if cols == (0..self.nu) && rows == (0..self.nv) {
             return *self;
         }
@@ -105,7 +105,7 @@ impl Cells {
     /// Bands of whole rows (or whole columns) of at most `most` cells each (one row or column
     /// at least), as even as they allow, in order: (columns, rows) of each. One band, the
     /// whole grid, when it has at most `most` cells.
-    pub fn bands(&self, most: usize, cut: Cut) -> Vec<(Range<usize>, Range<usize>)> {
+    pub(crate) fn bands(&self, most: usize, cut: Cut) -> Vec<(Range<usize>, Range<usize>)> {
         let (along, across) = match cut {
             Cut::Rows => (self.nv, self.nu),
             Cut::Columns => (self.nu, self.nv),
@@ -124,12 +124,12 @@ impl Cells {
     }
 
     /// Index of cell (i, j).
-    pub fn index(&self, i: usize, j: usize) -> usize {
+    pub(crate) fn index(&self, i: usize, j: usize) -> usize {
         j * self.nu + i
     }
 
     /// The cell (i, j) that (u, v) falls in, None outside the footprint.
-    pub fn cell_of(&self, u: f64, v: f64) -> Option<(usize, usize)> {
+    pub(crate) fn cell_of(&self, u: f64, v: f64) -> Option<(usize, usize)> {
         if !self.r.contains(u, v) {
             return None;
         }
@@ -139,7 +139,7 @@ impl Cells {
     }
 
     /// Centre of cell (i, j).
-    pub fn centre(&self, i: usize, j: usize) -> [f64; 2] {
+    pub(crate) fn centre(&self, i: usize, j: usize) -> [f64; 2] {
         [
             0.5 * (self.u(i) + self.u(i + 1)),
             0.5 * (self.v(j) + self.v(j + 1)),
@@ -147,7 +147,7 @@ impl Cells {
     }
 
     /// A cell's sides (du, dv).
-    pub fn pitch(&self) -> (f64, f64) {
+    pub(crate) fn pitch(&self) -> (f64, f64) {
         (
             (self.r.u1 - self.r.u0) / self.nu as f64,
             (self.r.v1 - self.r.v0) / self.nv as f64,
@@ -155,12 +155,12 @@ impl Cells {
     }
 
     /// Area of one cell.
-    pub fn cell_area(&self) -> f64 {
+    pub(crate) fn cell_area(&self) -> f64 {
         self.r.area() / self.len() as f64
     }
 
     /// The cells (i range, j range, half-open) that the box [u0, u1] × [v0, v1] overlaps.
-    pub fn overlapping(
+    pub(crate) fn overlapping(
         &self,
         u0: f64,
         u1: f64,
@@ -196,16 +196,16 @@ pub struct Region {
 /// runs on beyond what was measured (SPEC.md §1: the event says it is incomplete); ground another
 /// event owns is not open (that event measures it).
 #[derive(Debug, Clone, PartialEq, Default)]
-pub struct OpenRim {
+pub(crate) struct OpenRim {
     /// (|Δw| of the cell, the edge's length) per open edge.
-    pub edges: Vec<(f32, f32)>,
+    pub(crate) edges: Vec<(f32, f32)>,
     /// The 90th percentile of |Δw| over the region's cells: how large the event's change is.
-    pub p90_change: f64,
+    pub(crate) p90_change: f64,
 }
 
 impl OpenRim {
     /// The length of open rim whose cell changed by more than `level`, and the open rim's length.
-    pub fn changed_length(&self, level: f64) -> (f64, f64) {
+    pub(crate) fn changed_length(&self, level: f64) -> (f64, f64) {
         self.edges.iter().fold((0.0, 0.0), |(c, t), &(dw, len)| {
             let len = len as f64;
             (c + if dw as f64 > level { len } else { 0.0 }, t + len)
@@ -216,7 +216,7 @@ impl OpenRim {
 impl Region {
     /// The open rim of the region (see [`OpenRim`]), `dw` the surfaces' difference per cell
     /// ([`Region::cell_changes`]).
-    pub fn open_rim(&self, dw: &[Option<f64>]) -> OpenRim {
+    pub(crate) fn open_rim(&self, dw: &[Option<f64>]) -> OpenRim {
         let c = &self.cells;
         let (du, dv) = (
             (c.r.u1 - c.r.u0) / c.nu as f64,
@@ -259,7 +259,7 @@ impl Region {
     /// The surfaces' difference at the centre of every covered cell (None elsewhere), row-major,
     /// from their heights `before` and `after` at the centres (`surface::Lattice::centres`, NaN
     /// where a surface has none): evaluated once for the open rim and the step variance.
-    pub fn cell_changes(&self, before: &[f64], after: &[f64]) -> Vec<Option<f64>> {
+    pub(crate) fn cell_changes(&self, before: &[f64], after: &[f64]) -> Vec<Option<f64>> {
         (0..self.cells.len())
             .map(|k| {
                 let d = after[k] - before[k];
@@ -280,7 +280,7 @@ impl Region {
     ///
     /// A box scar 2.2 m wide and 0.67 m deep sampled every 0.26 m: ±0.14 m³ (95 %) from its
     /// edges alone, where the noise of thousands of points averages to a few litres.
-    pub fn step_variance(&self, dw: &[Option<f64>], spacing: f64) -> f64 {
+    pub(crate) fn step_variance(&self, dw: &[Option<f64>], spacing: f64) -> f64 {
         let c = &self.cells;
         let at = |i: isize, j: isize| -> Option<f64> {
             if i < 0 || j < 0 || i >= c.nu as isize || j >= c.nv as isize {
@@ -313,14 +313,14 @@ impl Region {
 /// One polygon of a region's outline in (u, v): an outer ring (counter-clockwise) and its holes
 /// (clockwise), first vertex not repeated.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Polygon {
-    pub outer: Vec<[f64; 2]>,
-    pub holes: Vec<Vec<[f64; 2]>>,
+pub(crate) struct Polygon {
+    pub(crate) outer: Vec<[f64; 2]>,
+    pub(crate) holes: Vec<Vec<[f64; 2]>>,
 }
 
 impl Region {
     /// The region from per-cell `covered` (both epochs) and `owned` flags.
-    pub fn new(cells: Cells, covered: Vec<bool>, owned: &[bool]) -> Region {
+    pub(crate) fn new(cells: Cells, covered: Vec<bool>, owned: &[bool]) -> Region {
         let inside = covered.iter().zip(owned).map(|(&c, &o)| c && o).collect();
         Region {
             cells,
@@ -330,29 +330,29 @@ impl Region {
     }
 
     /// Is cell (i, j) in the region?
-    pub fn contains(&self, i: usize, j: usize) -> bool {
+    pub(crate) fn contains(&self, i: usize, j: usize) -> bool {
         self.inside[self.cells.index(i, j)]
     }
 
     /// Area of the region.
-    pub fn area(&self) -> f64 {
+    pub(crate) fn area(&self) -> f64 {
         self.inside.iter().filter(|&&x| x).count() as f64 * self.cells.cell_area()
     }
 
     /// The covered share of the footprint (0..1).
-    pub fn coverage(&self) -> f64 {
+    pub(crate) fn coverage(&self) -> f64 {
         self.covered.iter().filter(|&&x| x).count() as f64 / self.cells.len() as f64
     }
 
     /// True when no cell is in the region.
-    pub fn is_empty(&self) -> bool {
+    pub(crate) fn is_empty(&self) -> bool {
         !self.inside.iter().any(|&x| x)
     }
 
     /// The outline of the region: the cell edges between a region cell and a cell outside it (or
     /// the footprint's edge), chained into rings, straight runs merged; holes assigned to the
     /// outer ring around them.
-    pub fn outline(&self) -> Vec<Polygon> {
+    pub(crate) fn outline(&self) -> Vec<Polygon> {
         let c = &self.cells;
         let node = |i: usize, j: usize| (j * (c.nu + 1) + i) as u32;
         let pos = |n: u32| {
@@ -445,7 +445,7 @@ fn simplify(ring: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
 
 /// Which (u, v) locations have a point within a radius: points bucketed on a grid of that radius,
 /// a query looks at the 3 × 3 buckets around it.
-pub struct PointCoverage {
+pub(crate) struct PointCoverage {
     origin: [f64; 2],
     size: f64,
     nx: usize,
@@ -457,7 +457,7 @@ pub struct PointCoverage {
 
 impl PointCoverage {
     /// Index the (u, v) of `points` that fall in `r` grown by `radius`.
-    pub fn new(points: impl Iterator<Item = [f64; 2]>, r: &Footprint, radius: f64) -> Self {
+    pub(crate) fn new(points: impl Iterator<Item = [f64; 2]>, r: &Footprint, radius: f64) -> Self {
         let g = r.grown(radius);
         let size = radius.max(1e-9);
         let nx = (((g.u1 - g.u0) / size).ceil() as usize).clamp(1, 1 << 14);
@@ -496,7 +496,7 @@ impl PointCoverage {
     }
 
     /// Is there a point within `radius` (the one given to [`PointCoverage::new`]) of (u, v)?
-    pub fn covers(&self, u: f64, v: f64, radius: f64) -> bool {
+    pub(crate) fn covers(&self, u: f64, v: f64, radius: f64) -> bool {
         let bx = ((u - self.origin[0]) / self.size).floor() as isize;
         let by = ((v - self.origin[1]) / self.size).floor() as isize;
         let r2 = radius * radius;

@@ -10,17 +10,17 @@ use crate::events::Obb;
 
 /// The reach of an event's search boxes, from the run's parameters.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Search {
+pub(crate) struct Search {
     /// The volume margin of SPEC.md §1: cyl_radius + 2 × point spacing.
-    pub margin: f64,
+    pub(crate) margin: f64,
     /// The point spacing.
-    pub spacing: f64,
+    pub(crate) spacing: f64,
     /// The M3C2 cylinder's half-length.
-    pub cyl_halflen: f64,
+    pub(crate) cyl_halflen: f64,
 }
 
 impl Search {
-    pub fn new(cyl_radius: f64, point_spacing: f64, cyl_halflen: f64) -> Search {
+    pub(crate) fn new(cyl_radius: f64, point_spacing: f64, cyl_halflen: f64) -> Search {
         Search {
             margin: cyl_radius + 2.0 * point_spacing,
             spacing: point_spacing,
@@ -30,13 +30,13 @@ impl Search {
 
     /// How far from the before surface, along the box's third axis, the volume of an event
     /// whose largest |distance| is `max_abs_distance` looks for the two surfaces.
-    pub fn depth(&self, max_abs_distance: f64) -> f64 {
+    pub(crate) fn depth(&self, max_abs_distance: f64) -> f64 {
         self.cyl_halflen.max(max_abs_distance + self.margin)
     }
 
     /// The box (in the event's frame) whose points the volume needs, reaching `depth` beyond
     /// `obb`'s own extent along its third axis: its half extents and its XY bounds.
-    pub fn search_box(&self, obb: &Obb, depth: f64) -> ([f64; 3], [f64; 4]) {
+    pub(crate) fn search_box(&self, obb: &Obb, depth: f64) -> ([f64; 3], [f64; 4]) {
         // Summed in this order: the boxes' bits are part of what the units agree on.
         let (m, s) = (self.margin, self.spacing);
         let h = [

@@ -1,7 +1,7 @@
 //! Closed solids between a surface and a base plane, and their volumes.
 //!
 //! A *top* is a triangulated height field over an event's region (a union of the footprint's
-//! cells, [`Region`]), facing +w. It is closed into a solid by vertical walls under its boundary
+//! cells, `Region`), facing +w. It is closed into a solid by vertical walls under its boundary
 //! edges, down to a base plane w = base below both epochs, and a bottom (a fan from the base
 //! centre). Every edge of the result is shared by exactly two faces with opposite directions:
 //! walls pair with the top's boundary edges, the bottom fan with the walls' lower edges. The
@@ -11,7 +11,7 @@
 //! add up to the region's.
 //!
 //! Two tops:
-//! - [`clipped_top`] (points → [`Tin`](super::surface::Tin)): every TIN triangle clipped to each
+//! - `clipped_top` (points → [`Tin`](super::surface::Tin)): every TIN triangle clipped to each
 //!   region cell it overlaps (Sutherland & Hodgman 1974). The volume is the exact integral of the
 //!   piecewise-linear TIN over the region, so vertical steps (box sides, cliff scars) are kept
 //!   where the wall points put them. (A plain grid resampling would move each step to the nearest
@@ -24,7 +24,7 @@
 //!   node) and shared by label, so neighbouring pieces share them exactly and the top is
 //!   watertight by construction. Heights on clipped edges are interpolated along the edge (never
 //!   through a triangle's area, so slivers cannot blow up).
-//! - [`grid_top`] (any [`Surface`], e.g. a user mesh): heights sampled on a regular grid over
+//! - `grid_top` (any `Surface`, e.g. a user mesh): heights sampled on a regular grid over
 //!   the region (2 triangles per square).
 
 use rustc_hash::FxHashMap as HashMap;
@@ -174,7 +174,11 @@ impl Ids {
 /// put vertices on that edge (where grid lines cross it); the whole one takes the same vertices,
 /// as a fan from its centroid (on its plane, so the integral is unchanged), so every edge still
 /// has one face on each side.
-pub fn clipped_top(tin_vertices: &[[f64; 3]], tin_faces: &[[u32; 3]], region: &Region) -> Mesh {
+pub(crate) fn clipped_top(
+    tin_vertices: &[[f64; 3]],
+    tin_faces: &[[u32; 3]],
+    region: &Region,
+) -> Mesh {
     clip_top(tin_vertices, tin_faces, region, true)
 }
 
@@ -424,7 +428,7 @@ const SUB: usize = 4;
 /// triangulated grid is Σ node height × dual-cell area, so it equals a midpoint-rule integral SUB
 /// times finer, and a vertical step is misplaced by at most a square's side / (2·SUB) instead of
 /// half of it. `None` when a node of the region has no height (the region must be covered).
-pub fn grid_top(surface: &dyn Surface, region: &Region, split: usize) -> Option<Mesh> {
+pub(crate) fn grid_top(surface: &dyn Surface, region: &Region, split: usize) -> Option<Mesh> {
     use rayon::prelude::*;
     let c = &region.cells;
     let split = split.max(1);
@@ -504,7 +508,7 @@ pub fn grid_top(surface: &dyn Surface, region: &Region, split: usize) -> Option<
 }
 
 /// Lowest height of a top.
-pub fn min_height(top: &Mesh) -> f64 {
+pub(crate) fn min_height(top: &Mesh) -> f64 {
     top.vertices
         .iter()
         .map(|p| p[2])
@@ -547,7 +551,7 @@ fn boundary_edges(faces: &[[u32; 3]]) -> Vec<(u32, u32)> {
     edges
 }
 
-pub fn close(top: Mesh, base: f64, r: &Footprint) -> Mesh {
+pub(crate) fn close(top: Mesh, base: f64, r: &Footprint) -> Mesh {
     let mut edges = boundary_edges(&top.faces);
     edges.sort_unstable();
     let next = boundary::successors(&edges, |v| {

@@ -48,32 +48,27 @@ pub trait Surface: Sync {
 /// are asked for (cell corners, cell centres, sub-cell midpoints).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Lattice {
-    pub u0: f64,
-    pub du: f64,
-    pub nu: usize,
-    pub v0: f64,
-    pub dv: f64,
-    pub nv: usize,
+    pub(crate) u0: f64,
+    pub(crate) du: f64,
+    pub(crate) nu: usize,
+    pub(crate) v0: f64,
+    pub(crate) dv: f64,
+    pub(crate) nv: usize,
 }
 
 impl Lattice {
     /// Point (i, j).
-    pub fn point(&self, i: usize, j: usize) -> (f64, f64) {
+    pub(crate) fn point(&self, i: usize, j: usize) -> (f64, f64) {
         (self.u0 + i as f64 * self.du, self.v0 + j as f64 * self.dv)
     }
 
     /// Number of points.
-    pub fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         self.nu * self.nv
     }
 
-    /// True when it has no points.
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
-
     /// The corners of the cells of `c`: (nu + 1) × (nv + 1).
-    pub fn nodes(c: &Cells) -> Lattice {
+    pub(crate) fn nodes(c: &Cells) -> Lattice {
         let (du, dv) = c.pitch();
         Lattice {
             u0: c.r.u0,
@@ -86,13 +81,13 @@ impl Lattice {
     }
 
     /// The centres of the cells of `c`, row by row as the cells.
-    pub fn centres(c: &Cells) -> Lattice {
+    pub(crate) fn centres(c: &Cells) -> Lattice {
         Lattice::within(c, 1, 0..c.nv)
     }
 
     /// The centres of the `k × k` sub-cells of each cell of `c` in rows `rows`: k·nu points a
     /// row, k rows a row of cells.
-    pub fn within(c: &Cells, k: usize, rows: std::ops::Range<usize>) -> Lattice {
+    pub(crate) fn within(c: &Cells, k: usize, rows: std::ops::Range<usize>) -> Lattice {
         let (du, dv) = c.pitch();
         let (du, dv) = (du / k as f64, dv / k as f64);
         Lattice {
@@ -228,7 +223,7 @@ impl Tin {
     /// Triangulate local points (non-finite ones skipped). Points at an identical (u, v)
     /// keep one height (spade merges duplicates). Fails when the points do not span a
     /// triangle (fewer than 3, or all collinear in (u, v)).
-    pub fn new(local: &[[f64; 3]]) -> Result<Self> {
+    pub(crate) fn new(local: &[[f64; 3]]) -> Result<Self> {
         let verts: Vec<Vertex> = local
             .iter()
             .filter(|p| p.iter().all(|x| x.is_finite()))
@@ -248,14 +243,9 @@ impl Tin {
         Ok(Tin { tri })
     }
 
-    /// Is (u, v) inside the triangulated area (the convex hull of the points)?
-    pub fn contains(&self, u: f64, v: f64) -> bool {
-        self.height_at(u, v).is_some()
-    }
-
     /// Vertices (u, v, w) by spade's fixed index, and the triangles (counter-clockwise in
     /// (u, v), i.e. facing +w).
-    pub fn mesh(&self) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
+    pub(crate) fn mesh(&self) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
         let verts = self
             .tri
             .vertices()
@@ -270,16 +260,6 @@ impl Tin {
             .map(|f| f.vertices().map(|v| v.fix().index() as u32))
             .collect();
         (verts, faces)
-    }
-
-    /// Number of vertices.
-    pub fn len(&self) -> usize {
-        self.tri.num_vertices()
-    }
-
-    /// True when empty (never, for a constructed TIN).
-    pub fn is_empty(&self) -> bool {
-        self.tri.num_vertices() == 0
     }
 }
 

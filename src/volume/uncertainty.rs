@@ -37,33 +37,33 @@ const LARGE: f64 = 50.0;
 /// The parts of an event's volume uncertainty (one standard deviation each, m³) and the 95 %
 /// half-width.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct VolumeUncertainty {
-    pub random_m3: f64,
-    pub correlated_m3: f64,
-    pub systematic_m3: f64,
+pub(crate) struct VolumeUncertainty {
+    pub(crate) random_m3: f64,
+    pub(crate) correlated_m3: f64,
+    pub(crate) systematic_m3: f64,
     #[serde(default)]
-    pub sampling_m3: f64,
+    pub(crate) sampling_m3: f64,
     /// 1.96 × the combined standard deviation.
-    pub half_width_95_m3: f64,
+    pub(crate) half_width_95_m3: f64,
 }
 
 /// What the propagation needs of one event.
 #[derive(Debug, Clone, Copy)]
-pub struct ErrorModel {
+pub(crate) struct ErrorModel {
     /// Per epoch: region area per point (s², m²).
-    pub point_area: [f64; 2],
+    pub(crate) point_area: [f64; 2],
     /// Per epoch: mean per-point variance over the region (m²).
-    pub variance: [f64; 2],
+    pub(crate) variance: [f64; 2],
     /// The stable ground's variogram, if measured.
-    pub variogram: Option<Variogram>,
+    pub(crate) variogram: Option<Variogram>,
     /// The registration error along the event's axis (m).
-    pub systematic: f64,
+    pub(crate) systematic: f64,
     /// The standard deviation of the volume from the sampling of its steps (m³).
-    pub sampling: f64,
+    pub(crate) sampling: f64,
 }
 
 /// Propagate `model` over `region`.
-pub fn propagate(region: &Region, model: &ErrorModel) -> VolumeUncertainty {
+pub(crate) fn propagate(region: &Region, model: &ErrorModel) -> VolumeUncertainty {
     let a = region.area();
     let random = (0..2)
         .map(|k| a * model.point_area[k] * model.variance[k])

@@ -62,16 +62,6 @@ impl UserMesh {
             bins,
         }
     }
-
-    /// Number of triangles kept.
-    pub fn len(&self) -> usize {
-        self.tris.len()
-    }
-
-    /// True when no triangle overlaps the footprint.
-    pub fn is_empty(&self) -> bool {
-        self.tris.is_empty()
-    }
 }
 
 fn minmax(x: [f64; 3]) -> (f64, f64) {

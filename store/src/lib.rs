@@ -73,7 +73,7 @@ use talus_base::{Error, Result};
 pub const PLAN_FILE: &str = "plan.json";
 
 /// How long a claim from another host (whose pid cannot be checked) holds without renewal: ten
-/// renewals ([`claim::RENEW_EVERY`]) missed, room for hosts' clocks minutes apart. A task on a
+/// renewals (`claim::RENEW_EVERY`) missed, room for hosts' clocks minutes apart. A task on a
 /// node that died leaves a claim another host takes over after this.
 pub const DEFAULT_LEASE: Duration = Duration::from_secs(10 * 60);
 

@@ -23,11 +23,11 @@ use super::{row, solve};
 use crate::events::stable::Sample;
 
 /// Blocks across and along the sample's footprint.
-pub const BLOCKS: usize = 3;
+pub(crate) const BLOCKS: usize = 3;
 /// Share of the held-out points the measure is taken over (the rest: changed ground).
 const KEPT: f64 = 0.8;
 /// Fewest held-out points, over all blocks, for the measure to be taken.
-pub const MIN_HELD_OUT: usize = 30;
+pub(crate) const MIN_HELD_OUT: usize = 30;
 /// Fewest stable points a block's complement must hold to be fitted.
 const MIN_TRAIN: usize = 20;
 
@@ -44,7 +44,7 @@ fn block(s: &Sample, bbox: &[f64; 4]) -> usize {
 /// module doc); NaN when too few points could be held out. `keep` is the stable ground the
 /// transform was fitted on, `pool` every candidate (held out by block), `o` and `scale` the
 /// fit's origin and rotation scale, `vertical_only` whether only the vertical was fitted.
-pub fn confirmed_share(
+pub(crate) fn confirmed_share(
     samples: &[Sample],
     keep: &[usize],
     pool: &[usize],

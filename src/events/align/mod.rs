@@ -42,19 +42,19 @@ use nalgebra::{Matrix6, SymmetricEigen, Vector3, Vector6};
 use super::stable::{median, Sample};
 use crate::geom::Point3;
 
-pub mod holdout;
+pub(crate) mod holdout;
 
 /// Fewest stable points a fit of `dof` directions is tried on: 30 a direction, at least 50.
-pub fn min_points(dof: usize) -> usize {
+pub(crate) fn min_points(dof: usize) -> usize {
     (30 * dof).max(50)
 }
 /// Fewest stable points the six-direction fit starts from.
-pub const MIN_POINTS: usize = 180;
+pub(crate) const MIN_POINTS: usize = 180;
 /// Least share of its predicted change the held-out ground must confirm ([`holdout`]), and
 /// 2 − it the most: the share is 2β − 1 for β the slope of the held-out distances on the
 /// prediction, 1 for one motion; a share far above 1 is structure the prediction only follows
 /// (the tails of a mound that grew read as a tilt).
-pub const HOLDS_OUT: f64 = 0.5;
+pub(crate) const HOLDS_OUT: f64 = 0.5;
 
 /// How far a transform may move a survey and still be a misregistration (SPEC.md §1: "bounded by
 /// what GNSS, targets and ICP leave"): the largest displacement it gives any point of the
@@ -69,39 +69,39 @@ pub const HOLDS_OUT: f64 = 0.5;
 /// bound; beyond it a "fit" is a different survey datum, a wrong CRS or change aligned away.
 /// `--align on` raises it to [`Limits::FORCED`].
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Limits {
-    pub shift_m: f64,
-    pub turn_deg: f64,
+pub(crate) struct Limits {
+    pub(crate) shift_m: f64,
+    pub(crate) turn_deg: f64,
 }
 
 /// Whose stable ground a fit is on: found in the distances, or the user's areas. The user's
 /// word makes their ground stable (as in DoD practice): a fit on it need not be confirmed on
 /// held-out ground, which only says how much the areas agree among themselves.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Ground {
+pub(crate) enum Ground {
     Automatic,
     User,
 }
 
 impl Limits {
-    pub const PLAUSIBLE: Limits = Limits {
+    pub(crate) const PLAUSIBLE: Limits = Limits {
         shift_m: 1.0,
         turn_deg: 0.5,
     };
-    pub const FORCED: Limits = Limits {
+    pub(crate) const FORCED: Limits = Limits {
         shift_m: 100.0,
         turn_deg: 20.0,
     };
 
     /// Whether a motion moving no point more than `largest` metres and turning `turn` degrees
     /// is within these.
-    pub fn admit(&self, largest: f64, turn: f64) -> bool {
+    pub(crate) fn admit(&self, largest: f64, turn: f64) -> bool {
         largest <= self.shift_m && turn <= self.turn_deg
     }
 
     /// The limits between two surveys each within these of a third (a campaign's survey and its
     /// predecessor, both off the first): their offsets add up to twice.
-    pub fn between(&self) -> Limits {
+    pub(crate) fn between(&self) -> Limits {
         Limits {
             shift_m: 2.0 * self.shift_m,
             turn_deg: 2.0 * self.turn_deg,
@@ -111,82 +111,82 @@ impl Limits {
 /// A direction of the scaled normal matrix whose eigenvalue is below this is not constrained:
 /// its standard error, σ/√λ at the stable ground's radius, would be more than half the noise of
 /// one distance (λ is the information of that many points entirely along it).
-pub const CONSTRAINED: f64 = 4.0;
+pub(crate) const CONSTRAINED: f64 = 4.0;
 /// χ² of the fitted motion that makes it significant: the 99.9 % quantile, by degrees of
 /// freedom (1 to 6).
 const CHI2_999: [f64; 6] = [10.83, 13.82, 16.27, 18.47, 20.52, 22.46];
 /// A motion moving the stable surface by less than this share of σ_d is not applied.
-pub const MIN_EFFECT: f64 = 0.2;
+pub(crate) const MIN_EFFECT: f64 = 0.2;
 /// After a fit, the stable ground must hold still to within this many times its measurement
 /// noise (LoD95 / 1.96 of its distances): a misregistration is rigid, and removing it leaves the
 /// surveys' noise; ground that moves (a beach, a creeping slope) leaves far more, and a "fit" to
 /// it would be a tilt of the sand, not of the survey.
-pub const RIGID: f64 = 3.0;
+pub(crate) const RIGID: f64 = 3.0;
 /// After a fit, at least this share of what the core points tell of every direction it
 /// constrains well ([`WELL_SEEN`]) must come from ground at rest ([`Alignment::at_rest_share`]): ground that moves
 /// is then a minority, and the stable ground the fit chose is the site's, not a self-selected
 /// part of a moving slope.
-pub const AT_REST: f64 = 0.5;
+pub(crate) const AT_REST: f64 = 0.5;
 /// The at-rest share is judged on the directions the stable ground sees with at least this
 /// share of the information of its best-seen one: a direction seen a thousand times less (a
 /// shift along a straight coast, seen only through the side walls of an old scar) is fixed by a
 /// few features, not by the ground at large, and what tells most of it is the walls of new
 /// changes — a share there measures the changes, not whether the ground holds still.
-pub const WELL_SEEN: f64 = 0.01;
+pub(crate) const WELL_SEEN: f64 = 0.01;
 
 /// The fitted transform of the later epoch, and what was decided.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Alignment {
+pub(crate) struct Alignment {
     /// The rotation vector ω (radians, about `origin`) and translation t of the later epoch's
     /// misregistration: later ≈ R(ω)(x − o) + o + t.
-    pub rotation: Point3,
-    pub translation: Point3,
-    pub origin: Point3,
+    pub(crate) rotation: Point3,
+    pub(crate) translation: Point3,
+    pub(crate) origin: Point3,
     /// Standard errors of ω (radians) and t (metres); none for a component the stable ground
     /// does not constrain (the fit leaves it at zero: the survey is not moved that way).
-    pub rotation_sd: [Option<f64>; 3],
-    pub translation_sd: [Option<f64>; 3],
+    pub(crate) rotation_sd: [Option<f64>; 3],
+    pub(crate) translation_sd: [Option<f64>; 3],
     /// Degrees of freedom the stable ground constrains (of 6).
-    pub constrained: usize,
+    pub(crate) constrained: usize,
     /// RMS over the stable points of the displacement along their normals the fit explains.
-    pub effect_m: f64,
+    pub(crate) effect_m: f64,
     /// Robust standard deviation of the residuals after the fit.
-    pub residual_m: f64,
+    pub(crate) residual_m: f64,
     /// What the residual would be from the surveys' noise alone: the median over the stable
     /// points of LoD95 / 1.96, the standard error of one M3C2 distance from its cylinders'
     /// spreads and counts.
-    pub noise_m: f64,
-    pub chi2: f64,
-    pub stable_points: usize,
+    pub(crate) noise_m: f64,
+    pub(crate) chi2: f64,
+    pub(crate) stable_points: usize,
     /// The least, over the directions the fit constrains well ([`WELL_SEEN`]), share of what
     /// the core points tell of that direction (Σ (a·v)² over the pool) that comes from core points the fit leaves at
     /// rest: near 1 when a misregistration was removed, small when the fit holds still only a
     /// self-selected part of ground that moves.
-    pub at_rest_share: f64,
+    pub(crate) at_rest_share: f64,
     /// The share of its predicted change the held-out blocks of stable ground confirm
     /// ([`holdout`]); None where too few points could be held out.
-    pub confirmed_share: Option<f64>,
+    pub(crate) confirmed_share: Option<f64>,
     /// The largest displacement the transform gives a point of the stable ground's footprint (m).
-    pub largest_shift_m: f64,
+    pub(crate) largest_shift_m: f64,
     /// Only the vertical was fitted (the stable ground does not see both tilts).
-    pub vertical_only: bool,
+    pub(crate) vertical_only: bool,
     /// Rigid, significant, at rest and confirmed out of sample, but beyond the limits: the
     /// surveys are far off (a datum, a CRS), not misregistered by a fraction of a metre.
-    pub gross: bool,
-    pub applied: bool,
+    pub(crate) gross: bool,
+    pub(crate) applied: bool,
     /// The transform is known: enough stable ground, seeing the vertical and both tilts, that
     /// holds still as one rigid body, at rest, once it is removed (every rule of the module's
     /// header but the significance (3) and the effect (5)).
     /// A known transform that is not applied is known to be too small to matter: a chain of
     /// alignments may pass through it as the identity ([`super::chain`]); an unknown one it may not.
-    pub determined: bool,
+    pub(crate) determined: bool,
     /// Why it was, or was not, applied.
-    pub reason: String,
+    pub(crate) reason: String,
 }
 
 impl Alignment {
     /// No fit (`reason` says why): the identity, not applied.
-    pub fn none(reason: String) -> Alignment {
+    pub(crate) fn none(reason: String) -> Alignment {
         Alignment {
             rotation: [0.0; 3],
             translation: [0.0; 3],
@@ -212,7 +212,7 @@ impl Alignment {
 
     /// The 4×4 matrix (row-major) mapping the later epoch's coordinates onto the earlier's: the
     /// inverse of the misregistration, with the exact rotation of ω (Rodrigues).
-    pub fn matrix(&self) -> [[f64; 4]; 4] {
+    pub(crate) fn matrix(&self) -> [[f64; 4]; 4] {
         let r = rotation(&self.rotation);
         let rt = r.transpose();
         let o = Vector3::from(self.origin);
@@ -231,7 +231,8 @@ impl Alignment {
     }
 
     /// `p` (later epoch) mapped onto the earlier epoch.
-    pub fn apply(&self, p: &Point3) -> Point3 {
+    #[cfg(test)]
+    pub(crate) fn apply(&self, p: &Point3) -> Point3 {
         let m = self.matrix();
         let mut out = [0.0; 3];
         for (i, o) in out.iter_mut().enumerate() {
@@ -241,7 +242,7 @@ impl Alignment {
     }
 
     /// The rotation's angle in degrees.
-    pub fn rotation_deg(&self) -> f64 {
+    pub(crate) fn rotation_deg(&self) -> f64 {
         Vector3::from(self.rotation).norm().to_degrees()
     }
 }
@@ -357,7 +358,7 @@ fn solve(
 /// wall turned 0.1° about the vertical — and a fit on what is left would be biased toward no
 /// turn.) `sigma_d` is the noise of one distance on stable ground; `limits` bound a plausible
 /// misregistration.
-pub fn fit(
+pub(crate) fn fit(
     samples: &[Sample],
     stable: &[usize],
     pool: &[usize],
@@ -553,7 +554,7 @@ pub fn fit(
 /// the fit is tried again over every sample, its stable set re-selected from its own residuals,
 /// and taken when it applies or is a gross misregistration. The noise of one distance, σ_d, is
 /// the stable ground's robust spread ([`super::stable::spread`]).
-pub fn find(samples: &[Sample], limits: &Limits, ground: Ground) -> Alignment {
+pub(crate) fn find(samples: &[Sample], limits: &Limits, ground: Ground) -> Alignment {
     let finite: Vec<usize> = (0..samples.len())
         .filter(|&i| samples[i].distance.is_finite() && samples[i].normal[0].is_finite())
         .collect();
@@ -594,7 +595,7 @@ pub fn find(samples: &[Sample], limits: &Limits, ground: Ground) -> Alignment {
 /// about the vertical — taken from the rest of the surveys' stable ground (the fit over `rest`,
 /// the automatic sample), so that a misregistration the areas cannot see is still removed.
 /// Where the rest cannot fix them either, the fit is the areas' alone, and says so.
-pub fn complete(
+pub(crate) fn complete(
     user: &Alignment,
     inside: &[Sample],
     rest: &[Sample],

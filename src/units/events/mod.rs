@@ -31,48 +31,48 @@ use crate::store::UnitWriter;
 
 mod pieces;
 
-pub const EVENTS: &str = "events.json";
-pub const KEPT: &str = "kept.tile";
+pub(crate) const EVENTS: &str = "events.json";
+pub(crate) const KEPT: &str = "kept.tile";
 /// The drafts by tile (see `write_near`): the index, and the lines it points into.
-pub const NEAR: &str = "near.json";
-pub const NEAR_DRAFTS: &str = "near_drafts.jsonl";
+pub(crate) const NEAR: &str = "near.json";
+pub(crate) const NEAR_DRAFTS: &str = "near_drafts.jsonl";
 
 /// An event as the events unit leaves it: described, with its candidate boxes.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct Draft {
-    pub event: Event,
+pub(crate) struct Draft {
+    pub(crate) event: Event,
     /// The boxes the volume may be extruded along: the mean normal's, and straight up's where the
     /// normal is not steep (see `volume::axis`).
-    pub candidates: Vec<Obb>,
+    pub(crate) candidates: Vec<Obb>,
     /// Its core points whose other epoch lies beyond the user's half-length (not measured: the
     /// event is incomplete).
-    pub beyond_reach: usize,
+    pub(crate) beyond_reach: usize,
     /// Its core points whose normal's sign the data does not decide (`CoreResult::sign_known`):
     /// where they are most of it, its sign may be the reverse.
-    pub sign_unknown: usize,
+    pub(crate) sign_unknown: usize,
 }
 
 /// A kept core point.
 #[derive(Debug, Clone, Copy)]
-pub struct Kept {
-    pub key: u64,
-    pub xyz: Point3,
-    pub d: f64,
-    pub lod: f64,
-    pub normal: Point3,
-    pub std_dev: [f64; 2],
-    pub smoothed: f64,
+pub(crate) struct Kept {
+    pub(crate) key: u64,
+    pub(crate) xyz: Point3,
+    pub(crate) d: f64,
+    pub(crate) lod: f64,
+    pub(crate) normal: Point3,
+    pub(crate) std_dev: [f64; 2],
+    pub(crate) smoothed: f64,
     /// 0 = in no event.
-    pub event: u32,
+    pub(crate) event: u32,
     /// The other epoch lies beyond the user's half-length: `d` is the walk's finding, not a
     /// measurement (`m3c2::Reach::Beyond`).
-    pub beyond: bool,
+    pub(crate) beyond: bool,
     /// The data does not decide which side of the surface is out here (`CoreResult::sign_known`).
-    pub sign_unknown: bool,
+    pub(crate) sign_unknown: bool,
 }
 
 /// The candidate boxes of an event with core points `cluster` (see [`Draft::candidates`]).
-pub fn candidate_boxes(e: &Event, cluster: &[Point3]) -> Vec<Obb> {
+pub(crate) fn candidate_boxes(e: &Event, cluster: &[Point3]) -> Vec<Obb> {
     let mut boxes = vec![e.obb];
     let n = e.mean_normal;
     if n[2] >= STEEP_NZ && n[2] < 1.0 - 1e-9 {
@@ -91,22 +91,22 @@ pub fn candidate_boxes(e: &Event, cluster: &[Point3]) -> Vec<Obb> {
 /// ≈ 65 bytes each beyond the base at the clustering's peak, ≈ 78 at the writing's beyond the
 /// base and the fixed 8 MiB. Before the blocks (one kd-tree and one clustering over every kept
 /// point) the unit took ≈ 117 bytes each.
-pub const BYTES_PER_KEPT: u64 = 80;
+pub(crate) const BYTES_PER_KEPT: u64 = 80;
 
 /// The pair's events: filter, smoothing, signed clustering, description.
-pub struct EventsStage;
+pub(crate) struct EventsStage;
 
 /// What an events unit records.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
-pub struct EventsMeta {
+pub(crate) struct EventsMeta {
     /// Events described.
-    pub events: usize,
+    pub(crate) events: usize,
     /// Core points kept by the filter.
-    pub kept: usize,
+    pub(crate) kept: usize,
     /// Pieces of space they were smoothed and clustered in, when more than the budget holds at
     /// once (0: all at once).
     #[serde(default)]
-    pub pieces: usize,
+    pub(crate) pieces: usize,
 }
 
 impl Stage for EventsStage {
@@ -502,14 +502,14 @@ fn write_near(
 
 /// A pair's drafts by tile (`write_near`): the index held (a line per tile reached), a tile's
 /// drafts read from their line when asked.
-pub struct NearDrafts {
+pub(crate) struct NearDrafts {
     path: std::path::PathBuf,
     lines: HashMap<(u32, u32), (u64, u64)>,
 }
 
 impl NearDrafts {
     /// Pair `pair`'s (its events unit must be done).
-    pub fn open(ctx: &Ctx, pair: usize) -> Result<NearDrafts> {
+    pub(crate) fn open(ctx: &Ctx, pair: usize) -> Result<NearDrafts> {
         let u = ctx.unit(&Spec::pair(EventsStage::KIND, pair))?;
         let index: Vec<NearLine> = super::read_json(ctx, u, NEAR)?;
         Ok(NearDrafts {
@@ -522,7 +522,7 @@ impl NearDrafts {
     }
 
     /// The drafts whose search boxes reach tile `t`, in id order (none when no box does).
-    pub fn drafts(&self, t: talus_tiling::TileId) -> Result<Vec<Draft>> {
+    pub(crate) fn drafts(&self, t: talus_tiling::TileId) -> Result<Vec<Draft>> {
         use std::io::{Read, Seek, SeekFrom};
         let Some(&(offset, len)) = self.lines.get(&(t.col, t.row)) else {
             return Ok(Vec::new());
@@ -572,14 +572,14 @@ fn to_columns(kept: &[Kept]) -> TileColumns {
 }
 
 /// The events of pair `pair` (its events unit must be done).
-pub fn read_drafts(ctx: &Ctx, pair: usize) -> Result<Vec<Draft>> {
+pub(crate) fn read_drafts(ctx: &Ctx, pair: usize) -> Result<Vec<Draft>> {
     let u = ctx.unit(&Spec::pair(EventsStage::KIND, pair))?;
     super::read_json(ctx, u, EVENTS)
 }
 
 /// Rows of a `kept.tile` frame: its readers (the volumes units, the outputs) hold a frame at a
 /// time, never the pair's kept core points, which grow with the change.
-pub const KEPT_FRAME: usize = 1 << 16;
+pub(crate) const KEPT_FRAME: usize = 1 << 16;
 
 /// `kept.tile` being written: the kept core points in key order, [`KEPT_FRAME`] rows to a frame
 /// (one empty frame when nothing is kept).
@@ -608,14 +608,14 @@ impl KeptWriter {
 }
 
 /// The kept core points of a pair, a frame at a time in key order.
-pub struct KeptFrames {
+pub(crate) struct KeptFrames {
     path: std::path::PathBuf,
     frames: talus_tiling::TileFrames,
 }
 
 impl KeptFrames {
     /// Pair `pair`'s kept core points (its events unit must be done).
-    pub fn open(ctx: &Ctx, pair: usize) -> Result<KeptFrames> {
+    pub(crate) fn open(ctx: &Ctx, pair: usize) -> Result<KeptFrames> {
         let u = ctx.unit(&Spec::pair(EventsStage::KIND, pair))?;
         let path = ctx.input(u, KEPT)?;
         let frames = talus_tiling::TileFrames::open(&path).map_err(|e| super::damaged(&path, e))?;
@@ -623,18 +623,18 @@ impl KeptFrames {
     }
 
     /// Kept core points in the file.
-    pub fn count(&self) -> u64 {
+    pub(crate) fn count(&self) -> u64 {
         self.frames.point_count()
     }
 
     /// The next frame's kept core points; None after the last.
-    pub fn next_frame(&mut self) -> Result<Option<Vec<Kept>>> {
+    pub(crate) fn next_frame(&mut self) -> Result<Option<Vec<Kept>>> {
         self.next_frame_where(&|_| true)
     }
 
     /// The next frame whose bounds `want` accepts (the others are passed over undecoded: the
     /// points are in key order, tile by tile, so a frame covers a strip of a few tiles).
-    pub fn next_frame_where(
+    pub(crate) fn next_frame_where(
         &mut self,
         want: &dyn Fn(&crate::geom::Bounds) -> bool,
     ) -> Result<Option<Vec<Kept>>> {
@@ -648,7 +648,7 @@ impl KeptFrames {
 
 /// Pair `pair`'s kept core points looked up by key, the keys asked in ascending order (as the
 /// merge of its results gives them): a frame held at a time.
-pub struct KeptByKey {
+pub(crate) struct KeptByKey {
     frames: Option<KeptFrames>,
     rows: Vec<Kept>,
     at: usize,
@@ -656,7 +656,7 @@ pub struct KeptByKey {
 
 impl KeptByKey {
     /// Over `frames`; None: no kept core points (an M3C2-only run).
-    pub fn new(frames: Option<KeptFrames>) -> KeptByKey {
+    pub(crate) fn new(frames: Option<KeptFrames>) -> KeptByKey {
         KeptByKey {
             frames,
             rows: Vec::new(),
@@ -665,7 +665,7 @@ impl KeptByKey {
     }
 
     /// The kept core point of `key`, if it is one; `key` not below the last one asked.
-    pub fn get(&mut self, key: u64) -> Result<Option<&Kept>> {
+    pub(crate) fn get(&mut self, key: u64) -> Result<Option<&Kept>> {
         loop {
             while self.at < self.rows.len() && self.rows[self.at].key < key {
                 self.at += 1;
@@ -731,7 +731,7 @@ fn from_columns(c: &TileColumns, path: &std::path::Path) -> Result<Vec<Kept>> {
 /// between. Two events whose boxes overlap reach a common tile (the owner of a point of the
 /// overlap: `owner` is monotone along each axis), and an event reaches the tile owning its
 /// centroid. The events unit files drafts by them, the volumes unit reads the tiles.
-pub fn reached_tiles(
+pub(crate) fn reached_tiles(
     d: &Draft,
     params: &crate::params::Params,
     grid: &talus_tiling::TileGrid,
@@ -749,7 +749,7 @@ pub fn reached_tiles(
 }
 
 /// The reach of the run's search boxes ([`crate::volume::Search`]).
-pub fn search(params: &crate::params::Params) -> crate::volume::Search {
+pub(crate) fn search(params: &crate::params::Params) -> crate::volume::Search {
     crate::volume::Search::new(
         params.cyl_radius.value,
         params.point_spacing.value,
@@ -758,7 +758,7 @@ pub fn search(params: &crate::params::Params) -> crate::volume::Search {
 }
 
 /// The XY bounds of each of `d`'s search boxes, one a candidate box.
-pub fn search_xy(d: &Draft, params: &crate::params::Params) -> Vec<[f64; 4]> {
+pub(crate) fn search_xy(d: &Draft, params: &crate::params::Params) -> Vec<[f64; 4]> {
     let s = search(params);
     let depth = s.depth(d.event.max_abs_distance);
     d.candidates

@@ -16,7 +16,7 @@ use crate::plan::Plan;
 use crate::units::tiling::TilingMeta;
 
 /// Refuse the plan when pair `pair`'s densest tile certainly does not fit the budget.
-pub fn check_planned(plan: &Plan, pair: usize) -> Result<()> {
+pub(crate) fn check_planned(plan: &Plan, pair: usize) -> Result<()> {
     let p = &plan.pairs[pair];
     let points = plan.surveys[p.before].points + plan.surveys[p.after].points;
     let tiles = plan.layout.len() as u64;
@@ -41,7 +41,11 @@ pub fn check_planned(plan: &Plan, pair: usize) -> Result<()> {
 
 /// Points per tile of a pair (both surveys, halos included, in grid order) from its two tilings'
 /// records.
-pub fn pair_tile_points(plan: &Plan, before: &TilingMeta, after: &TilingMeta) -> Result<Vec<u64>> {
+pub(crate) fn pair_tile_points(
+    plan: &Plan,
+    before: &TilingMeta,
+    after: &TilingMeta,
+) -> Result<Vec<u64>> {
     let tiles = plan.layout.len();
     if before.tile_points.len() != tiles || after.tile_points.len() != tiles {
         return Err(Error::Internal(format!(
@@ -61,7 +65,7 @@ pub fn pair_tile_points(plan: &Plan, before: &TilingMeta, after: &TilingMeta) ->
 /// Refuse the budget when the densest of a pair's tiles (`points` per tile, in grid order, see
 /// [`pair_tile_points`]) does not fit it, naming the first such tile in grid order (the same
 /// whichever unit checks).
-pub fn check_tiled(plan: &Plan, points: &[u64]) -> Result<()> {
+pub(crate) fn check_tiled(plan: &Plan, points: &[u64]) -> Result<()> {
     let grid = plan.layout.grid()?;
     let Some((densest, &n)) = grid
         .tiles()

@@ -36,7 +36,7 @@ fn ahead(runs: usize) -> usize {
 /// when the merge decoded its chunks itself (a chunk per run, and one being decoded with its
 /// columns). A stage that merges reserves it: a layout of many small tiles (a low budget, a
 /// dense site) costs the merge a chunk for each.
-pub fn merge_need(runs: usize) -> u64 {
+pub(crate) fn merge_need(runs: usize) -> u64 {
     let chunk = (CHUNK_ROWS * std::mem::size_of::<KeyedResult>()) as u64;
     (runs.max(1) as u64 + ahead(runs) as u64 + 1) * chunk
 }
@@ -70,7 +70,7 @@ impl Merged {
     }
 
     /// The merge of `runs`: each a sorted run of chunk files.
-    pub fn of_runs(runs: Vec<Vec<PathBuf>>) -> Result<Self> {
+    pub(crate) fn of_runs(runs: Vec<Vec<PathBuf>>) -> Result<Self> {
         use rayon::prelude::*;
         // The first non-empty chunk of every run, in parallel, and how many files it took; the
         // rest from the reader.

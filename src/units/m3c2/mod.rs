@@ -1,5 +1,5 @@
 //! An M3C2 unit: normals and M3C2 for the core points one tile owns, for one pair (pass 2 of
-//! SPEC.md §3), from the pair's two tilings (and the user's core points, [`super::cores`]). Results are
+//! SPEC.md §3), from the pair's two tilings (and the user's core points, `super::cores`). Results are
 //! written as chunk files sorted by core-point key; [`Merged`] streams a pair's results in global
 //! key order (a k-way merge over the tiles), so everything downstream is the same whatever the
 //! tiling.
@@ -8,10 +8,11 @@ use std::path::PathBuf;
 
 use talus_tiling::{Column, ColumnData, TileColumns, TileId};
 
-pub mod fit;
+pub(crate) mod fit;
 mod merge;
 
-pub use merge::{merge_need, Merged};
+pub(crate) use merge::merge_need;
+pub use merge::Merged;
 
 use super::cores::{ThinnedStage, UserCoresStage};
 use super::stage::{Line, Planner, Scope, Stage, Total};
@@ -25,15 +26,15 @@ use crate::spatial::Tubes;
 use crate::store::UnitWriter;
 
 /// Rows per result chunk file: a merge holds one chunk per tile.
-pub const CHUNK_ROWS: usize = 8192;
+pub(crate) const CHUNK_ROWS: usize = 8192;
 
 /// The file of chunk `k`.
-pub fn chunk_file(k: usize) -> String {
+pub(crate) fn chunk_file(k: usize) -> String {
     format!("r_{k:05}.tile")
 }
 
 /// Resident bytes per point while a tile is computed: the layout sizes tiles by it.
-pub const BYTES_PER_POINT: u64 = crate::plan::layout::BYTES_PER_POINT;
+pub(crate) const BYTES_PER_POINT: u64 = crate::plan::layout::BYTES_PER_POINT;
 
 /// Resident bytes of an M3C2 unit over `points` points.
 pub fn need(points: u64) -> u64 {
@@ -41,27 +42,27 @@ pub fn need(points: u64) -> u64 {
 }
 
 /// Normals and M3C2 for the core points one tile owns, for one pair.
-pub struct M3c2Stage;
+pub(crate) struct M3c2Stage;
 
 /// What an M3C2 unit records.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
-pub struct M3c2Meta {
+pub(crate) struct M3c2Meta {
     /// Result chunk files ([`chunk_file`]).
-    pub chunks: usize,
+    pub(crate) chunks: usize,
     /// Core points the tile owns (rows over its chunks).
-    pub core_points: u64,
+    pub(crate) core_points: u64,
     /// Points the tile owns, both surveys.
-    pub points: u64,
+    pub(crate) points: u64,
     /// Points of both surveys in the tile's halo box.
-    pub halo_points: u64,
+    pub(crate) halo_points: u64,
     /// Core points whose walk left the tile, walked again over the points along their axes.
-    pub walked_beyond_tile: usize,
+    pub(crate) walked_beyond_tile: usize,
     /// Points gathered along those axes.
-    pub points_along: usize,
+    pub(crate) points_along: usize,
     /// Core points whose missing survey was measured beyond the cylinder ([`Reach::Extended`]).
-    pub extended: usize,
+    pub(crate) extended: usize,
     /// Core points whose other survey lies beyond the user's half-length.
-    pub beyond_reach: usize,
+    pub(crate) beyond_reach: usize,
 }
 
 impl Stage for M3c2Stage {
@@ -114,7 +115,7 @@ impl Stage for M3c2Stage {
 
 /// Where the core points come from, as the M3C2 and outputs units' keys say it: a core-point
 /// unit's (its key is a dependency's), or each M3C2 unit's own thinning of the before survey.
-pub fn cores_key(core_unit: Option<usize>) -> &'static str {
+pub(crate) fn cores_key(core_unit: Option<usize>) -> &'static str {
     match core_unit {
         Some(_) => "core-point unit",
         None => "thinned C1",
@@ -302,7 +303,7 @@ fn gather_along(
 /// back bit for bit stays f64 (user core points, an aligned frame), so the results read back
 /// are the same either way. 6 bytes less a core point than f64 coordinates (of ≈ 61; issue 46,
 /// the peak disk of a run holds every tile's results).
-pub fn chunk_options(ctx: &Ctx) -> Result<talus_tiling::WriteOptions> {
+pub(crate) fn chunk_options(ctx: &Ctx) -> Result<talus_tiling::WriteOptions> {
     Ok(super::tiling::write_options(ctx.quantum(0)?))
 }
 
@@ -325,7 +326,7 @@ fn write_chunks(
 }
 
 /// Result chunks encoded as chunk files' bytes, in parallel.
-pub fn encode_chunks<C: AsRef<[KeyedResult]> + Sync>(
+pub(crate) fn encode_chunks<C: AsRef<[KeyedResult]> + Sync>(
     chunks: &[C],
     opts: &talus_tiling::WriteOptions,
 ) -> Result<Vec<Vec<u8>>> {
@@ -388,7 +389,7 @@ fn to_columns(rs: &[KeyedResult]) -> TileColumns {
 }
 
 /// Read one result chunk back.
-pub fn read_chunk(path: &std::path::Path) -> Result<Vec<KeyedResult>> {
+pub(crate) fn read_chunk(path: &std::path::Path) -> Result<Vec<KeyedResult>> {
     let c = talus_tiling::read_tile(path).map_err(|e| super::damaged(path, e))?;
     let missing = |name: &str| Error::Damaged {
         path: path.to_path_buf(),
@@ -448,7 +449,7 @@ pub fn read_chunk(path: &std::path::Path) -> Result<Vec<KeyedResult>> {
 }
 
 /// The chunk files of a pair's M3C2 units, per tile in grid order.
-pub fn pair_chunks(ctx: &Ctx, pair: usize) -> Result<Vec<Vec<PathBuf>>> {
+pub(crate) fn pair_chunks(ctx: &Ctx, pair: usize) -> Result<Vec<Vec<PathBuf>>> {
     match ctx
         .plan
         .find(&Spec::pair(super::merged::MergedStage::KIND, pair))
@@ -469,7 +470,7 @@ pub fn pair_chunks(ctx: &Ctx, pair: usize) -> Result<Vec<Vec<PathBuf>>> {
 }
 
 /// The chunk files of each of pair `pair`'s M3C2 units, in grid order.
-pub fn tile_chunks(ctx: &Ctx, pair: usize) -> Result<Vec<Vec<PathBuf>>> {
+pub(crate) fn tile_chunks(ctx: &Ctx, pair: usize) -> Result<Vec<Vec<PathBuf>>> {
     let grid = ctx.plan.layout.grid()?;
     grid.tiles()
         .map(|t| {
@@ -481,7 +482,7 @@ pub fn tile_chunks(ctx: &Ctx, pair: usize) -> Result<Vec<Vec<PathBuf>>> {
 }
 
 /// How many core points a pair's M3C2 units hold, from their records.
-pub fn pair_count(ctx: &Ctx, pair: usize) -> Result<u64> {
+pub(crate) fn pair_count(ctx: &Ctx, pair: usize) -> Result<u64> {
     let grid = ctx.plan.layout.grid()?;
     let mut n = 0;
     for t in grid.tiles() {

@@ -19,7 +19,7 @@ use crate::units::m3c2::Merged;
 /// f64 took 39 bytes a core point in the LAZ (the 10M-point pair's 2.65M core points: 104 MB),
 /// f32 takes 24; scaled integers would take 11, but have no NaN (a no-data value laspy and
 /// PDAL hand out as a number).
-pub const M3C2_DIMS: &[ExtraDim] = &[
+pub(crate) const M3C2_DIMS: &[ExtraDim] = &[
     ExtraDim {
         name: Cow::Borrowed("m3c2_distance"),
         ty: ExtraType::F32,
@@ -94,16 +94,16 @@ pub const M3C2_DIMS: &[ExtraDim] = &[
 
 /// Counts of what m3c2.laz holds.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct Written {
-    pub core_points: u64,
-    pub computed: u64,
-    pub significant: u64,
+pub(crate) struct Written {
+    pub(crate) core_points: u64,
+    pub(crate) computed: u64,
+    pub(crate) significant: u64,
     /// Distances found by the walk beyond the cylinder's half-length ([`Reach::Extended`]).
-    pub extended: u64,
+    pub(crate) extended: u64,
     /// Core points whose other epoch lies beyond the user's half-length ([`Reach::Beyond`]).
-    pub beyond_reach: u64,
+    pub(crate) beyond_reach: u64,
     /// Core points whose normal's sign the data does not decide (`CoreResult::sign_known`).
-    pub sign_unknown: u64,
+    pub(crate) sign_unknown: u64,
 }
 
 /// Write m3c2.laz into `out` from the pair's `total` results in key order (`results`), with the
@@ -112,7 +112,7 @@ pub struct Written {
 /// result in the same order (the viewer's terrain sample rides on this pass instead of merging
 /// the results again).
 #[allow(clippy::too_many_arguments)]
-pub fn write_m3c2_laz(
+pub(crate) fn write_m3c2_laz(
     out: &mut UnitWriter,
     results: &mut Merged,
     total: u64,

@@ -4,10 +4,10 @@
 //! stay in the pair's points unit ([`points`]) and the meshes in the volumes units that wrote
 //! them, and are published from there (the record's `publish` list says which file goes where).
 
-pub mod laz;
-pub mod points;
-pub mod tables;
-pub mod view;
+pub(crate) mod laz;
+pub(crate) mod points;
+pub(crate) mod tables;
+pub(crate) mod view;
 
 use rustc_hash::FxHashMap as HashMap;
 use std::path::PathBuf;
@@ -31,11 +31,11 @@ use crate::volume::uncertainty::VolumeUncertainty;
 use points::{PointsMeta, PointsStage};
 
 /// The file that completes a published set (written last, removed first).
-pub const MARKER: &str = "summary.json";
+pub(crate) const MARKER: &str = "summary.json";
 
 /// The names of DIR entries talus writes (so that publishing may replace them; anything else in
 /// DIR is the user's).
-pub fn is_output(name: &str) -> bool {
+pub(crate) fn is_output(name: &str) -> bool {
     matches!(
         name,
         "m3c2.laz"
@@ -52,29 +52,28 @@ pub fn is_output(name: &str) -> bool {
 
 /// One event with its volume, as the outputs report it.
 #[derive(Debug, Clone)]
-pub struct EventRecord {
-    pub event: Event,
-    pub volume_m3: Option<f64>,
-    pub volume_uncertainty_m3: Option<f64>,
-    pub uncertainty: Option<VolumeUncertainty>,
+pub(crate) struct EventRecord {
+    pub(crate) event: Event,
+    pub(crate) volume_m3: Option<f64>,
+    pub(crate) volume_uncertainty_m3: Option<f64>,
+    pub(crate) uncertainty: Option<VolumeUncertainty>,
     /// |V| exceeds its 95 % half-width.
-    pub significant: bool,
-    pub gain_m3: Option<f64>,
-    pub loss_m3: Option<f64>,
-    pub footprint_area_m2: Option<f64>,
-    pub region_area_m2: Option<f64>,
-    pub coverage: Option<f64>,
-    pub volume_note: Option<String>,
+    pub(crate) significant: bool,
+    pub(crate) gain_m3: Option<f64>,
+    pub(crate) loss_m3: Option<f64>,
+    pub(crate) footprint_area_m2: Option<f64>,
+    pub(crate) region_area_m2: Option<f64>,
+    pub(crate) coverage: Option<f64>,
+    pub(crate) volume_note: Option<String>,
     /// The volume covers the whole change (see `units::volumes::Measured::complete`).
-    pub complete: bool,
-    pub region: Vec<Vec<Vec<crate::io::Point3>>>,
-    pub meshes: bool,
+    pub(crate) complete: bool,
+    pub(crate) region: Vec<Vec<Vec<crate::io::Point3>>>,
     /// The share of its core points that look like vegetation in either epoch.
-    pub vegetation_fraction: Option<f64>,
+    pub(crate) vegetation_fraction: Option<f64>,
     /// Most of its core points look like vegetation (`events::vegetation::MOST`).
-    pub vegetation: bool,
+    pub(crate) vegetation: bool,
     /// The data decides the event's sign (`units::volumes::sign_known`).
-    pub sign_known: bool,
+    pub(crate) sign_known: bool,
 }
 
 impl EventRecord {
@@ -109,7 +108,6 @@ impl EventRecord {
             volume_note: m.note,
             complete: m.complete,
             region: m.region,
-            meshes: m.meshes,
             sign_known: m.sign_known,
         }
     }
@@ -117,78 +115,78 @@ impl EventRecord {
 
 /// One input as summary.json reports it.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct InputSummary {
-    pub path: PathBuf,
-    pub format: String,
-    pub points: u64,
-    pub bounds: Bounds,
-    pub crs: String,
+pub(crate) struct InputSummary {
+    pub(crate) path: PathBuf,
+    pub(crate) format: String,
+    pub(crate) points: u64,
+    pub(crate) bounds: Bounds,
+    pub(crate) crs: String,
 }
 
 /// The work of one stage: its units and the seconds they took (summed over the units, in
 /// whichever processes ran them).
 #[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct StageTime {
-    pub stage: String,
-    pub units: usize,
-    pub seconds: f64,
+pub(crate) struct StageTime {
+    pub(crate) stage: String,
+    pub(crate) units: usize,
+    pub(crate) seconds: f64,
 }
 
 /// What summary.json holds.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Summary {
-    pub tool: String,
-    pub version: String,
-    pub inputs: Vec<InputSummary>,
-    pub core_points_file: Option<PathBuf>,
-    pub spacing: Spacing,
-    pub parameters: Params,
+    pub(crate) tool: String,
+    pub(crate) version: String,
+    pub(crate) inputs: Vec<InputSummary>,
+    pub(crate) core_points_file: Option<PathBuf>,
+    pub(crate) spacing: Spacing,
+    pub(crate) parameters: Params,
     /// Noise and registration error measured on the stable ground (None: too little of it).
-    pub stable: Option<Stable>,
+    pub(crate) stable: Option<Stable>,
     /// With `--stable`: what the user's areas held (points inside, with a distance) and whether
     /// the stable ground is theirs (else why not, and what was used instead).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub stable_areas: Option<crate::events::stable::AreasUse>,
-    pub tiles: usize,
-    pub tile_size: f64,
-    pub core_points: u64,
-    pub computed_points: u64,
-    pub significant_points: u64,
+    pub(crate) stable_areas: Option<crate::events::stable::AreasUse>,
+    pub(crate) tiles: usize,
+    pub(crate) tile_size: f64,
+    pub(crate) core_points: u64,
+    pub(crate) computed_points: u64,
+    pub(crate) significant_points: u64,
     /// Core points kept by the significance filter (|d| ≥ τ and significant).
-    pub kept_points: u64,
-    pub events: usize,
+    pub(crate) kept_points: u64,
+    pub(crate) events: usize,
     /// The events the totals count ([`Totals::counted`]) that gained, and that lost.
-    pub gain_events: usize,
-    pub loss_events: usize,
+    pub(crate) gain_events: usize,
+    pub(crate) loss_events: usize,
     /// Events whose |volume| exceeds its 95 % uncertainty (the others stay out of the totals).
-    pub significant_events: usize,
+    pub(crate) significant_events: usize,
     /// Events most of whose core points look like vegetation; with `--vegetation flag` or
     /// `remove` they stay out of the totals.
     #[serde(default)]
-    pub vegetation_events: usize,
+    pub(crate) vegetation_events: usize,
     /// Sum of the volumes of the gain events the totals count, m³.
-    pub total_gain_m3: f64,
+    pub(crate) total_gain_m3: f64,
     /// Sum of the volumes of the loss events they count, m³ (≤ 0).
-    pub total_loss_m3: f64,
+    pub(crate) total_loss_m3: f64,
     /// What the totals hold, and every event they leave out, by why.
-    pub totals: Totals,
+    pub(crate) totals: Totals,
     /// How far M3C2 looked for the other epoch (SPEC.md §1 "Change of any depth").
     #[serde(default)]
-    pub reach: ReachSummary,
+    pub(crate) reach: ReachSummary,
     /// The later survey's alignment onto the first (absent with `--align off`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub alignment: Option<AlignmentSummary>,
+    pub(crate) alignment: Option<AlignmentSummary>,
     /// The LAS classes compared and the points each survey left out by class.
     #[serde(default)]
-    pub classes: ClassesSummary,
+    pub(crate) classes: ClassesSummary,
     /// With `--vegetation remove`: the points judged vegetation-like and dropped before M3C2,
     /// before then after.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub vegetation_removed: Option<[u64; 2]>,
-    pub stages: Vec<StageTime>,
+    pub(crate) vegetation_removed: Option<[u64; 2]>,
+    pub(crate) stages: Vec<StageTime>,
     /// The run computed M3C2 alone (`--m3c2-only`): no events, no totals.
     #[serde(default)]
-    pub m3c2_only: bool,
+    pub(crate) m3c2_only: bool,
 }
 
 /// summary.json `totals`: what `total_gain_m3` and `total_loss_m3` sum and what they leave out.
@@ -197,27 +195,27 @@ pub struct Summary {
 /// volume is a bound (the change is at least that), reported apart; one whose sign the data
 /// cannot tell is reported by its size alone.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
-pub struct Totals {
+pub(crate) struct Totals {
     /// The rule, in words.
-    pub counted: String,
+    pub(crate) counted: String,
     /// Significant events of known sign whose volume covers part of their change only
     /// (`complete: false`): how many, and the least gain and loss they show (m³).
-    pub incomplete_events: usize,
-    pub incomplete_gain_at_least_m3: f64,
-    pub incomplete_loss_at_least_m3: f64,
+    pub(crate) incomplete_events: usize,
+    pub(crate) incomplete_gain_at_least_m3: f64,
+    pub(crate) incomplete_loss_at_least_m3: f64,
     /// Significant events whose sign the data does not decide (`sign_known: false`): how many
     /// and the sum of their |volumes| (m³).
-    pub sign_unknown_events: usize,
-    pub sign_unknown_abs_m3: f64,
+    pub(crate) sign_unknown_events: usize,
+    pub(crate) sign_unknown_abs_m3: f64,
     /// Events whose |volume| does not exceed its uncertainty.
-    pub not_significant_events: usize,
+    pub(crate) not_significant_events: usize,
     /// Vegetation events left out (`--vegetation flag` or `remove`).
-    pub vegetation_left_out: usize,
+    pub(crate) vegetation_left_out: usize,
 }
 
 /// Which of the totals an event falls in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Tally {
+pub(crate) enum Tally {
     Counted,
     Incomplete,
     SignUnknown,
@@ -227,7 +225,7 @@ pub enum Tally {
 
 impl EventRecord {
     /// Where the totals put this event, under vegetation mode `mode`.
-    pub fn tally(&self, mode: crate::params::Vegetation) -> Tally {
+    pub(crate) fn tally(&self, mode: crate::params::Vegetation) -> Tally {
         if !mode.counts(self.vegetation) {
             Tally::Vegetation
         } else if !self.significant {
@@ -245,7 +243,7 @@ impl EventRecord {
 impl Totals {
     /// The totals of `records` under vegetation mode `mode`: (gains counted, losses counted,
     /// the rest).
-    pub fn of(
+    pub(crate) fn of(
         records: &[EventRecord],
         mode: crate::params::Vegetation,
     ) -> ([f64; 2], [usize; 2], Totals) {
@@ -291,7 +289,7 @@ impl Totals {
 }
 
 /// A volume for the terminal: signed, three decimals, zero without a sign.
-pub fn volume_text(v: f64) -> String {
+pub(crate) fn volume_text(v: f64) -> String {
     if v == 0.0 {
         "0.000".into()
     } else {
@@ -301,35 +299,35 @@ pub fn volume_text(v: f64) -> String {
 
 /// summary.json `classes` (SPEC.md §4 "classification first").
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
-pub struct ClassesSummary {
+pub(crate) struct ClassesSummary {
     /// The classes compared: `all`, `all but 3,4,5,7,18` (the default), or the kept list.
-    pub used: String,
+    pub(crate) used: String,
     /// Per survey, before then after: its classes as read (null when none was read: text or
     /// PLY input, or `--classes all`).
-    pub surveys: Vec<Option<SurveyClasses>>,
+    pub(crate) surveys: Vec<Option<SurveyClasses>>,
 }
 
 /// One survey's classes.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct SurveyClasses {
+pub(crate) struct SurveyClasses {
     /// The points carry a classification (some class other than 0 and 1).
-    pub classified: bool,
+    pub(crate) classified: bool,
     /// Points left out, in all.
-    pub left_out: u64,
+    pub(crate) left_out: u64,
     /// Every class that occurred: its points, and how many were left out.
-    pub per_class: Vec<ClassRow>,
+    pub(crate) per_class: Vec<ClassRow>,
 }
 
 /// One class of a survey.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct ClassRow {
-    pub class: u8,
-    pub points: u64,
-    pub left_out: u64,
+pub(crate) struct ClassRow {
+    pub(crate) class: u8,
+    pub(crate) points: u64,
+    pub(crate) left_out: u64,
 }
 
 impl SurveyClasses {
-    pub fn of(c: &crate::io::classes::ClassCounts) -> SurveyClasses {
+    pub(crate) fn of(c: &crate::io::classes::ClassCounts) -> SurveyClasses {
         SurveyClasses {
             classified: c.classified(),
             left_out: c.left_out(),
@@ -349,42 +347,42 @@ impl SurveyClasses {
 /// summary.json `alignment` (SPEC.md §1): the rigid transform fitted on the stable ground, and
 /// whether (and why) it was applied.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct AlignmentSummary {
-    pub applied: bool,
+pub(crate) struct AlignmentSummary {
+    pub(crate) applied: bool,
     /// 4×4, row-major: maps the later survey's coordinates onto the earlier's.
-    pub matrix: [[f64; 4]; 4],
+    pub(crate) matrix: [[f64; 4]; 4],
     /// The later survey's misregistration: translation (m) and rotation vector (rad) about
     /// `origin`, with their standard errors.
-    pub translation: [f64; 3],
+    pub(crate) translation: [f64; 3],
     /// Null for a component the stable ground does not constrain (left at zero).
-    pub translation_sd: [Option<f64>; 3],
-    pub rotation: [f64; 3],
-    pub rotation_sd: [Option<f64>; 3],
-    pub rotation_deg: f64,
-    pub origin: [f64; 3],
+    pub(crate) translation_sd: [Option<f64>; 3],
+    pub(crate) rotation: [f64; 3],
+    pub(crate) rotation_sd: [Option<f64>; 3],
+    pub(crate) rotation_deg: f64,
+    pub(crate) origin: [f64; 3],
     /// Directions (of 6) the stable ground constrains.
-    pub constrained: usize,
-    pub stable_points: usize,
+    pub(crate) constrained: usize,
+    pub(crate) stable_points: usize,
     /// Robust standard deviation of the stable ground's distances after the fit.
-    pub residual_m: f64,
+    pub(crate) residual_m: f64,
     /// The least share, over the directions fitted, of what the core points tell of that
     /// direction that comes from ground the fit leaves at rest (applied only from 0.5).
-    pub at_rest_share: f64,
+    pub(crate) at_rest_share: f64,
     /// The share of its predicted change the held-out blocks of stable ground confirm (applied
     /// only from 0.5; null where too little could be held out).
-    pub confirmed_share: Option<f64>,
+    pub(crate) confirmed_share: Option<f64>,
     /// The largest displacement it gives a point of the stable ground (m).
-    pub largest_shift_m: f64,
+    pub(crate) largest_shift_m: f64,
     /// Only the vertical was fitted: the stable ground does not see both tilts.
-    pub vertical_only: bool,
+    pub(crate) vertical_only: bool,
     /// The surveys the transform passes through, from this one to the first (0): `[k, 0]` for
     /// a fit onto the first, longer for a chain through predecessors.
-    pub route: Vec<usize>,
-    pub reason: String,
+    pub(crate) route: Vec<usize>,
+    pub(crate) reason: String,
 }
 
 impl AlignmentSummary {
-    pub fn of(r: &crate::events::chain::Route) -> AlignmentSummary {
+    pub(crate) fn of(r: &crate::events::chain::Route) -> AlignmentSummary {
         let a = &r.alignment;
         AlignmentSummary {
             applied: a.applied,
@@ -411,19 +409,19 @@ impl AlignmentSummary {
 /// summary.json `reach`: the rule M3C2 followed where a cylinder held one epoch only, and what it
 /// found.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
-pub struct ReachSummary {
+pub(crate) struct ReachSummary {
     /// "walk" (derived half-length: a search window, the other epoch sought on along the normal
     /// and measured) or "flag" (the user's half-length: what lies beyond it is flagged, not
     /// measured).
-    pub rule: String,
+    pub(crate) rule: String,
     /// The rule in words.
-    pub description: String,
+    pub(crate) description: String,
     /// Core points whose distance the walk measured beyond the half-length.
-    pub extended_points: u64,
+    pub(crate) extended_points: u64,
     /// Core points with the other epoch beyond the user's half-length (`m3c2_beyond_reach`).
-    pub beyond_reach_points: u64,
+    pub(crate) beyond_reach_points: u64,
     /// Events whose volume does not cover their whole change (`complete: false`).
-    pub incomplete_events: usize,
+    pub(crate) incomplete_events: usize,
 }
 
 impl ReachSummary {
@@ -457,7 +455,7 @@ impl ReachSummary {
 impl Summary {
     /// One line for the terminal: what was measured, what the totals count and what they
     /// leave out.
-    pub fn one_line(&self) -> String {
+    pub(crate) fn one_line(&self) -> String {
         let points = format!(
             "talus: {} core points ({} with a distance, {} significant)",
             self.core_points, self.computed_points, self.significant_points
@@ -617,15 +615,15 @@ impl Summary {
 /// A file the executor publishes: from unit `unit` (its name and kind), `file`, as `name` in DIR.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Publish {
-    pub kind: String,
-    pub unit: String,
-    pub file: String,
-    pub name: String,
+    pub(crate) kind: String,
+    pub(crate) unit: String,
+    pub(crate) file: String,
+    pub(crate) name: String,
 }
 
 impl Publish {
     /// File `file` of the plan's unit `unit`, published as `name`.
-    pub fn of(plan: &crate::plan::Plan, unit: usize, file: &str, name: String) -> Publish {
+    pub(crate) fn of(plan: &crate::plan::Plan, unit: usize, file: &str, name: String) -> Publish {
         let u = &plan.units[unit];
         Publish {
             kind: u.kind().to_string(),
@@ -640,18 +638,18 @@ impl Publish {
 /// and the terrain sample are the points unit's, `points::need`). Measured: the process's peak
 /// while it ran 38–43 MiB on the 120M-point pair (1,028 events, the process's base included);
 /// reserved as what the unit reserved before m3c2.laz moved out, which the smallest budget holds.
-pub const NEED: u64 = points::FIXED;
+pub(crate) const NEED: u64 = points::FIXED;
 
 /// A pair's outputs, ready to publish.
-pub struct OutputsStage;
+pub(crate) struct OutputsStage;
 
 /// What an outputs unit records.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct OutputsMeta {
+pub(crate) struct OutputsMeta {
     /// The files to publish into DIR.
-    pub publish: Vec<Publish>,
+    pub(crate) publish: Vec<Publish>,
     /// Core points written to m3c2.laz.
-    pub core_points: u64,
+    pub(crate) core_points: u64,
 }
 
 impl Stage for OutputsStage {

@@ -25,30 +25,30 @@ use crate::units::Ctx;
 /// compressor's chunks, the viewer's terrain sample (at most 2M points, 16 B each), the kept core
 /// points' frames (measured with the outputs it was part of: 110–125 MiB on the 5.2M-point cliff
 /// with 15 tiles, of which the merge's about 18).
-pub const FIXED: u64 = 112 << 20;
+pub(crate) const FIXED: u64 = 112 << 20;
 
 /// Resident bytes of a points unit whose merge holds `inputs` inputs
 /// (`merged::merge_inputs`).
-pub fn need(inputs: usize) -> u64 {
+pub(crate) fn need(inputs: usize) -> u64 {
     FIXED + crate::units::m3c2::merge_need(inputs)
 }
 
 /// A pair's m3c2.laz and terrain sample.
-pub struct PointsStage;
+pub(crate) struct PointsStage;
 
 /// What a points unit records.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct PointsMeta {
+pub(crate) struct PointsMeta {
     /// What m3c2.laz holds.
-    pub written: Written,
+    pub(crate) written: Written,
     /// The terrain sample in terrain.bin.
-    pub terrain: Terrain,
+    pub(crate) terrain: Terrain,
     /// Core points in the pair's events' kept set (the significance filter's survivors).
-    pub kept: u64,
+    pub(crate) kept: u64,
 }
 
 /// The files of a points unit.
-pub const FILES: [&str; 2] = ["m3c2.laz", "terrain.bin"];
+pub(crate) const FILES: [&str; 2] = ["m3c2.laz", "terrain.bin"];
 
 impl Stage for PointsStage {
     const KIND: &'static str = "points";

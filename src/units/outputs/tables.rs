@@ -24,60 +24,60 @@ fn nan_if_null<'de, D: Deserializer<'de>>(d: D) -> std::result::Result<f64, D::E
 
 /// The parts of an event's 95 % volume interval (SPEC.md §1).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct UncertaintyParts {
+pub(crate) struct UncertaintyParts {
     #[serde(deserialize_with = "nan_if_null")]
-    pub random: f64,
+    pub(crate) random: f64,
     #[serde(deserialize_with = "nan_if_null")]
-    pub correlated: f64,
+    pub(crate) correlated: f64,
     #[serde(deserialize_with = "nan_if_null")]
-    pub systematic: f64,
+    pub(crate) systematic: f64,
     #[serde(deserialize_with = "nan_if_null")]
-    pub sampling: f64,
+    pub(crate) sampling: f64,
 }
 
 /// The properties of one event: what events.geojson holds (events.csv the same, flattened), and
 /// what a campaign reads back from its pairs. Written through a JSON value, so the keys come
 /// out in name order whatever the order here.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct EventProperties {
-    pub id: u32,
-    pub kind: Kind,
-    pub volume_m3: Option<f64>,
-    pub volume_uncertainty_m3: Option<f64>,
+pub(crate) struct EventProperties {
+    pub(crate) id: u32,
+    pub(crate) kind: Kind,
+    pub(crate) volume_m3: Option<f64>,
+    pub(crate) volume_uncertainty_m3: Option<f64>,
     /// |V| exceeds its 95 % half-width.
-    pub significant: bool,
-    pub uncertainty_parts_m3: Option<UncertaintyParts>,
-    pub gain_m3: Option<f64>,
-    pub loss_m3: Option<f64>,
-    pub n_points: usize,
+    pub(crate) significant: bool,
+    pub(crate) uncertainty_parts_m3: Option<UncertaintyParts>,
+    pub(crate) gain_m3: Option<f64>,
+    pub(crate) loss_m3: Option<f64>,
+    pub(crate) n_points: usize,
     #[serde(deserialize_with = "nan_if_null")]
-    pub area_m2: f64,
-    pub footprint_area_m2: Option<f64>,
-    pub region_area_m2: Option<f64>,
-    pub coverage: Option<f64>,
+    pub(crate) area_m2: f64,
+    pub(crate) footprint_area_m2: Option<f64>,
+    pub(crate) region_area_m2: Option<f64>,
+    pub(crate) coverage: Option<f64>,
     #[serde(deserialize_with = "nan_if_null")]
-    pub mean_distance_m: f64,
+    pub(crate) mean_distance_m: f64,
     #[serde(deserialize_with = "nan_if_null")]
-    pub max_abs_distance_m: f64,
+    pub(crate) max_abs_distance_m: f64,
     #[serde(deserialize_with = "nan_if_null")]
-    pub mean_lod95_m: f64,
-    pub obb: Obb,
+    pub(crate) mean_lod95_m: f64,
+    pub(crate) obb: Obb,
     /// False where a limit cut the event's measurement short (`volume_note` says which).
-    pub complete: bool,
-    pub volume_note: Option<String>,
+    pub(crate) complete: bool,
+    pub(crate) volume_note: Option<String>,
     /// The share of its core points that look like vegetation in either epoch (null: not
     /// judged, the volume came from the user's surfaces). Absent from older results.
     #[serde(default)]
-    pub vegetation_fraction: Option<f64>,
+    pub(crate) vegetation_fraction: Option<f64>,
     /// Most of its core points look like vegetation: listed, but left out of totals, tracks and
     /// the magnitude–frequency fit unless `--vegetation keep`.
     #[serde(default)]
-    pub vegetation: bool,
+    pub(crate) vegetation: bool,
     /// The data decides which side of the surface is out over most of it (false: a face near
     /// vertical scanned alone, its gain and loss may be the reverse; `complete` is false and
     /// `volume_note` says so). Absent from older results: true.
     #[serde(default = "known")]
-    pub sign_known: bool,
+    pub(crate) sign_known: bool,
 }
 
 fn known() -> bool {
@@ -86,7 +86,7 @@ fn known() -> bool {
 
 impl EventProperties {
     /// The properties of event `r`.
-    pub fn of(r: &EventRecord) -> EventProperties {
+    pub(crate) fn of(r: &EventRecord) -> EventProperties {
         let e = &r.event;
         EventProperties {
             id: e.id,
@@ -123,44 +123,44 @@ impl EventProperties {
 /// A point's geometry.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "type", content = "coordinates")]
-pub enum PointGeometry {
+pub(crate) enum PointGeometry {
     Point(Point3),
 }
 
 /// GeoJSON's `"type": "Feature"` of a feature.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-pub enum Feature {
+pub(crate) enum Feature {
     #[default]
     Feature,
 }
 
 /// GeoJSON's `"type": "FeatureCollection"` of a collection.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-pub enum Collection {
+pub(crate) enum Collection {
     #[default]
     FeatureCollection,
 }
 
 /// An event of events.geojson.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct EventFeature {
+pub(crate) struct EventFeature {
     #[serde(rename = "type")]
-    pub kind: Feature,
-    pub geometry: PointGeometry,
-    pub properties: EventProperties,
+    pub(crate) kind: Feature,
+    pub(crate) geometry: PointGeometry,
+    pub(crate) properties: EventProperties,
 }
 
 /// An event's region outline: one polygon, or several.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "type", content = "coordinates")]
-pub enum RegionGeometry {
+pub(crate) enum RegionGeometry {
     Polygon(Vec<Vec<Point3>>),
     MultiPolygon(Vec<Vec<Vec<Point3>>>),
 }
 
 impl RegionGeometry {
     /// Its polygons.
-    pub fn polygons(self) -> Vec<Vec<Vec<Point3>>> {
+    pub(crate) fn polygons(self) -> Vec<Vec<Vec<Point3>>> {
         match self {
             RegionGeometry::Polygon(p) => vec![p],
             RegionGeometry::MultiPolygon(ps) => ps,
@@ -170,35 +170,35 @@ impl RegionGeometry {
 
 /// What event_regions.geojson says of an event beside its outline.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct RegionProperties {
-    pub id: u32,
-    pub kind: Kind,
-    pub volume_m3: Option<f64>,
-    pub region_area_m2: Option<f64>,
-    pub coverage: Option<f64>,
+pub(crate) struct RegionProperties {
+    pub(crate) id: u32,
+    pub(crate) kind: Kind,
+    pub(crate) volume_m3: Option<f64>,
+    pub(crate) region_area_m2: Option<f64>,
+    pub(crate) coverage: Option<f64>,
 }
 
 /// An event's region (no geometry for an event without a volume).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct RegionFeature {
+pub(crate) struct RegionFeature {
     #[serde(rename = "type")]
-    pub kind: Feature,
-    pub geometry: Option<RegionGeometry>,
-    pub properties: RegionProperties,
+    pub(crate) kind: Feature,
+    pub(crate) geometry: Option<RegionGeometry>,
+    pub(crate) properties: RegionProperties,
 }
 
 /// A GeoJSON FeatureCollection of features `F`, with the CRS's name.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct FeatureCollection<F> {
+pub(crate) struct FeatureCollection<F> {
     #[serde(rename = "type")]
-    pub kind: Collection,
-    pub crs_name: String,
-    pub features: Vec<F>,
+    pub(crate) kind: Collection,
+    pub(crate) crs_name: String,
+    pub(crate) features: Vec<F>,
 }
 
 impl<F: Serialize> FeatureCollection<F> {
     /// The collection of `features`.
-    pub fn new(crs_name: String, features: Vec<F>) -> FeatureCollection<F> {
+    pub(crate) fn new(crs_name: String, features: Vec<F>) -> FeatureCollection<F> {
         FeatureCollection {
             kind: Collection::FeatureCollection,
             crs_name,
@@ -207,13 +207,13 @@ impl<F: Serialize> FeatureCollection<F> {
     }
 
     /// As a JSON value: keys in name order, as every talus JSON file writes them.
-    pub fn to_value(&self) -> Result<Value> {
+    pub(crate) fn to_value(&self) -> Result<Value> {
         serde_json::to_value(self).map_err(|e| Error::Internal(e.to_string()))
     }
 }
 
 /// Is `name` a mesh file talus writes (`event_NNNN_before.ply` / `event_NNNN_after.ply`)?
-pub fn is_event_mesh(name: &str) -> bool {
+pub(crate) fn is_event_mesh(name: &str) -> bool {
     let Some(rest) = name.strip_prefix("event_") else {
         return false;
     };
@@ -226,7 +226,7 @@ pub fn is_event_mesh(name: &str) -> bool {
 /// Write event_regions.geojson: per event the outline of the region its volume was integrated
 /// over (Polygon or MultiPolygon, 3-D coordinates in the footprint plane; null geometry for an
 /// event without a volume).
-pub fn write_regions(out: &mut UnitWriter, events: &[EventRecord], crs: &Crs) -> Result<()> {
+pub(crate) fn write_regions(out: &mut UnitWriter, events: &[EventRecord], crs: &Crs) -> Result<()> {
     let features: Vec<RegionFeature> = events
         .iter()
         .map(|r| RegionFeature {
@@ -251,7 +251,7 @@ pub fn write_regions(out: &mut UnitWriter, events: &[EventRecord], crs: &Crs) ->
 }
 
 /// Write events.geojson and events.csv.
-pub fn write_tables(out: &mut UnitWriter, events: &[EventRecord], crs: &Crs) -> Result<()> {
+pub(crate) fn write_tables(out: &mut UnitWriter, events: &[EventRecord], crs: &Crs) -> Result<()> {
     let features: Vec<EventFeature> = events
         .iter()
         .map(|r| EventFeature {
@@ -311,7 +311,7 @@ pub fn write_tables(out: &mut UnitWriter, events: &[EventRecord], crs: &Crs) -> 
 }
 
 /// A CSV field: quoted (quotes doubled) when it holds a comma, a quote or a line break.
-pub fn csv_text(s: &str) -> String {
+pub(crate) fn csv_text(s: &str) -> String {
     if s.contains([',', '"', '\n', '\r']) {
         format!("\"{}\"", s.replace('"', "\"\""))
     } else {

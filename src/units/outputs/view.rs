@@ -11,13 +11,13 @@ use crate::store::UnitWriter;
 use crate::units::{write_bytes, write_streamed};
 
 /// Upper bound on the terrain points the viewer gets.
-pub const MAX_TERRAIN_POINTS: u64 = 2_000_000;
+pub(crate) const MAX_TERRAIN_POINTS: u64 = 2_000_000;
 
 /// Mesh files of one event, relative to DIR.
 #[derive(Debug, Clone, Serialize)]
-pub struct EventMeshes {
-    pub before: String,
-    pub after: String,
+pub(crate) struct EventMeshes {
+    pub(crate) before: String,
+    pub(crate) after: String,
 }
 
 #[derive(Serialize)]
@@ -36,13 +36,13 @@ struct ViewJson<'a> {
 /// What a campaign reads of a pair's view.json (written as `ViewJson`): the pair's colour range,
 /// from which the campaign's one scale for every pair is drawn.
 #[derive(Debug, Clone, Deserialize)]
-pub struct ViewRange {
-    pub distance_range: [f64; 2],
+pub(crate) struct ViewRange {
+    pub(crate) distance_range: [f64; 2],
 }
 
 /// The terrain the viewer gets: every `stride`-th core point of the canonical order, collected
 /// while m3c2.laz is written (one pass over the results for both).
-pub struct TerrainSample {
+pub(crate) struct TerrainSample {
     stride: u64,
     origin: Point3,
     seen: u64,
@@ -56,7 +56,7 @@ impl TerrainSample {
     /// A sample of at most [`MAX_TERRAIN_POINTS`] of `total` core points, relative to `origin`.
     /// Its columns are allocated whole, at the size the stride gives: grown by doubling they
     /// would hold up to twice that, and three times while a doubling copies.
-    pub fn new(total: u64, origin: Point3) -> Self {
+    pub(crate) fn new(total: u64, origin: Point3) -> Self {
         let stride = total.div_ceil(MAX_TERRAIN_POINTS).max(1);
         let n = total.div_ceil(stride) as usize;
         TerrainSample {
@@ -70,7 +70,7 @@ impl TerrainSample {
     }
 
     /// The next core point in canonical order.
-    pub fn push(&mut self, k: &KeyedResult) {
+    pub(crate) fn push(&mut self, k: &KeyedResult) {
         if self.seen.is_multiple_of(self.stride) {
             let o = self.origin;
             self.pos
@@ -85,7 +85,7 @@ impl TerrainSample {
     }
 
     /// Write terrain.bin; what view.json says of it.
-    pub fn write(self, out: &mut UnitWriter) -> Result<Terrain> {
+    pub(crate) fn write(self, out: &mut UnitWriter) -> Result<Terrain> {
         let TerrainSample {
             origin,
             pos,
@@ -133,16 +133,16 @@ impl TerrainSample {
 
 /// What view.json says of terrain.bin.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct Terrain {
+pub(crate) struct Terrain {
     /// The local origin the float32 offsets are from.
-    pub origin: Point3,
-    pub points: usize,
+    pub(crate) origin: Point3,
+    pub(crate) points: usize,
     /// The 2nd and 98th percentiles of the sample's distances (the viewer's colour range).
-    pub distance_range: [f64; 2],
+    pub(crate) distance_range: [f64; 2],
     /// The direction the surface faces: the mean of its oriented normals (of known sign),
     /// normalised; up where there is none. The viewer looks at a steep face along it.
     #[serde(default = "up")]
-    pub facing: Point3,
+    pub(crate) facing: Point3,
 }
 
 fn up() -> Point3 {
@@ -151,7 +151,7 @@ fn up() -> Point3 {
 
 /// Write view.json: the terrain sample `terrain` (published beside it as terrain.bin) and the
 /// events' meshes.
-pub fn write_view(
+pub(crate) fn write_view(
     out: &mut UnitWriter,
     crs: &Crs,
     terrain: &Terrain,
