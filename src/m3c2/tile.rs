@@ -29,6 +29,21 @@ impl EpochPoints<'_> {
     pub(crate) fn point(&self, i: usize) -> Point3 {
         [self.x[i], self.y[i], self.z[i]]
     }
+
+    /// The core points the tile owns ([`core_points::thin`] on the grid anchored at `anchor`
+    /// with cells of `core_spacing`), with their cell keys.
+    pub(crate) fn core_points(&self, anchor: &Point3, core_spacing: f64) -> Vec<(u64, Point3)> {
+        core_points::thin(
+            self.len(),
+            |i| self.point(i),
+            anchor,
+            core_spacing,
+            |i| self.owned[i],
+        )
+        .into_iter()
+        .map(|(k, i)| (k, self.point(i)))
+        .collect()
+    }
 }
 
 /// One core point's result with its global sort key.
@@ -61,16 +76,7 @@ pub fn compute(
     let (b, a) = rayon::join(|| index(before), || index(after));
     let keyed: Vec<(u64, Point3)> = match cores {
         Some(c) => c.to_vec(),
-        None => core_points::thin(
-            before.len(),
-            |i| before.point(i),
-            &anchor,
-            core_spacing,
-            |i| before.owned[i],
-        )
-        .into_iter()
-        .map(|(k, i)| (k, before.point(i)))
-        .collect(),
+        None => before.core_points(&anchor, core_spacing),
     };
     if keyed.is_empty() {
         return Vec::new();

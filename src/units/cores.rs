@@ -197,16 +197,9 @@ fn thin(ctx: &Ctx, survey: usize, out: &mut UnitWriter) -> Result<CoresMeta> {
             &format!("thinning tile {} ({count} points)", id.name()),
         )?;
         let t = read_tile(ctx, tiling, id)?;
-        let pts: Vec<(u64, Point3)> = crate::m3c2::core_points::thin(
-            t.len(),
-            |i| t.point(i),
-            &plan.layout.anchor,
-            plan.layout.core_spacing,
-            |i| t.owned[i],
-        )
-        .into_iter()
-        .map(|(k, i)| (k, t.point(i)))
-        .collect();
+        let pts = t
+            .epoch()
+            .core_points(&plan.layout.anchor, plan.layout.core_spacing);
         n += pts.len() as u64;
         write(out, id, &pts)?;
         (ctx.progress)(t.owned.iter().filter(|&&o| o).count() as u64);

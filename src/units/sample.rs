@@ -286,17 +286,12 @@ fn picked(
     plan: &crate::plan::Plan,
 ) -> Vec<(u64, Point3)> {
     match picks {
-        Picks::Cores(n) => crate::m3c2::core_points::thin(
-            before.len(),
-            |i| before.point(i),
-            &plan.layout.anchor,
-            plan.layout.core_spacing,
-            |i| before.owned[i],
-        )
-        .into_iter()
-        .map(|(k, i)| (k, before.point(i)))
-        .filter(|(k, p)| region.contains(p) && Areas::takes(*k, n))
-        .collect(),
+        Picks::Cores(n) => before
+            .epoch()
+            .core_points(&plan.layout.anchor, plan.layout.core_spacing)
+            .into_iter()
+            .filter(|(k, p)| region.contains(p) && Areas::takes(*k, n))
+            .collect(),
         Picks::Points(n) => {
             let mut c: Vec<(u64, Point3)> = (0..before.len())
                 .filter(|&i| before.owned[i])
