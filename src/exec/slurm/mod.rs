@@ -82,11 +82,6 @@ pub(crate) fn stage_order() -> impl Iterator<Item = &'static dyn Registered> {
     registry().stages().iter().copied()
 }
 
-/// The rank of a store kind in pipeline order.
-pub(crate) fn rank(kind: &str) -> Option<usize> {
-    registry().rank(kind)
-}
-
 /// The stages of `plan` whose units are not all done (`done[i]`): for each, its units not done
 /// in tasks of `tiles_per_task` (tile stages) or one (the others), at most [`MAX_TASKS`] tasks
 /// (more units per task when there are more). An error if a unit depends on a unit of its own or
@@ -223,10 +218,7 @@ pub(crate) fn check_idle(store: &Store) -> Result<()> {
     }
     if active.is_empty() {
         let ended = |c: &crate::store::ClaimInfo| {
-            let task = c.label.strip_prefix("slurm ").unwrap_or_default();
-            task.split('_')
-                .next()
-                .is_some_and(|job| jobs.ids.iter().any(|id| id == job))
+            task::array_job_of(&c.label).is_some_and(|job| jobs.ids.iter().any(|id| id == job))
         };
         let dropped = store.drop_claims(ended)?;
         if dropped > 0 {

@@ -11,7 +11,7 @@
 
 use std::fmt::Write as _;
 
-use super::{rank, stage_order};
+use super::stage_order;
 use crate::error::{Error, Result};
 use crate::plan::Plan;
 use crate::store::Store;
@@ -58,11 +58,10 @@ pub(crate) fn report(
     let plan = Plan::load(&store.plan_path())?;
     let mut stages: Vec<StageWork> = Vec::new();
     let mut secs = vec![0.0; plan.units.len()];
+    let ranks = crate::units::stage::check_plan(&plan)?;
     for (r, stage) in stage_order().enumerate() {
         let kind = stage.kind();
-        let idx: Vec<usize> = (0..plan.units.len())
-            .filter(|&i| rank(plan.units[i].kind()) == Some(r))
-            .collect();
+        let idx: Vec<usize> = (0..plan.units.len()).filter(|&i| ranks[i] == r).collect();
         if idx.is_empty() {
             continue;
         }

@@ -104,6 +104,17 @@ pub(crate) fn run(dir: &Path, number: u32, stage: &str, task: Option<usize>) -> 
     Ok(())
 }
 
+/// The label a Slurm task claims its units under: `slurm <array job>_<task>`, the same in every
+/// attempt of the task (`Store::claim_attempt`).
+fn claim_label(task_id: &str) -> String {
+    format!("slurm {task_id}")
+}
+
+/// The array job of a claim label a Slurm task wrote ([`claim_label`]), if it is one.
+pub(crate) fn array_job_of(label: &str) -> Option<&str> {
+    label.strip_prefix("slurm ")?.split('_').next()
+}
+
 /// Execute the units `names` of `plan`; how many this task computed.
 fn units(store: &Store, plan: &Plan, names: &[String], task_id: &str) -> Result<usize> {
     let idx: Vec<usize> = names
@@ -119,7 +130,7 @@ fn units(store: &Store, plan: &Plan, names: &[String], task_id: &str) -> Result<
         .num_threads(threads())
         .build()
         .map_err(|e| Error::Internal(format!("thread pool: {e}")))?;
-    let label = format!("slurm {task_id}");
+    let label = claim_label(task_id);
     // Slurm counts a task's requeues (after its node failed, or by hand); the first run has none.
     let attempt = std::env::var("SLURM_RESTART_COUNT")
         .ok()
@@ -148,4 +159,14 @@ fn publish(store: &Store, plan: &Plan) -> Result<()> {
     store.recover(&ours)?;
     crate::exec::publish::publish_and_gc(store, plan, &ours)?;
     lock.release()
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn a_claim_label_names_its_array_job() {
+        let label = super::claim_label("518_7");
+        assert_eq!(super::array_job_of(&label), Some("518"));
+        assert_eq!(super::array_job_of("thread 3"), None);
+    }
 }
