@@ -78,7 +78,6 @@ fn renewer() {
 pub struct Claim {
     path: PathBuf,
     info: ClaimInfo,
-    released: bool,
 }
 
 impl Store {
@@ -143,7 +142,6 @@ impl Store {
                 Ok(Some(Claim {
                     path,
                     info,
-                    released: false,
                 }))
             }
             Acquired::Held(_) => Ok(None),
@@ -215,8 +213,6 @@ impl Drop for Claim {
     fn drop(&mut self) {
         let mut held = held();
         held.retain(|(_, info, _)| info.owner.token != self.info.owner.token);
-        if !self.released {
-            let _ = owner_file::release(&self.path, &self.info.owner.token);
-        }
+        let _ = owner_file::release(&self.path, &self.info.owner.token);
     }
 }
