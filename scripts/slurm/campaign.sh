@@ -22,28 +22,10 @@ here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 repo="$(cd "$here/../.." && pwd)"
 # shellcheck source=common.sh
 source "$here/common.sh"
-
-fail() {
-  echo "" >&2
-  echo "******** slurm campaign test FAILED: $* ********" >&2
-  exit 1
-}
-section() { echo; echo "== $*"; }
-
-data="$repo/tests/data/st-leonards"
-[[ -d "$data" ]] || fail "no St Leonards data at $data (see tests/data/README.md)"
-mapfile -t surveys < <(ls "$data"/*.laz)
-[[ ${#surveys[@]} == 6 ]] || fail "expected 6 surveys in $data, found ${#surveys[@]}"
-
-if [[ -z "${TALUS_BIN:-}" ]]; then
-  (cd "$repo" && cargo build --release --quiet --bin talus)
-  # Cargo's target directory, wherever CARGO_TARGET_DIR or a config puts it.
-  target="$(cd "$repo" && cargo metadata --format-version 1 --no-deps \
-    | python3 -c 'import json, sys; print(json.load(sys.stdin)["target_directory"])')"
-  TALUS_BIN="$target/release/talus"
-fi
-talus="$(cd "$(dirname "$TALUS_BIN")" && pwd)/$(basename "$TALUS_BIN")"
-[[ -x "$talus" ]] || fail "no talus binary at $talus"
+test_name="slurm campaign test"
+# shellcheck source=run_test.sh
+source "$here/run_test.sh"
+test_inputs
 
 # ---------------------------------------------------------------- cluster
 started_here=""
@@ -57,18 +39,7 @@ eval "$(bash "$here/up.sh")" || fail "up.sh could not bring up Slurm"
 [[ -n "${SLURM_CONF:-}" ]] || fail "up.sh did not print SLURM_CONF"
 sinfo
 
-work="$state/campaign-test"
-rm -rf "$work"
-mkdir -p "$work"
-cd "$work"
-campaign() { "$talus" campaign "${surveys[@]}" "$@"; }
-# same_as_local NAME: $work/NAME holds the local run's outputs, byte for byte; its status.
-same_as_local() {
-  python3 "$here/same_outputs.py" "$work/local" "$work/$1" >"$work/same-$1.txt" \
-    || { cat "$work/same-$1.txt"; fail "the outputs of run '$1' differ from the local run's"; }
-  tail -n 1 "$work/same-$1.txt"
-  "$talus" status "$work/$1"
-}
+work_in campaign-test
 
 # ---------------------------------------------------------------- 1. local
 section "1. local run"

@@ -32,29 +32,13 @@ export SLURM_STATE_DIR="${SLURM_STATE_DIR:-/tmp/talus-slurm-nodes}"
 export TALUS_SLURM_NODES="${TALUS_SLURM_NODES:-2}"
 # shellcheck source=common.sh
 source "$here/common.sh"
-
-fail() {
-  echo "" >&2
-  echo "******** slurm nodes test FAILED: $* ********" >&2
-  exit 1
-}
-section() { echo; echo "== $*"; }
+test_name="slurm nodes test"
+# shellcheck source=run_test.sh
+source "$here/run_test.sh"
 indent() { sed 's/^/  /'; }
 
 ((slurm_nodes >= 2)) || fail "TALUS_SLURM_NODES=$slurm_nodes: this test needs at least 2 nodes"
-data="$repo/tests/data/st-leonards"
-[[ -d "$data" ]] || fail "no St Leonards data at $data (see tests/data/README.md)"
-mapfile -t surveys < <(ls "$data"/*.laz)
-[[ ${#surveys[@]} == 6 ]] || fail "expected 6 surveys in $data, found ${#surveys[@]}"
-
-if [[ -z "${TALUS_BIN:-}" ]]; then
-  (cd "$repo" && cargo build --release --quiet --bin talus)
-  target="$(cd "$repo" && cargo metadata --format-version 1 --no-deps \
-    | python3 -c 'import json, sys; print(json.load(sys.stdin)["target_directory"])')"
-  TALUS_BIN="$target/release/talus"
-fi
-talus="$(cd "$(dirname "$TALUS_BIN")" && pwd)/$(basename "$TALUS_BIN")"
-[[ -x "$talus" ]] || fail "no talus binary at $talus"
+test_inputs
 
 # ---------------------------------------------------------------- cluster
 mapfile -t nodes < <(node_names)
@@ -77,16 +61,7 @@ sinfo -N -o '%N %T %c %m'
 locks="$(grep -rnE '\b(flock|lockf|F_SETLKW?|F_OFD_SETLKW?)\b|fs2::|fd_lock' "$repo/store/src" || true)"
 [[ -z "$locks" ]] || fail "the store now takes file locks; README.md's NFS section no longer holds: $locks"
 
-work="$state/nodes-test"
-rm -rf "$work"
-mkdir -p "$work"
-cd "$work"
-campaign() { "$talus" campaign "${surveys[@]}" "$@"; }
-same_as_local() {
-  python3 "$here/same_outputs.py" "$work/local" "$work/$1" >"$work/same-$1.txt" \
-    || { cat "$work/same-$1.txt"; fail "the outputs of run '$1' differ from the local run's"; }
-  tail -n 1 "$work/same-$1.txt"
-}
+work_in nodes-test
 # per_node JOBS: from Slurm's job-completion log, every task of the arrays listed in JOBS (talus's
 # stdout: stage, array id, tasks) as "node state count", one line per node and final state.
 per_node() {
