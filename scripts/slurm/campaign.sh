@@ -42,11 +42,7 @@ sinfo
 work_in campaign-test
 
 # ---------------------------------------------------------------- 1. local
-section "1. local run"
-t0=$SECONDS
-campaign --out "$work/local" 2>"$work/local.err" || { cat "$work/local.err" >&2; fail "local run failed"; }
-tail -n 1 "$work/local.err"
-echo "local run: $((SECONDS - t0)) s"
+local_reference
 
 # ---------------------------------------------------------------- 2. slurm --wait
 section "2. --executor slurm --wait"

@@ -92,11 +92,7 @@ jobcomp_of() {
 }
 
 # ---------------------------------------------------------------- 1. local
-section "1. local run"
-t0=$SECONDS
-campaign --out "$work/local" 2>"$work/local.err" || { cat "$work/local.err" >&2; fail "local run failed"; }
-tail -n 1 "$work/local.err"
-echo "local run: $((SECONDS - t0)) s"
+local_reference
 
 # ---------------------------------------------------------------- 2. slurm --wait on both nodes
 section "2. --executor slurm --wait across ${nodes[*]}"

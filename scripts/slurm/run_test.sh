@@ -39,6 +39,15 @@ work_in() {
 
 campaign() { "$talus" campaign "${surveys[@]}" "$@"; }
 
+# local_reference: the campaign run locally into $work/local, what the Slurm runs must equal.
+local_reference() {
+  local t0=$SECONDS
+  section "1. local run"
+  campaign --out "$work/local" 2>"$work/local.err" || { cat "$work/local.err" >&2; fail "local run failed"; }
+  tail -n 1 "$work/local.err"
+  echo "local run: $((SECONDS - t0)) s"
+}
+
 # same_as_local NAME: $work/NAME holds the local run's outputs, byte for byte; its status.
 same_as_local() {
   python3 "$here/same_outputs.py" "$work/local" "$work/$1" >"$work/same-$1.txt" \
