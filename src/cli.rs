@@ -310,6 +310,12 @@ struct CampaignArgs {
     /// Compare each later survey with the first as well.
     #[arg(long)]
     baseline: bool,
+    /// Give every pair its own m3c2.laz (and terrain positions), exactly compare's outputs.
+    /// By default the time series (timeseries.parquet, timeseries.laz) holds every pair's
+    /// distance at every core point and the pairs hold their events, meshes and summaries:
+    /// about half the disk.
+    #[arg(long)]
+    pair_clouds: bool,
     /// Continue an interrupted campaign, or one with surveys added, in DIR.
     #[arg(long, conflicts_with = "force")]
     resume: bool,
@@ -449,6 +455,7 @@ fn run(cli: Cli) -> crate::Result<()> {
                 force: a.force,
                 tile_size: a.tile_size,
                 keep_units: a.exec.keep_units,
+                pair_clouds: a.pair_clouds,
                 executor: a.exec.executor()?,
             };
             let Some(done) = crate::commands::campaign::campaign(&opts)? else {

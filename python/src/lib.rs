@@ -440,7 +440,7 @@ fn compare(
 
 /// `talus campaign EPOCH... --out OUT` with `params_json`'s parameters.
 #[pyfunction]
-#[pyo3(signature = (epochs, out, params_json, config=None, baseline=false, resume=false, force=false))]
+#[pyo3(signature = (epochs, out, params_json, config=None, baseline=false, resume=false, force=false, pair_clouds=false))]
 #[allow(clippy::too_many_arguments)]
 fn campaign(
     py: Python<'_>,
@@ -451,6 +451,7 @@ fn campaign(
     baseline: bool,
     resume: bool,
     force: bool,
+    pair_clouds: bool,
 ) -> PyResult<()> {
     let opts = CampaignOptions {
         epochs,
@@ -463,6 +464,7 @@ fn campaign(
         tile_size: None,
         // The intermediate units are released after the run, as the command line's default.
         keep_units: false,
+        pair_clouds,
         executor: Default::default(),
     };
     py.detach(|| talus::commands::campaign::campaign(&opts))

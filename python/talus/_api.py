@@ -404,12 +404,13 @@ def campaign(
     baseline=False,
     resume=False,
     force=False,
+    pair_clouds=False,
     progress=True,
     **params,
 ):
     """``talus campaign EPOCH... --out OUT`` (the surveys in date order, or a folder, as the
     command takes them) with the parameters as keyword arguments. Returns the :class:`Result`
-    of OUT."""
+    of OUT. ``pair_clouds=True`` is ``--pair-clouds``: every pair gets its own m3c2.laz."""
     if isinstance(epochs, (str, os.PathLike)):
         epochs = [epochs]
     _run(
@@ -422,5 +423,6 @@ def campaign(
         baseline=bool(baseline),
         resume=bool(resume),
         force=bool(force),
+        pair_clouds=bool(pair_clouds),
     )
     return Result(out)

@@ -32,6 +32,9 @@ pub struct CampaignOptions {
     pub tile_size: Option<f64>,
     /// Keep the intermediate units' files after the run (`--keep-units`).
     pub keep_units: bool,
+    /// Each pair's m3c2.laz and terrain positions of its own (`--pair-clouds`): the pairs are
+    /// exactly compare's outputs, at about twice a campaign's disk.
+    pub pair_clouds: bool,
     /// Where the units run (SPEC.md §6).
     pub executor: crate::exec::Executor,
 }
@@ -169,6 +172,7 @@ fn plan(
         .collect();
     let mut plan = Plan::new(surveys, pairs, params, spacing, layout);
     plan.keep_units = opts.keep_units;
+    plan.lean_pairs = !opts.pair_clouds;
     plan.stable_areas = stable_areas(store, user, &plan.surveys)?;
     // The core points are the first survey's: within its bounds.
     let what = format!("the core points (from {})", epochs[0].arg.display());

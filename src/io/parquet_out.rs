@@ -1,12 +1,13 @@
-//! A streaming Parquet writer of a flat table of DOUBLE columns (a campaign's
+//! A streaming Parquet writer of a flat table of DOUBLE or FLOAT columns (a campaign's
 //! `timeseries.parquet`), through the `parquet` crate's low-level column writers.
 //!
 //! The file follows the Apache Parquet format specification (parquet-format,
 //! <https://parquet.apache.org/docs/file-format/> and its `parquet.thrift`): the magic `PAR1`,
 //! row groups each holding one column chunk per column, written column after column, and the
 //! footer (`FileMetaData`: the schema, the row groups' column-chunk metadata, key-value
-//! metadata, `created_by`). The schema is flat: every column a `DOUBLE` (IEEE 754 binary64),
-//! `REQUIRED`, or `OPTIONAL` where a value may be missing: a NaN given to an optional column is
+//! metadata, `created_by`). The schema is flat: every column a `DOUBLE` (IEEE 754 binary64) or
+//! a `FLOAT` (binary32: a campaign's distances, stored as m3c2.laz stores them), `REQUIRED`, or
+//! `OPTIONAL` where a value may be missing: a NaN given to an optional column is
 //! written as a null (definition level 0, "Nested Encoding" in the specification, no value
 //! stored), the others as values (definition level 1). Pages are data pages v1 (format 1.0,
 //! what every reader reads), PLAIN-encoded (no dictionary: distances hardly repeat) and
@@ -28,7 +29,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use parquet::basic::{Compression, Encoding, Repetition, Type as PhysicalType, ZstdLevel};
-use parquet::data_type::DoubleType;
+use parquet::data_type::{DoubleType, FloatType};
 use parquet::file::metadata::KeyValue;
 use parquet::file::properties::{WriterProperties, WriterVersion};
 use parquet::file::writer::SerializedFileWriter;
@@ -56,6 +57,8 @@ pub(crate) struct Column {
     pub name: String,
     /// OPTIONAL (NaN written as null) rather than REQUIRED (every value written; NaN refused).
     pub nullable: bool,
+    /// FLOAT (IEEE 754 binary32: each value rounded to the nearest) rather than DOUBLE.
+    pub single: bool,
 }
 
 impl Column {
@@ -63,6 +66,7 @@ impl Column {
         Column {
             name: name.into(),
             nullable: false,
+            single: false,
         }
     }
 
@@ -70,6 +74,15 @@ impl Column {
         Column {
             name: name.into(),
             nullable: true,
+            single: false,
+        }
+    }
+
+    /// This column as FLOAT.
+    pub(crate) fn single(self) -> Column {
+        Column {
+            single: true,
+            ..self
         }
     }
 }
@@ -90,7 +103,7 @@ pub(crate) fn memory_need(columns: usize, rows: u64) -> u64 {
     let groups = rows.div_ceil(rows_per_group(columns) as u64).max(1);
     let chunks = groups * columns as u64;
     let pages = chunks + rows.div_ceil(PAGE_ROWS as u64) * columns as u64;
-    let fixed = BATCH * (8 + 8 + 2) + 4 * (PAGE_ROWS * 8) + crate::memory::IO_HEADROOM as usize;
+    let fixed = BATCH * (8 + 8 + 4 + 2) + 4 * (PAGE_ROWS * 8) + crate::memory::IO_HEADROOM as usize;
     fixed as u64 + chunks * 1024 + pages * 64
 }
 
@@ -105,6 +118,8 @@ pub(crate) struct ParquetWriter {
     rows: u64,
     values: Vec<f64>,
     present: Vec<f64>,
+    /// The batch's values as FLOAT, for a [`Column::single`].
+    singles: Vec<f32>,
     levels: Vec<i16>,
 }
 
@@ -134,7 +149,11 @@ impl ParquetWriter {
                 } else {
                     Repetition::REQUIRED
                 };
-                Type::primitive_type_builder(&c.name, PhysicalType::DOUBLE)
+                let physical = match c.single {
+                    true => PhysicalType::FLOAT,
+                    false => PhysicalType::DOUBLE,
+                };
+                Type::primitive_type_builder(&c.name, physical)
                     .with_repetition(repetition)
                     .build()
                     .map(Arc::new)
@@ -173,6 +192,7 @@ impl ParquetWriter {
             rows: 0,
             values: Vec::new(),
             present: Vec::new(),
+            singles: Vec::new(),
             levels: Vec::new(),
         })
     }
@@ -220,8 +240,7 @@ impl ParquetWriter {
                 let n = left.min(BATCH);
                 self.values.resize(n, 0.0);
                 fill(c, &mut self.values)?;
-                let typed = chunk.typed::<DoubleType>();
-                let written = if column.nullable {
+                let levels = if column.nullable {
                     self.present.clear();
                     self.levels.clear();
                     for &v in &self.values {
@@ -232,7 +251,7 @@ impl ParquetWriter {
                             self.present.push(v);
                         }
                     }
-                    typed.write_batch(&self.present, Some(&self.levels), None)
+                    Some(&self.levels[..])
                 } else {
                     if self.values.iter().any(|v| v.is_nan()) {
                         return Err(Error::Internal(format!(
@@ -240,7 +259,20 @@ impl ParquetWriter {
                             column.name
                         )));
                     }
-                    typed.write_batch(&self.values, None, None)
+                    None
+                };
+                let values = match levels {
+                    Some(_) => &self.present,
+                    None => &self.values,
+                };
+                let written = if column.single {
+                    self.singles.clear();
+                    self.singles.extend(values.iter().map(|&v| v as f32));
+                    let typed = chunk.typed::<FloatType>();
+                    typed.write_batch(&self.singles, levels, None)
+                } else {
+                    let typed = chunk.typed::<DoubleType>();
+                    typed.write_batch(values, levels, None)
                 };
                 written.map_err(|e| Error::output(&self.path, std::io::Error::other(e)))?;
                 left -= n;

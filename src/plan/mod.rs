@@ -238,6 +238,13 @@ pub struct Plan {
     /// released once the outputs are published (`exec::publish`).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub keep_units: bool,
+    /// A campaign whose pairs hold no per-core-point cloud of their own (no m3c2.laz; the
+    /// viewer's terrain positions once, in the first pair's terrain.bin): the time series holds
+    /// every pair's distance at every core point, and a campaign's disk stays within a bound
+    /// of its inputs (issue 46). False for a comparison, and for a campaign run with
+    /// `--pair-clouds`, whose pairs are exactly compare's outputs.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub lean_pairs: bool,
     /// Units this run computes again that DIR's previous run had under other keys, and why
     /// (`talus status` shows them).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
@@ -365,6 +372,7 @@ impl Plan {
             meshes: None,
             m3c2_only: false,
             keep_units: false,
+            lean_pairs: false,
             recomputed: Vec::new(),
             units: Vec::new(),
             index: SpecIndex::default(),

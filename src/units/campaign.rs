@@ -154,7 +154,8 @@ pub(crate) struct CampaignMeta {
 impl Stage for CampaignStage {
     const KIND: &'static str = "campaign";
     const SCOPE: Scope = Scope::Run;
-    const VERSION: u32 = 2;
+    /// 3: the time series' distances as float32 (timeseries.laz, timeseries.parquet).
+    const VERSION: u32 = 3;
     const LINE: Line = OutputsStage::LINE;
     type Meta = CampaignMeta;
 
@@ -610,7 +611,7 @@ fn write_timeseries(ctx: &Ctx, out: &mut UnitWriter, crs: &io::CloudInfo) -> Res
             .iter()
             .map(|n| ExtraDim {
                 name: n.clone().into(),
-                ty: ExtraType::F64,
+                ty: ExtraType::F32,
                 description: "M3C2 distance of the pair",
             })
             .collect()
@@ -728,7 +729,7 @@ fn write_parquet(
     let schema: Vec<Column> = ["x", "y", "z"]
         .iter()
         .map(|c| Column::required(c))
-        .chain(names.iter().map(|n| Column::nullable(n)))
+        .chain(names.iter().map(|n| Column::nullable(n).single()))
         .collect();
     let date = |s: usize| plan.surveys[s].date.clone();
     let pairs: Vec<Value> = plan
@@ -751,8 +752,8 @@ fn write_parquet(
         (
             "talus:description".to_string(),
             "x, y, z: the campaign's core points (in the CRS's units), as timeseries.laz stores \
-             them; d_<before>_<after>: the pair's M3C2 distance at the core point (metres, as \
-             its m3c2.laz's m3c2_distance), null where none was computed"
+             them; d_<before>_<after>: the pair's M3C2 distance at the core point (metres, \
+             float32 as m3c2.laz's m3c2_distance), null where none was computed"
                 .to_string(),
         ),
     ];

@@ -139,10 +139,7 @@ impl Store {
             Acquired::Ours => {
                 renewer();
                 held().push((path.clone(), info.clone(), self.tmp()));
-                Ok(Some(Claim {
-                    path,
-                    info,
-                }))
+                Ok(Some(Claim { path, info }))
             }
             Acquired::Held(_) => Ok(None),
         }

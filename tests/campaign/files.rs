@@ -307,7 +307,7 @@ fn distance_columns(pairs: &[(usize, usize)], labels: &[String]) -> Vec<String> 
 }
 
 /// What tests/py/read_timeseries.py found, checked: every value compared agreed; the Parquet's
-/// columns are x, y, z (required) and `names` (nullable), all DOUBLE, in as many rows as the
+/// columns are x, y, z (required, DOUBLE) and `names` (nullable, FLOAT), in as many rows as the
 /// campaign's core points; `created_by` and the key-value metadata (version, the CRS of the
 /// synthetic surveys, each pair's column, labels and dates).
 fn assert_timeseries(r: &Value, dir: &Path, names: &[String], truth: &CampaignTruth) {
@@ -328,7 +328,7 @@ fn assert_timeseries(r: &Value, dir: &Path, names: &[String], truth: &CampaignTr
         .chain(names.iter().map(String::as_str))
         .collect();
     assert_eq!(columns, want);
-    assert_eq!(r["types"], serde_json::json!(["double"]));
+    assert_eq!(r["types"], serde_json::json!(["double", "float"]));
     let nullable: Vec<bool> = (0..columns.len()).map(|c| c >= 3).collect();
     assert_eq!(r["nullable"], serde_json::json!(nullable));
     let summary = json(&dir.join("summary.json"));
@@ -355,10 +355,10 @@ fn assert_timeseries(r: &Value, dir: &Path, names: &[String], truth: &CampaignTr
 }
 
 /// Issue 46, item 3: timeseries.parquet holds timeseries.laz's core points and distances, and
-/// each pair's m3c2.laz distances, read by independent readers (pyarrow, laspy:
-/// tests/py/read_timeseries.py) and compared bit for bit, a null exactly where the LAS has NaN
-/// (a 0.3 m half-length leaves the deeper changes beyond reach: nulls in every pair). The
-/// consecutive and baseline pairs are columns in the campaign's pair order, the LAS's
+/// each pair's m3c2.laz distances (`--pair-clouds`), read by independent readers (pyarrow,
+/// laspy: tests/py/read_timeseries.py) and compared bit for bit, a null exactly where the LAS
+/// has NaN (a 0.3 m half-length leaves the deeper changes beyond reach: nulls in every pair).
+/// The consecutive and baseline pairs are columns in the campaign's pair order, the LAS's
 /// dimensions the same; summary.json says the LAS holds the distances.
 #[test]
 fn timeseries_parquet_holds_the_laz_values_read_by_pyarrow_and_laspy() {
@@ -366,8 +366,12 @@ fn timeseries_parquet_holds_the_laz_values_read_by_pyarrow_and_laspy() {
         return;
     };
     let tmp = common::tempdir();
-    let (truth, _, labels, dir) =
-        synth_and_campaign(tmp.path(), 30_000, &[], &["--cyl-halflen", "0.3"]);
+    let (truth, _, labels, dir) = synth_and_campaign(
+        tmp.path(),
+        30_000,
+        &[],
+        &["--cyl-halflen", "0.3", "--pair-clouds"],
+    );
     let pairs = all_pairs(&truth);
     // The plan's order: the consecutive pairs, then the baseline ones.
     let names = distance_columns(&pairs, &labels);
@@ -386,7 +390,9 @@ fn timeseries_parquet_holds_the_laz_values_read_by_pyarrow_and_laspy() {
 
 /// Issue 46, item 3: a campaign of 401 surveys (400 pairs, more than the 341 whose extra-bytes
 /// descriptors fit a LAS VLR) writes timeseries.parquet with 400 distance columns, which pyarrow
-/// reads, each bit for bit its pair's m3c2.laz distances (laspy) at the same core points, and the
+/// reads, each bit for bit its pair's distances in the viewer's terrain.bin (the pairs hold no
+/// m3c2.laz: no `--pair-clouds`; the positions once, in the first pair's) at the same core
+/// points, and the
 /// first three the dimensions of the timeseries.laz of a campaign of the first four surveys;
 /// its timeseries.laz holds the core points only, and laspy reads it; summary.json says so.
 /// About 30 s in release (the surveys 5 s, the campaign 20 s).
@@ -412,7 +418,12 @@ fn four_hundred_pairs_in_parquet_columns_and_a_laz_of_core_points_readers_read()
     assert_timeseries(&r, &dir, &names, &truth);
     let rows = r["rows"].as_u64().unwrap();
     assert!(rows > 100, "{rows} core points");
-    assert_eq!(r["compared"]["pairs"], rows * 400);
+    assert_eq!(r["compared"]["terrain"], rows * 400);
+    assert!(!dir
+        .join("pairs")
+        .join(&names[1][2..])
+        .join("m3c2.laz")
+        .exists());
     assert_eq!(r["compared"]["against"], rows * 3);
     // The LAS: the core points alone (compared with the Parquet's x, y, z).
     assert_eq!(r["laz"]["extra_dims"], serde_json::json!([]));

@@ -7,7 +7,8 @@
 //!   places on other tracks;
 //! - synthetic: each pair's results are `talus compare`'s on its two surveys given the pair's
 //!   parameters (summary.json) and the campaign's core points (timeseries.laz), with the campaign
-//!   cut into tiles on its own grid and compare left to its own;
+//!   cut into tiles on its own grid and compare left to its own (`--pair-clouds`); without it,
+//!   the same pairs but m3c2.laz, and terrain.bin's positions once, in the first pair's;
 //! - each pair's results are `talus compare`'s on that pair, given the campaign's parameters and
 //!   core points (byte for byte);
 //! - appending a survey: a run on five surveys, then on six with `--resume`, computes only what
@@ -17,9 +18,9 @@
 //! - bad input (no date, one date twice, an empty folder, tiles in two CRSs, a survey off the
 //!   site): exit 2, one line naming the file and the problem, nothing written;
 //! - the time series: timeseries.parquet read by pyarrow holds timeseries.laz's values (laspy)
-//!   and each pair's m3c2.laz distances, bit for bit, nulls where they have NaN; at 400 pairs
-//!   (past what a LAS VLR describes) the Parquet holds them all and timeseries.laz the core
-//!   points only, which laspy reads.
+//!   and each pair's m3c2.laz distances (`--pair-clouds`), bit for bit, nulls where they have
+//!   NaN; at 400 pairs (past what a LAS VLR describes) the Parquet holds them all (each its
+//!   pair's terrain.bin distances) and timeseries.laz the core points only, which laspy reads.
 //!
 //! "The outputs" are every file of DIR but the timings a run records of itself (summary.json's
 //! stage seconds, the `seconds` column of campaign.csv/json and the run-time column of
@@ -199,6 +200,60 @@ fn parameter_flags(p: &Value) -> Vec<String> {
     .collect()
 }
 
+/// The lean campaign's pair `label` (in `lean`) holds the `--pair-clouds` one's outputs (in
+/// `full`) but m3c2.laz; where its terrain positions are in the first pair (`shared`: its
+/// label), its terrain.bin is the full one's distances and its view.json the full one's with
+/// `positions` naming the first pair's terrain.bin.
+fn assert_lean_pair(label: &str, full: &Path, lean: &Path, shared: Option<&str>) {
+    let (mut mine, mut theirs) = (outputs(lean), outputs(full));
+    assert!(
+        theirs.remove("m3c2.laz").is_some(),
+        "pair {label}: no m3c2.laz with --pair-clouds"
+    );
+    let (terrain, view) = (
+        mine.remove("terrain.bin").unwrap(),
+        mine.remove("view.json").unwrap(),
+    );
+    let (t, v) = (
+        theirs.remove("terrain.bin").unwrap(),
+        theirs.remove("view.json").unwrap(),
+    );
+    assert_eq!(
+        mine.keys().collect::<Vec<_>>(),
+        theirs.keys().collect::<Vec<_>>(),
+        "pair {label}"
+    );
+    for (n, bytes) in &mine {
+        assert!(
+            bytes == &theirs[n],
+            "pair {label}: {n} differs from --pair-clouds'"
+        );
+    }
+    let mut view: Value = serde_json::from_slice(&view).unwrap();
+    let v: Value = serde_json::from_slice(&v).unwrap();
+    match shared {
+        None => {
+            assert!(terrain == t, "pair {label}: terrain.bin differs");
+            assert_eq!(view, v, "pair {label}: view.json");
+        }
+        Some(first) => {
+            let n = v["points"].as_u64().unwrap() as usize;
+            assert!(n > 0 && t.len() == 16 * n, "pair {label}: {n} points");
+            assert!(
+                terrain == t[12 * n..],
+                "pair {label}: terrain.bin is not the distances"
+            );
+            let at = view.as_object_mut().unwrap().remove("positions");
+            assert_eq!(
+                at,
+                Some(format!("../{first}/terrain.bin").into()),
+                "pair {label}"
+            );
+            assert_eq!(view, v, "pair {label}: view.json");
+        }
+    }
+}
+
 /// The campaign's pair `label` (its outputs in `pair`) is compare's run in `out`: every output
 /// but summary.json byte for byte (m3c2.laz, events, regions, viewer files), every mesh.
 fn assert_pair_is_compare(label: &str, pair: &Path, out: &Path) {
@@ -226,7 +281,7 @@ fn each_pair_is_a_compare_of_its_surveys_with_the_campaigns_parameters_and_core_
     let s = surveys();
     let tmp = common::tempdir();
     let dir = tmp.path().join("campaign");
-    ok(&campaign(&s[..4], &dir, &[]));
+    ok(&campaign(&s[..4], &dir, &["--pair-clouds"]));
     let summary = json(&dir.join("summary.json"));
     let params = parameter_flags(&summary["parameters"]);
     for k in 0..3 {
@@ -664,11 +719,37 @@ fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
 /// stable ground's measurement and the counts and totals (not: the paths, the core-point file,
 /// the spacing measured on compare's own before survey, the tiles, the parameters' sources, the
 /// timings).
+///
+/// Without `--pair-clouds` (the default, issue 46), the same campaign's pairs hold the same files
+/// but m3c2.laz, the same bytes but terrain.bin and view.json: terrain.bin is the distances of
+/// the full one alone (its last 4 bytes a point) but in the first pair, and view.json names the
+/// first pair's for the positions ([`assert_lean_pair`]).
 #[test]
 fn synthetic_campaign_pairs_are_compares_with_its_parameters_and_core_points() {
     let tmp = common::tempdir();
-    let (truth, surveys, labels, dir) =
-        synth_and_campaign(tmp.path(), 60_000, &[], &["--tile-size", "12"]);
+    let (truth, surveys, labels, dir) = synth_and_campaign(
+        tmp.path(),
+        60_000,
+        &[],
+        &["--tile-size", "12", "--pair-clouds"],
+    );
+    let lean = tmp.path().join("lean");
+    ok(&campaign(
+        &surveys,
+        &lean,
+        &["--baseline", "--tile-size", "12"],
+    ));
+    let first = format!("{}_{}", labels[0], labels[1]);
+    for (k, (b, a)) in all_pairs(&truth).into_iter().enumerate() {
+        let label = format!("{}_{}", labels[b], labels[a]);
+        let shared = (k > 0).then_some(first.as_str());
+        assert_lean_pair(
+            &label,
+            &dir.join("pairs").join(&label),
+            &lean.join("pairs").join(&label),
+            shared,
+        );
+    }
     let summary = json(&dir.join("summary.json"));
     assert!(summary["tiles"].as_u64().unwrap() > 1, "one tile");
     let cores = dir.join("timeseries.laz");

@@ -7,8 +7,11 @@ Reads DIR/timeseries.parquet (pyarrow) and DIR/timeseries.laz (laspy) and checks
 row: x, y and z equal to the LAS's bit for bit; each distance column d_<before>_<after> equal bit
 for bit to the LAS's extra dimension of that name when the LAS has it, a null where the LAS has
 NaN and nowhere else. With --pairs also each pair's DIR/pairs/<before>_<after>/m3c2.laz: its
-points are the same, in the same order, and its m3c2_distance (float32) is the column rounded to
-float32 (NaN as null).
+points are the same, in the same order, and its m3c2_distance (float32) is the column (NaN as
+null); a pair without m3c2.laz (a campaign run without --pair-clouds) is compared through its
+terrain.bin (the viewer's file, every core point when there are at most 2M): the distances
+(float32, after the positions or alone where view.json names `positions` elsewhere) are the
+column, and the positions (float32 offsets from view.json's origin) within 1 mm of x, y, z.
 With --against OTHER also OTHER/timeseries.laz, the time series of another campaign of the same
 first survey (so the same core points, in the same order): each extra dimension of it is the
 column of that name here.
@@ -56,6 +59,37 @@ def compare(name, column, values, mismatches):
     return len(values)
 
 
+def pair_file(folder, column, name):
+    """DIR/pairs/<before>_<after>/name of the pair whose column is `column`."""
+    return os.path.join(folder, "pairs", column[len("d_"):], name)
+
+
+def compare_terrain(folder, name, column, xyz, mismatches):
+    """A pair's terrain.bin (the viewer's) against its column and the core points: the values
+    compared (0 when the terrain is a sample, not every core point)."""
+    with open(pair_file(folder, name, "view.json")) as f:
+        view = json.load(f)
+    n = view["points"]
+    if n != len(column):
+        return 0
+    raw = np.fromfile(pair_file(folder, name, "terrain.bin"), dtype="<f4")
+    if "positions" in view:
+        where = os.path.normpath(os.path.join(os.path.dirname(pair_file(folder, name, "x")), view["positions"]))
+        positions = np.fromfile(where, dtype="<f4")[: 3 * n]
+        distances = raw
+    else:
+        positions, distances = raw[: 3 * n], raw[3 * n :]
+    if len(distances) != n or len(positions) != 3 * n:
+        mismatches.append(f"{name}: terrain.bin holds {raw.size} floats for {n} points")
+        return 0
+    p = positions.reshape(n, 3).astype(np.float64) + np.asarray(view["origin"])
+    for a, axis in enumerate("xyz"):
+        off = np.abs(p[:, a] - xyz[axis])
+        if off.max(initial=0.0) > 1e-3:
+            mismatches.append(f"{name}: terrain.bin's {axis} off by {off.max()} m")
+    return compare(f"{name} (terrain.bin)", column, distances.astype(np.float32), mismatches)
+
+
 def main():
     folder = sys.argv[1]
     args = sys.argv[2:]
@@ -67,7 +101,7 @@ def main():
     las = laspy.read(os.path.join(folder, "timeseries.laz"))
     extra = list(las.point_format.extra_dimension_names)
     mismatches = []
-    compared = {"laz": 0, "pairs": 0, "against": 0}
+    compared = {"laz": 0, "pairs": 0, "terrain": 0, "against": 0}
     xyz = {"x": np.asarray(las.x), "y": np.asarray(las.y), "z": np.asarray(las.z)}
     for name, values in xyz.items():
         compared["laz"] += compare(name, table.column(name), values, mismatches)
@@ -76,8 +110,10 @@ def main():
         column = table.column(name)
         if name in extra:
             compared["laz"] += compare(name, column, np.asarray(las[name]), mismatches)
-        if with_pairs:
-            pair = os.path.join(folder, "pairs", name[len("d_"):], "m3c2.laz")
+        if with_pairs and not os.path.exists(pair_file(folder, name, "m3c2.laz")):
+            compared["terrain"] += compare_terrain(folder, name, column, xyz, mismatches)
+        elif with_pairs:
+            pair = pair_file(folder, name, "m3c2.laz")
             m = laspy.read(pair)
             for axis in "xyz":
                 if not np.array_equal(bits(getattr(m, axis)), bits(xyz[axis])):

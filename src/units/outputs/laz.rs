@@ -106,24 +106,40 @@ pub(crate) struct Written {
     pub(crate) sign_unknown: u64,
 }
 
-/// Write m3c2.laz into `out` from the pair's `total` results in key order (`results`), with the
-/// registration error `reg_error` in LoD95 and significance. `event_of(key)` gives the smoothed
-/// distance and event id of a core point (NaN, 0 when it is in no event); `each` sees every
-/// result in the same order (the viewer's terrain sample rides on this pass instead of merging
-/// the results again).
-#[allow(clippy::too_many_arguments)]
+/// Where m3c2.laz goes: its CRS and coordinate grid.
+pub(crate) struct Cloud<'a> {
+    pub(crate) crs: &'a Crs,
+    pub(crate) grid: CoordinateGrid,
+}
+
+/// Count what m3c2.laz holds of the pair's `total` results in key order (`results`), with the
+/// registration error `reg_error` in LoD95 and significance, and write it into `out` when
+/// `cloud` says where (a lean campaign's pair has none: `Plan::lean_pairs`). `event_of(key)`
+/// gives the smoothed distance and event id of a core point (NaN, 0 when it is in no event);
+/// `each` sees every result in the same order (the viewer's terrain sample rides on this pass
+/// instead of merging the results again).
 pub(crate) fn write_m3c2_laz(
     out: &mut UnitWriter,
     results: &mut Merged,
     total: u64,
     reg_error: f64,
-    crs: &Crs,
-    grid: CoordinateGrid,
+    cloud: Option<Cloud>,
     event_of: &mut dyn FnMut(u64) -> Result<(f64, u32)>,
     each: &mut dyn FnMut(&KeyedResult),
 ) -> Result<Written> {
-    let path = out.path("m3c2.laz")?;
-    let mut w = ResultWriter::create_on_grid(&path, crs, M3C2_DIMS, grid, Some(total))?;
+    let mut w = match cloud {
+        Some(c) => {
+            let path = out.path("m3c2.laz")?;
+            Some(ResultWriter::create_on_grid(
+                &path,
+                c.crs,
+                M3C2_DIMS,
+                c.grid,
+                Some(total),
+            )?)
+        }
+        None => None,
+    };
     let mut written = Written {
         core_points: 0,
         computed: 0,
@@ -136,30 +152,32 @@ pub(crate) fn write_m3c2_laz(
         k.r = k.r.with_registration(reg_error);
         each(&k);
         let r = &k.r;
-        let (smoothed, event) = event_of(k.key)?;
         // Beyond the user's half-length nothing is measured: the flag says why there is none.
         let beyond = r.reach == Reach::Beyond;
         let (uncertainty, significant) = match beyond {
             true => (f64::NAN, false),
             false => (r.uncertainty, r.significant),
         };
-        let extra = [
-            r.measured(),
-            uncertainty,
-            significant as u8 as f64,
-            r.std_dev1,
-            r.std_dev2,
-            r.count1 as f64,
-            r.count2 as f64,
-            r.normal[0],
-            r.normal[1],
-            r.normal[2],
-            smoothed,
-            event as f64,
-            beyond as u8 as f64,
-            !r.sign_known as u8 as f64,
-        ];
-        w.write(k.xyz, &extra)?;
+        if let Some(w) = w.as_mut() {
+            let (smoothed, event) = event_of(k.key)?;
+            let extra = [
+                r.measured(),
+                uncertainty,
+                significant as u8 as f64,
+                r.std_dev1,
+                r.std_dev2,
+                r.count1 as f64,
+                r.count2 as f64,
+                r.normal[0],
+                r.normal[1],
+                r.normal[2],
+                smoothed,
+                event as f64,
+                beyond as u8 as f64,
+                !r.sign_known as u8 as f64,
+            ];
+            w.write(k.xyz, &extra)?;
+        }
         written.core_points += 1;
         written.computed += r.measured().is_finite() as u64;
         written.significant += significant as u64;
@@ -167,7 +185,9 @@ pub(crate) fn write_m3c2_laz(
         written.beyond_reach += beyond as u64;
         written.sign_unknown += !r.sign_known as u64;
     }
-    w.finish()?;
-    out.add_file("m3c2.laz")?;
+    if let Some(w) = w {
+        w.finish()?;
+        out.add_file("m3c2.laz")?;
+    }
     Ok(written)
 }

@@ -655,7 +655,9 @@ pub(crate) struct OutputsMeta {
 impl Stage for OutputsStage {
     const KIND: &'static str = "outputs";
     const SCOPE: Scope = Scope::Pair;
-    const VERSION: u32 = 1;
+    /// 2: a lean campaign's pair (`Plan::lean_pairs`) publishes no m3c2.laz and names the
+    /// first pair's terrain positions in view.json.
+    const VERSION: u32 = 2;
     const LINE: Line = Line {
         name: "outputs",
         counts: "files",
@@ -777,7 +779,7 @@ fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<Outp
         .map_err(|e| Error::Internal(format!("summary: {e}")))?;
     super::write_bytes(out, MARKER, text.as_bytes())?;
     publish.extend(
-        points::FILES
+        points::files(plan)
             .iter()
             .map(|&f| Publish::of(plan, points_unit, f, f.into())),
     );

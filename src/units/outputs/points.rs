@@ -1,5 +1,7 @@
 //! A points unit: a pair's m3c2.laz and the viewer's terrain sample (terrain.bin), in one pass
-//! over the pair's results in key order. The outputs unit publishes both from here.
+//! over the pair's results in key order. The outputs unit publishes both from here. A lean
+//! campaign's pair (`Plan::lean_pairs`) has no m3c2.laz, and its terrain.bin its distances
+//! alone but in the first pair (`shared_positions`).
 //!
 //! A unit of its own because it needs the events (each core point's smoothed distance and event
 //! id) but not their volumes: it runs beside the volumes units instead of after them. Writing
@@ -47,13 +49,30 @@ pub(crate) struct PointsMeta {
     pub(crate) kept: u64,
 }
 
-/// The files of a points unit.
-pub(crate) const FILES: [&str; 2] = ["m3c2.laz", "terrain.bin"];
+/// The files of a points unit: m3c2.laz (not in a lean campaign: `Plan::lean_pairs`) and
+/// terrain.bin.
+pub(crate) fn files(plan: &crate::plan::Plan) -> &'static [&'static str] {
+    match plan.lean_pairs {
+        false => &["m3c2.laz", "terrain.bin"],
+        true => &["terrain.bin"],
+    }
+}
+
+/// Where pair `pair`'s terrain positions are when not in its own terrain.bin (view.json's
+/// `positions`, relative to the pair's folder): in a lean campaign every pair has the
+/// campaign's core points in the same order about the same origin, so the first pair's
+/// terrain.bin holds the positions and the others' hold their distances alone (4 bytes a point
+/// instead of 16).
+pub(crate) fn shared_positions(plan: &crate::plan::Plan, pair: usize) -> Option<String> {
+    (plan.lean_pairs && pair > 0).then(|| format!("../{}/terrain.bin", plan.pairs[0].label))
+}
 
 impl Stage for PointsStage {
     const KIND: &'static str = "points";
     const SCOPE: Scope = Scope::Pair;
-    const VERSION: u32 = 2;
+    /// 3: a lean campaign's pair writes no m3c2.laz, and its terrain.bin the distances alone but
+    /// in the first pair.
+    const VERSION: u32 = 3;
     const LINE: Line = Line {
         name: "m3c2.laz",
         counts: "core points",
@@ -66,8 +85,14 @@ impl Stage for PointsStage {
     /// checked here.
     fn plan(p: &mut Planner) -> Result<()> {
         let tiles = p.plan.layout.len();
-        let version = format!("{}|{}", env!("CARGO_PKG_VERSION"), p.plan.m3c2_only);
         for pair in 0..p.plan.pairs.len() {
+            // A lean campaign's pair: what it writes and where its terrain positions are.
+            let lean = match (p.plan.lean_pairs, shared_positions(p.plan, pair)) {
+                (false, _) => String::new(),
+                (true, None) => "|lean".to_string(),
+                (true, Some(at)) => format!("|lean|{at}"),
+            };
+            let version = format!("{}|{}{lean}", env!("CARGO_PKG_VERSION"), p.plan.m3c2_only);
             let whose = match p.plan.pairs.len() {
                 1 => "the pair's".to_string(),
                 _ => format!("pair {}'s", p.plan.pairs[pair].label),
@@ -120,7 +145,7 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<PointsMeta> {
     // The kept core points beside the results, both in key order.
     let mut kept = KeptByKey::new(kept);
     let total = crate::units::m3c2::pair_count(ctx, pair)?;
-    let mut terrain = TerrainSample::new(total, plan.layout.anchor);
+    let mut terrain = TerrainSample::new(total, plan.layout.anchor, shared_positions(plan, pair));
     // The user's core-point file, when there is one, opened once for its scale and bounds.
     let user_cores = plan
         .core_points
@@ -149,13 +174,16 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<PointsMeta> {
         }
     }
     let mut merged = crate::units::m3c2::Merged::new(ctx, pair)?;
+    let cloud = (!plan.lean_pairs).then(|| laz::Cloud {
+        crs: &crs,
+        grid: CoordinateGrid::for_extent(extent.min, extent.max, &scales),
+    });
     let written = laz::write_m3c2_laz(
         out,
         &mut merged,
         total,
         params.reg_error.value,
-        &crs,
-        CoordinateGrid::for_extent(extent.min, extent.max, &scales),
+        cloud,
         &mut |k| {
             Ok(kept
                 .get(k)?

@@ -30,6 +30,10 @@ struct ViewJson<'a> {
     distance_range: [f64; 2],
     facing: Point3,
     terrain: &'a str,
+    /// Where the terrain's positions are when terrain.bin holds its distances alone (a lean
+    /// campaign's pair: `points::shared_positions`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    positions: Option<&'a str>,
     meshes: std::collections::BTreeMap<String, EventMeshes>,
 }
 
@@ -44,6 +48,8 @@ pub(crate) struct ViewRange {
 /// while m3c2.laz is written (one pass over the results for both).
 pub(crate) struct TerrainSample {
     stride: u64,
+    /// Where the positions are when not collected here ([`Terrain::positions`]).
+    positions: Option<String>,
     origin: Point3,
     seen: u64,
     pos: Vec<f32>,
@@ -56,14 +62,16 @@ impl TerrainSample {
     /// A sample of at most [`MAX_TERRAIN_POINTS`] of `total` core points, relative to `origin`.
     /// Its columns are allocated whole, at the size the stride gives: grown by doubling they
     /// would hold up to twice that, and three times while a doubling copies.
-    pub(crate) fn new(total: u64, origin: Point3) -> Self {
+    pub(crate) fn new(total: u64, origin: Point3, positions: Option<String>) -> Self {
         let stride = total.div_ceil(MAX_TERRAIN_POINTS).max(1);
         let n = total.div_ceil(stride) as usize;
+        let own = if positions.is_none() { 3 * n } else { 0 };
         TerrainSample {
             stride,
+            positions,
             origin,
             seen: 0,
-            pos: Vec::with_capacity(3 * n),
+            pos: Vec::with_capacity(own),
             dist: Vec::with_capacity(n),
             normals: [0.0; 3],
         }
@@ -73,8 +81,10 @@ impl TerrainSample {
     pub(crate) fn push(&mut self, k: &KeyedResult) {
         if self.seen.is_multiple_of(self.stride) {
             let o = self.origin;
-            self.pos
-                .extend(k.xyz.iter().zip(&o).map(|(x, o)| (x - o) as f32));
+            if self.positions.is_none() {
+                self.pos
+                    .extend(k.xyz.iter().zip(&o).map(|(x, o)| (x - o) as f32));
+            }
             self.dist.push(k.r.measured() as f32);
             let n = k.r.normal;
             if k.r.sign_known && n.iter().all(|v| v.is_finite()) {
@@ -88,6 +98,7 @@ impl TerrainSample {
     pub(crate) fn write(self, out: &mut UnitWriter) -> Result<Terrain> {
         let TerrainSample {
             origin,
+            positions,
             pos,
             mut dist,
             normals,
@@ -127,6 +138,7 @@ impl TerrainSample {
             points,
             distance_range,
             facing,
+            positions,
         })
     }
 }
@@ -143,6 +155,10 @@ pub(crate) struct Terrain {
     /// normalised; up where there is none. The viewer looks at a steep face along it.
     #[serde(default = "up")]
     pub(crate) facing: Point3,
+    /// Where the positions are when terrain.bin holds the distances alone (relative to the
+    /// pair's folder); None: terrain.bin holds both.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub(crate) positions: Option<String>,
 }
 
 fn up() -> Point3 {
@@ -166,6 +182,7 @@ pub(crate) fn write_view(
         distance_range: terrain.distance_range,
         facing: terrain.facing,
         terrain: "terrain.bin",
+        positions: terrain.positions.as_deref(),
         meshes: meshes
             .iter()
             .map(|(id, m)| (id.to_string(), m.clone()))
