@@ -16,7 +16,7 @@
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 import { CSS2DRenderer } from 'three/addons/renderers/CSS2DRenderer.js';
-import { loadView, loadEvents, loadTerrain, loadSummary, loadMesh, meshPaths, setBase } from './data.js';
+import { loadView, loadEvents, loadTerrain, loadSummary, loadMesh, meshPaths, setBase, positionsKept } from './data.js';
 import { loadCampaign, readState, goTo, savedCamera, sceneEvents, colouring, drawCampaign, colourKeys } from './campaign.js';
 import { distanceColors, rampHalfWidth } from './colormap.js';
 import { Terrain, interleaveTerrain } from './terrain.js';
@@ -70,9 +70,11 @@ async function main() {
   const { crsName } = loaded;
   const events = campaign ? sceneEvents(campaign, state, view.origin, loaded.events) : loaded.events;
   const origin = view.origin;
+  // A campaign's pairs may share their core points (view.json `positions`): `share` keeps this
+  // pair's for the next one.
   const raw = await loadTerrain(view, (p) => {
     loading.textContent = `Loading terrain… ${Math.round(p * 100)} %`;
-  });
+  }, { share: Boolean(campaign) });
   loading.textContent = 'Preparing…';
   T.timings.loaded = ms();
   const terrainData = interleaveTerrain(raw.positions, raw.distances);
@@ -445,6 +447,8 @@ async function main() {
     return { x: r.left + ((v.x + 1) / 2) * r.width, y: r.top + ((1 - v.y) / 2) * r.height };
   };
   T.project = (id) => T.projectLocal(byId.get(id).local);
+  /** The terrain as drawn (interleaved: terrain.js): local positions and distances. */
+  T.terrainArrays = () => ({ positions: terrain.positions, distances: terrainData.distances });
   applyFilter();
   loading.hidden = true;
   renderNow();
@@ -454,6 +458,7 @@ async function main() {
   await loadSolids(view, events, layer, requestRender);
   T.markers = layer.visibleMarkers();
   renderNow();
+  await positionsKept();
   T.timings.ready = ms();
   T.ready = true;
 }

@@ -6,9 +6,13 @@
 // vegetation true), event 3 was judged and is not (fraction 0.12); the others carry neither
 // property, as results written before talus judged vegetation.
 //
+// makeCampaignFixture writes a campaign of such results (pairs/<before>_<after>/, the same core
+// points in every pair), some of whose pairs name the first pair's terrain in view.json
+// `positions` and keep only their distances.
+//
 // Usage: node make-fixture.mjs DIR [scale]   (or import { makeFixture } and call it)
 
-import { mkdirSync, writeFileSync } from 'node:fs';
+import { mkdirSync, readFileSync, writeFileSync } from 'node:fs';
 import { join } from 'node:path';
 import { fileURLToPath } from 'node:url';
 
@@ -88,9 +92,10 @@ function percentile(sorted, p) {
 /**
  * Write the fixture into `dir` and return what a reader should find:
  * { origin, points, events: [{ id, kind, volume_m3, volume_uncertainty_m3, centroid,
- * vegetation_fraction (or null), vegetation }], range }.
+ * vegetation_fraction (or null), vegetation }], range }. `shift` (m) is added to every
+ * distance: a campaign's pairs differ by it, their core points do not.
  */
-export function makeFixture(dir, scale = 1) {
+export function makeFixture(dir, scale = 1, { shift = 0 } = {}) {
   const NX = Math.round(250 * scale);
   const NY = Math.round(200 * scale);
   const STEP = 125 / NX;
@@ -113,7 +118,7 @@ export function makeFixture(dir, scale = 1) {
       pos[3 * k + 1] = y;
       pos[3 * k + 2] = surface(x, y) + Math.max(d, 0);
       // M3C2 is not computed near the scan border (no neighbours on one side).
-      dist[k] = x < 2 ? NaN : d;
+      dist[k] = x < 2 ? NaN : d + shift;
       k++;
     }
   }
@@ -199,6 +204,76 @@ export function makeFixture(dir, scale = 1) {
     }, null, 1),
   );
   return { origin: ORIGIN, points: n, events: expected, range };
+}
+
+/**
+ * A campaign in `dir` (summary.json, campaign.json, events.geojson, pairs/<label>/) of
+ * `layout.length` pairs of consecutive epochs, each a [`makeFixture`] result (density `scale`)
+ * with the same core points and its own distances (shifted by 0.1 m per pair). A pair whose
+ * layout is 'shared' names the first pair's terrain.bin in view.json `positions` and keeps only
+ * its n distances (4n bytes); a 'full' one (the first must be) keeps its whole terrain.bin.
+ * Returns { labels, points, origin }.
+ */
+export function makeCampaignFixture(dir, layout = ['full', 'shared', 'shared', 'full'], scale = 0.4) {
+  if (layout[0] !== 'full') throw new Error('the first pair keeps its whole terrain');
+  const epochs = Array.from({ length: layout.length + 1 }, (_, i) => {
+    const date = new Date(Date.UTC(2021, 2 + 3 * i, 1)).toISOString().slice(0, 10);
+    return { label: date.replaceAll('-', ''), date };
+  });
+  const labels = layout.map((_, i) => `${epochs[i].label}_${epochs[i + 1].label}`);
+  const rows = [];
+  const features = [];
+  let range = null;
+  let fixture;
+  layout.forEach((kind, i) => {
+    const pairDir = join(dir, 'pairs', labels[i]);
+    fixture = makeFixture(pairDir, scale, { shift: 0.1 * i });
+    const n = fixture.points;
+    if (kind === 'shared') {
+      const full = readFileSync(join(pairDir, 'terrain.bin'));
+      writeFileSync(join(pairDir, 'terrain.bin'), full.subarray(12 * n));
+      const view = JSON.parse(readFileSync(join(pairDir, 'view.json'), 'utf8'));
+      view.positions = `../${labels[0]}/terrain.bin`;
+      writeFileSync(join(pairDir, 'view.json'), JSON.stringify(view, null, 1));
+    }
+    range = range ? [Math.min(range[0], fixture.range[0]), Math.max(range[1], fixture.range[1])] : fixture.range;
+    const [before, after] = [epochs[i], epochs[i + 1]];
+    const sum = (f) => fixture.events.filter(f).reduce((s, e) => s + e.volume_m3, 0);
+    rows.push({
+      label: labels[i], before: before.label, after: after.label,
+      before_date: before.date, after_date: after.date, days: 92,
+      core_points: n, events: fixture.events.length,
+      gain_m3: sum((e) => e.volume_m3 > 0), loss_m3: sum((e) => e.volume_m3 < 0), net_m3: sum(() => true),
+    });
+    for (const e of fixture.events) {
+      features.push({
+        type: 'Feature',
+        geometry: { type: 'Point', coordinates: e.centroid },
+        properties: {
+          pair: labels[i], before_date: before.date, after_date: after.date,
+          track_id: e.vegetation ? null : e.id, id: e.id, kind: e.kind,
+          volume_m3: e.volume_m3, volume_uncertainty_m3: e.volume_uncertainty_m3,
+          vegetation: e.vegetation,
+        },
+      });
+    }
+  });
+  writeFileSync(join(dir, 'summary.json'), JSON.stringify({
+    tool: 'talus',
+    version: '0.1.0-fixture',
+    epochs: epochs.map((e) => ({ label: e.label, date: e.date })),
+    pairs: rows.map((r) => ({ label: r.label, events: r.events })),
+    core_points: fixture.points,
+  }, null, 1));
+  writeFileSync(join(dir, 'campaign.json'), JSON.stringify({
+    pairs: rows,
+    epochs: epochs.map((e) => ({ label: e.label, date: e.date })),
+    distance_range: range,
+  }, null, 1));
+  writeFileSync(join(dir, 'events.geojson'), JSON.stringify({
+    type: 'FeatureCollection', crs_name: 'WGS 84 / UTM zone 33N', features,
+  }, null, 1));
+  return { labels, points: fixture.points, origin: ORIGIN };
 }
 
 if (process.argv[1] === fileURLToPath(import.meta.url)) {
