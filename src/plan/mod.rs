@@ -570,7 +570,7 @@ impl Plan {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     fn unit(parts: &[&str]) -> Unit {
@@ -584,8 +584,8 @@ mod tests {
         }
     }
 
-    /// A plan with no surveys, pairs or units, for the index's tests.
-    fn empty_plan() -> Plan {
+    /// A plan with no surveys, pairs or units, for the index's tests (and the executor's).
+    pub(crate) fn empty_plan() -> Plan {
         let params = Params::resolve(&crate::params::UserParams::default(), 0.25).unwrap();
         let spacing = Spacing {
             spacing: 0.25,
