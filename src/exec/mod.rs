@@ -586,7 +586,9 @@ mod tests {
     fn slots_take_units_pair_by_pair() {
         let mut plan = crate::plan::tests::empty_plan();
         let mut add = |spec: Spec, deps: Vec<usize>| plan.push(spec, "u", &[], deps);
-        let t: Vec<usize> = (0..3).map(|s| add(Spec::survey("tiling", s), vec![])).collect();
+        let t: Vec<usize> = (0..3)
+            .map(|s| add(Spec::survey("tiling", s), vec![]))
+            .collect();
         let m0 = add(Spec::pair("m3c2", 0), vec![t[0], t[1]]);
         let m1 = add(Spec::pair("m3c2", 1), vec![t[1], t[2]]);
         let e0 = add(Spec::pair("events", 0), vec![m0]);

@@ -15,6 +15,7 @@ use std::path::PathBuf;
 use serde::{Deserialize, Serialize};
 
 use super::events::EventsStage;
+use super::series::SeriesStage;
 use super::stable::StableStage;
 use super::stage::{registry, Line, Planner, Publishes, Scope, Stage, Total};
 use super::volumes::{mesh_files, Measured, VolumesStage};
@@ -684,6 +685,10 @@ impl Stage for OutputsStage {
                 deps.push(e);
                 deps.extend(p.of_pair(VolumesStage::KIND, pair));
             }
+            // Where terrain.bin may come from (`view::Terrain::series`).
+            if points::shared_positions(p.plan, pair).is_some() {
+                deps.push(p.the(&Spec::pair(SeriesStage::KIND, pair))?);
+            }
             p.add_pair(Self::KIND, pair, &version, deps);
         }
         Ok(())
@@ -778,11 +783,14 @@ fn run(ctx: &Ctx, unit: usize, pair: usize, out: &mut UnitWriter) -> Result<Outp
     let text = serde_json::to_string_pretty(&summary)
         .map_err(|e| Error::Internal(format!("summary: {e}")))?;
     super::write_bytes(out, MARKER, text.as_bytes())?;
-    publish.extend(
-        points::files(plan)
-            .iter()
-            .map(|&f| Publish::of(plan, points_unit, f, f.into())),
-    );
+    for &f in points::files(plan) {
+        if f == "terrain.bin" && terrain.series {
+            let series = ctx.unit(&Spec::pair(SeriesStage::KIND, pair))?;
+            publish.push(Publish::of(plan, series, super::series::FILE, f.into()));
+        } else {
+            publish.push(Publish::of(plan, points_unit, f, f.into()));
+        }
+    }
     let mut files = vec!["view.json", MARKER];
     if !plan.m3c2_only {
         files.extend(["events.geojson", "events.csv", "event_regions.geojson"]);

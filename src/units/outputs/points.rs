@@ -145,7 +145,11 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<PointsMeta> {
     // The kept core points beside the results, both in key order.
     let mut kept = KeptByKey::new(kept);
     let total = crate::units::m3c2::pair_count(ctx, pair)?;
-    let mut terrain = TerrainSample::new(total, plan.layout.anchor, shared_positions(plan, pair));
+    // A lean campaign's pair after the first: its series unit holds these distances, the same
+    // bytes, when the sample is every core point; terrain.bin is published from there.
+    let shared = shared_positions(plan, pair);
+    let series = shared.is_some();
+    let mut terrain = TerrainSample::new(total, plan.layout.anchor, shared, series);
     // The user's core-point file, when there is one, opened once for its scale and bounds.
     let user_cores = plan
         .core_points

@@ -50,6 +50,9 @@ pub(crate) struct TerrainSample {
     stride: u64,
     /// Where the positions are when not collected here ([`Terrain::positions`]).
     positions: Option<String>,
+    /// Whether the pair's series unit holds these distances, the same bytes, when the sample is
+    /// every core point ([`Terrain::series`]).
+    series: bool,
     origin: Point3,
     seen: u64,
     pos: Vec<f32>,
@@ -62,13 +65,14 @@ impl TerrainSample {
     /// A sample of at most [`MAX_TERRAIN_POINTS`] of `total` core points, relative to `origin`.
     /// Its columns are allocated whole, at the size the stride gives: grown by doubling they
     /// would hold up to twice that, and three times while a doubling copies.
-    pub(crate) fn new(total: u64, origin: Point3, positions: Option<String>) -> Self {
+    pub(crate) fn new(total: u64, origin: Point3, positions: Option<String>, series: bool) -> Self {
         let stride = total.div_ceil(MAX_TERRAIN_POINTS).max(1);
         let n = total.div_ceil(stride) as usize;
         let own = if positions.is_none() { 3 * n } else { 0 };
         TerrainSample {
             stride,
             positions,
+            series,
             origin,
             seen: 0,
             pos: Vec::with_capacity(own),
@@ -94,26 +98,32 @@ impl TerrainSample {
         self.seen += 1;
     }
 
-    /// Write terrain.bin; what view.json says of it.
+    /// Write terrain.bin (unless the series unit holds it: [`Terrain::series`]); what view.json
+    /// says of it.
     pub(crate) fn write(self, out: &mut UnitWriter) -> Result<Terrain> {
         let TerrainSample {
+            stride,
             origin,
             positions,
+            series,
             pos,
             mut dist,
             normals,
             ..
         } = self;
-        // Streamed, a run of values at a time (a byte copy would be as large as the terrain).
-        write_streamed(out, "terrain.bin", |w| {
-            let mut bytes = Vec::with_capacity(1 << 16);
-            for run in pos.chunks(1 << 14).chain(dist.chunks(1 << 14)) {
-                bytes.clear();
-                bytes.extend(run.iter().flat_map(|v| v.to_le_bytes()));
-                w.write_all(&bytes)?;
-            }
-            Ok(())
-        })?;
+        let series = series && positions.is_some() && stride == 1;
+        if !series {
+            // Streamed, a run of values at a time (a byte copy would be as large as the terrain).
+            write_streamed(out, "terrain.bin", |w| {
+                let mut bytes = Vec::with_capacity(1 << 16);
+                for run in pos.chunks(1 << 14).chain(dist.chunks(1 << 14)) {
+                    bytes.clear();
+                    bytes.extend(run.iter().flat_map(|v| v.to_le_bytes()));
+                    w.write_all(&bytes)?;
+                }
+                Ok(())
+            })?;
+        }
         let points = dist.len();
         drop(pos);
         // The colour range from the distances themselves (written already): no copy of them.
@@ -139,6 +149,7 @@ impl TerrainSample {
             distance_range,
             facing,
             positions,
+            series,
         })
     }
 }
@@ -159,6 +170,10 @@ pub(crate) struct Terrain {
     /// pair's folder); None: terrain.bin holds both.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub(crate) positions: Option<String>,
+    /// terrain.bin is the pair's series column (every core point's distance as f32 in key
+    /// order: the same bytes), published from the series unit rather than written twice.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub(crate) series: bool,
 }
 
 fn up() -> Point3 {
