@@ -313,7 +313,7 @@ struct CampaignArgs {
     /// Give every pair its own m3c2.laz (and terrain positions), exactly compare's outputs.
     /// By default the time series (timeseries.parquet, timeseries.laz) holds every pair's
     /// distance at every core point and the pairs hold their events, meshes and summaries:
-    /// about half the disk.
+    /// about half the disk. Part of every pair's key: give it again with `--resume`.
     #[arg(long)]
     pair_clouds: bool,
     /// Continue an interrupted campaign, or one with surveys added, in DIR.

@@ -266,7 +266,7 @@ struct RunCtx<'a> {
 /// The order slots take ready units in: by the first pair each unit serves (its own pair, or
 /// the earliest of the units that read it), then in plan order. Plan order is stage after
 /// stage: a campaign's slots took every pair's M3C2 before any pair's events, so every pair's
-/// M3C2 results and every survey's tiles were on disk at once (4.1× the inputs of 41 surveys of
+/// M3C2 results and every survey's tiles were on disk at once (4.3× the inputs of 41 surveys of
 /// 400k points, issue 46). Pair by pair, a pair's readers finish and release its intermediate
 /// units before later pairs' pile up. A preference, not a barrier: a slot with nothing of the
 /// earliest pair ready takes a later pair's unit. A comparison (one pair) keeps plan order.

@@ -359,14 +359,15 @@ fn assert_timeseries(r: &Value, dir: &Path, names: &[String], truth: &CampaignTr
 /// laspy: tests/py/read_timeseries.py) and compared bit for bit, a null exactly where the LAS
 /// has NaN (a 0.3 m half-length leaves the deeper changes beyond reach: nulls in every pair).
 /// The consecutive and baseline pairs are columns in the campaign's pair order, the LAS's
-/// dimensions the same; summary.json says the LAS holds the distances.
+/// dimensions the same; summary.json says the LAS holds the distances. Without --pair-clouds,
+/// each pair's terrain.bin holds the column's values.
 #[test]
 fn timeseries_parquet_holds_the_laz_values_read_by_pyarrow_and_laspy() {
     let Some(py) = common::laspy::pyarrow_python() else {
         return;
     };
     let tmp = common::tempdir();
-    let (truth, _, labels, dir) = synth_and_campaign(
+    let (truth, surveys, labels, dir) = synth_and_campaign(
         tmp.path(),
         30_000,
         &[],
@@ -386,6 +387,18 @@ fn timeseries_parquet_holds_the_laz_values_read_by_pyarrow_and_laspy() {
     }
     let summary = json(&dir.join("summary.json"));
     assert_eq!(summary["timeseries"]["laz_distances"], true);
+    // The same campaign without --pair-clouds: its pairs' terrain.bin (the time-series columns'
+    // files but the first's) hold the same distances, NaN where the Parquet has null.
+    let lean = tmp.path().join("lean");
+    ok(&campaign(
+        &surveys,
+        &lean,
+        &["--baseline", "--cyl-halflen", "0.3"],
+    ));
+    let r = common::laspy::read_timeseries(&py, &lean, true, None);
+    assert_timeseries(&r, &lean, &names, &truth);
+    assert_eq!(r["compared"]["terrain"], rows * names.len() as u64);
+    assert_eq!(r["compared"]["pairs"], 0);
 }
 
 /// Issue 46, item 3: a campaign of 401 surveys (400 pairs, more than the 341 whose extra-bytes

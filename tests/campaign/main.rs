@@ -202,9 +202,9 @@ fn parameter_flags(p: &Value) -> Vec<String> {
 
 /// The lean campaign's pair `label` (in `lean`) holds the `--pair-clouds` one's outputs (in
 /// `full`) but m3c2.laz; where its terrain positions are in the first pair (`shared`: its
-/// label), its terrain.bin is the full one's distances (published from its time-series column,
-/// the same bytes) and its view.json the full one's with `positions` naming the first pair's
-/// terrain.bin.
+/// label), its terrain.bin is the full one's distances (its time-series column's file, the same
+/// bytes) and its view.json the full one's with `positions` naming the first pair's terrain.bin
+/// (and format version 2).
 fn assert_lean_pair(label: &str, full: &Path, lean: &Path, shared: Option<&str>) {
     let (mut mine, mut theirs) = (outputs(lean), outputs(full));
     assert!(
@@ -223,18 +223,6 @@ fn assert_lean_pair(label: &str, full: &Path, lean: &Path, shared: Option<&str>)
         mine.keys().collect::<Vec<_>>(),
         theirs.keys().collect::<Vec<_>>(),
         "pair {label}"
-    );
-    // summary.json but its stage timings: a lean pair's terrain.bin may be its time-series
-    // column's file, which adds that stage to the pair's list.
-    let summary = |files: &mut BTreeMap<String, Vec<u8>>| {
-        let mut v: Value = serde_json::from_slice(&files.remove("summary.json").unwrap()).unwrap();
-        v.as_object_mut().unwrap().remove("stages");
-        v
-    };
-    assert_eq!(
-        summary(&mut mine),
-        summary(&mut theirs),
-        "pair {label}: summary.json"
     );
     for (n, bytes) in &mine {
         assert!(
@@ -262,7 +250,28 @@ fn assert_lean_pair(label: &str, full: &Path, lean: &Path, shared: Option<&str>)
                 Some(format!("../{first}/terrain.bin").into()),
                 "pair {label}"
             );
+            // A view.json naming its positions elsewhere is format version 2.
+            assert_eq!(view["version"], 2, "pair {label}");
+            view["version"] = v["version"].clone();
             assert_eq!(view, v, "pair {label}: view.json");
+            // Published from the pair's time-series column (up to 2M core points): that very
+            // file, not a copy.
+            use std::os::unix::fs::MetadataExt;
+            let ino = std::fs::metadata(lean.join("terrain.bin")).unwrap().ino();
+            let store = lean
+                .parent()
+                .unwrap()
+                .parent()
+                .unwrap()
+                .join(".talus/units/series");
+            let linked = std::fs::read_dir(&store).unwrap().any(|d| {
+                let f = d.unwrap().path().join("series.bin");
+                std::fs::metadata(f).is_ok_and(|m| m.ino() == ino)
+            });
+            assert!(
+                linked,
+                "pair {label}: terrain.bin is not its series unit's file"
+            );
         }
     }
 }

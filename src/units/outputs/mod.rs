@@ -850,7 +850,9 @@ fn summarize(
     let mut seen = std::collections::HashSet::new();
     let mut stack = plan.units[unit].deps.clone();
     while let Some(u) = stack.pop() {
-        if !seen.insert(u) {
+        // A pair's time-series column is the campaign's work, not the pair's: a dependency
+        // only where terrain.bin is published from it, which must not change the pair's stages.
+        if !seen.insert(u) || plan.units[u].kind() == SeriesStage::KIND {
             continue;
         }
         stack.extend(&plan.units[u].deps);

@@ -189,7 +189,8 @@ pub(crate) fn write_view(
     meshes: &[(u32, EventMeshes)],
 ) -> Result<()> {
     let view = ViewJson {
-        version: 1,
+        // 2: terrain.bin holds the distances alone, the positions are where `positions` says.
+        version: if terrain.positions.is_some() { 2 } else { 1 },
         crs: crs.describe(),
         units: "m",
         origin: terrain.origin,
