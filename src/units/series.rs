@@ -2,7 +2,8 @@
 //! campaign's core points, in key order (every pair of a campaign has the same core points), as
 //! little-endian f32 (as m3c2.laz, timeseries.laz and timeseries.parquet store it: 0.06 µm at
 //! 1 m, below any survey's precision) — the first pair's rows also hold each core point's x, y,
-//! z as f64 before it (exact: the LAS grid's values). Not compressed: the distances' low bits are noise (zstd saves little), and the campaign reads
+//! z as f64 before it (exact: the LAS grid's values). Not compressed: the distances' low bits
+//! are noise (zstd saves little), and the campaign reads
 //! every pair's column at once, a few pages each, where a zstd stream's decoder holds a
 //! window and tables (≈ 0.2 MiB a pair: 80 MiB at 400 pairs).
 //!

@@ -107,8 +107,8 @@ pub(crate) struct Written {
 }
 
 /// Where m3c2.laz goes: its CRS and coordinate grid.
-pub(crate) struct Cloud<'a> {
-    pub(crate) crs: &'a Crs,
+pub(crate) struct Cloud {
+    pub(crate) crs: Crs,
     pub(crate) grid: CoordinateGrid,
 }
 
@@ -132,7 +132,7 @@ pub(crate) fn write_m3c2_laz(
             let path = out.path("m3c2.laz")?;
             Some(ResultWriter::create_on_grid(
                 &path,
-                c.crs,
+                &c.crs,
                 M3C2_DIMS,
                 c.grid,
                 Some(total),

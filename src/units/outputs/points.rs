@@ -126,30 +126,10 @@ impl Stage for PointsStage {
     }
 }
 
-/// Write pair `pair`'s m3c2.laz and terrain sample into `out`.
-fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<PointsMeta> {
-    let plan = ctx.plan;
+/// Pair `pair`'s m3c2.laz's CRS (its before survey's) and coordinate grid.
+fn cloud(plan: &crate::plan::Plan, pair: usize) -> Result<laz::Cloud> {
     let p = &plan.pairs[pair];
     let bs = &plan.surveys[p.before];
-    let ground = crate::units::stable::read(ctx, pair)?;
-    let params = ground.params(plan);
-    let _held = ctx.reserve(
-        need(crate::units::merged::merge_inputs(plan)),
-        "writing m3c2.laz (and the merge of the pair's tiles)",
-    )?;
-    let kept = match plan.m3c2_only {
-        true => None,
-        false => Some(KeptFrames::open(ctx, pair)?),
-    };
-    let kept_count = kept.as_ref().map_or(0, |k| k.count());
-    // The kept core points beside the results, both in key order.
-    let mut kept = KeptByKey::new(kept);
-    let total = crate::units::m3c2::pair_count(ctx, pair)?;
-    // A lean campaign's pair after the first: its series unit holds these distances, the same
-    // bytes, when the sample is every core point; terrain.bin is published from there.
-    let shared = shared_positions(plan, pair);
-    let series = shared.is_some();
-    let mut terrain = TerrainSample::new(total, plan.layout.anchor, shared, series);
     // The user's core-point file, when there is one, opened once for its scale and bounds.
     let user_cores = plan
         .core_points
@@ -177,11 +157,38 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<PointsMeta> {
             extent.grow(&plan.surveys[survey].bounds.max);
         }
     }
-    let mut merged = crate::units::m3c2::Merged::new(ctx, pair)?;
-    let cloud = (!plan.lean_pairs).then(|| laz::Cloud {
-        crs: &crs,
+    Ok(laz::Cloud {
+        crs,
         grid: CoordinateGrid::for_extent(extent.min, extent.max, &scales),
-    });
+    })
+}
+
+/// Write pair `pair`'s m3c2.laz and terrain sample into `out`.
+fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<PointsMeta> {
+    let plan = ctx.plan;
+    let ground = crate::units::stable::read(ctx, pair)?;
+    let params = ground.params(plan);
+    let _held = ctx.reserve(
+        need(crate::units::merged::merge_inputs(plan)),
+        "writing m3c2.laz (and the merge of the pair's tiles)",
+    )?;
+    let kept = match plan.m3c2_only {
+        true => None,
+        false => Some(KeptFrames::open(ctx, pair)?),
+    };
+    let kept_count = kept.as_ref().map_or(0, |k| k.count());
+    // The kept core points beside the results, both in key order.
+    let mut kept = KeptByKey::new(kept);
+    let total = crate::units::m3c2::pair_count(ctx, pair)?;
+    // A lean campaign's pair after the first: its terrain.bin holds the distances alone, and
+    // its series unit those very bytes when the sample is every core point.
+    let mut terrain = TerrainSample::new(total, plan.layout.anchor, shared_positions(plan, pair));
+    // Where m3c2.laz goes: a lean campaign's pairs have none (nor need its input's header).
+    let cloud = match plan.lean_pairs {
+        true => None,
+        false => Some(cloud(plan, pair)?),
+    };
+    let mut merged = crate::units::m3c2::Merged::new(ctx, pair)?;
     let written = laz::write_m3c2_laz(
         out,
         &mut merged,

@@ -48,11 +48,10 @@ pub(crate) struct ViewRange {
 /// while m3c2.laz is written (one pass over the results for both).
 pub(crate) struct TerrainSample {
     stride: u64,
-    /// Where the positions are when not collected here ([`Terrain::positions`]).
+    /// Where the positions are when not collected here ([`Terrain::positions`]): a lean
+    /// campaign's pair after the first, whose series unit holds these very distances when the
+    /// sample is every core point ([`Terrain::series`]).
     positions: Option<String>,
-    /// Whether the pair's series unit holds these distances, the same bytes, when the sample is
-    /// every core point ([`Terrain::series`]).
-    series: bool,
     origin: Point3,
     seen: u64,
     pos: Vec<f32>,
@@ -65,14 +64,13 @@ impl TerrainSample {
     /// A sample of at most [`MAX_TERRAIN_POINTS`] of `total` core points, relative to `origin`.
     /// Its columns are allocated whole, at the size the stride gives: grown by doubling they
     /// would hold up to twice that, and three times while a doubling copies.
-    pub(crate) fn new(total: u64, origin: Point3, positions: Option<String>, series: bool) -> Self {
+    pub(crate) fn new(total: u64, origin: Point3, positions: Option<String>) -> Self {
         let stride = total.div_ceil(MAX_TERRAIN_POINTS).max(1);
         let n = total.div_ceil(stride) as usize;
         let own = if positions.is_none() { 3 * n } else { 0 };
         TerrainSample {
             stride,
             positions,
-            series,
             origin,
             seen: 0,
             pos: Vec::with_capacity(own),
@@ -105,13 +103,12 @@ impl TerrainSample {
             stride,
             origin,
             positions,
-            series,
             pos,
             mut dist,
             normals,
             ..
         } = self;
-        let series = series && positions.is_some() && stride == 1;
+        let series = positions.is_some() && stride == 1;
         if !series {
             // Streamed, a run of values at a time (a byte copy would be as large as the terrain).
             write_streamed(out, "terrain.bin", |w| {
