@@ -75,8 +75,8 @@ enum Command {
         /// The submission's number (DIR/.talus/slurm/N).
         #[arg(long)]
         submission: u32,
-        /// The stage: tiling, align, aligned, cleared, orient, cores, thinned, m3c2, merged,
-        /// stable, events, series, volumes, points, outputs, campaign, publish.
+        /// The stage: tiling, align, aligned, cleared, field, orient, cores, thinned, m3c2,
+        /// merged, stable, events, series, volumes, points, outputs, campaign, publish.
         #[arg(long)]
         stage: String,
         /// The task (default: SLURM_ARRAY_TASK_ID).

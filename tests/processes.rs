@@ -125,8 +125,8 @@ fn three_processes_one_killed_give_the_one_process_bytes() {
             .unwrap();
     let planned = plan["units"].as_array().unwrap().len();
     let finished: usize = [
-        "tiling", "align", "aligned", "orient", "m3c2", "stable", "events", "points", "volumes",
-        "outputs",
+        "tiling", "align", "aligned", "field", "orient", "m3c2", "stable", "events", "points",
+        "volumes", "outputs",
     ]
     .iter()
     .map(|k| unit_times(&dir, k).len())

@@ -195,7 +195,7 @@ fn a_released_run_resumed_with_new_parameters_gives_a_fresh_runs_outputs() {
     let dir = tmp.path().join("run");
     compare(&before, &after, &dir, ARGS);
     let units = dir.join(".talus/units");
-    for kind in ["tiling", "orient", "m3c2"] {
+    for kind in ["tiling", "field", "orient", "m3c2"] {
         for unit in std::fs::read_dir(units.join(kind)).unwrap() {
             let unit = unit.unwrap().path();
             let names: Vec<String> = std::fs::read_dir(&unit)
@@ -304,7 +304,7 @@ fn intermediate_units_go_as_soon_as_their_readers_are_done() {
         .expect("a published line");
     let mut released = 0;
     for (i, u) in units.iter().enumerate() {
-        if !["tiling", "orient", "aligned", "m3c2"].contains(&kind(u).as_str()) {
+        if !["tiling", "field", "orient", "aligned", "m3c2"].contains(&kind(u).as_str()) {
             continue;
         }
         let me = u["name"].as_str().unwrap();

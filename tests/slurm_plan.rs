@@ -60,7 +60,7 @@ fn plan_only_writes_the_scripts_and_submits_nothing() {
     assert_eq!(
         stages,
         [
-            "tiling", "align", "aligned", "orient", "m3c2", "stable", "events", "volumes",
+            "tiling", "align", "aligned", "field", "orient", "m3c2", "stable", "events", "volumes",
             "points", "outputs", "publish"
         ],
         "{stdout}"
@@ -96,8 +96,15 @@ fn plan_only_writes_the_scripts_and_submits_nothing() {
     .pop()
     .unwrap();
     assert_eq!(m3c2["tasks"].as_array().unwrap().len(), tiles.div_ceil(2));
+    // The orientation field's sample is a unit per tile of the before survey: two to a task too.
+    let field = m3c2_of(&json(&sub.join("submission.json")), "stages", &|s| {
+        s["kind"] == "field"
+    })
+    .pop()
+    .unwrap();
+    assert_eq!(field["tasks"].as_array().unwrap().len(), tiles.div_ceil(2));
 
-    let script = std::fs::read_to_string(sub.join("05-m3c2.sh")).unwrap();
+    let script = std::fs::read_to_string(sub.join("06-m3c2.sh")).unwrap();
     for line in [
         "#!/bin/bash",
         &format!("#SBATCH --array=0-{}", tiles.div_ceil(2) - 1),
@@ -111,7 +118,7 @@ fn plan_only_writes_the_scripts_and_submits_nothing() {
     let submit = std::fs::read_to_string(sub.join("submit.sh")).unwrap();
     assert!(
         submit.contains(
-            r#"sbatch --parsable "--dependency=afterok:$j4" -p long '--comment=a b' 05-m3c2.sh"#
+            r#"sbatch --parsable "--dependency=afterok:$j5" -p long '--comment=a b' 06-m3c2.sh"#
         ),
         "{submit}"
     );

@@ -143,6 +143,7 @@ fn a_registered_stage_runs_locally_in_a_worker_and_in_a_slurm_plan() {
             "survey_heights",
             "align",
             "aligned",
+            "field",
             "orient",
             "m3c2",
             "stable",

@@ -169,6 +169,15 @@ impl Spec {
         }
     }
 
+    /// The unit of `kind` for tile `tile` of survey `survey`.
+    pub(crate) fn survey_tile(kind: &str, survey: usize, tile: TileId) -> Spec {
+        Spec {
+            survey: Some(survey),
+            tile: Some([tile.col, tile.row]),
+            ..Spec::run(kind)
+        }
+    }
+
     /// The unit of `kind` for tile `tile` of pair `pair`.
     pub(crate) fn tile(kind: &str, pair: usize, tile: TileId) -> Spec {
         Spec {

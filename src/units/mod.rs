@@ -18,6 +18,7 @@ pub(crate) mod campaign;
 pub mod cleared;
 pub(crate) mod cores;
 pub(crate) mod events;
+pub(crate) mod field;
 pub mod m3c2;
 pub(crate) mod merged;
 pub(crate) mod orient;

@@ -30,6 +30,17 @@ pub enum Scope {
     Pair,
     /// One per pair and tile (M3C2, volumes): a Slurm task runs several of them.
     Tile,
+    /// One per survey and tile (the orientation field's sample): as [`Scope::Tile`], a Slurm
+    /// task runs several of them.
+    SurveyTile,
+}
+
+impl Scope {
+    /// Whether the stage has a unit per tile (of a pair or of a survey): its work spreads
+    /// over the tiles, and a Slurm task runs several of its units.
+    pub(crate) fn per_tile(self) -> bool {
+        matches!(self, Scope::Tile | Scope::SurveyTile)
+    }
 }
 
 /// The progress line a stage's units count on (stages may share one), and what it counts.
@@ -292,6 +303,7 @@ pub(crate) fn default_stages() -> Vec<&'static dyn Registered> {
         entry::<align::AlignStage>(),
         entry::<aligned::AlignedStage>(),
         entry::<cleared::ClearedStage>(),
+        entry::<field::FieldStage>(),
         entry::<orient::OrientStage>(),
         entry::<cores::UserCoresStage>(),
         entry::<cores::ThinnedStage>(),
@@ -529,6 +541,7 @@ pub(crate) fn check_plan(plan: &Plan) -> Result<Vec<usize>> {
             Scope::Survey => s.survey.is_some() && s.pair.is_none() && s.tile.is_none(),
             Scope::Pair => s.survey.is_none() && s.pair.is_some() && s.tile.is_none(),
             Scope::Tile => s.survey.is_none() && s.pair.is_some() && s.tile.is_some(),
+            Scope::SurveyTile => s.survey.is_some() && s.pair.is_none() && s.tile.is_some(),
             Scope::Run => s.survey.is_none() && s.pair.is_none() && s.tile.is_none(),
         };
         if !fits {

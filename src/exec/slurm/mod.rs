@@ -37,7 +37,7 @@ use std::time::{Duration, Instant};
 use crate::error::{Error, Result};
 use crate::plan::Plan;
 use crate::store::{Lock, Store};
-use crate::units::stage::{registry, Registered, Scope};
+use crate::units::stage::{registry, Registered};
 use crate::units::unit_ref;
 
 /// The name of the last job, which publishes the outputs.
@@ -100,7 +100,7 @@ pub(crate) fn stages(plan: &Plan, done: &[bool], tiles_per_task: usize) -> Resul
         }
         let kind = stage.kind();
         // Units one per tile are grouped `tiles_per_task` to a task.
-        let mut per = if stage.scope() == Scope::Tile {
+        let mut per = if stage.scope().per_tile() {
             tiles_per_task.max(1)
         } else {
             1

@@ -80,7 +80,7 @@ pub(crate) fn report(
             tasks.push(t.seconds);
             peak = peak.max(t.peak_rss_bytes.unwrap_or(0));
         }
-        let tile = stage.scope() == Scope::Tile;
+        let tile = stage.scope().per_tile();
         let tasks = if tile {
             let n = (tasks.len() as f64 * scale).round() as usize;
             (0..n).map(|k| tasks[k % tasks.len()]).collect()

@@ -658,7 +658,7 @@ impl Stage for OutputsStage {
     const SCOPE: Scope = Scope::Pair;
     /// 2: a lean campaign's pair (`Plan::lean_pairs`) publishes no m3c2.laz and names the
     /// first pair's terrain positions in view.json.
-    const VERSION: u32 = 2;
+    const VERSION: u32 = 3;
     const LINE: Line = Line {
         name: "outputs",
         counts: "files",
