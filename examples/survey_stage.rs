@@ -46,11 +46,13 @@ impl Stage for SurveyHeights {
     /// tiling's key is a dependency's, so a changed survey changes it).
     fn plan(p: &mut Planner) -> talus::Result<()> {
         for s in 0..p.plan.surveys.len() {
-            let Some(tiling) = p.find(&Spec::survey(TilingStage::KIND, s)) else {
+            // Its tiling unit, or its parts (a large survey is tiled by several units).
+            let tiling = p.plan.survey_units(TilingStage::KIND, s);
+            if tiling.is_empty() {
                 continue;
-            };
+            }
             let label = p.plan.surveys[s].label.clone();
-            p.add(Spec::survey(Self::KIND, s), &label, &[], vec![tiling]);
+            p.add(Spec::survey(Self::KIND, s), &label, &[], tiling);
         }
         Ok(())
     }
@@ -60,11 +62,11 @@ impl Stage for SurveyHeights {
     fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> talus::Result<Heights> {
         let survey = ctx.survey(unit)?;
         // The survey as delivered: its own tiling (not an aligned one).
-        let tiling = ctx.unit(&Spec::survey(TilingStage::KIND, survey))?;
+        let tiling = ctx.own_tiling(survey)?;
         let (mut n, mut sum) = (0u64, 0.0f64);
         let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
         for id in ctx.plan.layout.grid()?.tiles() {
-            let t = read_tile(ctx, tiling, id)?;
+            let t = read_tile(ctx, &tiling, id)?;
             for i in (0..t.len()).filter(|&i| t.owned[i]) {
                 n += 1;
                 sum += t.z[i];

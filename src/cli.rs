@@ -211,6 +211,12 @@ struct ExecArgs {
     /// (slurm) Tiles per array task in the tile stages (M3C2, volumes) (default: 1).
     #[arg(long, value_name = "N")]
     tiles_per_task: Option<usize>,
+    /// Points a tiling unit reads at most: a larger LAS/LAZ survey is tiled by several units,
+    /// ranges of its points, a task each on a cluster (default: 8388608 with --executor slurm;
+    /// a local run tiles each survey whole). The tiles, and every output, are the same whatever
+    /// it is.
+    #[arg(long, value_name = "N")]
+    tiling_part: Option<u64>,
 }
 
 impl ExecArgs {
@@ -219,6 +225,11 @@ impl ExecArgs {
         if self.tiles_per_task == Some(0) {
             return Err(crate::Error::Usage(
                 "--tiles-per-task: must be at least 1".into(),
+            ));
+        }
+        if self.tiling_part == Some(0) {
+            return Err(crate::Error::Usage(
+                "--tiling-part: must be at least 1".into(),
             ));
         }
         if self.executor == "local" {
@@ -437,6 +448,7 @@ fn run(cli: Cli) -> crate::Result<()> {
                 tile_size: a.tile_size,
                 m3c2_only: a.m3c2_only,
                 keep_units: a.exec.keep_units,
+                tiling_part: a.exec.tiling_part,
                 executor: a.exec.executor()?,
             };
             if let Some(summary) = crate::commands::compare::compare(&opts)? {
@@ -455,6 +467,7 @@ fn run(cli: Cli) -> crate::Result<()> {
                 force: a.force,
                 tile_size: a.tile_size,
                 keep_units: a.exec.keep_units,
+                tiling_part: a.exec.tiling_part,
                 pair_clouds: a.pair_clouds,
                 executor: a.exec.executor()?,
             };

@@ -303,3 +303,100 @@ fn events_in_pieces_equal_the_events_held_at_once() {
         }
     }
 }
+
+/// A survey larger than `--tiling-part` is tiled by several units, ranges of its points (a task
+/// each on a cluster: issue 47): every output is the whole survey's, byte for byte — through the
+/// LAZ decoder of layered point formats (the synthesized cliff, misregistered so that the
+/// alignment applies and its sample reads the parts' frames near its windows), the las crate's
+/// LAZ decoder (St Leonards, point format 0) and uncompressed LAS (autzen, format 7), parts
+/// starting inside LAZ chunks. A survey that shows too few distinct positions across its parts
+/// is refused as a whole one is.
+#[test]
+fn a_survey_tiled_in_parts_gives_the_whole_surveys_outputs() {
+    let tmp = common::tempdir();
+    let (before, after) = pipeline_common::synth_cliff(
+        &tmp.path().join("scene"),
+        120_000,
+        &["--shift", "0.08,0,0", "--turn", "0,0,0.1"],
+    );
+    let leo = common::data("st-leonards");
+    let autzen = common::data("autzen-bmx");
+    let pairs = [
+        ("cliff", before, after, "25001", vec!["--tile-size", "10"]),
+        (
+            "leo",
+            leo.join("leo_20180606_dsm_resampled_1m.laz"),
+            leo.join("leo_20180713_dsm_resampled_1m.laz"),
+            "40000",
+            vec![],
+        ),
+        (
+            "autzen",
+            autzen.join("autzen-bmx-2010.las"),
+            autzen.join("autzen-bmx-2023.las"),
+            "100",
+            vec![],
+        ),
+    ];
+    for (name, b, a, part, extra) in &pairs {
+        let whole = tmp.path().join(format!("{name}-whole"));
+        let parted = tmp.path().join(format!("{name}-parts"));
+        let o = common::run_compare(b, a, &whole, extra);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let line = String::from_utf8_lossy(&o.stderr).to_string();
+        compare(
+            b,
+            a,
+            &parted,
+            &[&extra[..], &["--tiling-part", part]].concat(),
+        );
+        let parts = std::fs::read_dir(parted.join(".talus/units/tiling"))
+            .unwrap()
+            .count();
+        assert!(parts >= 6, "{name}: {parts} tiling units");
+        if *name == "cliff" {
+            assert!(line.contains("the after survey aligned on"), "{line}");
+            assert_same_outputs(&whole, &parted);
+        } else {
+            // Real surveys' events may have no solids: every output file compared.
+            for f in ["m3c2.laz", "events.csv", "terrain.bin", "view.json"] {
+                assert!(
+                    std::fs::read(whole.join(f)).unwrap() == std::fs::read(parted.join(f)).unwrap(),
+                    "{name}: {f} differs in parts"
+                );
+            }
+        }
+        assert_eq!(
+            summary_without_timings(&whole),
+            summary_without_timings(&parted),
+            "{name}: summary.json"
+        );
+    }
+
+    // Two distinct positions over 829 points (inside autzen's extent), in parts of 100:
+    // refused as one survey is.
+    let p = [[194_480.0, 259_230.0, 430.0], [194_481.0, 259_230.5, 430.2]];
+    let twice: Vec<talus::geom::Point3> = (0..829).map(|i| p[i % 2]).collect();
+    let f = tmp.path().join("two_places.laz");
+    let mut w = talus::io::las_out::ResultWriter::create(
+        &f,
+        &talus::io::Crs::default(),
+        &[],
+        [194_000.0, 259_000.0, 100.0],
+    )
+    .unwrap();
+    for q in &twice {
+        w.write(*q, &[]).unwrap();
+    }
+    w.finish().unwrap();
+    let (_, b, _, _, _) = &pairs[2];
+    let out = tmp.path().join("two");
+    let o = common::run_compare(b, &f, &out, &["--tiling-part", "100"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("two_places.laz: 829 points at only 2 distinct position(s)"),
+        "{err}"
+    );
+    assert!(!out.exists(), "a refused run left {}", out.display());
+}

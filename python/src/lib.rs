@@ -464,6 +464,7 @@ fn campaign(
         tile_size: None,
         // The intermediate units are released after the run, as the command line's default.
         keep_units: false,
+        tiling_part: None,
         pair_clouds,
         executor: Default::default(),
     };

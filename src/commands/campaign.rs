@@ -9,7 +9,9 @@
 
 use std::path::{Path, PathBuf};
 
-use super::run::{keeps_decoded, measure_spacing, stable_areas, survey, RunOptions};
+use super::run::{
+    keeps_decoded_of, measure_spacing, stable_areas, survey, tiling_part, RunOptions,
+};
 use crate::campaign::epochs::{self, EpochEntry};
 use crate::error::{Error, Result};
 use crate::params::{Params, UserParams};
@@ -32,6 +34,8 @@ pub struct CampaignOptions {
     pub tile_size: Option<f64>,
     /// Keep the intermediate units' files after the run (`--keep-units`).
     pub keep_units: bool,
+    /// Points a tiling unit reads at most (`--tiling-part`); None: `plan::TILING_PART`.
+    pub tiling_part: Option<u64>,
     /// Each pair's m3c2.laz and terrain positions of its own (`--pair-clouds`): the pairs are
     /// exactly compare's outputs, at about twice a campaign's disk.
     pub pair_clouds: bool,
@@ -134,7 +138,13 @@ fn plan(
         store,
         files[0].first(),
         user,
-        keeps_decoded(opts.resume, &opts.executor).then_some(decoded),
+        keeps_decoded_of(
+            opts.resume,
+            &opts.executor,
+            &files[0],
+            tiling_part(opts.tiling_part, &opts.executor),
+        )
+        .then_some(decoded),
     )?;
     let params = Params::resolve(user, spacing.effective_spacing)?;
     params.check_core_spacing(user)?;
@@ -172,6 +182,7 @@ fn plan(
         .collect();
     let mut plan = Plan::new(surveys, pairs, params, spacing, layout);
     plan.keep_units = opts.keep_units;
+    plan.tiling_part = tiling_part(opts.tiling_part, &opts.executor);
     plan.lean_pairs = !opts.pair_clouds;
     plan.stable_areas = stable_areas(store, user, &plan.surveys)?;
     // The core points are the first survey's: within its bounds.

@@ -10,7 +10,9 @@
 
 use std::path::{Path, PathBuf};
 
-use super::run::{input_file, keeps_decoded, measure_spacing, stable_areas, survey, RunOptions};
+use super::run::{
+    input_file, keeps_decoded_of, measure_spacing, stable_areas, survey, tiling_part, RunOptions,
+};
 use crate::error::{Error, Result};
 use crate::io::{self, CloudInfo};
 use crate::params::{Params, UserParams};
@@ -40,6 +42,8 @@ pub struct CompareOptions {
     pub m3c2_only: bool,
     /// Keep the intermediate units' files after the run (`--keep-units`).
     pub keep_units: bool,
+    /// Points a tiling unit reads at most (`--tiling-part`); None: `plan::TILING_PART`.
+    pub tiling_part: Option<u64>,
     /// Where the units run (SPEC.md §6).
     pub executor: crate::exec::Executor,
 }
@@ -115,7 +119,13 @@ fn plan(
         store,
         inputs.before.first(),
         user,
-        keeps_decoded(opts.resume, &opts.executor).then_some(decoded),
+        keeps_decoded_of(
+            opts.resume,
+            &opts.executor,
+            &inputs.before,
+            tiling_part(opts.tiling_part, &opts.executor),
+        )
+        .then_some(decoded),
     )?;
     crate::progress::trace(|| "spacing measured".into());
     let params = Params::resolve(user, spacing.effective_spacing)?;
@@ -148,6 +158,7 @@ fn plan(
     plan.meshes = meshes;
     plan.m3c2_only = opts.m3c2_only;
     plan.keep_units = opts.keep_units;
+    plan.tiling_part = tiling_part(opts.tiling_part, &opts.executor);
     plan.stable_areas = stable_areas(store, user, &plan.surveys)?;
     let cores = opts.core_points.as_ref().zip(inputs.cores.as_ref());
     let cores = cores.map(|(p, c)| (format!("the core points {}", p.display()), c.bounds));

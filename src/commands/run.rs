@@ -89,6 +89,16 @@ pub(crate) fn survey(store: &Store, label: &str, files: &SurveyFiles) -> Result<
         scale: files.scale(),
         epsg: files.first().crs.epsg_code(),
         transform: files.first().transform,
+        file_points: if files.infos.iter().all(|i| {
+            matches!(
+                i.format,
+                crate::io::CloudFormat::Las | crate::io::CloudFormat::Laz
+            )
+        }) {
+            files.infos.iter().map(|i| i.point_count).collect()
+        } else {
+            Vec::new()
+        },
     })
 }
 
@@ -166,6 +176,33 @@ pub(crate) fn measure_spacing(
 /// resumed run has most likely tiled the survey already: the copy would be written for nothing).
 pub(crate) fn keeps_decoded(resume: bool, executor: &Executor) -> bool {
     !resume && matches!(executor, Executor::Local)
+}
+
+/// Points a tiling unit reads at most (`Plan::tiling_part`): the user's `--tiling-part`, else
+/// [`crate::plan::TILING_PART`] on a cluster, where the parts spread over the nodes, and the
+/// whole survey in a local run — its two slots already tile a pair's two surveys at once, and
+/// the before survey is tiled from the points its spacing pass decoded ([`keeps_decoded`]),
+/// which a part cannot read.
+pub(crate) fn tiling_part(user: Option<u64>, executor: &Executor) -> u64 {
+    user.unwrap_or(match executor {
+        Executor::Local => u64::MAX,
+        Executor::Slurm(_) => crate::plan::TILING_PART,
+    })
+}
+
+/// Whether a run keeps the points its spacing pass decodes of `survey` for its tiling
+/// ([`keeps_decoded`]), given the run's tiling part: a survey tiled in parts does not read
+/// them (the copy would be written for nothing).
+pub(crate) fn keeps_decoded_of(
+    resume: bool,
+    executor: &Executor,
+    survey: &SurveyFiles,
+    tiling_part: u64,
+) -> bool {
+    let las = |i: &io::CloudInfo| matches!(i.format, io::CloudFormat::Las | io::CloudFormat::Laz);
+    keeps_decoded(resume, executor)
+        && (!survey.infos.iter().all(las)
+            || survey.infos.iter().map(|i| i.point_count).sum::<u64>() <= tiling_part)
 }
 
 /// Names under `dir` (`/`-separated, `.talus` left out) that `ours` takes for talus outputs.

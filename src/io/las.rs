@@ -62,6 +62,8 @@ const GEOGRAPHIC_TYPE_GEO_KEY: u16 = 2048;
 /// A streaming LAS/LAZ reader; see the module doc.
 pub(crate) struct LasReader {
     info: CloudInfo,
+    /// The points it delivers, those left out by class included (the file's, or its range's).
+    expected: u64,
     rx: Receiver<Result<Vec<Point3>>>,
     recycle: Sender<Vec<Point3>>,
     current: Vec<Point3>,
@@ -81,6 +83,17 @@ impl LasReader {
     /// delivering only the points of the classes `classes` keeps (None or all classes: every
     /// point, the classification not even decoded).
     pub(crate) fn open_with(path: &Path, classes: Option<&Classes>) -> Result<Self> {
+        Self::open_range(path, classes, None)
+    }
+
+    /// [`LasReader::open_with`], delivering only the points `start..start + count` of the file
+    /// (`range`: `(start, count)`; before the class filter, which applies within it): a part of
+    /// a large survey that a task of its own tiles (`units::tiling`).
+    pub(crate) fn open_range(
+        path: &Path,
+        classes: Option<&Classes>,
+        range: Option<(u64, u64)>,
+    ) -> Result<Self> {
         let classes = classes.filter(|c| !c.keeps_all()).cloned();
         let file = open_file(path)?;
         let file_len = file
@@ -172,6 +185,16 @@ impl LasReader {
         if point_count == 0 {
             return Err(Error::input(path, "contains no points"));
         }
+        let (start, count) = range.unwrap_or((0, point_count));
+        if start.checked_add(count).is_none_or(|end| end > point_count) {
+            return Err(Error::input(
+                path,
+                format!(
+                    "holds {point_count} points, not the {count} from point {start} the plan \
+                     reads (the file changed since the run was planned)"
+                ),
+            ));
+        }
         let t = header.transforms();
         check_transforms(path, [t.x, t.y, t.z])?;
         let is_laz = header.point_format().is_compressed
@@ -218,7 +241,8 @@ impl LasReader {
         let source = Source {
             path: path.to_path_buf(),
             kind,
-            total: point_count,
+            start,
+            total: start + count,
             accepted,
             filter: classes.zip(counts.clone()),
             // Point formats 6 to 10 are compressed in layers: only the coordinates' are decoded.
@@ -236,6 +260,7 @@ impl LasReader {
         }
         Ok(LasReader {
             info,
+            expected: count,
             rx,
             recycle,
             current: Vec::new(),
@@ -425,6 +450,8 @@ fn laz_items_match(path: &Path, header: &las::Header) -> Result<()> {
 struct Source {
     path: PathBuf,
     kind: &'static str,
+    /// The first point it reads, and the point it stops before.
+    start: u64,
     total: u64,
     accepted: BoundsCheck,
     /// A LAZ file of a layered point format: its header and where its points start.
@@ -444,6 +471,7 @@ fn decode(
     let Source {
         path,
         kind,
+        start,
         total,
         accepted,
         layered,
@@ -470,6 +498,21 @@ fn decode(
                 Decoder::Las(Box::new((r, pd)))
             }),
     };
+    let opened = opened.and_then(|mut d| {
+        if start > 0 {
+            guarded(&path, &format!("{kind} file"), || {
+                d.seek(start).map_err(|e| {
+                    Error::input(
+                        &path,
+                        format!(
+                            "truncated or corrupt {kind} file: cannot reach point {start}: {e}"
+                        ),
+                    )
+                })
+            })?;
+        }
+        Ok(d)
+    });
     let mut decoder = match opened {
         Ok(r) => {
             if ready.send(Ok(())).is_err() {
@@ -482,7 +525,7 @@ fn decode(
             return;
         }
     };
-    let mut index = 0u64;
+    let mut index = start;
     let mut classes: Vec<u8> = Vec::new();
     loop {
         let mut chunk = recycle.try_recv().unwrap_or_default();
@@ -562,12 +605,44 @@ enum Decoder {
 /// most of reading such a file (talus uses nothing but x, y, z).
 struct Layers {
     decompressor: laz::ParLasZipDecompressor<BufReader<File>>,
+    /// Whether its chunks have one size (see [`Decoder::seek`]).
+    fixed_chunks: bool,
     transforms: las::Vector<las::Transform>,
     record: usize,
     bytes: Vec<u8>,
 }
 
 impl Decoder {
+    /// Go to point `index` of the file: through the LAZ chunk table where the chunks have one
+    /// size (the decompressors find a point's chunk by dividing by it), else by decoding the
+    /// points before it (a LAZ file of variable chunks, which few writers make).
+    fn seek(&mut self, index: u64) -> std::result::Result<(), String> {
+        let fixed = match self {
+            Decoder::Las(las) => {
+                let h = las.0.header();
+                !h.point_format().is_compressed
+                    || h.laz_vlr().is_ok_and(|v| v.chunk_size() != u32::MAX)
+            }
+            Decoder::Layers(l) => l.fixed_chunks,
+        };
+        if fixed {
+            return match self {
+                Decoder::Las(las) => las.0.seek(index).map_err(|e| e.to_string()),
+                Decoder::Layers(l) => l.decompressor.seek(index).map_err(|e| e.to_string()),
+            };
+        }
+        let (mut at, mut skipped) = (0u64, Vec::new());
+        while at < index {
+            let n = self.fill(&mut skipped, None, index - at)?;
+            if n == 0 {
+                return Err(format!("the file ends after {at} points"));
+            }
+            skipped.clear();
+            at += n;
+        }
+        Ok(())
+    }
+
     /// Decode up to one chunk of points (at most `left`) into `out`; how many (0: the end).
     /// With `classes`: each point's class too (cleared first).
     fn fill(
@@ -584,7 +659,9 @@ impl Decoder {
                 } else {
                     LAS_CHUNK
                 };
-                let n = reader.fill_points(chunk, pd).map_err(|e| e.to_string())?;
+                let n = reader
+                    .fill_points(chunk.min(left), pd)
+                    .map_err(|e| e.to_string())?;
                 out.reserve(pd.len());
                 out.extend(pd.x().zip(pd.y()).zip(pd.z()).map(|((x, y), z)| [x, y, z]));
                 if let Some(c) = classes {
@@ -641,6 +718,7 @@ fn coordinates_only(
         .map_err(|e| corrupt(e.to_string()))?;
     let vlr = header.laz_vlr().map_err(|e| corrupt(e.to_string()))?;
     let record = vlr.items_size() as usize;
+    let fixed_chunks = vlr.chunk_size() != u32::MAX;
     let mut selection = laz::DecompressionSelection::base().decompress_z();
     if classified {
         selection = selection.decompress_classification();
@@ -649,6 +727,7 @@ fn coordinates_only(
         laz::ParLasZipDecompressor::selective(f, vlr, selection).map_err(|e| corrupt(e.to_string()))
     })?;
     Ok(Layers {
+        fixed_chunks,
         decompressor,
         transforms: *header.transforms(),
         record,
@@ -695,13 +774,13 @@ impl PointReader for LasReader {
                     }
                     Err(_) => {
                         self.finished = true;
-                        if self.delivered + self.left_out() != self.info.point_count {
+                        if self.delivered + self.left_out() != self.expected {
                             return Err(Error::input(
                                 &self.info.path,
                                 format!(
                                     "truncated: read {} of the {} points the header promises",
                                     self.delivered + self.left_out(),
-                                    self.info.point_count
+                                    self.expected
                                 ),
                             ));
                         }

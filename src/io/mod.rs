@@ -207,6 +207,30 @@ pub fn open_with(path: &Path, classes: Option<&classes::Classes>) -> Result<Box<
     }
 }
 
+/// [`open_with`] for the points `start..start + count` of the LAS/LAZ file `path` (before the
+/// class filter, which applies within them): a part of a survey tiled by several units.
+pub fn open_range(
+    path: &Path,
+    classes: Option<&classes::Classes>,
+    start: u64,
+    count: u64,
+) -> Result<Box<dyn PointReader>> {
+    let mut prefix = [0u8; 4];
+    let n = read_prefix(path, &mut prefix)?;
+    if &prefix[..n] != b"LASF" {
+        return Err(Error::input(
+            path,
+            "is no longer a LAS/LAZ file (the plan read it as one): it changed since the run \
+             was planned",
+        ));
+    }
+    Ok(Box::new(las::LasReader::open_range(
+        path,
+        classes,
+        Some((start, count)),
+    )?))
+}
+
 /// The UTF-8 byte order mark, which text written on Windows may start with (skipped by the text
 /// and PLY readers; Unicode 15 §23.8).
 const BOM: &str = "\u{feff}";

@@ -118,6 +118,21 @@ pub struct Survey {
     /// text and PLY (and in a plan written before 0.3: `units::Ctx::quantum` reads the header).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub transform: Option<[[f64; 2]; 3]>,
+    /// The points of each of its files, when every one is LAS or LAZ (whose headers count them
+    /// exactly): a survey larger than [`Plan::tiling_part`] is tiled in parts, ranges of these
+    /// (`units::tiling::parts`). Empty for text and PLY, which are tiled whole.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub file_points: Vec<u64>,
+}
+
+/// Points a tiling unit reads at most by default on a cluster (`Plan::tiling_part`): 8 Mi
+/// points, a few seconds of decoding, so that a 120M-point survey is tiled by 15 tasks. A
+/// local run tiles each survey whole by default (`commands::run::tiling_part`).
+pub const TILING_PART: u64 = 1 << 23;
+
+/// A plan written before `tiling_part` existed tiled every survey whole.
+fn default_tiling_part() -> u64 {
+    u64::MAX
 }
 
 /// Two surveys compared.
@@ -140,6 +155,10 @@ pub struct Spec {
     pub pair: Option<usize>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tile: Option<[u32; 2]>,
+    /// The part of a survey's units that split it (a survey's tiling in ranges of its points:
+    /// `units::tiling::parts`); None where the survey is one unit.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub part: Option<u32>,
 }
 
 impl Spec {
@@ -150,6 +169,7 @@ impl Spec {
             survey: None,
             pair: None,
             tile: None,
+            part: None,
         }
     }
 
@@ -157,6 +177,15 @@ impl Spec {
     pub fn survey(kind: &str, survey: usize) -> Spec {
         Spec {
             survey: Some(survey),
+            ..Spec::run(kind)
+        }
+    }
+
+    /// The unit of `kind` for part `part` of survey `survey`.
+    pub(crate) fn survey_part(kind: &str, survey: usize, part: u32) -> Spec {
+        Spec {
+            survey: Some(survey),
+            part: Some(part),
             ..Spec::run(kind)
         }
     }
@@ -254,6 +283,10 @@ pub struct Plan {
     /// `--pair-clouds`, whose pairs are exactly compare's outputs.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub lean_pairs: bool,
+    /// Points a tiling unit reads at most (`--tiling-part`): a larger LAS/LAZ survey is tiled
+    /// by several units, ranges of its points, each a task of its own on a cluster.
+    #[serde(default = "default_tiling_part")]
+    pub tiling_part: u64,
     /// Units this run computes again that DIR's previous run had under other keys, and why
     /// (`talus status` shows them).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
@@ -382,6 +415,7 @@ impl Plan {
             m3c2_only: false,
             keep_units: false,
             lean_pairs: false,
+            tiling_part: u64::MAX,
             recomputed: Vec::new(),
             units: Vec::new(),
             index: SpecIndex::default(),
@@ -484,6 +518,17 @@ impl Plan {
         } else {
             self.units.iter().position(|u| &u.spec == spec)
         }
+    }
+
+    /// The units of `kind` for survey `survey`: its one unit, or its parts in order
+    /// ([`Spec::part`]); empty when it has none.
+    pub fn survey_units(&self, kind: &str, survey: usize) -> Vec<usize> {
+        if let Some(u) = self.find(&Spec::survey(kind, survey)) {
+            return vec![u];
+        }
+        (0u32..)
+            .map_while(|k| self.find(&Spec::survey_part(kind, survey, k)))
+            .collect()
     }
 
     /// The units of `kind` for `pair` (every pair for kinds without one), in plan order.

@@ -10,7 +10,6 @@ use serde::{Deserialize, Serialize};
 
 use super::sample::{Picks, Region};
 use super::stage::{Line, Planner, Scope, Stage, Total};
-use super::tiling::TilingStage;
 use super::Ctx;
 use crate::error::Result;
 use crate::events::align::{find, Alignment, Ground, Limits};
@@ -72,12 +71,13 @@ impl Stage for AlignStage {
             p.plan.params.align_limits(),
             crate::events::align::holdout::BLOCKS
         );
-        let first = p.the(&Spec::survey(TilingStage::KIND, 0))?;
+        let first = p.tiling_units(0)?;
         let later = later_surveys(p.plan);
         for &s in &later {
-            let mut deps = vec![first, p.the(&Spec::survey(TilingStage::KIND, s))?];
+            let mut deps = first.clone();
+            deps.extend(p.tiling_units(s)?);
             if let Some(prev) = predecessor(&later, s) {
-                deps.push(p.the(&Spec::survey(TilingStage::KIND, prev))?);
+                deps.extend(p.tiling_units(prev)?);
             }
             let label = p.plan.surveys[s].label.clone();
             p.add(Spec::survey(Self::KIND, s), &label, &[&key], deps);
@@ -259,15 +259,12 @@ fn sample_of(
     region: &Region,
     picks: Picks,
 ) -> Result<(Vec<Sample>, usize)> {
-    let tilings = [
-        ctx.unit(&Spec::survey(TilingStage::KIND, onto))?,
-        ctx.unit(&Spec::survey(TilingStage::KIND, s))?,
-    ];
+    let tilings = [ctx.own_tiling(onto)?, ctx.own_tiling(s)?];
     let params = crate::m3c2::M3c2Params {
         orientation: crate::m3c2::Orientation::Up,
         ..ctx.plan.params.m3c2()
     };
-    super::sample::sample(ctx, tilings, region, picks, &params)
+    super::sample::sample(ctx, [&tilings[0], &tilings[1]], region, picks, &params)
 }
 
 /// The fits of survey `s` (its align unit must be done), if it has them.

@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 
 use super::align::AlignStage;
 use super::stage::{Line, Planner, Scope, Stage, TilesOf, Total};
-use super::tiling::{split, TilingMeta, TilingStage};
+use super::tiling::{split, TilingMeta};
 use super::Ctx;
 use crate::error::Result;
 use crate::events::chain::{routes, Route};
@@ -56,7 +56,7 @@ impl Stage for AlignedStage {
             };
             aligns.push(align);
             let mut deps = aligns.clone();
-            deps.push(p.the(&Spec::survey(TilingStage::KIND, s))?);
+            deps.extend(p.tiling_units(s)?);
             let label = p.plan.surveys[s].label.clone();
             p.add(Spec::survey(Self::KIND, s), &label, &[], deps);
         }

@@ -88,7 +88,7 @@ impl Stage for ClearedStage {
             if meta.tile_points[grid.index(id)] == 0 {
                 continue;
             }
-            let t = read_tile(ctx, source, id)?;
+            let t = read_tile(ctx, &source, id)?;
             let index = crate::spatial::Columns::from_fn(
                 t.owned.len(),
                 |i| t.point(i),

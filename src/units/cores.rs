@@ -183,20 +183,17 @@ fn cut(ctx: &Ctx, out: &mut UnitWriter) -> Result<CoresMeta> {
 /// campaign is a `compare` of its two surveys).
 fn thin(ctx: &Ctx, survey: usize, out: &mut UnitWriter) -> Result<CoresMeta> {
     let plan = ctx.plan;
-    let tiling = ctx.tiling(survey)?;
+    let (tiling, meta) = ctx.tiles(survey)?;
     let grid = plan.layout.grid()?;
     let mut n = 0u64;
     for id in grid.tiles() {
-        let path = ctx.input(tiling, &super::tiling::tile_file(id))?;
-        let count = talus_tiling::read_tile_header(&path)
-            .map_err(|e| super::damaged(&path, e))?
-            .point_count;
+        let count = meta.tile_points[grid.index(id)];
         // The tile as read (25 bytes a point), its file's bytes, the thinning's cells.
         let _held = ctx.reserve(
             count * 64 + crate::memory::HEADROOM,
             &format!("thinning tile {} ({count} points)", id.name()),
         )?;
-        let t = read_tile(ctx, tiling, id)?;
+        let t = read_tile(ctx, &tiling, id)?;
         let pts = t
             .epoch()
             .core_points(&plan.layout.anchor, plan.layout.core_spacing);

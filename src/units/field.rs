@@ -183,7 +183,7 @@ fn sample_tile(ctx: &Ctx, s: usize, id: talus_tiling::TileId) -> Result<Vec<Samp
         n * BYTES_PER_POINT + crate::memory::HEADROOM,
         &format!("the orientation field: tile {} ({n} points)", id.name()),
     )?;
-    let t = read_tile(ctx, tiling, id)?;
+    let t = read_tile(ctx, &tiling, id)?;
     // A cell belongs to the tile holding its centre, which holds all of it (the halo is wider
     // than half a cell): its point is the one nearest its centre among all the survey's,
     // whichever tile owns each of them.

@@ -148,11 +148,12 @@ impl Ctx<'_> {
             .ok_or_else(|| Error::Internal(format!("unit {} without a tile", u.name)))
     }
 
-    /// The unit whose tile files hold survey `survey` in the run's frame, and their record:
+    /// The units whose tile files hold survey `survey` in the run's frame, and their record:
     /// the last stage in the registry that provides tiles ([`stage::Stage::TILES`]) and whose
-    /// unit of the survey holds them — its cleared tiling with `--vegetation remove`, else its
-    /// aligned tiling where the alignment applied, else its own tiling.
-    pub(crate) fn tiles(&self, survey: usize) -> Result<(usize, tiling::TilingMeta)> {
+    /// units of the survey hold them — its cleared tiling with `--vegetation remove`, else its
+    /// aligned tiling where the alignment applied, else its own tiling (in parts where it is
+    /// large: [`Tiles`]).
+    pub(crate) fn tiles(&self, survey: usize) -> Result<(Tiles, tiling::TilingMeta)> {
         self.tiles_before(survey, None)
     }
 
@@ -162,17 +163,20 @@ impl Ctx<'_> {
         &self,
         survey: usize,
         kind: Option<&str>,
-    ) -> Result<(usize, tiling::TilingMeta)> {
+    ) -> Result<(Tiles, tiling::TilingMeta)> {
         let stages = stage::registry().stages();
         let end = kind
             .and_then(|k| stages.iter().position(|s| s.kind() == k))
             .unwrap_or(stages.len());
         for st in stages[..end].iter().rev().filter(|s| s.provides_tiles()) {
-            let Some(u) = self.plan.find(&Spec::survey(st.kind(), survey)) else {
+            let units = self.plan.survey_units(st.kind(), survey);
+            let Some(&first) = units.first() else {
                 continue;
             };
-            if let Some(m) = self.tiles_of(u)? {
-                return Ok((u, m));
+            if self.tiles_of(first)?.is_some() {
+                let tiles = Tiles(units);
+                let meta = self.tiles_meta(&tiles)?;
+                return Ok((tiles, meta));
             }
         }
         Err(Error::Internal(format!(
@@ -180,9 +184,19 @@ impl Ctx<'_> {
         )))
     }
 
-    /// The unit whose tile files hold survey `survey` in the run's frame ([`Ctx::tiles`]).
-    pub(crate) fn tiling(&self, survey: usize) -> Result<usize> {
+    /// The units whose tile files hold survey `survey` in the run's frame ([`Ctx::tiles`]).
+    pub(crate) fn tiling(&self, survey: usize) -> Result<Tiles> {
         Ok(self.tiles(survey)?.0)
+    }
+
+    /// Survey `survey`'s own tiling, as delivered (not aligned, not cleared): its unit or its
+    /// parts.
+    pub fn own_tiling(&self, survey: usize) -> Result<Tiles> {
+        let units = self.plan.survey_units(tiling::TilingStage::KIND, survey);
+        if units.is_empty() {
+            return Err(Error::Internal(format!("survey {survey} has no tiling")));
+        }
+        Ok(Tiles(units))
     }
 
     /// The coordinate quantum (scale, offset per axis) of survey `survey`'s first file, which
@@ -206,11 +220,23 @@ impl Ctx<'_> {
         Ok(self.tiles(survey)?.1)
     }
 
-    /// The tiling record of unit `u`, which holds a survey's tiles ([`stage::Stage::TILES`]).
-    pub(crate) fn tiling_meta_of(&self, u: usize) -> Result<tiling::TilingMeta> {
-        self.tiles_of(u)?.ok_or_else(|| {
-            Error::Internal(format!("unit {} holds no tiles", self.plan.units[u].name))
-        })
+    /// The tiling record of the units `tiles`, which hold a survey's tiles: a part's records
+    /// merged ([`tiling::TilingMeta::merge`]).
+    pub(crate) fn tiles_meta(&self, tiles: &Tiles) -> Result<tiling::TilingMeta> {
+        let metas = tiles
+            .0
+            .iter()
+            .map(|&u| {
+                self.tiles_of(u)?.ok_or_else(|| {
+                    Error::Internal(format!("unit {} holds no tiles", self.plan.units[u].name))
+                })
+            })
+            .collect::<Result<Vec<_>>>()?;
+        match tiles.0.as_slice() {
+            [_] => Ok(metas.into_iter().next().unwrap_or_else(|| unreachable!())),
+            [first, ..] => tiling::TilingMeta::merge(self, self.survey(*first)?, metas),
+            [] => Err(Error::Internal("tiles of no unit".into())),
+        }
     }
 
     /// The tiles' record unit `u` holds, if its stage provides tiles and its meta says it
@@ -285,6 +311,14 @@ pub struct TilePoints {
 }
 
 impl TilePoints {
+    /// Add `more`'s points after these.
+    fn append(&mut self, more: TilePoints) {
+        self.x.extend(more.x);
+        self.y.extend(more.y);
+        self.z.extend(more.z);
+        self.owned.extend(more.owned);
+    }
+
     /// Number of points.
     pub fn len(&self) -> usize {
         self.x.len()
@@ -312,29 +346,46 @@ impl TilePoints {
     }
 }
 
-/// Read tile `id` of the tiling unit `tiling`.
-pub fn read_tile(ctx: &Ctx, tiling: usize, id: TileId) -> Result<TilePoints> {
-    let path = ctx.input(tiling, &tiling::tile_file(id))?;
-    let cols = talus_tiling::read_tile(&path).map_err(|e| damaged(&path, e))?;
-    Ok(tile_points(cols))
+/// The units whose tile files hold a survey's tiles: one unit, or a tiling's parts in order
+/// (`units::tiling::parts`) — a tile's points are then the parts' files of that tile one after
+/// the other, the whole survey's tile bit for bit.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Tiles(pub Vec<usize>);
+
+impl Tiles {
+    /// The units' keys, as one (what a cache of results computed from the tiles is keyed by).
+    pub(crate) fn key(&self, plan: &crate::plan::Plan) -> String {
+        let keys: Vec<&str> = self.0.iter().map(|&u| plan.units[u].key.as_str()).collect();
+        keys.join("+")
+    }
 }
 
-/// The points of tile `id` of tiling unit `tiling` in the frames of its file that reach any of
-/// `boxes` ([x0, y0, x1, y1]), in their order: every point inside the boxes, and others beside
-/// them (the rest of those frames); the frames that do not reach them are not decoded.
+/// Read tile `id` of the survey whose tiles `tiles` hold.
+pub fn read_tile(ctx: &Ctx, tiles: &Tiles, id: TileId) -> Result<TilePoints> {
+    let mut t = TilePoints::default();
+    for &u in &tiles.0 {
+        let path = ctx.input(u, &tiling::tile_file(id))?;
+        let cols = talus_tiling::read_tile(&path).map_err(|e| damaged(&path, e))?;
+        if tiles.0.len() == 1 {
+            return Ok(tile_points(cols));
+        }
+        t.append(tile_points(cols));
+    }
+    Ok(t)
+}
+
+/// The points of tile `id` of the survey whose tiles `tiles` hold, in the frames of its files
+/// that reach any of `boxes` ([x0, y0, x1, y1]), in their order: every point inside the boxes,
+/// and others beside them (the rest of those frames); the frames that do not reach them are not
+/// decoded.
 pub(crate) fn read_tile_near(
     ctx: &Ctx,
-    tiling: usize,
+    tiles: &Tiles,
     id: TileId,
     boxes: &[[f64; 4]],
 ) -> Result<TilePoints> {
     let mut t = TilePoints::default();
-    for_each_frame_near(ctx, tiling, id, boxes, |f| {
-        t.x.extend(f.x);
-        t.y.extend(f.y);
-        t.z.extend(f.z);
-        t.owned.extend(f.owned);
-    })?;
+    for_each_frame_near(ctx, tiles, id, boxes, |f| t.append(f))?;
     Ok(t)
 }
 
@@ -342,19 +393,21 @@ pub(crate) fn read_tile_near(
 /// points: `f` gets the points of each frame that reaches `boxes`, in order.
 pub(crate) fn for_each_frame_near(
     ctx: &Ctx,
-    tiling: usize,
+    tiles: &Tiles,
     id: TileId,
     boxes: &[[f64; 4]],
     mut f: impl FnMut(TilePoints),
 ) -> Result<()> {
-    let path = ctx.input(tiling, &tiling::tile_file(id))?;
-    let mut frames = talus_tiling::TileFrames::open(&path).map_err(|e| damaged(&path, e))?;
     let want = |b: &crate::geom::Bounds| reaches(b, boxes);
-    while let Some(cols) = frames
-        .next_frame_where(&want)
-        .map_err(|e| damaged(&path, e))?
-    {
-        f(tile_points(cols));
+    for &u in &tiles.0 {
+        let path = ctx.input(u, &tiling::tile_file(id))?;
+        let mut frames = talus_tiling::TileFrames::open(&path).map_err(|e| damaged(&path, e))?;
+        while let Some(cols) = frames
+            .next_frame_where(&want)
+            .map_err(|e| damaged(&path, e))?
+        {
+            f(tile_points(cols));
+        }
     }
     Ok(())
 }

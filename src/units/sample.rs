@@ -5,7 +5,7 @@
 //! where they lie and by hashes of their keys, every tile of the grid computes the ones it owns
 //! over the points within reach of them, and the results come back in key order.
 
-use super::{read_tile_near, Ctx, TilePoints};
+use super::{read_tile_near, Ctx, TilePoints, Tiles};
 use crate::error::Result;
 use crate::events::stable::Sample;
 use crate::geom::Point3;
@@ -67,16 +67,13 @@ fn point_key(p: &Point3) -> u64 {
 /// it ([`Reference`]).
 pub(crate) fn sample(
     ctx: &Ctx,
-    tilings: [usize; 2],
+    tilings: [&Tiles; 2],
     region: &Region,
     picks: Picks,
     params: &crate::m3c2::M3c2Params,
 ) -> Result<(Vec<Sample>, usize)> {
     let plan = ctx.plan;
-    let (m0, m1) = (
-        ctx.tiling_meta_of(tilings[0])?,
-        ctx.tiling_meta_of(tilings[1])?,
-    );
+    let (m0, m1) = (ctx.tiles_meta(tilings[0])?, ctx.tiles_meta(tilings[1])?);
     // The densest tile of the two surveys first, as the M3C2 units check it: a budget that
     // cannot hold it is refused with the same words, whichever unit meets it first.
     let pair_points = super::m3c2::fit::pair_tile_points(plan, &m0, &m1)?;
@@ -160,7 +157,7 @@ impl Reference {
     /// `picks` and `params`: the memo's when it has it, else made (and memoised when small).
     fn of(
         ctx: &Ctx,
-        tiling: usize,
+        tiling: &Tiles,
         counts: &[Vec<u64>; 2],
         region: &Region,
         picks: Picks,
@@ -169,7 +166,7 @@ impl Reference {
         let plan = ctx.plan;
         let boxes = region.boxes();
         let key = crate::plan::key_of(&[
-            &plan.units[tiling].key,
+            &tiling.key(plan),
             &format!("{:?}", plan.layout),
             &format!("{params:?}"),
             &format!("{picks:?}"),
@@ -216,7 +213,7 @@ impl Reference {
 
     fn make(
         ctx: &Ctx,
-        tiling: usize,
+        tiling: &Tiles,
         counts: &[Vec<u64>; 2],
         region: &Region,
         picks: Picks,

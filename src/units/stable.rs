@@ -234,7 +234,7 @@ fn areas_sample(ctx: &Ctx, pair: usize, areas: &Areas) -> Result<(Vec<Sample>, u
     };
     super::sample::sample(
         ctx,
-        [ctx.tiling(p.before)?, ctx.tiling(p.after)?],
+        [&ctx.tiling(p.before)?, &ctx.tiling(p.after)?],
         &super::sample::Region::Areas(areas),
         super::sample::Picks::Points(one_in),
         &params,

@@ -427,6 +427,17 @@ impl Planner<'_> {
         self.plan.units[unit].after = after;
     }
 
+    /// Survey `s`'s own tiling: its unit, or its parts in order (`units::tiling::parts`).
+    pub fn tiling_units(&self, s: usize) -> Result<Vec<usize>> {
+        let units = self.plan.survey_units(super::tiling::TilingStage::KIND, s);
+        if units.is_empty() {
+            return Err(Error::Internal(format!(
+                "no tiling of survey {s} planned before"
+            )));
+        }
+        Ok(units)
+    }
+
     /// The unit of `spec`, which an earlier stage must have planned.
     pub(crate) fn the(&self, spec: &Spec) -> Result<usize> {
         self.find(spec)
@@ -499,7 +510,7 @@ impl Planner<'_> {
             .stages()
             .iter()
             .filter(|st| st.provides_tiles())
-            .filter_map(|st| self.find(&Spec::survey(st.kind(), s)))
+            .flat_map(|st| self.plan.survey_units(st.kind(), s))
             .collect();
         if out.is_empty() {
             return Err(Error::Internal(format!("no unit holds survey {s}'s tiles")));

@@ -75,6 +75,68 @@ pub struct TilingMeta {
     /// Points read and left out per LAS class (`--classes`); None when no class was read (text
     /// or PLY input, or every class kept).
     pub(crate) classes: Option<ClassCounts>,
+    /// A part's first distinct positions (at most [`MIN_DISTINCT`]; None for a whole survey,
+    /// which checks them itself): a survey tiled in parts is refused for too few positions
+    /// once its parts' records are read together ([`TilingMeta::merge`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub(crate) distinct: Option<Vec<crate::geom::Point3>>,
+}
+
+impl TilingMeta {
+    /// The record of a survey tiled in parts, from its parts' records in order: a tile's points
+    /// are its parts' files of that tile one after the other. A survey whose parts together
+    /// show fewer than [`MIN_DISTINCT`] distinct positions is refused here, as a whole
+    /// survey's tiling refuses it.
+    pub(crate) fn merge(ctx: &Ctx, survey: usize, parts: Vec<TilingMeta>) -> Result<TilingMeta> {
+        let mut it = parts.into_iter();
+        let Some(mut all) = it.next() else {
+            return Err(crate::error::Error::Internal(format!(
+                "survey {survey}'s tiling without a part"
+            )));
+        };
+        let mut seen = FewPositions(all.distinct.take().unwrap_or_default());
+        for m in it {
+            all.points += m.points;
+            for (t, n) in all.tile_points.iter_mut().zip(&m.tile_points) {
+                *t += n;
+            }
+            all.classes = match (all.classes, m.classes) {
+                (Some(a), Some(b)) => Some(a.merge(&b)),
+                (a, b) => a.or(b),
+            };
+            seen.see(m.distinct.as_deref().unwrap_or_default());
+        }
+        seen.check(ctx, survey, all.classes.as_ref(), all.points)?;
+        Ok(all)
+    }
+}
+
+/// A part of a survey's tiling: its points `start..end`, the survey's files one after the other
+/// in name order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Part {
+    pub start: u64,
+    pub end: u64,
+}
+
+/// The parts survey `s` of `plan` is tiled in: ranges of [`crate::plan::Plan::tiling_part`]
+/// points (the last one shorter); none — one unit for the whole survey — when it holds no more
+/// than that, or when it is not all LAS/LAZ (whose headers count the points: text and PLY are
+/// read whole). A part's tile files hold its points of the tile in the order it reads them,
+/// so the parts' files one after the other are the whole survey's tile, bit for bit.
+pub fn parts(plan: &crate::plan::Plan, s: usize) -> Vec<Part> {
+    let sv = &plan.surveys[s];
+    let total: u64 = sv.file_points.iter().sum();
+    let size = plan.tiling_part.max(1);
+    if sv.file_points.len() != sv.files.len() || total != sv.points || total <= size {
+        return Vec::new();
+    }
+    (0..total.div_ceil(size))
+        .map(|k| Part {
+            start: k * size,
+            end: ((k + 1) * size).min(total),
+        })
+        .collect()
 }
 
 impl Stage for TilingStage {
@@ -108,19 +170,38 @@ impl Stage for TilingStage {
                     Err(_) => String::new(),
                 };
                 let classes = format!("classes {}", p.plan.params.classes.value);
-                p.add(
-                    Spec::survey(Self::KIND, s),
-                    &label,
-                    &[&key, &layout, &frames, &classes],
-                    Vec::new(),
-                );
+                let parts = parts(p.plan, s);
+                if parts.is_empty() {
+                    p.add(
+                        Spec::survey(Self::KIND, s),
+                        &label,
+                        &[&key, &layout, &frames, &classes],
+                        Vec::new(),
+                    );
+                }
+                for (k, part) in parts.iter().enumerate() {
+                    let range = format!("points {}..{}", part.start, part.end);
+                    p.add(
+                        Spec::survey_part(Self::KIND, s, k as u32),
+                        &format!("{label}-p{k}"),
+                        &[&key, &layout, &frames, &classes, &range],
+                        Vec::new(),
+                    );
+                }
             }
         }
         Ok(())
     }
 
     fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<TilingMeta> {
-        split(ctx, ctx.survey(unit)?, None, out)
+        let s = ctx.survey(unit)?;
+        let part = match ctx.plan.units[unit].spec.part {
+            Some(k) => Some(*parts(ctx.plan, s).get(k as usize).ok_or_else(|| {
+                crate::error::Error::Internal(format!("survey {s} has no tiling part {k}"))
+            })?),
+            None => None,
+        };
+        split_part(ctx, s, part, None, out)
     }
 }
 
@@ -134,19 +215,42 @@ pub fn split(
     transform: Option<Transform>,
     out: &mut UnitWriter,
 ) -> Result<TilingMeta> {
+    split_part(ctx, survey, None, transform, out)
+}
+
+/// [`split`] for part `part` of the survey (None: all of it).
+pub fn split_part(
+    ctx: &Ctx,
+    survey: usize,
+    part: Option<Part>,
+    transform: Option<Transform>,
+    out: &mut UnitWriter,
+) -> Result<TilingMeta> {
     let plan = ctx.plan;
-    let files = &plan.surveys[survey].files;
+    let sv = &plan.surveys[survey];
     let mut splitting = Splitting::new(ctx, survey, out)?;
+    // Every part writes its coordinates in the survey's first file's quantum.
+    splitting.quantum(ctx.quantum(survey)?);
     let mut buf = Vec::new();
     let keep = plan.params.classes();
     let mut classes: Option<ClassCounts> = None;
     let mut positions = FewPositions::default();
-    // A survey delivered as tiles: its files one after the other, in name order.
-    for (k, f) in files.iter().enumerate() {
-        let mut reader = io::open_with(&f.path, Some(&keep))?;
-        if k == 0 {
-            splitting.quantum(reader.info().transform);
-        }
+    // A survey delivered as tiles: its files one after the other, in name order; a part reads
+    // the range of each file that falls in it.
+    let mut first = 0u64;
+    for (k, f) in sv.files.iter().enumerate() {
+        let mut reader = match part {
+            None => io::open_with(&f.path, Some(&keep))?,
+            Some(part) => {
+                let n = sv.file_points[k];
+                let (start, end) = (part.start.max(first), part.end.min(first + n));
+                first += n;
+                if start >= end {
+                    continue;
+                }
+                io::open_range(&f.path, Some(&keep), start - (first - n), end - start)?
+            }
+        };
         let mut left_out = 0;
         while reader.fill(&mut buf, 1 << 16)? > 0 {
             if let Some(f) = transform {
@@ -168,8 +272,12 @@ pub fn split(
             });
         }
     }
-    positions.check(ctx, survey, classes.as_ref(), splitting.points)?;
-    splitting.finish(out, classes)
+    if part.is_none() {
+        positions.check(ctx, survey, classes.as_ref(), splitting.points)?;
+    }
+    let mut meta = splitting.finish(out, classes)?;
+    meta.distinct = part.map(|_| positions.0);
+    Ok(meta)
 }
 
 /// The first [`MIN_DISTINCT`] distinct positions of a survey's points (of the classes
@@ -311,6 +419,7 @@ impl<'a> Splitting<'a> {
             points: self.points,
             tile_points,
             classes,
+            distinct: None,
         })
     }
 }

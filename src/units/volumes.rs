@@ -16,7 +16,7 @@ use talus_tiling::TileId;
 use super::events::{reached_tiles, search, search_xy, Draft, EventsStage, Kept};
 use super::stable::StableStage;
 use super::stage::{Line, Planner, Scope, Stage, Total};
-use super::Ctx;
+use super::{Ctx, Tiles};
 use crate::error::Result;
 use crate::events::stable::Stable;
 use crate::events::{Event, Obb};
@@ -339,7 +339,7 @@ type SearchBox = ([f64; 3], [f64; 4], Obb);
 /// touch (owned points only: no duplicates from halos).
 fn gather(
     ctx: &Ctx,
-    tilings: [usize; 2],
+    tilings: [&Tiles; 2],
     boxes: &[Vec<SearchBox>],
 ) -> Result<[Vec<Vec<Point3>>; 2]> {
     let mut out = [vec![Vec::new(); boxes.len()], vec![Vec::new(); boxes.len()]];
@@ -499,7 +499,7 @@ fn run(ctx: &Ctx, pair: usize, tile: TileId, out: &mut UnitWriter) -> Result<Vol
         let boxes = search_boxes(&mine, params, user.is_some());
         let [mut before, mut after] = match user {
             Some(_) => [vec![Vec::new(); mine.len()], vec![Vec::new(); mine.len()]],
-            None => gather(ctx, tilings, &boxes)?,
+            None => gather(ctx, [&tilings[0], &tilings[1]], &boxes)?,
         };
         for (b, a) in before.iter_mut().zip(&mut after) {
             // What was gathered is held while every event of the tile is measured: as much as

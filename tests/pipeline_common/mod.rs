@@ -19,7 +19,7 @@ pub const COMPARED: &[&str] = &[
 
 /// `talus synth cliff` (3 planted events) with `points` per epoch into `dir`, with `extra`
 /// options; the epochs' paths.
-fn synth_cliff(dir: &Path, points: u64, extra: &[&str]) -> (PathBuf, PathBuf) {
+pub fn synth_cliff(dir: &Path, points: u64, extra: &[&str]) -> (PathBuf, PathBuf) {
     let n = points.to_string();
     let mut args = vec![
         "synth",

@@ -80,7 +80,10 @@ pub(crate) fn report(
             tasks.push(t.seconds);
             peak = peak.max(t.peak_rss_bytes.unwrap_or(0));
         }
-        let tile = stage.scope().per_tile();
+        // A stage whose units spread over the input as it grows: per tile, or a survey's
+        // tiling in parts (a larger survey has more parts, not longer ones).
+        let tile =
+            stage.scope().per_tile() || idx.iter().any(|&i| plan.units[i].spec.part.is_some());
         let tasks = if tile {
             let n = (tasks.len() as f64 * scale).round() as usize;
             (0..n).map(|k| tasks[k % tasks.len()]).collect()
@@ -116,7 +119,7 @@ pub(crate) fn report(
         plan.units.len(),
         if scale > 1.0 {
             format!(
-                ", extrapolated ×{scale} linearly per tile (tile stages: ×{scale} tasks; the \
+                ", extrapolated ×{scale} linearly per tile (tile stages and tilings in parts: ×{scale} tasks; the \
                  others: ×{scale} work)"
             )
         } else {

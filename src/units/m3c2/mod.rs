@@ -16,7 +16,7 @@ pub use merge::Merged;
 
 use super::cores::{ThinnedStage, UserCoresStage};
 use super::stage::{Line, Planner, Scope, Stage, Total};
-use super::{read_tile, Ctx, TilePoints};
+use super::{read_tile, Ctx, TilePoints, Tiles};
 use crate::error::{Error, Result};
 use crate::io::Point3;
 use crate::m3c2::tile::{compute, distances_along, KeyedResult};
@@ -139,8 +139,8 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<M3c2Meta> {
     )?;
     let (before, after) = std::thread::scope(|s| {
         // Both epochs at once: decompressing a tile is one thread's work.
-        let a = s.spawn(|| read_tile(ctx, ta, tile));
-        let b = read_tile(ctx, tb, tile);
+        let a = s.spawn(|| read_tile(ctx, &ta, tile));
+        let b = read_tile(ctx, &tb, tile);
         let a = a
             .join()
             .unwrap_or_else(|_| Err(Error::Internal("a tile reader panicked".into())));
@@ -179,7 +179,7 @@ fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<M3c2Meta> {
         let wanted: Vec<KeyedResult> = pending.iter().map(|&i| results[i]).collect();
         let [b, a] = gather_along(
             ctx,
-            [tb, ta],
+            [&tb, &ta],
             tile,
             [&before, &after],
             &wanted,
@@ -242,7 +242,7 @@ pub(super) fn open_box(grid: &talus_tiling::TileGrid, id: TileId, grow: f64) -> 
 /// others' read a frame at a time from the tilings `tilings`.
 fn gather_along(
     ctx: &Ctx,
-    tilings: [usize; 2],
+    tilings: [&Tiles; 2],
     tile: TileId,
     own: [&TilePoints; 2],
     wanted: &[KeyedResult],
