@@ -55,7 +55,7 @@ sed 's/^/  /' "$work/slurm.err"
 [[ $rc == 0 ]] || fail "the Slurm run exited $rc"
 # One array per registered stage that has units here (tiling, align, aligned, orient, thinned,
 # m3c2, stable, events, series, volumes, points, outputs, campaign) and the publishing job.
-[[ "$(wc -l <"$work/slurm.jobs")" == 14 ]] || fail "expected 14 arrays (13 stages and the publishing job)"
+[[ "$(wc -l <"$work/slurm.jobs")" == 15 ]] || fail "expected 15 arrays (14 stages and the publishing job)"
 echo "Slurm run: $((SECONDS - t0)) s"
 same_as_local slurm
 

@@ -95,17 +95,22 @@ jobcomp_of() {
 local_reference
 
 # ---------------------------------------------------------------- 2. slurm --wait on both nodes
-section "2. --executor slurm --wait across ${nodes[*]}"
+section "2. --executor slurm --wait across ${nodes[*]}, each survey tiled in parts"
 t0=$SECONDS
 rc=0
-campaign --out "$work/slurm" --executor slurm --wait >"$work/slurm.jobs" 2>"$work/slurm.err" || rc=$?
+# Each survey (91k to 181k points) tiled by 3 to 5 units of at most 40,000 points (22 in all),
+# spread over the nodes; the local reference tiled each whole: the outputs must be the same bytes.
+campaign --out "$work/slurm" --executor slurm --wait --tiling-part 40000 \
+  >"$work/slurm.jobs" 2>"$work/slurm.err" || rc=$?
 sed 's/^/  /' "$work/slurm.err"
 [[ $rc == 0 ]] || fail "the Slurm run exited $rc"
-[[ "$(wc -l <"$work/slurm.jobs")" == 14 ]] || fail "expected 14 arrays (13 stages and the publishing job)"
+[[ "$(wc -l <"$work/slurm.jobs")" == 15 ]] || fail "expected 15 arrays (14 stages and the publishing job)"
 echo "Slurm run: $((SECONDS - t0)) s"
 show_per_node "$work/slurm.jobs"
 ! per_node "$work/slurm.jobs" | grep -v ' COMPLETED ' || fail "a task of the Slurm run did not complete"
-same_as_local slurm
+same_as_local slurm --tiling-parts
+[[ "$(ls "$work/slurm/.talus/units/tiling" | wc -l)" == 22 ]] \
+  || fail "the Slurm run did not tile its surveys in parts: $(ls "$work/slurm/.talus/units/tiling")"
 
 # kill_mid_task NAME: run the campaign into $work/NAME with --wait in the background (extra
 # options after NAME), catch an M3C2 task in the middle of a unit (freeze_claimer.py), SIGKILL its
