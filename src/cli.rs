@@ -213,8 +213,8 @@ struct ExecArgs {
     tiles_per_task: Option<usize>,
     /// Points a tiling unit reads at most: a larger LAS/LAZ survey is tiled by several units,
     /// ranges of its points, a task each on a cluster (default: 8388608 with --executor slurm;
-    /// a local run tiles each survey whole). The tiles, and every output, are the same whatever
-    /// it is.
+    /// a local run tiles each survey whole). The points a tile holds, and every output, are the
+    /// same whatever it is.
     #[arg(long, value_name = "N")]
     tiling_part: Option<u64>,
 }

@@ -371,6 +371,19 @@ fn a_survey_tiled_in_parts_gives_the_whole_surveys_outputs() {
             summary_without_timings(&parted),
             "{name}: summary.json"
         );
+        // The stage table too but for its seconds: a survey's parts count as one unit.
+        let units = |d: &Path| -> Vec<(String, u64)> {
+            let v: serde_json::Value =
+                serde_json::from_str(&std::fs::read_to_string(d.join("summary.json")).unwrap())
+                    .unwrap();
+            v["stages"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|s| (s["stage"].to_string(), s["units"].as_u64().unwrap()))
+                .collect()
+        };
+        assert_eq!(units(&whole), units(&parted), "{name}: the stage table");
     }
 
     // Two distinct positions over 829 points (inside autzen's extent), in parts of 100:

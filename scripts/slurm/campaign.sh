@@ -53,7 +53,7 @@ echo "job arrays submitted (stage, job id, tasks):"
 sed 's/^/  /' "$work/slurm.jobs"
 sed 's/^/  /' "$work/slurm.err"
 [[ $rc == 0 ]] || fail "the Slurm run exited $rc"
-# One array per registered stage that has units here (tiling, align, aligned, orient, thinned,
+# One array per registered stage that has units here (tiling, align, aligned, field, orient, thinned,
 # m3c2, stable, events, series, volumes, points, outputs, campaign) and the publishing job.
 [[ "$(wc -l <"$work/slurm.jobs")" == 15 ]] || fail "expected 15 arrays (14 stages and the publishing job)"
 echo "Slurm run: $((SECONDS - t0)) s"

@@ -108,7 +108,7 @@ sed 's/^/  /' "$work/slurm.err"
 echo "Slurm run: $((SECONDS - t0)) s"
 show_per_node "$work/slurm.jobs"
 ! per_node "$work/slurm.jobs" | grep -v ' COMPLETED ' || fail "a task of the Slurm run did not complete"
-same_as_local slurm --tiling-parts
+same_as_local slurm
 [[ "$(ls "$work/slurm/.talus/units/tiling" | wc -l)" == 22 ]] \
   || fail "the Slurm run did not tile its surveys in parts: $(ls "$work/slurm/.talus/units/tiling")"
 

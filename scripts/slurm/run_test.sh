@@ -48,10 +48,9 @@ local_reference() {
   echo "local run: $((SECONDS - t0)) s"
 }
 
-# same_as_local NAME [--tiling-parts]: $work/NAME holds the local run's outputs, byte for byte
-# (with --tiling-parts: but the tiling's unit count in summary.json); its status.
+# same_as_local NAME: $work/NAME holds the local run's outputs, byte for byte; its status.
 same_as_local() {
-  python3 "$here/same_outputs.py" "$work/local" "$work/$1" "${@:2}" >"$work/same-$1.txt" \
+  python3 "$here/same_outputs.py" "$work/local" "$work/$1" >"$work/same-$1.txt" \
     || { cat "$work/same-$1.txt"; fail "the outputs of run '$1' differ from the local run's"; }
   tail -n 1 "$work/same-$1.txt"
   "$talus" status "$work/$1"

@@ -1,13 +1,10 @@
 #!/usr/bin/env python3
-"""same_outputs.py A B [--tiling-parts]: exit 0 when directories A and B hold the same outputs,
-byte for byte.
+"""same_outputs.py A B: exit 0 when directories A and B hold the same outputs, byte for byte.
 
 Every file under A and B but .talus/ is compared, with the one exception the campaign and
 resume tests make (tests/campaign/): the timings a run records of itself, the "seconds" values
 of summary.json and campaign.json, the seconds column of campaign.csv and the run-time column
-of report.html's table (its last cell in each row), are blanked first. With --tiling-parts (one
-run tiled its surveys in parts, `--tiling-part`), the tiling's unit count in summary.json's
-stage table is blanked too: the one thing parts change.
+of report.html's table (its last cell in each row), are blanked first.
 Prints one line per file and a verdict; exit 1 on any difference.
 """
 import hashlib
@@ -20,16 +17,9 @@ import sys
 RUN_TIME = re.compile(r"<td>[0-9][0-9 .,\u202f\u2009]*</td>(\s*)</tr>")
 
 
-TILING_PARTS = "--tiling-parts" in sys.argv[3:]
-
-
 def blank(v):
     if isinstance(v, dict):
-        tiling = TILING_PARTS and v.get("stage") == "pass 1: tiling"
-        return {
-            k: (None if k == "seconds" or (tiling and k == "units") else blank(x))
-            for k, x in v.items()
-        }
+        return {k: (None if k == "seconds" else blank(x)) for k, x in v.items()}
     if isinstance(v, list):
         return [blank(x) for x in v]
     return v
@@ -50,7 +40,7 @@ def outputs(base):
             timed = ""
             if name.endswith("summary.json") or name == "campaign.json":
                 data = json.dumps(blank(json.loads(data)), sort_keys=True).encode()
-                timed = " (seconds blanked" + (", tiling units" if TILING_PARTS else "") + ")"
+                timed = " (seconds blanked)"
             elif name == "report.html":
                 data = RUN_TIME.sub(r"<td>-</td>\1</tr>", data.decode()).encode()
                 timed = " (run-time column blanked)"

@@ -34,7 +34,8 @@ pub struct CampaignOptions {
     pub tile_size: Option<f64>,
     /// Keep the intermediate units' files after the run (`--keep-units`).
     pub keep_units: bool,
-    /// Points a tiling unit reads at most (`--tiling-part`); None: `plan::TILING_PART`.
+    /// Points a tiling unit reads at most (`--tiling-part`); None: `plan::TILING_PART` on
+    /// Slurm, the whole survey locally (`run::tiling_part`).
     pub tiling_part: Option<u64>,
     /// Each pair's m3c2.laz and terrain positions of its own (`--pair-clouds`): the pairs are
     /// exactly compare's outputs, at about twice a campaign's disk.

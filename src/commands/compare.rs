@@ -42,7 +42,8 @@ pub struct CompareOptions {
     pub m3c2_only: bool,
     /// Keep the intermediate units' files after the run (`--keep-units`).
     pub keep_units: bool,
-    /// Points a tiling unit reads at most (`--tiling-part`); None: `plan::TILING_PART`.
+    /// Points a tiling unit reads at most (`--tiling-part`); None: `plan::TILING_PART` on
+    /// Slurm, the whole survey locally (`run::tiling_part`).
     pub tiling_part: Option<u64>,
     /// Where the units run (SPEC.md §6).
     pub executor: crate::exec::Executor,

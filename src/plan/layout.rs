@@ -173,7 +173,7 @@ pub(crate) fn tile_density(grid: &DensityGrid, held: f64, mean: f64, params: &Pa
 /// The halo of the tile files: how far beyond its square a tile must hold points so that every
 /// neighbourhood a tile's M3C2 unit computes for the core points it owns is the one a whole-cloud
 /// run sees (SPEC.md §3): the normal sphere and the M3C2 cylinder (inside its circumscribed
-/// sphere). The orientation field's normals fit within it (`units::orient::geometry`). The
+/// sphere). The orientation field's normals fit within it (`units::field::geometry`). The
 /// DBSCAN `eps` is not in it: the events unit clusters the kept core points with its own halo,
 /// so a changed `eps` must not cut the surveys again.
 pub(crate) fn tile_halo(params: &Params) -> f64 {

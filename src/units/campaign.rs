@@ -160,13 +160,18 @@ impl Stage for CampaignStage {
     type Meta = CampaignMeta;
 
     /// The units of its first and last surveys (their tiles, the last one's orientation field):
-    /// the survey appended next is aligned onto the first and compared with the last.
+    /// the survey appended next is aligned onto the first and compared with the last. Not the
+    /// per-tile samples of an orientation field (`units::field`): only its `orient` unit,
+    /// kept, reads them.
     fn keeps(plan: &crate::plan::Plan) -> Vec<usize> {
         let ends = [Some(0), plan.surveys.len().checked_sub(1)];
         (0..plan.units.len())
             .filter(|&i| {
                 let u = &plan.units[i].spec;
-                u.pair.is_none() && u.survey.is_some() && ends.contains(&u.survey)
+                u.pair.is_none()
+                    && u.tile.is_none()
+                    && u.survey.is_some()
+                    && ends.contains(&u.survey)
             })
             .collect()
     }

@@ -362,14 +362,31 @@ impl Tiles {
 
 /// Read tile `id` of the survey whose tiles `tiles` hold.
 pub fn read_tile(ctx: &Ctx, tiles: &Tiles, id: TileId) -> Result<TilePoints> {
-    let mut t = TilePoints::default();
-    for &u in &tiles.0 {
-        let path = ctx.input(u, &tiling::tile_file(id))?;
-        let cols = talus_tiling::read_tile(&path).map_err(|e| damaged(&path, e))?;
-        if tiles.0.len() == 1 {
-            return Ok(tile_points(cols));
-        }
-        t.append(tile_points(cols));
+    let paths = tiles
+        .0
+        .iter()
+        .map(|&u| ctx.input(u, &tiling::tile_file(id)))
+        .collect::<Result<Vec<_>>>()?;
+    let read = |p: &Path| talus_tiling::read_tile(p).map_err(|e| damaged(p, e));
+    if let [one] = paths.as_slice() {
+        return Ok(tile_points(read(one)?));
+    }
+    // The whole tile's columns sized once from the parts' headers: what is held is the tile
+    // and one part, as the per-point needs counted on a whole tile allow.
+    let mut n = 0;
+    for p in &paths {
+        n += talus_tiling::read_tile_header(p)
+            .map_err(|e| damaged(p, e))?
+            .point_count as usize;
+    }
+    let mut t = TilePoints {
+        x: Vec::with_capacity(n),
+        y: Vec::with_capacity(n),
+        z: Vec::with_capacity(n),
+        owned: Vec::with_capacity(n),
+    };
+    for p in &paths {
+        t.append(tile_points(read(p)?));
     }
     Ok(t)
 }

@@ -78,15 +78,20 @@ impl Stage for OrientStage {
         let g = sample::geometry(plan, s);
         let anchor = plan.layout.anchor;
         let fields: Vec<usize> = plan.units[unit].deps.clone();
-        let mut sample: Vec<SamplePoint> = Vec::new();
+        // Reserved before anything is read: the tiles' samples' sizes are in their records.
+        let n = fields
+            .iter()
+            .map(|&u| Ok(ctx.meta::<FieldStage>(u)?.points as u64))
+            .sum::<Result<u64>>()?;
+        let _held = ctx.reserve(
+            n * BYTES_PER_SAMPLE + crate::memory::HEADROOM,
+            &format!("the orientation field: {n} sample points"),
+        )?;
+        let mut sample: Vec<SamplePoint> = Vec::with_capacity(n as usize);
         for &u in &fields {
             sample.extend(sample::read(ctx, u)?);
             crate::interrupt::check()?;
         }
-        let _held = ctx.reserve(
-            sample.len() as u64 * BYTES_PER_SAMPLE + crate::memory::HEADROOM,
-            &format!("the orientation field: {} sample points", sample.len()),
-        )?;
         // Each cell is one tile's (the one holding its centre): the keys are distinct, and the
         // sample is in one order whatever the tiling.
         sample.sort_by_key(|s| s.0);

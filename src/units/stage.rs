@@ -476,9 +476,15 @@ impl Planner<'_> {
     ) -> usize {
         let cores = super::m3c2::cores_key(self.core_unit());
         let (b, a) = (self.plan.pairs[pair].before, self.plan.pairs[pair].after);
+        // The surveys as keys before `file_points` existed: the files' point counts decide how a
+        // survey is tiled, not what a pair's units compute from it.
         let inputs: Vec<String> = [b, a]
             .iter()
-            .map(|&s| serde_json::to_string(&self.plan.surveys[s]).unwrap_or_default())
+            .map(|&s| {
+                let mut sv = self.plan.surveys[s].clone();
+                sv.file_points.clear();
+                serde_json::to_string(&sv).unwrap_or_default()
+            })
             .collect();
         let label = self.plan.pairs[pair].label.clone();
         self.add(

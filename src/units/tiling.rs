@@ -111,6 +111,10 @@ impl TilingMeta {
     }
 }
 
+/// Most parts a survey is tiled in (as many as a Slurm array's tasks): a smaller `--tiling-part`
+/// is refused rather than planned as millions of units.
+pub(crate) const MAX_PARTS: usize = 1000;
+
 /// A part of a survey's tiling: its points `start..end`, the survey's files one after the other
 /// in name order.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -171,6 +175,16 @@ impl Stage for TilingStage {
                 };
                 let classes = format!("classes {}", p.plan.params.classes.value);
                 let parts = parts(p.plan, s);
+                if parts.len() > MAX_PARTS {
+                    return Err(crate::error::Error::Usage(format!(
+                        "--tiling-part {}: survey {} ({} points) would be tiled by {} units, \
+                         more than {MAX_PARTS}: give a larger part",
+                        p.plan.tiling_part,
+                        p.plan.surveys[s].arg.display(),
+                        p.plan.surveys[s].points,
+                        parts.len()
+                    )));
+                }
                 if parts.is_empty() {
                     p.add(
                         Spec::survey(Self::KIND, s),

@@ -263,7 +263,12 @@ fn gather_along(
     // the walk tests every point again.
     let slack = 1e-6 * (1.0 + r);
     let near = |p: &Point3| tubes.any_holds(p, slack);
-    let xy = tubes.xy_bounds();
+    // The frames read are those reaching the axes' bounds grown by the same slack, so that
+    // which points `near` sees never depends on where a tile file's frames end.
+    let xy = {
+        let b = tubes.xy_bounds();
+        [b[0] - slack, b[1] - slack, b[2] + slack, b[3] + slack]
+    };
     let mut out = [Vec::new(), Vec::new()];
     let grid = ctx.plan.layout.grid()?;
     for id in grid.tiles() {

@@ -657,7 +657,8 @@ impl Stage for OutputsStage {
     const KIND: &'static str = "outputs";
     const SCOPE: Scope = Scope::Pair;
     /// 2: a lean campaign's pair (`Plan::lean_pairs`) publishes no m3c2.laz and names the
-    /// first pair's terrain positions in view.json.
+    /// first pair's terrain positions in view.json. 3: summary.json's stage table counts the
+    /// orientation field's units (`units::field`).
     const VERSION: u32 = 3;
     const LINE: Line = Line {
         name: "outputs",
@@ -859,7 +860,11 @@ fn summarize(
         let name = registry().get(plan.units[u].kind())?.line().name;
         let secs = ctx.timing(u)?.seconds;
         let e = stages.entry(name).or_insert((0, 0.0));
-        e.0 += 1;
+        // A survey tiled in parts counts as one unit (their seconds add up): the table is the
+        // same whatever `--tiling-part` and the executor chose.
+        if plan.units[u].spec.part.is_none_or(|k| k == 0) {
+            e.0 += 1;
+        }
         e.1 += secs;
     }
     // The pipeline's lines before this stage's own.
