@@ -89,16 +89,7 @@ pub(crate) fn survey(store: &Store, label: &str, files: &SurveyFiles) -> Result<
         scale: files.scale(),
         epsg: files.first().crs.epsg_code(),
         transform: files.first().transform,
-        file_points: if files.infos.iter().all(|i| {
-            matches!(
-                i.format,
-                crate::io::CloudFormat::Las | crate::io::CloudFormat::Laz
-            )
-        }) {
-            files.infos.iter().map(|i| i.point_count).collect()
-        } else {
-            Vec::new()
-        },
+        file_points: files.las_points(),
     })
 }
 
@@ -199,10 +190,8 @@ pub(crate) fn keeps_decoded_of(
     survey: &SurveyFiles,
     tiling_part: u64,
 ) -> bool {
-    let las = |i: &io::CloudInfo| matches!(i.format, io::CloudFormat::Las | io::CloudFormat::Laz);
-    keeps_decoded(resume, executor)
-        && (!survey.infos.iter().all(las)
-            || survey.infos.iter().map(|i| i.point_count).sum::<u64>() <= tiling_part)
+    let las = survey.las_points();
+    keeps_decoded(resume, executor) && (las.is_empty() || las.iter().sum::<u64>() <= tiling_part)
 }
 
 /// Names under `dir` (`/`-separated, `.talus` left out) that `ours` takes for talus outputs.

@@ -170,6 +170,16 @@ impl SurveyFiles {
         self.infos.iter().map(|i| i.point_count).sum()
     }
 
+    /// The points of each file when every one is LAS or LAZ, whose headers count them exactly
+    /// (`Survey::file_points`: what a tiling in parts ranges over); empty otherwise.
+    pub(crate) fn las_points(&self) -> Vec<u64> {
+        let las = |i: &CloudInfo| matches!(i.format, io::CloudFormat::Las | io::CloudFormat::Laz);
+        match self.infos.iter().all(las) {
+            true => self.infos.iter().map(|i| i.point_count).collect(),
+            false => Vec::new(),
+        }
+    }
+
     /// Bounds of all files.
     pub(crate) fn bounds(&self) -> Bounds {
         let mut b = Bounds::empty();

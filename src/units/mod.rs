@@ -169,13 +169,8 @@ impl Ctx<'_> {
             .and_then(|k| stages.iter().position(|s| s.kind() == k))
             .unwrap_or(stages.len());
         for st in stages[..end].iter().rev().filter(|s| s.provides_tiles()) {
-            let units = self.plan.survey_units(st.kind(), survey);
-            let Some(&first) = units.first() else {
-                continue;
-            };
-            if self.tiles_of(first)?.is_some() {
-                let tiles = Tiles(units);
-                let meta = self.tiles_meta(&tiles)?;
+            let tiles = Tiles(self.plan.survey_units(st.kind(), survey));
+            if let Some(meta) = self.tiles_meta(&tiles)? {
                 return Ok((tiles, meta));
             }
         }
@@ -220,22 +215,21 @@ impl Ctx<'_> {
         Ok(self.tiles(survey)?.1)
     }
 
-    /// The tiling record of the units `tiles`, which hold a survey's tiles: a part's records
-    /// merged ([`tiling::TilingMeta::merge`]).
-    pub(crate) fn tiles_meta(&self, tiles: &Tiles) -> Result<tiling::TilingMeta> {
-        let metas = tiles
-            .0
-            .iter()
-            .map(|&u| {
-                self.tiles_of(u)?.ok_or_else(|| {
-                    Error::Internal(format!("unit {} holds no tiles", self.plan.units[u].name))
-                })
-            })
-            .collect::<Result<Vec<_>>>()?;
+    /// The tiling record of the units `tiles` (its parts' records merged:
+    /// [`tiling::TilingMeta::merge`]), each record read once; None when they hold no tiles (no
+    /// unit, or an aligned tiling whose alignment did not apply).
+    pub(crate) fn tiles_meta(&self, tiles: &Tiles) -> Result<Option<tiling::TilingMeta>> {
+        let mut metas = Vec::with_capacity(tiles.0.len());
+        for &u in &tiles.0 {
+            match self.tiles_of(u)? {
+                Some(m) => metas.push(m),
+                None => return Ok(None),
+            }
+        }
         match tiles.0.as_slice() {
-            [_] => Ok(metas.into_iter().next().unwrap_or_else(|| unreachable!())),
-            [first, ..] => tiling::TilingMeta::merge(self, self.survey(*first)?, metas),
-            [] => Err(Error::Internal("tiles of no unit".into())),
+            [] => Ok(None),
+            [_] => Ok(metas.pop()),
+            [first, ..] => tiling::TilingMeta::merge(self, self.survey(*first)?, metas).map(Some),
         }
     }
 

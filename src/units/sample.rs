@@ -60,6 +60,12 @@ fn point_key(p: &Point3) -> u64 {
     .next_u64()
 }
 
+/// The tiling record of `tiles`, which must hold a survey's tiles.
+fn held(ctx: &Ctx, tiles: &Tiles) -> Result<super::tiling::TilingMeta> {
+    ctx.tiles_meta(tiles)?
+        .ok_or_else(|| crate::error::Error::Internal(format!("units {:?} hold no tiles", tiles.0)))
+}
+
 /// M3C2 between the tilings `tilings` (units holding the before and the after survey's tiles) at the points `picks` chooses in `region`, with `params`: the samples
 /// measured within the cylinder (a walked distance may be finished in another tile, so it is
 /// left out), in key order, and how many points were computed. The before survey's half of it
@@ -73,7 +79,7 @@ pub(crate) fn sample(
     params: &crate::m3c2::M3c2Params,
 ) -> Result<(Vec<Sample>, usize)> {
     let plan = ctx.plan;
-    let (m0, m1) = (ctx.tiles_meta(tilings[0])?, ctx.tiles_meta(tilings[1])?);
+    let (m0, m1) = (held(ctx, tilings[0])?, held(ctx, tilings[1])?);
     // The densest tile of the two surveys first, as the M3C2 units check it: a budget that
     // cannot hold it is refused with the same words, whichever unit meets it first.
     let pair_points = super::m3c2::fit::pair_tile_points(plan, &m0, &m1)?;
