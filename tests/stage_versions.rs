@@ -2,8 +2,8 @@
 //! units' keys, so it must change whenever what the stage writes changes. This test runs a fixed
 //! campaign (3 misregistered surveys of 20,000 points, `--vegetation remove`: tiling, align,
 //! aligned, cleared, orient, thinned, m3c2, stable, events, series, volumes, points, outputs,
-//! campaign) and a compare with `--core-points` (cores), hashes each stage's units, and compares with
-//! `tests/data/stage_outputs.json`: a hash that changed under an unchanged version fails,
+//! campaign) and a compare with `--core-points` (cores) and `--tiling-part` (segments), hashes
+//! each stage's units, and compares with `tests/data/stage_outputs.json`: a hash that changed under an unchanged version fails,
 //! naming the stage to bump, unless an earlier stage's version changed (a stage's output follows
 //! from its dependencies'). (`merged` needs more than 32 tiles a pair: not covered here.)
 //!
@@ -213,6 +213,9 @@ fn a_stage_whose_output_changed_has_a_new_version() {
         "--core-points",
         &surveys[0],
         "--keep-units",
+        // The before survey tiled in parts, and m3c2.laz written in segments.
+        "--tiling-part",
+        "8000",
     ]);
 
     let mut hashes = BTreeMap::new();

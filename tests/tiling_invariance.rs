@@ -309,7 +309,8 @@ fn events_in_pieces_equal_the_events_held_at_once() {
 /// LAZ decoder of layered point formats (the synthesized cliff, misregistered so that the
 /// alignment applies and its sample reads the parts' frames near its windows), the las crate's
 /// LAZ decoder (St Leonards, point format 0) and uncompressed LAS (autzen, format 7), parts
-/// starting inside LAZ chunks. A survey that shows too few distinct positions across its parts
+/// starting inside LAZ chunks; m3c2.laz written in as many segments as the before survey's
+/// parts and joined, byte for byte the file one pass writes. A survey that shows too few distinct positions across its parts
 /// is refused as a whole one is.
 #[test]
 fn a_survey_tiled_in_parts_gives_the_whole_surveys_outputs() {
@@ -322,7 +323,15 @@ fn a_survey_tiled_in_parts_gives_the_whole_surveys_outputs() {
     let leo = common::data("st-leonards");
     let autzen = common::data("autzen-bmx");
     let pairs = [
-        ("cliff", before, after, "25001", vec!["--tile-size", "10"]),
+        // Core points closer than the default: more than four LAZ chunks of them, so that
+        // m3c2.laz's segments hold chunks each.
+        (
+            "cliff",
+            before,
+            after,
+            "25001",
+            vec!["--tile-size", "10", "--core-spacing", "0.24"],
+        ),
         (
             "leo",
             leo.join("leo_20180606_dsm_resampled_1m.laz"),
@@ -354,6 +363,23 @@ fn a_survey_tiled_in_parts_gives_the_whole_surveys_outputs() {
             .unwrap()
             .count();
         assert!(parts >= 6, "{name}: {parts} tiling units");
+        // m3c2.laz written in segments, as many as the before survey's parts, and joined.
+        let segments: Vec<serde_json::Value> =
+            std::fs::read_dir(parted.join(".talus/units/segments"))
+                .unwrap()
+                .map(|d| {
+                    let rec = d.unwrap().path().join("record.json");
+                    serde_json::from_str(&std::fs::read_to_string(rec).unwrap()).unwrap()
+                })
+                .collect();
+        let filled = segments
+            .iter()
+            .filter(|r| r["meta"]["written"]["core_points"].as_u64() > Some(0))
+            .count();
+        assert!(segments.len() >= 3, "{name}: {} segments", segments.len());
+        if *name == "cliff" {
+            assert!(filled >= 3, "{name}: {filled} segments hold core points");
+        }
         if *name == "cliff" {
             assert!(line.contains("the after survey aligned on"), "{line}");
             assert_same_outputs(&whole, &parted);

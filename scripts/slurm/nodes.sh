@@ -3,8 +3,9 @@
 # two slurmd nodes on this machine (node1, node2: Slurm's multiple-slurmd mode, one CPU and half
 # the memory each, DIR shared since they share the file system), then the St Leonards campaign:
 #   1. a local run, the reference;
-#   2. `--executor slurm --wait` across both nodes: every output identical to the local run's
-#      (same_outputs.py), and Slurm's job-completion log must show tasks on both nodes;
+#   2. `--executor slurm --wait` across both nodes, each survey tiled in parts and each pair's
+#      m3c2.laz written in segments: every output identical to the local run's (same_outputs.py),
+#      and Slurm's job-completion log must show tasks on both nodes;
 #   3. a node killed mid-task, Slurm requeues: a second Slurm run; when one of its M3C2 tasks is
 #      in the middle of a unit (it holds the unit's claim, the unit is not done), that node's
 #      slurmd, its slurmstepd processes and their job processes (the talus task) are SIGKILLed.
@@ -36,6 +37,9 @@ test_name="slurm nodes test"
 # shellcheck source=run_test.sh
 source "$here/run_test.sh"
 indent() { sed 's/^/  /'; }
+# Every run writes each pair's m3c2.laz (`--pair-clouds`): where a survey is tiled in parts, its
+# pairs' m3c2.laz is written in segments on both nodes and joined, and compared byte for byte.
+campaign() { "$talus" campaign "${surveys[@]}" --pair-clouds "$@"; }
 
 ((slurm_nodes >= 2)) || fail "TALUS_SLURM_NODES=$slurm_nodes: this test needs at least 2 nodes"
 test_inputs
@@ -104,13 +108,16 @@ campaign --out "$work/slurm" --executor slurm --wait --tiling-part 40000 \
   >"$work/slurm.jobs" 2>"$work/slurm.err" || rc=$?
 sed 's/^/  /' "$work/slurm.err"
 [[ $rc == 0 ]] || fail "the Slurm run exited $rc"
-[[ "$(wc -l <"$work/slurm.jobs")" == 15 ]] || fail "expected 15 arrays (14 stages and the publishing job)"
+[[ "$(wc -l <"$work/slurm.jobs")" == 16 ]] || fail "expected 16 arrays (15 stages and the publishing job)"
 echo "Slurm run: $((SECONDS - t0)) s"
 show_per_node "$work/slurm.jobs"
 ! per_node "$work/slurm.jobs" | grep -v ' COMPLETED ' || fail "a task of the Slurm run did not complete"
 same_as_local slurm
 [[ "$(ls "$work/slurm/.talus/units/tiling" | wc -l)" == 22 ]] \
   || fail "the Slurm run did not tile its surveys in parts: $(ls "$work/slurm/.talus/units/tiling")"
+segments="$(ls "$work/slurm/.talus/units/segments" | wc -l)"
+((segments > 5)) || fail "the Slurm run wrote its pairs' m3c2.laz in $segments segments"
+echo "the surveys tiled in 22 parts, the pairs' m3c2.laz written in $segments segments"
 
 # kill_mid_task NAME: run the campaign into $work/NAME with --wait in the background (extra
 # options after NAME), catch an M3C2 task in the middle of a unit (freeze_claimer.py), SIGKILL its

@@ -11,6 +11,7 @@ use crate::error::{Error, Result};
 pub mod classes;
 pub(crate) mod las;
 pub mod las_out;
+pub(crate) mod laz_join;
 pub mod mesh_ply;
 pub(crate) mod parquet_out;
 pub(crate) mod ply;

@@ -313,6 +313,7 @@ pub(crate) fn default_stages() -> Vec<&'static dyn Registered> {
         entry::<events::EventsStage>(),
         entry::<series::SeriesStage>(),
         entry::<volumes::VolumesStage>(),
+        entry::<outputs::segments::SegmentsStage>(),
         entry::<outputs::points::PointsStage>(),
         entry::<outputs::OutputsStage>(),
         entry::<campaign::CampaignStage>(),
@@ -474,6 +475,34 @@ impl Planner<'_> {
         version: &str,
         deps: Vec<usize>,
     ) -> usize {
+        self.add_pair_spec(Spec::pair(kind, pair), "", version, deps)
+    }
+
+    /// [`Planner::add_pair`] for part `part` of the pair's units of `kind` (a pair's m3c2.laz
+    /// written in segments).
+    pub(crate) fn add_pair_part(
+        &mut self,
+        kind: &'static str,
+        pair: usize,
+        part: u32,
+        version: &str,
+        deps: Vec<usize>,
+    ) -> usize {
+        let spec = Spec {
+            part: Some(part),
+            ..Spec::pair(kind, pair)
+        };
+        self.add_pair_spec(spec, &format!("-p{part}"), version, deps)
+    }
+
+    fn add_pair_spec(
+        &mut self,
+        spec: Spec,
+        suffix: &str,
+        version: &str,
+        deps: Vec<usize>,
+    ) -> usize {
+        let pair = spec.pair.unwrap_or_default();
         let cores = super::m3c2::cores_key(self.core_unit());
         let (b, a) = (self.plan.pairs[pair].before, self.plan.pairs[pair].after);
         // The surveys as keys before `file_points` existed: the files' point counts decide how a
@@ -486,9 +515,9 @@ impl Planner<'_> {
                 serde_json::to_string(&sv).unwrap_or_default()
             })
             .collect();
-        let label = self.plan.pairs[pair].label.clone();
+        let label = format!("{}{suffix}", self.plan.pairs[pair].label);
         self.add(
-            Spec::pair(kind, pair),
+            spec,
             &label,
             &[version, &inputs[0], &inputs[1], cores],
             deps,

@@ -28,7 +28,7 @@ pub use hash::{hash64, Fnv64};
 pub use splitter::{empty_columns, tile_path, TileSplitter, OWNED_COLUMN};
 pub use tile_file::framed;
 pub use tile_file::{
-    encode_tile, read_tile, read_tile_frames, read_tile_header, write_tile, write_tile_with,
-    Column, ColumnData, FileDigest, Quantisation, TileColumns, TileFrames, TileHeader,
-    WriteOptions,
+    encode_tile, read_tile, read_tile_frames, read_tile_header, read_u32_columns, write_tile,
+    write_tile_with, Column, ColumnData, FileDigest, Quantisation, TileColumns, TileFrames,
+    TileHeader, WriteOptions,
 };

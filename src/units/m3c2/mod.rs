@@ -10,6 +10,7 @@ use talus_tiling::{Column, ColumnData, TileColumns, TileId};
 
 pub(crate) mod fit;
 mod merge;
+pub(crate) mod seek;
 
 pub(crate) use merge::merge_need;
 pub use merge::Merged;

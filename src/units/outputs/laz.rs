@@ -11,7 +11,6 @@ use crate::io::Crs;
 use crate::m3c2::tile::KeyedResult;
 use crate::m3c2::Reach;
 use crate::store::UnitWriter;
-use crate::units::m3c2::Merged;
 
 /// The extra dimensions of m3c2.laz, in record order (SPEC.md §2). Distances, uncertainties and
 /// spreads as 32-bit floats, as CloudCompare's scalar fields hold them: 24 bits of mantissa are
@@ -106,6 +105,30 @@ pub(crate) struct Written {
     pub(crate) sign_unknown: u64,
 }
 
+impl Written {
+    /// Nothing written yet.
+    pub(crate) fn none() -> Written {
+        Written {
+            core_points: 0,
+            computed: 0,
+            significant: 0,
+            extended: 0,
+            beyond_reach: 0,
+            sign_unknown: 0,
+        }
+    }
+
+    /// The counts of `self` and `other` together (a file written in segments).
+    pub(crate) fn add(&mut self, other: &Written) {
+        self.core_points += other.core_points;
+        self.computed += other.computed;
+        self.significant += other.significant;
+        self.extended += other.extended;
+        self.beyond_reach += other.beyond_reach;
+        self.sign_unknown += other.sign_unknown;
+    }
+}
+
 /// Where m3c2.laz goes: its CRS and coordinate grid.
 pub(crate) struct Cloud {
     pub(crate) crs: Crs,
@@ -120,7 +143,7 @@ pub(crate) struct Cloud {
 /// instead of merging the results again).
 pub(crate) fn write_m3c2_laz(
     out: &mut UnitWriter,
-    results: &mut Merged,
+    results: &mut dyn FnMut() -> Result<Option<KeyedResult>>,
     total: u64,
     reg_error: f64,
     cloud: Option<Cloud>,
@@ -140,15 +163,8 @@ pub(crate) fn write_m3c2_laz(
         }
         None => None,
     };
-    let mut written = Written {
-        core_points: 0,
-        computed: 0,
-        significant: 0,
-        extended: 0,
-        beyond_reach: 0,
-        sign_unknown: 0,
-    };
-    while let Some(mut k) = results.next_result()? {
+    let mut written = Written::none();
+    while let Some(mut k) = results()? {
         k.r = k.r.with_registration(reg_error);
         each(&k);
         let r = &k.r;

@@ -6,6 +6,7 @@
 
 pub(crate) mod laz;
 pub(crate) mod points;
+pub(crate) mod segments;
 pub(crate) mod tables;
 pub(crate) mod view;
 
@@ -860,9 +861,11 @@ fn summarize(
         let name = registry().get(plan.units[u].kind())?.line().name;
         let secs = ctx.timing(u)?.seconds;
         let e = stages.entry(name).or_insert((0, 0.0));
-        // A survey tiled in parts counts as one unit (their seconds add up): the table is the
-        // same whatever `--tiling-part` and the executor chose.
-        if plan.units[u].spec.part.is_none_or(|k| k == 0) {
+        // A survey tiled in parts counts as one unit, a pair's m3c2.laz written in segments as
+        // its points unit alone (their seconds add up): the table is the same whatever
+        // `--tiling-part` and the executor chose.
+        let spec = &plan.units[u].spec;
+        if spec.part.is_none_or(|k| k == 0 && spec.pair.is_none()) {
             e.0 += 1;
         }
         e.1 += secs;

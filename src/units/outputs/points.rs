@@ -11,6 +11,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::laz::{self, Written};
+use super::segments::SegmentsStage;
 use super::view::{Terrain, TerrainSample};
 use crate::error::Result;
 use crate::io::las_out::CoordinateGrid;
@@ -109,9 +110,17 @@ impl Stage for PointsStage {
                     }
                 ),
             )?;
-            let mut deps = vec![p.the(&Spec::pair(StableStage::KIND, pair))?];
-            deps.extend(p.pair_results(pair));
-            deps.extend(p.find(&Spec::pair(EventsStage::KIND, pair)));
+            // Written in segments: joined from them (which read the results themselves).
+            let segments = p.of_pair(SegmentsStage::KIND, pair);
+            // (The events for their kept count.)
+            let mut deps = match segments.is_empty() {
+                true => pass_deps(p, pair)?,
+                false => p
+                    .find(&Spec::pair(EventsStage::KIND, pair))
+                    .into_iter()
+                    .collect(),
+            };
+            deps.extend(segments);
             let unit = p.add_pair(Self::KIND, pair, &version, deps);
             // After the pair's volumes: they read the tiles, m3c2.laz is made from the M3C2
             // results; one after the other, the tiles go before m3c2.laz comes (issue 46).
@@ -126,8 +135,17 @@ impl Stage for PointsStage {
     }
 }
 
+/// What a pass over pair `pair`'s results that writes m3c2.laz reads: its stable ground (the
+/// registration error), its results and its events (each core point's event).
+pub(crate) fn pass_deps(p: &Planner, pair: usize) -> Result<Vec<usize>> {
+    let mut deps = vec![p.the(&Spec::pair(StableStage::KIND, pair))?];
+    deps.extend(p.pair_results(pair));
+    deps.extend(p.find(&Spec::pair(EventsStage::KIND, pair)));
+    Ok(deps)
+}
+
 /// Pair `pair`'s m3c2.laz's CRS (its before survey's) and coordinate grid.
-fn cloud(plan: &crate::plan::Plan, pair: usize) -> Result<laz::Cloud> {
+pub(crate) fn cloud(plan: &crate::plan::Plan, pair: usize) -> Result<laz::Cloud> {
     let p = &plan.pairs[pair];
     let bs = &plan.surveys[p.before];
     // The user's core-point file, when there is one, opened once for its scale and bounds.
@@ -163,9 +181,43 @@ fn cloud(plan: &crate::plan::Plan, pair: usize) -> Result<laz::Cloud> {
     })
 }
 
+/// Resident bytes of a points unit that joins segments: the whole terrain sample (positions,
+/// distances) with its pieces' normals as they are read, and the join's copies.
+const JOIN_NEED: u64 = 112 << 20;
+
+/// Pair `pair`'s m3c2.laz and terrain sample joined from its segments (`super::segments`): the
+/// bytes one pass writes.
+fn join(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<PointsMeta> {
+    let plan = ctx.plan;
+    let _held = ctx.reserve(JOIN_NEED, "joining m3c2.laz and the terrain sample")?;
+    let mut written = Written::none();
+    let (mut files, mut pieces) = (Vec::new(), Vec::new());
+    for u in plan.of_pair(SegmentsStage::KIND, pair) {
+        written.add(&ctx.meta::<SegmentsStage>(u)?.written);
+        files.push(ctx.input(u, "m3c2.laz")?);
+        pieces.push(ctx.input(u, super::view::PIECE)?);
+    }
+    crate::io::laz_join::join_laz(&files, &out.path("m3c2.laz")?)?;
+    out.add_file("m3c2.laz")?;
+    let terrain =
+        TerrainSample::joined(written.core_points, plan.layout.anchor, &pieces)?.write(out)?;
+    let kept = match plan.m3c2_only {
+        true => 0,
+        false => KeptFrames::open(ctx, pair)?.count(),
+    };
+    Ok(PointsMeta {
+        written,
+        terrain,
+        kept,
+    })
+}
+
 /// Write pair `pair`'s m3c2.laz and terrain sample into `out`.
 fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<PointsMeta> {
     let plan = ctx.plan;
+    if super::segments::count(plan, pair) > 0 {
+        return join(ctx, pair, out);
+    }
     let ground = crate::units::stable::read(ctx, pair)?;
     let params = ground.params(plan);
     let _held = ctx.reserve(
@@ -191,7 +243,7 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<PointsMeta> {
     let mut merged = crate::units::m3c2::Merged::new(ctx, pair)?;
     let written = laz::write_m3c2_laz(
         out,
-        &mut merged,
+        &mut || merged.next_result(),
         total,
         params.reg_error.value,
         cloud,

@@ -58,7 +58,14 @@ pub(crate) struct TerrainSample {
     dist: Vec<f32>,
     /// The sum of the sample's oriented normals (of known sign).
     normals: Point3,
+    /// A piece of the sample (`from_rank`): its oriented normals themselves, which the joined
+    /// sample sums in order as one pass would (a sum of the pieces' sums would round otherwise).
+    each_normal: Option<Vec<Point3>>,
 }
+
+/// A sample's piece, as a segment unit writes it (`terrain.part`: three u64 counts, then the
+/// positions and distances as f32 and the normals as f64, little-endian).
+pub(crate) const PIECE: &str = "terrain.part";
 
 impl TerrainSample {
     /// A sample of at most [`MAX_TERRAIN_POINTS`] of `total` core points, relative to `origin`.
@@ -76,7 +83,91 @@ impl TerrainSample {
             pos: Vec::with_capacity(own),
             dist: Vec::with_capacity(n),
             normals: [0.0; 3],
+            each_normal: None,
         }
+    }
+
+    /// The piece of the sample [`TerrainSample::new`] takes from the core points of canonical
+    /// ranks `from..to` (pushed in that order): the same points, for [`TerrainSample::joined`].
+    pub(crate) fn piece(total: u64, origin: Point3, from: u64, to: u64) -> Self {
+        let stride = total.div_ceil(MAX_TERRAIN_POINTS).max(1);
+        let n = (to.div_ceil(stride) - from.div_ceil(stride).min(to.div_ceil(stride))) as usize;
+        TerrainSample {
+            stride,
+            positions: None,
+            origin,
+            seen: from,
+            pos: Vec::with_capacity(3 * n),
+            dist: Vec::with_capacity(n),
+            normals: [0.0; 3],
+            each_normal: Some(Vec::new()),
+        }
+    }
+
+    /// Write this piece as [`PIECE`].
+    pub(crate) fn write_piece(self, out: &mut UnitWriter) -> Result<()> {
+        let normals = self.each_normal.unwrap_or_default();
+        write_streamed(out, PIECE, |w| {
+            for n in [self.pos.len(), self.dist.len(), normals.len()] {
+                w.write_all(&(n as u64).to_le_bytes())?;
+            }
+            let mut bytes = Vec::with_capacity(1 << 16);
+            for run in self.pos.chunks(1 << 14).chain(self.dist.chunks(1 << 14)) {
+                bytes.clear();
+                bytes.extend(run.iter().flat_map(|v| v.to_le_bytes()));
+                w.write_all(&bytes)?;
+            }
+            for run in normals.chunks(1 << 12) {
+                bytes.clear();
+                bytes.extend(run.iter().flatten().flat_map(|v| v.to_le_bytes()));
+                w.write_all(&bytes)?;
+            }
+            Ok(())
+        })
+    }
+
+    /// The sample of `total` core points about `origin` from its pieces' files, in order: the
+    /// sample one pass over every core point takes, bit for bit.
+    pub(crate) fn joined(
+        total: u64,
+        origin: Point3,
+        pieces: &[std::path::PathBuf],
+    ) -> Result<Self> {
+        let mut s = TerrainSample::new(total, origin, None);
+        for path in pieces {
+            let bytes = std::fs::read(path).map_err(|e| Error::Damaged {
+                path: path.clone(),
+                problem: e.to_string(),
+            })?;
+            let bad = || Error::Damaged {
+                path: path.clone(),
+                problem: "a terrain piece of another length than its counts say".into(),
+            };
+            let count = |k: usize| -> Result<usize> {
+                let b = bytes.get(8 * k..8 * k + 8).ok_or_else(bad)?;
+                usize::try_from(u64::from_le_bytes(b.try_into().map_err(|_| bad())?))
+                    .map_err(|_| bad())
+            };
+            let (np, nd, nn) = (count(0)?, count(1)?, count(2)?);
+            let body = &bytes[24..];
+            if body.len() != 4 * (np + nd) + 24 * nn {
+                return Err(bad());
+            }
+            let f32s = |b: &[u8]| -> Vec<f32> {
+                b.chunks_exact(4)
+                    .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                    .collect()
+            };
+            s.pos.extend(f32s(&body[..4 * np]));
+            s.dist.extend(f32s(&body[4 * np..4 * (np + nd)]));
+            for n in body[4 * (np + nd)..].chunks_exact(24) {
+                for (i, v) in n.chunks_exact(8).enumerate() {
+                    s.normals[i] += f64::from_le_bytes(v.try_into().map_err(|_| bad())?);
+                }
+            }
+        }
+        s.seen = total;
+        Ok(s)
     }
 
     /// The next core point in canonical order.
@@ -90,7 +181,10 @@ impl TerrainSample {
             self.dist.push(k.r.measured() as f32);
             let n = k.r.normal;
             if k.r.sign_known && n.iter().all(|v| v.is_finite()) {
-                (0..3).for_each(|i| self.normals[i] += n[i]);
+                match self.each_normal.as_mut() {
+                    Some(each) => each.push(n),
+                    None => (0..3).for_each(|i| self.normals[i] += n[i]),
+                }
             }
         }
         self.seen += 1;

@@ -345,6 +345,40 @@ impl<'a> Frame<'a> {
                 .all(|(a, b)| a.name == b.name && value_width(a.kind) == value_width(b.kind))
     }
 
+    /// The values of u32 column `name`, the other columns left compressed (a reader after
+    /// the keys of many small files decodes a column of fifteen).
+    pub(crate) fn u32_column(&self, name: &str) -> Result<Vec<u32>, String> {
+        let (h, n) = (&self.h, self.len);
+        let mut pos = 0usize;
+        for spec in &h.columns {
+            let len = usize::try_from(spec.stored_len).map_err(|_| "column too large")?;
+            let end = pos
+                .checked_add(len)
+                .filter(|&e| e <= self.payload.len())
+                .ok_or("column lengths exceed the payload")?;
+            if spec.name != name {
+                pos = end;
+                continue;
+            }
+            if spec.kind != KIND_U32 {
+                return Err(format!("column {name:?} is not u32"));
+            }
+            let raw_len = n.checked_mul(4).ok_or("point count too large")?;
+            let raw = decompress(&self.payload[pos..end], raw_len)
+                .map_err(|e| format!("column {name:?}: zstd: {e}"))?;
+            if raw.len() != raw_len {
+                return Err(format!(
+                    "column {name:?} holds {} bytes, expected {raw_len}",
+                    raw.len()
+                ));
+            }
+            let mut out = vec![0u32; n];
+            u32_values_into(&raw, n, spec.flags & FLAG_SHUFFLE != 0, &mut out, |q| q);
+            return Ok(out);
+        }
+        Err(format!("no column {name:?}"))
+    }
+
     /// Columns of this frame's names and types, `n` values each (zeroed: a large block comes
     /// from the system as zero pages, touched only when decoded into).
     pub(crate) fn empty_columns(&self, n: usize) -> TileColumns {

@@ -46,7 +46,7 @@ mod write;
 pub(crate) use codec::{encode_with_bounds, Frame};
 pub(crate) use format::{encoded_len, Cursor};
 pub use format::{MAGIC, VERSION};
-pub use read::{read_tile, read_tile_frames, read_tile_header, TileFrames};
+pub use read::{read_tile, read_tile_frames, read_tile_header, read_u32_columns, TileFrames};
 use talus_base::geom::Bounds;
 pub use write::{encode_tile, write_tile, write_tile_with};
 #[cfg(test)]

@@ -5,7 +5,7 @@ use std::fs::File;
 use std::io::{Read, Seek};
 use std::path::Path;
 
-use super::codec::decode;
+use super::codec::{decode, Frame};
 use super::format::{check_magic_version, parse_header, Header, VERSION};
 use super::{framed, Bounds, TileColumns, TileHeader};
 use crate::error::{Error, Result};
@@ -22,6 +22,20 @@ pub fn read_tile(path: &Path) -> Result<TileColumns> {
         Err(e) => Err(e),
     };
     decoded.map_err(|reason| Error::corrupt(path, reason))
+}
+
+/// The u32 columns `names` of a version-1 tile file, verified as [`read_tile`] verifies it
+/// (magic, version, header and payload checksums, length), but only these columns
+/// decompressed: a reader after the keys of many small sorted files leaves the rest.
+pub fn read_u32_columns(path: &Path, names: &[&str]) -> Result<Vec<Vec<u32>>> {
+    let mut bytes = Vec::new();
+    File::open(path)
+        .and_then(|mut f| f.read_to_end(&mut bytes))
+        .map_err(|e| Error::io(path, e))?;
+    let columns = check_magic_version(&bytes, &[VERSION])
+        .and_then(|_| Frame::check(&bytes))
+        .and_then(|frame| names.iter().map(|n| frame.u32_column(n)).collect());
+    columns.map_err(|reason| Error::corrupt(path, reason))
 }
 
 /// Read and verify a tile file a frame at a time: `f` gets each frame's columns in order (a

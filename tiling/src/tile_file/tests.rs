@@ -113,6 +113,32 @@ fn round_trip_is_bit_exact() {
     assert!(!crate::atomic::tmp_path(&path).exists());
 }
 
+/// One u32 column read alone is the column a whole read gives; other kinds and missing names
+/// are errors, and a damaged payload is caught as by a whole read.
+#[test]
+fn a_u32_column_read_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("t.tile");
+    for n in [0, 1, 5000] {
+        let cols = sample(n);
+        for opts in all_options() {
+            write_tile_with(&path, &cols, &opts).unwrap();
+            let got = read_u32_columns(&path, &["index"]).unwrap();
+            assert_eq!(Some(&ColumnData::U32(got[0].clone())), cols.column("index"));
+            assert!(read_u32_columns(&path, &["owned"]).is_err());
+            assert!(read_u32_columns(&path, &["nothing"]).is_err());
+        }
+    }
+    let mut bytes = std::fs::read(&path).unwrap();
+    let last = bytes.len() - 1;
+    bytes[last] ^= 0x55;
+    std::fs::write(&path, &bytes).unwrap();
+    assert!(matches!(
+        read_u32_columns(&path, &["index"]),
+        Err(crate::Error::Corrupt { .. })
+    ));
+}
+
 /// LAS-style coordinates (integers times the file's scale plus its offset, computed the way the
 /// `las` crate does) are stored quantised, bit-exact and smaller; values off that lattice fall
 /// back to f64 and stay bit-exact.
