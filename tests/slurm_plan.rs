@@ -115,13 +115,27 @@ fn plan_only_writes_the_scripts_and_submits_nothing() {
     ] {
         assert!(script.contains(line), "no {line:?} in\n{script}");
     }
+    // Each array waits for the arrays holding what its units read (issue 47): the orientation
+    // field for the tiling alone, beside the alignment; M3C2 for the tiles, the aligned survey
+    // and the field; m3c2.laz not for the volumes; the publishing job for every array.
     let submit = std::fs::read_to_string(sub.join("submit.sh")).unwrap();
-    assert!(
-        submit.contains(
-            r#"sbatch --parsable "--dependency=afterok:$j5" -p long '--comment=a b' 06-m3c2.sh"#
+    for (script, after) in [
+        ("01-tiling.sh", ""),
+        ("04-field.sh", "$j1"),
+        ("06-m3c2.sh", "$j1:$j3:$j5"),
+        ("10-points.sh", "$j6:$j7:$j8"),
+        (
+            "12-publish.sh",
+            "$j1:$j2:$j3:$j4:$j5:$j6:$j7:$j8:$j9:$j10:$j11",
         ),
-        "{submit}"
-    );
+    ] {
+        let dependency = match after {
+            "" => String::new(),
+            a => format!("\"--dependency=afterok:{a}\" "),
+        };
+        let line = format!("sbatch --parsable {dependency}-p long '--comment=a b' {script}");
+        assert!(submit.contains(&line), "no {line:?} in\n{submit}");
+    }
 
     let o = common::run(&["status", out.to_str().unwrap()]);
     let text = String::from_utf8_lossy(&o.stdout);

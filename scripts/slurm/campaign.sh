@@ -101,7 +101,7 @@ grep -q "m3c2 task 0 (${m}_0, job [0-9]*): CANCELLED" "$work/status-cancel.txt" 
   || fail "talus status does not name m3c2 task 0 as CANCELLED"
 grep -q "m3c2 task $last (${m}_$last): never ran: cancelled while queued" "$work/status-cancel.txt" \
   || fail "talus status does not name m3c2 task $last as cancelled while queued"
-grep -q "cancelled by Slurm because an earlier job failed" "$work/status-cancel.txt" \
+grep -q "cancelled by Slurm because a job they wait for failed" "$work/status-cancel.txt" \
   || fail "talus status does not say the later jobs were cancelled"
 
 echo

@@ -119,12 +119,17 @@ pub(crate) fn states(
     Ok(out)
 }
 
-/// Submit every array of `sub` (scripts in `dir`), each `afterok` on the previous one; their job
-/// ids. If an sbatch fails, the arrays already submitted are cancelled: no half chain is left.
+/// Submit every array of `sub` (scripts in `dir`), each `afterok` on the arrays it waits for
+/// (`StageRecord::after`); their job ids. If an sbatch fails, the arrays already submitted are cancelled: no half chain is left.
 pub(crate) fn submit_chain(dir: &Path, sub: &Submission) -> Result<Vec<String>> {
     let mut ids: Vec<String> = Vec::new();
     for k in 0..sub.stages.len() {
-        let args = sbatch_args(sub, k, ids.last().map(String::as_str));
+        let after: Vec<String> = sub.stages[k]
+            .after
+            .iter()
+            .filter_map(|&j| ids.get(j).cloned())
+            .collect();
+        let args = sbatch_args(sub, k, &after);
         let out = Command::new("sbatch").args(&args).current_dir(dir).output();
         let failure = match out {
             Ok(o) if o.status.success() => {

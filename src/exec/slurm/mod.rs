@@ -8,10 +8,13 @@
 //!   or pair otherwise) with `talus slurm-task`, i.e. [`crate::exec::run_units`] — the executor a
 //!   local run and `talus worker` use, with the store's claims and per-unit records. A last
 //!   one-task array publishes the outputs (takes DIR's lock, publishes as one set, drops old units).
-//! - **Chaining.** Every array depends `afterok` on the one before, with `--kill-on-invalid-dep=yes`:
-//!   a failed, cancelled or timed-out task cancels every later job at once instead of leaving them
-//!   pending forever. The whole chain is submitted in one go (never onto a job id of an earlier
-//!   submission, which Slurm may have forgotten: afterok on an unknown id runs at once).
+//! - **Chaining.** Every array depends `afterok` on the arrays holding units its units depend on
+//!   (not on every array before it: the orientation field's arrays run beside the alignment's,
+//!   the segments of m3c2.laz beside the volumes), the publishing job on all of them, with
+//!   `--kill-on-invalid-dep=yes`: a failed, cancelled or timed-out task cancels every job that
+//!   depends on it at once instead of leaving them pending forever. The whole chain is submitted
+//!   in one go (never onto a job id of an earlier submission, which Slurm may have forgotten:
+//!   afterok on an unknown id runs at once).
 //! - **Records.** `DIR/.talus/slurm/<n>/` per submission ([`record`]): `submission.json` (stages,
 //!   each task's units, the sbatch arguments), a copy of the plan the tasks execute, the sbatch
 //!   scripts and a `submit.sh` with the very sbatch commands, `jobs.json` (the arrays' job ids),
@@ -70,11 +73,13 @@ impl Default for Options {
     }
 }
 
-/// One stage of a submission: the units (plan indices) of each array task.
+/// One stage of a submission: the units (plan indices) of each array task, and the arrays
+/// (indices among the submission's stages) holding units they depend on.
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct StagePlan {
     pub kind: &'static str,
     pub tasks: Vec<Vec<usize>>,
+    pub after: Vec<usize>,
 }
 
 /// The stages in pipeline order (the registry's), each one job array.
@@ -109,7 +114,29 @@ pub(crate) fn stages(plan: &Plan, done: &[bool], tiles_per_task: usize) -> Resul
         out.push(StagePlan {
             kind,
             tasks: todo.chunks(per).map(|c| c.to_vec()).collect(),
+            after: Vec::new(),
         });
+    }
+    // Each array waits for the arrays holding what its units read, not for every array before
+    // it: the orientation field's arrays run beside the alignment's, the segments of m3c2.laz
+    // beside the volumes (the units' own dependencies, which the store checks when a unit reads).
+    let mut array_of = vec![None; plan.units.len()];
+    for (k, s) in out.iter().enumerate() {
+        for &u in s.tasks.iter().flatten() {
+            array_of[u] = Some(k);
+        }
+    }
+    for s in out.iter_mut() {
+        let mut after: Vec<usize> = s
+            .tasks
+            .iter()
+            .flatten()
+            .flat_map(|&u| &plan.units[u].deps)
+            .filter_map(|&d| array_of[d])
+            .collect();
+        after.sort_unstable();
+        after.dedup();
+        s.after = after;
     }
     Ok(out)
 }

@@ -53,6 +53,10 @@ pub(crate) struct StageRecord {
     pub script: String,
     /// The unit names of each task (the publishing job: one task, no unit).
     pub tasks: Vec<Vec<String>>,
+    /// The arrays (indices in [`Submission::stages`]) it waits for, `afterok` (a submission
+    /// recorded before this field: empty).
+    #[serde(default)]
+    pub after: Vec<usize>,
 }
 
 /// `jobs.json`: the job id of each array, in the order of [`Submission::stages`].
@@ -209,12 +213,14 @@ pub(crate) fn create(
                 .iter()
                 .map(|t| t.iter().map(|&i| name(i)).collect())
                 .collect(),
+            after: s.after.clone(),
         })
         .collect();
     records.push(StageRecord {
         kind: PUBLISH.to_string(),
         script: format!("{:02}-{PUBLISH}.sh", stages.len() + 1),
         tasks: vec![Vec::new()],
+        after: (0..stages.len()).collect(),
     });
     let threads = &plan.params.threads;
     let sub = Submission {

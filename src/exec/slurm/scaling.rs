@@ -1,8 +1,9 @@
 //! Scaling on paper (`talus plan-stats DIR`): how a finished run's plan maps onto job arrays —
 //! tasks per stage, their work and memory from the units' own records (`seconds`,
-//! `peak_rss_bytes`) — and the wall time expected on a number of nodes: the stages one after the
-//! other (each array waits `afterok` for the previous one, plus a scheduling latency), the tasks
-//! of a stage list-scheduled longest first on `nodes × cores` one-CPU task slots.
+//! `peak_rss_bytes`) — and the wall time expected on a number of nodes: each array released a
+//! scheduling latency after the arrays it waits for (`afterok`, as `super::stages` submits them)
+//! have ended, the released arrays' tasks list-scheduled on `nodes × cores` one-CPU task slots
+//! (the earlier array first, as Slurm's age priority does, and within it the longest task first).
 //!
 //! `scale` extrapolates to a bigger input of the same kind, linearly per tile: at a fixed memory
 //! budget a tile holds the same number of points, so the tile stages (m3c2, volumes) get `scale`
@@ -22,26 +23,79 @@ use crate::units::unit_ref;
 /// cluster (scripts/slurm/README.md, (b)).
 pub(crate) const STAGE_LATENCY: f64 = 1.0;
 
-/// One stage's tasks (seconds each) and the highest peak resident memory of its units.
+/// One stage's tasks (seconds each), the arrays it waits for (indices among the stages) and the
+/// highest peak resident memory of its units.
 struct StageWork {
     kind: &'static str,
     tasks: Vec<f64>,
+    after: Vec<usize>,
     peak: u64,
     scaled_peak: bool,
 }
 
-/// The makespan of `tasks` list-scheduled longest first on `slots` identical slots.
-fn makespan(tasks: &[f64], slots: usize) -> f64 {
-    let mut t = tasks.to_vec();
-    t.sort_by(|a, b| b.total_cmp(a));
-    let mut load = vec![0.0f64; slots.max(1)];
-    for x in t {
-        let i = (0..load.len())
-            .min_by(|&a, &b| load[a].total_cmp(&load[b]))
-            .unwrap_or(0);
-        load[i] += x;
+/// The wall time of `stages` on `slots` task slots, the publishing job's latency included: an
+/// event-driven list schedule. An array is released [`STAGE_LATENCY`] after the last of the
+/// arrays it waits for ends; a free slot takes a released task, of the earliest array first and
+/// the longest first within it.
+fn wall_time(stages: &[StageWork], slots: usize) -> f64 {
+    let n = stages.len();
+    let mut end: Vec<Option<f64>> = vec![None; n];
+    let mut left: Vec<usize> = stages.iter().map(|s| s.tasks.len()).collect();
+    let mut release: Vec<Option<f64>> = vec![None; n];
+    // Released tasks waiting for a slot: (array, seconds), and the tasks running: (end, array).
+    let mut ready: Vec<(usize, f64)> = Vec::new();
+    let mut running: Vec<(f64, usize)> = Vec::new();
+    let mut queued = vec![false; n];
+    let mut t = 0.0f64;
+    loop {
+        for k in 0..n {
+            if release[k].is_none() && stages[k].after.iter().all(|&j| end[j].is_some()) {
+                let r = stages[k]
+                    .after
+                    .iter()
+                    .filter_map(|&j| end[j])
+                    .fold(0.0, f64::max);
+                release[k] = Some(r + STAGE_LATENCY);
+                if left[k] == 0 {
+                    end[k] = release[k];
+                }
+            }
+        }
+        for k in 0..n {
+            if !queued[k] && release[k].is_some_and(|r| r <= t) {
+                queued[k] = true;
+                ready.extend(stages[k].tasks.iter().map(|&x| (k, x)));
+            }
+        }
+        ready.sort_by(|a, b| b.0.cmp(&a.0).then(a.1.total_cmp(&b.1)));
+        while running.len() < slots.max(1) {
+            let Some((k, x)) = ready.pop() else { break };
+            running.push((t + x, k));
+        }
+        // The next moment something happens: a task ends, or an array is released.
+        let next_end = running.iter().map(|r| r.0).fold(f64::INFINITY, f64::min);
+        let next_release = (0..n)
+            .filter(|&k| !queued[k])
+            .filter_map(|k| release[k])
+            .fold(f64::INFINITY, f64::min);
+        let next = next_end.min(next_release);
+        if !next.is_finite() {
+            break;
+        }
+        t = t.max(next);
+        running.retain(|&(e, k)| {
+            if e <= t {
+                left[k] -= 1;
+                if left[k] == 0 {
+                    end[k] = Some(e);
+                }
+                false
+            } else {
+                true
+            }
+        });
     }
-    load.into_iter().fold(0.0, f64::max)
+    end.iter().flatten().copied().fold(0.0, f64::max) + STAGE_LATENCY
 }
 
 /// The report `talus plan-stats` prints (Markdown tables).
@@ -93,10 +147,22 @@ pub(crate) fn report(
         stages.push(StageWork {
             kind,
             tasks,
+            after: Vec::new(),
             peak,
             // A survey's tiling holds its splitter's buffers whatever the survey's size.
             scaled_peak: !tile && stage.scope() != Scope::Survey && scale > 1.0,
         });
+    }
+    // The arrays each waits for, as a submission of the whole plan has them.
+    let arrays = super::stages(&plan, &vec![false; plan.units.len()], 1)?;
+    for (st, a) in stages.iter_mut().zip(&arrays) {
+        if st.kind != a.kind {
+            return Err(Error::Internal(format!(
+                "plan-stats: stage {} where the submission has {}",
+                st.kind, a.kind
+            )));
+        }
+        st.after = a.after.clone();
     }
     // Critical path along the dependencies alone (no stage barriers), unscaled.
     let mut finish = vec![0.0f64; plan.units.len()];
@@ -132,6 +198,7 @@ pub(crate) fn report(
         "| stage | tasks | work (s) | longest task (s) | peak RSS of a task (MiB) |"
     );
     let _ = writeln!(s, "|---|---:|---:|---:|---:|");
+    // Each array after the one before it (the submission before issue 47's), for comparison.
     let mut barrier_path = 0.0;
     for st in &stages {
         let work: f64 = st.tasks.iter().sum();
@@ -160,14 +227,16 @@ pub(crate) fn report(
     let _ = writeln!(s, "| publish | 1 | – | – | – |");
     let total: f64 = stages.iter().flat_map(|st| st.tasks.iter()).sum();
     let _ = writeln!(s);
+    let arrays_path = wall_time(&stages, usize::MAX);
     let _ = writeln!(
         s,
-        "work: {total:.1} s; critical path with the stage barriers of the job arrays: {barrier_path:.1} s \
-         (longest task of each stage + {STAGE_LATENCY} s of scheduling per array){}",
+        "work: {total:.1} s; critical path of the job arrays, each after those it waits for: \
+         {arrays_path:.1} s (longest task of each array + {STAGE_LATENCY} s of scheduling per \
+         array; each array after the one before it: {barrier_path:.1} s){}",
         if scale > 1.0 {
             String::new()
         } else {
-            format!("; along the dependencies alone: {dag:.1} s")
+            format!("; along the units' dependencies alone: {dag:.1} s")
         }
     );
     let _ = writeln!(s);
@@ -176,13 +245,7 @@ pub(crate) fn report(
         "| nodes × cores | task slots | expected wall time (s) | speed-up |"
     );
     let _ = writeln!(s, "|---|---:|---:|---:|");
-    let wall = |slots: usize| -> f64 {
-        stages
-            .iter()
-            .map(|st| makespan(&st.tasks, slots) + STAGE_LATENCY)
-            .sum::<f64>()
-            + STAGE_LATENCY
-    };
+    let wall = |slots: usize| wall_time(&stages, slots);
     let one = wall(cores.max(1));
     for &n in nodes {
         let slots = n.max(1) * cores.max(1);
@@ -194,14 +257,36 @@ pub(crate) fn report(
 
 #[cfg(test)]
 mod tests {
-    use super::makespan;
+    use super::{wall_time, StageWork, STAGE_LATENCY};
+
+    fn array(tasks: &[f64], after: &[usize]) -> StageWork {
+        StageWork {
+            kind: "x",
+            tasks: tasks.to_vec(),
+            after: after.to_vec(),
+            peak: 0,
+            scaled_peak: false,
+        }
+    }
 
     #[test]
-    fn longest_first_list_scheduling() {
-        // Longest first is not optimal (3+3 | 2+2+2 would be 6), it is the list schedule.
-        assert_eq!(makespan(&[3.0, 3.0, 2.0, 2.0, 2.0], 2), 7.0);
-        assert_eq!(makespan(&[5.0, 1.0, 1.0], 4), 5.0);
-        assert_eq!(makespan(&[1.0; 8], 1), 8.0);
-        assert_eq!(makespan(&[], 3), 0.0);
+    fn arrays_list_scheduled_after_what_they_wait_for() {
+        let l = STAGE_LATENCY;
+        // One array: longest first is not optimal (3+3 | 2+2+2 would be 6), it is the list
+        // schedule; then the publishing job's latency.
+        assert_eq!(
+            wall_time(&[array(&[3.0, 3.0, 2.0, 2.0, 2.0], &[])], 2),
+            l + 7.0 + l
+        );
+        assert_eq!(wall_time(&[array(&[1.0; 8], &[])], 1), l + 8.0 + l);
+        assert_eq!(wall_time(&[array(&[], &[])], 3), l + l);
+        // C waits for B only: it runs beside A.
+        let dag = [array(&[4.0], &[]), array(&[1.0], &[]), array(&[1.0], &[1])];
+        assert_eq!(wall_time(&dag, 8), l + 4.0 + l);
+        // C waits for A: after it.
+        let chain = [array(&[4.0], &[]), array(&[1.0], &[]), array(&[1.0], &[0])];
+        assert_eq!(wall_time(&chain, 8), l + 4.0 + l + 1.0 + l);
+        // One slot: the earlier array's tasks first (A, then B), C released after B.
+        assert_eq!(wall_time(&dag, 1), l + 5.0 + l + 1.0 + l);
     }
 }

@@ -19,12 +19,12 @@ pub(crate) fn quote(s: &str) -> String {
 }
 
 /// The arguments of sbatch for array `k` of `sub`, after `sbatch`: `--parsable`, the dependency
-/// on the previous array (`dependency`: its job id, or a shell variable in `submit.sh`), the
+/// on the arrays it waits for (`after`: their job ids, or shell variables in `submit.sh`), the
 /// user's `--slurm-args` (after talus's own `#SBATCH` lines, which they override), the script.
-pub(crate) fn sbatch_args(sub: &Submission, k: usize, dependency: Option<&str>) -> Vec<String> {
+pub(crate) fn sbatch_args(sub: &Submission, k: usize, after: &[String]) -> Vec<String> {
     let mut a = vec!["--parsable".to_string()];
-    if let Some(d) = dependency {
-        a.push(format!("--dependency=afterok:{d}"));
+    if !after.is_empty() {
+        a.push(format!("--dependency=afterok:{}", after.join(":")));
     }
     a.extend(sub.sbatch_args.iter().cloned());
     a.push(sub.stages[k].script.clone());
@@ -83,16 +83,20 @@ fn script(sub: &Submission, dir: &Path, k: usize) -> String {
 fn submit_sh(sub: &Submission) -> String {
     let mut t = format!(
         "#!/bin/bash\n\
-         # The sbatch commands of talus submission {}: each array after the previous one\n\
-         # (afterok; --kill-on-invalid-dep=yes in the scripts). talus runs exactly these unless\n\
+         # The sbatch commands of talus submission {}: each array after the arrays holding what\n\
+         # its units read (afterok; --kill-on-invalid-dep=yes in the scripts). talus runs exactly these unless\n\
          # --plan-only; after review, this script submits the same jobs and records their ids.\n\
          set -euo pipefail\n\
          cd \"$(dirname \"${{BASH_SOURCE[0]}}\")\"\n",
         sub.number
     );
     for k in 0..sub.stages.len() {
-        let dep = (k > 0).then(|| format!("$j{k}"));
-        let args: Vec<String> = sbatch_args(sub, k, dep.as_deref())
+        let after: Vec<String> = sub.stages[k]
+            .after
+            .iter()
+            .map(|j| format!("$j{}", j + 1))
+            .collect();
+        let args: Vec<String> = sbatch_args(sub, k, &after)
             .iter()
             .map(|a| {
                 if a.contains("$j") {

@@ -286,7 +286,7 @@ impl Report {
         }
         if !cancelled.is_empty() {
             out.push(format!(
-                "  cancelled by Slurm because an earlier job failed: {}",
+                "  cancelled by Slurm because a job they wait for failed: {}",
                 cancelled.join(", ")
             ));
         }
