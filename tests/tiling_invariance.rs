@@ -307,7 +307,8 @@ fn events_in_pieces_equal_the_events_held_at_once() {
 /// A survey larger than `--tiling-part` is tiled by several units, ranges of its points (a task
 /// each on a cluster: issue 47): every output is the whole survey's, byte for byte — through the
 /// LAZ decoder of layered point formats (the synthesized cliff, misregistered so that the
-/// alignment applies and its sample reads the parts' frames near its windows), the las crate's
+/// alignment applies, its sample reads the parts' frames near its windows and the after survey
+/// is tiled again in its parts), the las crate's
 /// LAZ decoder (St Leonards, point format 0) and uncompressed LAS (autzen, format 7), parts
 /// starting inside LAZ chunks; m3c2.laz written in as many segments as the before survey's
 /// parts and joined, byte for byte the file one pass writes. A survey that shows too few distinct positions across its parts
@@ -382,6 +383,11 @@ fn a_survey_tiled_in_parts_gives_the_whole_surveys_outputs() {
         }
         if *name == "cliff" {
             assert!(line.contains("the after survey aligned on"), "{line}");
+            // The after survey tiled again in the first one's frame, a unit per part.
+            let aligned = std::fs::read_dir(parted.join(".talus/units/aligned"))
+                .unwrap()
+                .count();
+            assert!(aligned >= 3, "{aligned} aligned units");
             assert_same_outputs(&whole, &parted);
         } else {
             // Real surveys' events may have no solids: every output file compared.
