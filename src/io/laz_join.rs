@@ -152,10 +152,18 @@ fn joined_header(parts: &[Part]) -> Result<las::raw::Header> {
             b[5] = b[5].max(r.max_z);
         }
     }
-    let too_many = || Error::Internal("the joined parts count more points than LAS holds".into());
-    raw.number_of_point_records = u32::try_from(legacy.0).map_err(|_| too_many())?;
+    // The legacy u32 counts: 0 where a LAS 1.4 file's count does not fit them (as las writes
+    // it; the u64 counts hold it), an error where there is nothing else to hold it.
+    let legacy_of = |v: u64| match (u32::try_from(v), raw.large_file.is_some()) {
+        (Ok(v), _) => Ok(v),
+        (Err(_), true) => Ok(0),
+        (Err(_), false) => Err(Error::Internal(
+            "the joined parts count more points than LAS holds".into(),
+        )),
+    };
+    raw.number_of_point_records = legacy_of(legacy.0)?;
     for (t, v) in raw.number_of_points_by_return.iter_mut().zip(legacy.1) {
-        *t = u32::try_from(v).map_err(|_| too_many())?;
+        *t = legacy_of(v)?;
     }
     if let Some(l) = raw.large_file.as_mut() {
         l.number_of_point_records = parts.iter().map(|p| p.points).sum();

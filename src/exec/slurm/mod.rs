@@ -9,8 +9,8 @@
 //!   local run and `talus worker` use, with the store's claims and per-unit records. A last
 //!   one-task array publishes the outputs (takes DIR's lock, publishes as one set, drops old units).
 //! - **Chaining.** Every array depends `afterok` on the arrays holding units its units depend on
-//!   (not on every array before it: the orientation field's arrays run beside the alignment's,
-//!   the segments of m3c2.laz beside the volumes), the publishing job on all of them, with
+//!   (not on every array before it: the first survey's orientation field runs beside the
+//!   alignment, the segments of m3c2.laz beside the volumes), the publishing job on all of them, with
 //!   `--kill-on-invalid-dep=yes`: a failed, cancelled or timed-out task cancels every job that
 //!   depends on it at once instead of leaving them pending forever. The whole chain is submitted
 //!   in one go (never onto a job id of an earlier submission, which Slurm may have forgotten:
@@ -118,27 +118,54 @@ pub(crate) fn stages(plan: &Plan, done: &[bool], tiles_per_task: usize) -> Resul
         });
     }
     // Each array waits for the arrays holding what its units read, not for every array before
-    // it: the orientation field's arrays run beside the alignment's, the segments of m3c2.laz
-    // beside the volumes (the units' own dependencies, which the store checks when a unit reads).
+    // it: the first survey's orientation field runs beside the alignment, the segments of
+    // m3c2.laz beside the volumes (the units' own dependencies, which the store checks when a
+    // unit reads).
     let mut array_of = vec![None; plan.units.len()];
     for (k, s) in out.iter().enumerate() {
         for &u in s.tasks.iter().flatten() {
             array_of[u] = Some(k);
         }
     }
+    // A dependency done already that depends on units not done (a unit computed again: the
+    // executor computes it before its readers) passes the wait on to those units' arrays.
+    let mut through = vec![None::<Vec<usize>>; plan.units.len()];
     for s in out.iter_mut() {
-        let mut after: Vec<usize> = s
-            .tasks
-            .iter()
-            .flatten()
-            .flat_map(|&u| &plan.units[u].deps)
-            .filter_map(|&d| array_of[d])
-            .collect();
+        let mut after = Vec::new();
+        for &u in s.tasks.iter().flatten() {
+            for &d in &plan.units[u].deps {
+                after.extend(arrays_of(plan, &array_of, &mut through, d));
+            }
+        }
         after.sort_unstable();
         after.dedup();
         s.after = after;
     }
     Ok(out)
+}
+
+/// The arrays unit `d` waits on: its own where it is in one, else (done already) those of its
+/// dependencies, memoised in `through`.
+fn arrays_of(
+    plan: &Plan,
+    array_of: &[Option<usize>],
+    through: &mut [Option<Vec<usize>>],
+    d: usize,
+) -> Vec<usize> {
+    if let Some(k) = array_of[d] {
+        return vec![k];
+    }
+    if let Some(known) = &through[d] {
+        return known.clone();
+    }
+    let mut out = Vec::new();
+    for &e in &plan.units[d].deps {
+        out.extend(arrays_of(plan, array_of, through, e));
+    }
+    out.sort_unstable();
+    out.dedup();
+    through[d] = Some(out.clone());
+    out
 }
 
 /// Split `--slurm-args` like a POSIX shell would (blanks separate words; single quotes keep
@@ -415,7 +442,45 @@ pub(crate) fn absolute(dir: &Path) -> Result<PathBuf> {
 #[cfg(test)]
 mod tests {
     use super::scripts::quote;
-    use super::split_args;
+    use super::{split_args, stages};
+    use crate::plan::Spec;
+
+    /// Each array waits for the arrays holding its units' dependencies, and through a
+    /// dependency done already to the arrays of what that one depends on.
+    #[test]
+    fn arrays_wait_for_what_their_units_read() {
+        let mut plan = crate::plan::tests::empty_plan();
+        let t0 = plan.push(Spec::survey("tiling", 0), "t0", &[], vec![]);
+        let t1 = plan.push(Spec::survey("tiling", 1), "t1", &[], vec![]);
+        let align = plan.push(Spec::survey("align", 1), "a1", &[], vec![t0, t1]);
+        let tile = crate::plan::tile_id([0, 0]);
+        let field = plan.push(Spec::survey_tile("field", 0, tile), "f", &[], vec![t0]);
+        let orient = plan.push(Spec::survey("orient", 0), "o", &[], vec![field]);
+        let m3c2 = plan.push(Spec::tile("m3c2", 0, tile), "m", &[], vec![t0, t1, orient]);
+        plan.push(Spec::pair("stable", 0), "s", &[], vec![m3c2]);
+        let done = |d: &[usize]| {
+            (0..plan.units.len())
+                .map(|i| d.contains(&i))
+                .collect::<Vec<_>>()
+        };
+        let arrays = stages(&plan, &done(&[]), 1).unwrap();
+        let after = |kind: &str| -> Vec<&str> {
+            let a = arrays.iter().find(|a| a.kind == kind).unwrap();
+            a.after.iter().map(|&k| arrays[k].kind).collect()
+        };
+        assert_eq!(after("tiling"), Vec::<&str>::new());
+        assert_eq!(after("align"), ["tiling"]);
+        // Beside the alignment, not after it.
+        assert_eq!(after("field"), ["tiling"]);
+        assert_eq!(after("m3c2"), ["tiling", "orient"]);
+        assert_eq!(after("stable"), ["m3c2"]);
+        // M3C2 done, the before survey's tiling to do again: stable waits for the tiling (which
+        // its task would otherwise compute itself, or wait on the claim of).
+        let arrays = stages(&plan, &done(&[t1, align, field, orient, m3c2]), 1).unwrap();
+        let kinds: Vec<&str> = arrays.iter().map(|a| a.kind).collect();
+        assert_eq!(kinds, ["tiling", "stable"]);
+        assert_eq!(arrays[1].after, [0]);
+    }
 
     #[test]
     fn slurm_args_split_like_a_shell() {

@@ -13,7 +13,7 @@ use serde::{Deserialize, Serialize};
 use super::laz::{self, Written};
 use super::segments::SegmentsStage;
 use super::view::{Terrain, TerrainSample};
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::io::las_out::CoordinateGrid;
 use crate::io::{self, Bounds};
 use crate::plan::Spec;
@@ -192,10 +192,26 @@ fn join(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<PointsMeta> {
     let _held = ctx.reserve(JOIN_NEED, "joining m3c2.laz and the terrain sample")?;
     let mut written = Written::none();
     let (mut files, mut pieces) = (Vec::new(), Vec::new());
+    // The segments cover the pair's core points once, in order.
+    let total = crate::units::m3c2::pair_count(ctx, pair)?;
+    let mut at = 0;
     for u in plan.of_pair(SegmentsStage::KIND, pair) {
-        written.add(&ctx.meta::<SegmentsStage>(u)?.written);
+        let m = ctx.meta::<SegmentsStage>(u)?;
+        if m.from != at || m.to < m.from || m.written.core_points != m.to - m.from {
+            return Err(Error::Internal(format!(
+                "segment {} holds core points {}..{} ({} written) after {at}",
+                plan.units[u].name, m.from, m.to, m.written.core_points
+            )));
+        }
+        at = m.to;
+        written.add(&m.written);
         files.push(ctx.input(u, "m3c2.laz")?);
         pieces.push(ctx.input(u, super::view::PIECE)?);
+    }
+    if at != total {
+        return Err(Error::Internal(format!(
+            "the segments hold {at} of the pair's {total} core points"
+        )));
     }
     crate::io::laz_join::join_laz(&files, &out.path("m3c2.laz")?)?;
     out.add_file("m3c2.laz")?;
@@ -215,7 +231,7 @@ fn join(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<PointsMeta> {
 /// Write pair `pair`'s m3c2.laz and terrain sample into `out`.
 fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<PointsMeta> {
     let plan = ctx.plan;
-    if super::segments::count(plan, pair) > 0 {
+    if plan.of_pair(SegmentsStage::KIND, pair).next().is_some() {
         return join(ctx, pair, out);
     }
     let ground = crate::units::stable::read(ctx, pair)?;

@@ -9,7 +9,9 @@
 //! whole chunks, which the join concatenates into the very file one writer writes
 //! (`io::laz_join`). A segment finds the key at its first rank in the tiles' sorted results
 //! (`m3c2::seek`: a binary search reading key columns only) and merges from there: no segment
-//! reads the results before its own (but the chunk each run holds its first key in).
+//! reads the results before its own (but the chunk each run holds its first key in). The
+//! events' kept core points it reads from their first frame (`KeptByKey`: a frame decoded to
+//! be passed), at most the pair's kept points a segment, a small share of its results.
 
 use serde::{Deserialize, Serialize};
 

@@ -100,7 +100,7 @@ impl TerrainSample {
             pos: Vec::with_capacity(3 * n),
             dist: Vec::with_capacity(n),
             normals: [0.0; 3],
-            each_normal: Some(Vec::new()),
+            each_normal: Some(Vec::with_capacity(n)),
         }
     }
 
@@ -149,6 +149,9 @@ impl TerrainSample {
                     .map_err(|_| bad())
             };
             let (np, nd, nn) = (count(0)?, count(1)?, count(2)?);
+            if np != 3 * nd {
+                return Err(bad());
+            }
             let body = &bytes[24..];
             if body.len() != 4 * (np + nd) + 24 * nn {
                 return Err(bad());
