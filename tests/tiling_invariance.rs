@@ -391,6 +391,11 @@ fn a_survey_tiled_in_parts_gives_the_whole_surveys_outputs() {
             .filter(|r| r["meta"]["written"]["core_points"].as_u64() > Some(0))
             .count();
         assert!(segments.len() >= 3, "{name}: {} segments", segments.len());
+        // The stable ground's pass in as many ranges.
+        let ranges = std::fs::read_dir(parted.join(".talus/units/sampled"))
+            .unwrap()
+            .count();
+        assert_eq!(ranges, segments.len(), "{name}: the stable ground's ranges");
         if *name == "cliff" {
             assert!(filled >= 3, "{name}: {filled} segments hold core points");
         }

@@ -108,7 +108,7 @@ campaign --out "$work/slurm" --executor slurm --wait --tiling-part 40000 \
   >"$work/slurm.jobs" 2>"$work/slurm.err" || rc=$?
 sed 's/^/  /' "$work/slurm.err"
 [[ $rc == 0 ]] || fail "the Slurm run exited $rc"
-[[ "$(wc -l <"$work/slurm.jobs")" == 16 ]] || fail "expected 16 arrays (15 stages and the publishing job)"
+[[ "$(wc -l <"$work/slurm.jobs")" == 17 ]] || fail "expected 17 arrays (16 stages and the publishing job)"
 echo "Slurm run: $((SECONDS - t0)) s"
 show_per_node "$work/slurm.jobs"
 ! per_node "$work/slurm.jobs" | grep -v ' COMPLETED ' || fail "a task of the Slurm run did not complete"
@@ -117,7 +117,9 @@ same_as_local slurm
   || fail "the Slurm run did not tile its surveys in parts: $(ls "$work/slurm/.talus/units/tiling")"
 segments="$(ls "$work/slurm/.talus/units/segments" | wc -l)"
 ((segments > 5)) || fail "the Slurm run wrote its pairs' m3c2.laz in $segments segments"
-echo "the surveys tiled in 22 parts, the pairs' m3c2.laz written in $segments segments"
+sampled="$(ls "$work/slurm/.talus/units/sampled" | wc -l)"
+((sampled == segments)) || fail "the stable ground's pass in $sampled ranges, m3c2.laz in $segments"
+echo "the surveys tiled in 22 parts; the pairs' stable ground sampled in $sampled ranges and m3c2.laz written in $segments segments"
 
 # kill_mid_task NAME: run the campaign into $work/NAME with --wait in the background (extra
 # options after NAME), catch an M3C2 task in the middle of a unit (freeze_claimer.py), SIGKILL its

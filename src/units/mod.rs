@@ -24,6 +24,7 @@ pub(crate) mod merged;
 pub(crate) mod orient;
 pub(crate) mod outputs;
 pub(crate) mod sample;
+pub(crate) mod sampled;
 pub(crate) mod scratch;
 pub(crate) mod series;
 pub(crate) mod solids;
@@ -129,6 +130,15 @@ impl Ctx<'_> {
         u.spec
             .pair
             .ok_or_else(|| Error::Internal(format!("unit {} without a pair", u.name)))
+    }
+
+    /// The part unit `i` is (of a survey's or a pair's units in parts).
+    pub(crate) fn part(&self, i: usize) -> Result<usize> {
+        let u = &self.plan.units[i];
+        u.spec
+            .part
+            .map(|k| k as usize)
+            .ok_or_else(|| Error::Internal(format!("unit {} without a part", u.name)))
     }
 
     /// The survey unit `i` is for.

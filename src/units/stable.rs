@@ -78,7 +78,12 @@ impl Stage for StableStage {
         let samples = format!("{SAMPLES}|areas at every point 1");
         let areas = areas_key(p.plan);
         for pair in 0..p.plan.pairs.len() {
-            let mut m3c2 = p.pair_results(pair);
+            // The pass over the results made in ranges (`super::sampled`), or here.
+            let ranges = p.of_pair(super::sampled::SampledStage::KIND, pair);
+            let mut m3c2 = match ranges.is_empty() {
+                true => p.pair_results(pair),
+                false => ranges,
+            };
             if p.plan.stable_areas.is_some() {
                 let (b, a) = (p.plan.pairs[pair].before, p.plan.pairs[pair].after);
                 m3c2.extend(p.survey_tiles(b)?);
@@ -128,34 +133,65 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<StableMeta> {
         None => None,
     };
     let total = pair_count(ctx, pair)?;
-    let step = total.div_ceil(SAMPLES).max(1);
-    let most = total.div_ceil(step).min(SAMPLES);
+    let step = super::sampled::step(total);
+    // At most SAMPLES: the multiples of `step` below `total` are no more.
+    let most = total.div_ceil(step);
     let _held = ctx.reserve(
         need(most, super::merged::merge_inputs(plan)),
         "the stable-ground sample and the merge of the pair's tiles",
     )?;
     let mut samples = Vec::with_capacity(most as usize);
-    let mut merged = Merged::new(ctx, pair)?;
     let mut n = 0u64;
-    let need = plan.params.min_points.value.max(1);
     let mut reached = Reached::default();
-    while let Some(k) = merged.next_result()? {
-        reached.add(&k.r, need);
-        if n.is_multiple_of(step) && k.r.measured().is_finite() && (samples.len() as u64) < most {
-            samples.push(Sample {
-                xyz: k.xyz,
-                normal: k.r.normal,
-                distance: k.r.measured(),
-                std_dev: [k.r.std_dev1, k.r.std_dev2],
-                lod: k.r.uncertainty,
-            });
+    let ranges: Vec<usize> = plan
+        .of_pair(super::sampled::SampledStage::KIND, pair)
+        .collect();
+    if ranges.is_empty() {
+        let mut merged = Merged::new(ctx, pair)?;
+        let need = plan.params.min_points.value.max(1);
+        while let Some(k) = merged.next_result()? {
+            reached.add(&k.r, need);
+            if n.is_multiple_of(step) && k.r.measured().is_finite() {
+                samples.push(Sample {
+                    xyz: k.xyz,
+                    normal: k.r.normal,
+                    distance: k.r.measured(),
+                    std_dev: [k.r.std_dev1, k.r.std_dev2],
+                    lod: k.r.uncertainty,
+                });
+            }
+            n += 1;
         }
-        n += 1;
+    }
+    // The pass made in ranges: their samples one after the other, their counts added up.
+    for u in ranges {
+        let m = ctx.meta::<super::sampled::SampledStage>(u)?;
+        if m.from != n {
+            return Err(Error::Internal(format!(
+                "the stable ground's range {} starts at rank {}, not {n}",
+                plan.units[u].name, m.from
+            )));
+        }
+        super::sampled::read(ctx, u, &mut samples)?;
+        reached.merge(&m.reached);
+        n = m.to;
+    }
+    if n != total {
+        return Err(Error::Internal(format!(
+            "the stable ground's pass read {n} of the pair's {total} core points"
+        )));
     }
     if reached.distances == 0 {
         return Err(Error::Epochs(reached.why_none(plan, pair, n)));
     }
-    (ctx.progress)(samples.len() as u64);
+    // Counted by the ranges where they sampled.
+    if plan
+        .of_pair(super::sampled::SampledStage::KIND, pair)
+        .next()
+        .is_none()
+    {
+        (ctx.progress)(samples.len() as u64);
+    }
     let automatic = measure(&samples, spacing);
     let (stable, areas) = match (&plan.stable_areas, inside) {
         (Some(a), Some((inside, computed))) => {
@@ -243,8 +279,8 @@ fn areas_sample(ctx: &Ctx, pair: usize, areas: &Areas) -> Result<(Vec<Sample>, u
 
 /// How far a pair's core points got: how many have a normal, enough points of each epoch in their
 /// cylinder, a distance.
-#[derive(Debug, Default)]
-struct Reached {
+#[derive(Debug, Default, Clone, Serialize, Deserialize)]
+pub(crate) struct Reached {
     normals: u64,
     before: u64,
     after: u64,
@@ -254,7 +290,16 @@ struct Reached {
 }
 
 impl Reached {
-    fn add(&mut self, r: &crate::m3c2::CoreResult, need: u32) {
+    /// The counts of `self` and `other` together (the pass made in ranges).
+    fn merge(&mut self, other: &Reached) {
+        self.normals += other.normals;
+        self.before += other.before;
+        self.after += other.after;
+        self.distances += other.distances;
+        self.beyond += other.beyond;
+    }
+
+    pub(crate) fn add(&mut self, r: &crate::m3c2::CoreResult, need: u32) {
         self.normals += u64::from(r.normal[0].is_finite());
         self.before += u64::from(r.count1 >= need);
         self.after += u64::from(r.count2 >= need);

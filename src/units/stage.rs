@@ -309,6 +309,7 @@ pub(crate) fn default_stages() -> Vec<&'static dyn Registered> {
         entry::<cores::ThinnedStage>(),
         entry::<m3c2::M3c2Stage>(),
         entry::<merged::MergedStage>(),
+        entry::<sampled::SampledStage>(),
         entry::<stable::StableStage>(),
         entry::<events::EventsStage>(),
         entry::<series::SeriesStage>(),

@@ -154,6 +154,70 @@ impl RunIndex {
     }
 }
 
+/// A pair's results of canonical ranks `from..to`, in key order: a merge started at the key of
+/// rank `from` (its keys below it passed over) and stopped after `to - from` results.
+pub(crate) struct RankRange {
+    merge: Option<(super::Merged, u64)>,
+    left: u64,
+    to: u64,
+}
+
+impl RankRange {
+    /// Ranks `from..to` of pair `pair`'s results.
+    pub(crate) fn open(ctx: &super::Ctx, pair: usize, from: u64, to: u64) -> Result<RankRange> {
+        let mut merge = None;
+        if from < to {
+            let mut index = RunIndex::new(super::pair_chunks(ctx, pair)?);
+            let key = index
+                .key_at(from)?
+                .ok_or_else(|| Error::Internal(format!("no core point of rank {from}")))?;
+            merge = Some((super::Merged::of_runs(index.runs_from(key)?)?, key));
+        }
+        Ok(RankRange {
+            merge,
+            left: to.saturating_sub(from),
+            to,
+        })
+    }
+
+    /// The next result of the range.
+    pub(crate) fn next_result(&mut self) -> Result<Option<crate::m3c2::tile::KeyedResult>> {
+        let Some((m, start)) = self.merge.as_mut() else {
+            return Ok(None);
+        };
+        while self.left > 0 {
+            match m.next_result()? {
+                Some(r) if r.key < *start => continue,
+                Some(r) => {
+                    self.left -= 1;
+                    return Ok(Some(r));
+                }
+                None => {
+                    return Err(Error::Internal(format!(
+                        "the pair's results ended {} core points before rank {}",
+                        self.left, self.to
+                    )))
+                }
+            }
+        }
+        Ok(None)
+    }
+}
+
+/// The ranks `from..to` of part `k` of `n` of `total` results cut on multiples of `unit` (whole
+/// LAZ chunks for m3c2.laz's segments; 1 for any cut): the cuts at k·total/n rounded down to
+/// them, so a part may be empty where the units are few.
+pub(crate) fn ranks(total: u64, unit: u64, k: usize, n: usize) -> (u64, u64) {
+    let cut = |k: usize| -> u64 {
+        if k >= n {
+            return total;
+        }
+        let at = (u128::from(total) * k as u128 / n as u128) as u64;
+        at / unit.max(1) * unit.max(1)
+    };
+    (cut(k), cut(k + 1))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -185,6 +249,24 @@ mod tests {
                     .collect()
             })
             .collect()
+    }
+
+    /// The parts cover every rank once, each but the last whole units.
+    #[test]
+    fn parts_cut_on_whole_units() {
+        for (total, unit, n) in [(1_000_003u64, 50_000u64, 7usize), (10, 10, 3), (0, 1, 2)] {
+            let mut at = 0;
+            for k in 0..n {
+                let (from, to) = ranks(total, unit, k, n);
+                assert_eq!(from, at);
+                assert!(to >= from);
+                if k + 1 < n {
+                    assert_eq!(to % unit, 0);
+                }
+                at = to;
+            }
+            assert_eq!(at, total);
+        }
     }
 
     /// The key at every tested rank is the merged order's, and the runs from it start the merge

@@ -18,13 +18,11 @@ use serde::{Deserialize, Serialize};
 use super::laz::{self, Written};
 use super::points;
 use super::view::TerrainSample;
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::io::las_out::laz_chunk_size;
-use crate::m3c2::tile::KeyedResult;
 use crate::store::UnitWriter;
 use crate::units::events::{KeptByKey, KeptFrames};
-use crate::units::m3c2::seek::RunIndex;
-use crate::units::m3c2::Merged;
+use crate::units::m3c2::seek::{ranks, RankRange};
 use crate::units::stage::{Planner, Scope, Stage};
 use crate::units::Ctx;
 
@@ -45,27 +43,10 @@ pub(crate) struct SegmentMeta {
 /// tiling has parts; 0 — the points unit writes it whole — for a survey tiled whole, and for a
 /// lean campaign's pair, which has no m3c2.laz (`Plan::lean_pairs`).
 pub(crate) fn count(plan: &crate::plan::Plan, pair: usize) -> usize {
-    if plan.lean_pairs {
-        return 0;
+    match plan.lean_pairs {
+        true => 0,
+        false => crate::units::sampled::count(plan, pair),
     }
-    match crate::units::tiling::parts(plan, plan.pairs[pair].before).len() {
-        n if n > 1 => n,
-        _ => 0,
-    }
-}
-
-/// The ranks `from..to` of segment `k` of `n` over `total` core points written in LAZ chunks of
-/// `chunk` points: the cuts at k·total/n rounded down to whole chunks (so a segment may be
-/// empty where the chunks are few).
-pub(crate) fn ranks(total: u64, chunk: u64, k: usize, n: usize) -> (u64, u64) {
-    let cut = |k: usize| -> u64 {
-        if k >= n {
-            return total;
-        }
-        let at = (u128::from(total) * k as u128 / n as u128) as u64;
-        at / chunk.max(1) * chunk.max(1)
-    };
-    (cut(k), cut(k + 1))
 }
 
 impl Stage for SegmentsStage {
@@ -112,10 +93,7 @@ impl Stage for SegmentsStage {
     fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<SegmentMeta> {
         let plan = ctx.plan;
         let pair = ctx.pair(unit)?;
-        let k = plan.units[unit]
-            .spec
-            .part
-            .ok_or_else(|| Error::Internal(format!("segment {} without a part", unit)))?;
+        let k = ctx.part(unit)?;
         let n = count(plan, pair);
         let ground = crate::units::stable::read(ctx, pair)?;
         let params = ground.params(plan);
@@ -124,46 +102,17 @@ impl Stage for SegmentsStage {
             "writing a segment of m3c2.laz (and the merge of the pair's tiles)",
         )?;
         let total = crate::units::m3c2::pair_count(ctx, pair)?;
-        let (from, to) = ranks(total, u64::from(laz_chunk_size(Some(total))), k as usize, n);
+        let (from, to) = ranks(total, u64::from(laz_chunk_size(Some(total))), k, n);
         let kept = match plan.m3c2_only {
             true => None,
             false => Some(KeptFrames::open(ctx, pair)?),
         };
         let mut kept = KeptByKey::new(kept);
         let mut terrain = TerrainSample::piece(total, plan.layout.anchor, from, to);
-        // The merge from the key at rank `from`, its keys below it passed over.
-        let mut merge = None;
-        if from < to {
-            let mut index = RunIndex::new(crate::units::m3c2::pair_chunks(ctx, pair)?);
-            let key = index.key_at(from)?.ok_or_else(|| {
-                Error::Internal(format!("no core point of rank {from} of {total}"))
-            })?;
-            merge = Some((Merged::of_runs(index.runs_from(key)?)?, key));
-        }
-        let mut left = to - from;
-        let mut next = || -> Result<Option<KeyedResult>> {
-            let Some((m, start)) = merge.as_mut() else {
-                return Ok(None);
-            };
-            while left > 0 {
-                match m.next_result()? {
-                    Some(r) if r.key < *start => continue,
-                    Some(r) => {
-                        left -= 1;
-                        return Ok(Some(r));
-                    }
-                    None => {
-                        return Err(Error::Internal(format!(
-                            "the pair's results ended {left} core points before rank {to}"
-                        )))
-                    }
-                }
-            }
-            Ok(None)
-        };
+        let mut range = RankRange::open(ctx, pair, from, to)?;
         let written = laz::write_m3c2_laz(
             out,
-            &mut next,
+            &mut || range.next_result(),
             total,
             params.reg_error.value,
             Some(points::cloud(plan, pair)?),
@@ -177,28 +126,5 @@ impl Stage for SegmentsStage {
         (ctx.progress)(written.core_points);
         terrain.write_piece(out)?;
         Ok(SegmentMeta { written, from, to })
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::ranks;
-
-    /// The segments cover every rank once, each but the last whole chunks.
-    #[test]
-    fn segments_cut_on_whole_chunks() {
-        for (total, chunk, n) in [(1_000_003u64, 50_000u64, 7usize), (10, 10, 3), (0, 1, 2)] {
-            let mut at = 0;
-            for k in 0..n {
-                let (from, to) = ranks(total, chunk, k, n);
-                assert_eq!(from, at);
-                assert!(to >= from);
-                if k + 1 < n {
-                    assert_eq!(to % chunk, 0);
-                }
-                at = to;
-            }
-            assert_eq!(at, total);
-        }
     }
 }
