@@ -76,8 +76,8 @@ enum Command {
         #[arg(long)]
         submission: u32,
         /// The stage: tiling, align, aligned, cleared, field, orient, cores, thinned, m3c2,
-        /// merged, sampled, stable, events, series, volumes, segments, points, outputs,
-        /// campaign, publish.
+        /// merged, sampled, stable, kept, events, series, volumes, segments, points,
+        /// outputs, campaign, publish.
         #[arg(long)]
         stage: String,
         /// The task (default: SLURM_ARRAY_TASK_ID).

@@ -396,6 +396,10 @@ fn a_survey_tiled_in_parts_gives_the_whole_surveys_outputs() {
             .unwrap()
             .count();
         assert_eq!(ranges, segments.len(), "{name}: the stable ground's ranges");
+        let kept = std::fs::read_dir(parted.join(".talus/units/kept"))
+            .unwrap()
+            .count();
+        assert_eq!(kept, segments.len(), "{name}: the events' filter's ranges");
         if *name == "cliff" {
             assert!(filled >= 3, "{name}: {filled} segments hold core points");
         }

@@ -108,7 +108,7 @@ campaign --out "$work/slurm" --executor slurm --wait --tiling-part 40000 \
   >"$work/slurm.jobs" 2>"$work/slurm.err" || rc=$?
 sed 's/^/  /' "$work/slurm.err"
 [[ $rc == 0 ]] || fail "the Slurm run exited $rc"
-[[ "$(wc -l <"$work/slurm.jobs")" == 17 ]] || fail "expected 17 arrays (16 stages and the publishing job)"
+[[ "$(wc -l <"$work/slurm.jobs")" == 18 ]] || fail "expected 18 arrays (17 stages and the publishing job)"
 echo "Slurm run: $((SECONDS - t0)) s"
 show_per_node "$work/slurm.jobs"
 ! per_node "$work/slurm.jobs" | grep -v ' COMPLETED ' || fail "a task of the Slurm run did not complete"
@@ -118,8 +118,10 @@ same_as_local slurm
 segments="$(ls "$work/slurm/.talus/units/segments" | wc -l)"
 ((segments > 5)) || fail "the Slurm run wrote its pairs' m3c2.laz in $segments segments"
 sampled="$(ls "$work/slurm/.talus/units/sampled" | wc -l)"
-((sampled == segments)) || fail "the stable ground's pass in $sampled ranges, m3c2.laz in $segments"
-echo "the surveys tiled in 22 parts; the pairs' stable ground sampled in $sampled ranges and m3c2.laz written in $segments segments"
+kept="$(ls "$work/slurm/.talus/units/kept" | wc -l)"
+((sampled == segments && kept == segments)) \
+  || fail "the stable ground in $sampled ranges, the events' filter in $kept, m3c2.laz in $segments"
+echo "the surveys tiled in 22 parts; the pairs' stable ground and events' filter in $sampled ranges each, m3c2.laz in $segments segments"
 
 # kill_mid_task NAME: run the campaign into $work/NAME with --wait in the background (extra
 # options after NAME), catch an M3C2 task in the middle of a unit (freeze_claimer.py), SIGKILL its

@@ -68,15 +68,7 @@ impl Stage for SampledStage {
         for pair in 0..p.plan.pairs.len() {
             let n = count(p.plan, pair);
             let deps = p.pair_results(pair);
-            for k in 0..n {
-                p.add_pair_part(
-                    Self::KIND,
-                    pair,
-                    k as u32,
-                    &format!("{SAMPLES}|range {k} of {n}"),
-                    deps.clone(),
-                );
-            }
+            p.add_pair_ranges(Self::KIND, pair, n, &SAMPLES.to_string(), &deps);
         }
         Ok(())
     }

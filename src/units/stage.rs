@@ -311,6 +311,7 @@ pub(crate) fn default_stages() -> Vec<&'static dyn Registered> {
         entry::<merged::MergedStage>(),
         entry::<sampled::SampledStage>(),
         entry::<stable::StableStage>(),
+        entry::<events::kept::KeptStage>(),
         entry::<events::EventsStage>(),
         entry::<series::SeriesStage>(),
         entry::<volumes::VolumesStage>(),
@@ -479,21 +480,26 @@ impl Planner<'_> {
         self.add_pair_spec(Spec::pair(kind, pair), "", version, deps)
     }
 
-    /// [`Planner::add_pair`] for part `part` of the pair's units of `kind` (a pair's m3c2.laz
-    /// written in segments).
-    pub(crate) fn add_pair_part(
+    /// [`Planner::add_pair`] for `n` units of `kind`, part k the k-th of `n` ranges of the
+    /// pair's results in key order (`units::m3c2::seek::ranks`), each over `deps`; their indices.
+    pub(crate) fn add_pair_ranges(
         &mut self,
         kind: &'static str,
         pair: usize,
-        part: u32,
+        n: usize,
         version: &str,
-        deps: Vec<usize>,
-    ) -> usize {
-        let spec = Spec {
-            part: Some(part),
-            ..Spec::pair(kind, pair)
-        };
-        self.add_pair_spec(spec, &format!("-p{part}"), version, deps)
+        deps: &[usize],
+    ) -> Vec<usize> {
+        (0..n)
+            .map(|k| {
+                let spec = Spec {
+                    part: Some(k as u32),
+                    ..Spec::pair(kind, pair)
+                };
+                let key = format!("{version}|range {k} of {n}");
+                self.add_pair_spec(spec, &format!("-p{k}"), &key, deps.to_vec())
+            })
+            .collect()
     }
 
     fn add_pair_spec(

@@ -18,7 +18,6 @@ use rustc_hash::FxHashMap as HashMap;
 use serde::{Deserialize, Serialize};
 use talus_tiling::{Column, ColumnData, TileColumns};
 
-use super::m3c2::Merged;
 use super::stable::StableStage;
 use super::stage::{Line, Planner, Scope, Stage, Total};
 use super::Ctx;
@@ -29,6 +28,7 @@ use crate::m3c2::orientation::STEEP_NZ;
 use crate::plan::Spec;
 use crate::store::UnitWriter;
 
+pub(crate) mod kept;
 mod pieces;
 
 pub(crate) const EVENTS: &str = "events.json";
@@ -126,32 +126,15 @@ impl Stage for EventsStage {
         if p.plan.m3c2_only {
             return Ok(());
         }
-        let params = &p.plan.params;
-        let user = |r: &crate::params::Resolved<f64>| {
-            if r.is_user() {
-                r.value.to_string()
-            } else {
-                "measured".into()
-            }
-        };
-        // The three after `near` size the volumes' search boxes, by which the drafts are filed
-        // by tile (`write_near`); `blocks 1`: smoothing takes the k nearest within its reach
-        // (`events::blocks`).
-        let key = format!(
-            "{}|{}|{}|{}|{}|{}|near {}|{}|{}|blocks 1",
-            user(&params.reg_error),
-            user(&params.threshold),
-            params.smooth_k.value,
-            params.smooth_sigma.value,
-            params.eps.value,
-            params.cluster_min_points.value,
-            params.cyl_radius.value,
-            params.cyl_halflen.value,
-            params.point_spacing.value
-        );
+        let key = key(p.plan);
         for pair in 0..p.plan.pairs.len() {
             let mut deps = vec![p.the(&Spec::pair(StableStage::KIND, pair))?];
-            deps.extend(p.pair_results(pair));
+            // The filter's pass made in ranges (`kept`), or here.
+            let ranges = p.of_pair(kept::KeptStage::KIND, pair);
+            match ranges.is_empty() {
+                true => deps.extend(p.pair_results(pair)),
+                false => deps.extend(ranges),
+            }
             let label = p.plan.pairs[pair].label.clone();
             p.add(Spec::pair(Self::KIND, pair), &label, &[&key], deps);
         }
@@ -161,6 +144,34 @@ impl Stage for EventsStage {
     fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<EventsMeta> {
         run(ctx, ctx.pair(unit)?, out)
     }
+}
+
+/// The key part of a pair's events (and of the ranges of its filter): the parameters the user
+/// gave (a measured one comes from the stable unit's key).
+fn key(plan: &crate::plan::Plan) -> String {
+    let params = &plan.params;
+    let user = |r: &crate::params::Resolved<f64>| {
+        if r.is_user() {
+            r.value.to_string()
+        } else {
+            "measured".into()
+        }
+    };
+    // The three after `near` size the volumes' search boxes, by which the drafts are filed by
+    // tile (`write_near`); `blocks 1`: smoothing takes the k nearest within its reach
+    // (`events::blocks`).
+    format!(
+        "{}|{}|{}|{}|{}|{}|near {}|{}|{}|blocks 1",
+        user(&params.reg_error),
+        user(&params.threshold),
+        params.smooth_k.value,
+        params.smooth_sigma.value,
+        params.eps.value,
+        params.cluster_min_points.value,
+        params.cyl_radius.value,
+        params.cyl_halflen.value,
+        params.point_spacing.value
+    )
 }
 
 /// The scratch rows of an events unit: every kept core point in key order — key (its bits),
@@ -212,37 +223,16 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<EventsMeta> {
         super::merged::pair_merge_need(ctx.plan),
         "the merge of the pair's tiles",
     )?;
-    let mut merged = Merged::new(ctx, pair)?;
+    let mut rows = kept::KeptRows::open(ctx, pair, tau, reg)?;
     let mut n = 0u64;
-    while let Some(k) = merged.next_result()? {
-        let r = k.r.with_registration(reg);
-        // A core point beyond the user's reach takes part with the distance the walk found: the
-        // change is there, and the event it belongs to says it is incomplete.
-        if !events::filter::is_kept(r.distance, r.uncertainty, tau) {
-            continue;
-        }
+    while let Some(row) = rows.next_row()? {
         n += 1;
-        let beyond = r.reach == crate::m3c2::Reach::Beyond;
-        let [nx, ny, nz] = r.normal;
-        let [x, y, z] = k.xyz;
-        spill.push(&[
-            f64::from_bits(k.key),
-            x,
-            y,
-            z,
-            r.distance,
-            r.uncertainty,
-            nx,
-            ny,
-            nz,
-            r.std_dev1,
-            r.std_dev2,
-            f64::from(u8::from(beyond) | u8::from(!r.sign_known) << 1),
-        ])?;
+        spill.push(&row)?;
+        let k = from_row(&row);
         if let Some((keys, pts, d)) = held.as_mut() {
             keys.push(k.key);
             pts.push(k.xyz);
-            d.push(r.distance);
+            d.push(k.d);
             if n * BYTES_PER_KEPT + FIXED > limit {
                 // More than the pool holds at once: a piece of space at a time.
                 let c = events::pieces::Columns::new(pts[0], settings.reach.max(settings.eps));
@@ -257,7 +247,7 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<EventsMeta> {
             *counts.entry(c.of(&k.xyz)).or_insert(0) += 1;
         }
     }
-    drop(merged);
+    drop(rows);
     let spill = spill.finish()?;
     // Given back before the next reservation: a unit waits only while it holds none.
     drop(merging);

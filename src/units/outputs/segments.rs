@@ -74,14 +74,7 @@ impl Stage for SegmentsStage {
             )?;
             let deps = points::pass_deps(p, pair)?;
             let version = format!("{}|{}", env!("CARGO_PKG_VERSION"), p.plan.m3c2_only);
-            for k in 0..n {
-                let unit = p.add_pair_part(
-                    Self::KIND,
-                    pair,
-                    k as u32,
-                    &format!("{version}|segment {k} of {n}"),
-                    deps.clone(),
-                );
+            for unit in p.add_pair_ranges(Self::KIND, pair, n, &version, &deps) {
                 // As the points unit: after the pair's volumes, which read the tiles.
                 let volumes = p.of_pair(crate::units::volumes::VolumesStage::KIND, pair);
                 p.order_after(unit, volumes);

@@ -1,0 +1,236 @@
+//! The events' significance filter over a pair's results in ranges of ranks, a unit (and a Slurm
+//! task) each: the pass over every result of the pair that the events unit made alone (on the
+//! 120M-point pair, 31M results merged for 840k kept), so that it reads the kept rows only.
+//!
+//! Whether a core point is kept follows from its own result and the stable ground's threshold
+//! and registration error, so a range of ranks filters its own: as many ranges as the pair's
+//! before survey has tiling parts (`units::sampled::count`), each from the key of its first rank
+//! (`m3c2::seek::RankRange`), writing its kept core points as the events unit's scratch rows
+//! ([`row`]). The events unit reads the ranges' rows one after the other ([`KeptRows`]): the rows
+//! one pass keeps, in the same order.
+
+use std::io::{BufReader, Read};
+
+use serde::{Deserialize, Serialize};
+
+use super::{EventsStage, SPILL_WIDTH};
+use crate::error::{Error, Result};
+use crate::events;
+use crate::m3c2::tile::KeyedResult;
+use crate::plan::Spec;
+use crate::store::UnitWriter;
+use crate::units::m3c2::seek::{ranks, RankRange};
+use crate::units::m3c2::Merged;
+use crate::units::stable::StableStage;
+use crate::units::stage::{Planner, Scope, Stage};
+use crate::units::Ctx;
+
+/// The file of a kept unit: its kept core points' rows, [`SPILL_WIDTH`] little-endian f64 each.
+pub(crate) const FILE: &str = "kept_rows.bin";
+
+/// A range of the events' filter.
+pub(crate) struct KeptStage;
+
+/// What a kept unit records.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub(crate) struct KeptMeta {
+    /// The canonical ranks of the pair's core points it read: `from..to`.
+    pub(crate) from: u64,
+    pub(crate) to: u64,
+    /// Rows in its file: its core points kept.
+    pub(crate) kept: u64,
+}
+
+/// The scratch row of result `k` (registration error `reg`, threshold `tau`) when it is kept:
+/// key (its bits), position (3), distance, LoD, normal (3), spreads (2), flags (1: beyond reach,
+/// 2: sign unknown). A core point beyond the user's reach takes part with the distance the walk
+/// found: the change is there, and the event it belongs to says it is incomplete.
+pub(crate) fn row(k: &KeyedResult, tau: f64, reg: f64) -> Option<[f64; SPILL_WIDTH]> {
+    let r = k.r.with_registration(reg);
+    if !events::filter::is_kept(r.distance, r.uncertainty, tau) {
+        return None;
+    }
+    let beyond = r.reach == crate::m3c2::Reach::Beyond;
+    let [nx, ny, nz] = r.normal;
+    let [x, y, z] = k.xyz;
+    Some([
+        f64::from_bits(k.key),
+        x,
+        y,
+        z,
+        r.distance,
+        r.uncertainty,
+        nx,
+        ny,
+        nz,
+        r.std_dev1,
+        r.std_dev2,
+        f64::from(u8::from(beyond) | u8::from(!r.sign_known) << 1),
+    ])
+}
+
+/// The stable ground's threshold and registration error for pair `pair`.
+fn tau_reg(ctx: &Ctx, pair: usize) -> Result<(f64, f64)> {
+    let params = crate::units::stable::read(ctx, pair)?.params(ctx.plan);
+    Ok((params.threshold.value, params.reg_error.value))
+}
+
+impl Stage for KeptStage {
+    const KIND: &'static str = "kept";
+    const SCOPE: Scope = Scope::Pair;
+    const VERSION: u32 = 1;
+    /// Read by the events unit alone.
+    const INTERMEDIATE: bool = true;
+    const LINE: crate::units::stage::Line = <EventsStage as Stage>::LINE;
+    type Meta = KeptMeta;
+
+    fn plan(p: &mut Planner) -> Result<()> {
+        if p.plan.m3c2_only {
+            return Ok(());
+        }
+        let key = super::key(p.plan);
+        for pair in 0..p.plan.pairs.len() {
+            let n = crate::units::sampled::count(p.plan, pair);
+            if n == 0 {
+                continue;
+            }
+            let mut deps = vec![p.the(&Spec::pair(StableStage::KIND, pair))?];
+            deps.extend(p.pair_results(pair));
+            p.add_pair_ranges(Self::KIND, pair, n, &key, &deps);
+        }
+        Ok(())
+    }
+
+    fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<KeptMeta> {
+        let plan = ctx.plan;
+        let pair = ctx.pair(unit)?;
+        let (tau, reg) = tau_reg(ctx, pair)?;
+        let total = crate::units::m3c2::pair_count(ctx, pair)?;
+        let n = crate::units::sampled::count(plan, pair);
+        let (from, to) = ranks(total, 1, ctx.part(unit)?, n);
+        let _held = ctx.reserve(
+            crate::units::merged::pair_merge_need(plan),
+            "a range of the events' filter (and the merge of the pair's tiles)",
+        )?;
+        let mut range = RankRange::open(ctx, pair, from, to)?;
+        let mut kept = 0u64;
+        super::super::write_streamed(out, FILE, |w| {
+            let mut bytes = Vec::with_capacity(1 << 16);
+            let to_io = |e: Error| std::io::Error::other(e.to_string());
+            while let Some(k) = range.next_result().map_err(to_io)? {
+                if let Some(r) = row(&k, tau, reg) {
+                    kept += 1;
+                    bytes.extend(r.iter().flat_map(|v| v.to_le_bytes()));
+                    if bytes.len() >= 1 << 16 {
+                        w.write_all(&bytes)?;
+                        bytes.clear();
+                    }
+                }
+            }
+            w.write_all(&bytes)
+        })?;
+        Ok(KeptMeta { from, to, kept })
+    }
+}
+
+/// A pair's kept core points' rows in key order: read from its kept units' files one after the
+/// other, or (none planned) filtered from a merge of its results.
+pub(crate) struct KeptRows {
+    source: Source,
+}
+
+enum Source {
+    Merge {
+        merged: Box<Merged>,
+        tau: f64,
+        reg: f64,
+    },
+    Ranges {
+        files: std::vec::IntoIter<(std::path::PathBuf, u64)>,
+        current: Option<(std::path::PathBuf, BufReader<std::fs::File>, u64)>,
+    },
+}
+
+impl KeptRows {
+    /// Pair `pair`'s, with the threshold `tau` and registration error `reg` its stable ground
+    /// gives (the merge's filter; the ranges filtered with the same).
+    pub(crate) fn open(ctx: &Ctx, pair: usize, tau: f64, reg: f64) -> Result<KeptRows> {
+        let plan = ctx.plan;
+        let ranges: Vec<usize> = plan.of_pair(KeptStage::KIND, pair).collect();
+        if ranges.is_empty() {
+            return Ok(KeptRows {
+                source: Source::Merge {
+                    merged: Box::new(Merged::new(ctx, pair)?),
+                    tau,
+                    reg,
+                },
+            });
+        }
+        let total = crate::units::m3c2::pair_count(ctx, pair)?;
+        let mut at = 0;
+        let mut files = Vec::with_capacity(ranges.len());
+        for u in ranges {
+            let m = ctx.meta::<KeptStage>(u)?;
+            if m.from != at {
+                return Err(Error::Internal(format!(
+                    "the events' filter range {} starts at rank {}, not {at}",
+                    plan.units[u].name, m.from
+                )));
+            }
+            at = m.to;
+            files.push((ctx.input(u, FILE)?, m.kept));
+        }
+        if at != total {
+            return Err(Error::Internal(format!(
+                "the events' filter ranges read {at} of the pair's {total} core points"
+            )));
+        }
+        Ok(KeptRows {
+            source: Source::Ranges {
+                files: files.into_iter(),
+                current: None,
+            },
+        })
+    }
+
+    /// The next kept core point's row.
+    pub(crate) fn next_row(&mut self) -> Result<Option<[f64; SPILL_WIDTH]>> {
+        match &mut self.source {
+            Source::Merge { merged, tau, reg } => {
+                while let Some(k) = merged.next_result()? {
+                    if let Some(r) = row(&k, *tau, *reg) {
+                        return Ok(Some(r));
+                    }
+                }
+                Ok(None)
+            }
+            Source::Ranges { files, current } => loop {
+                if let Some((path, file, left)) = current.as_mut() {
+                    if *left > 0 {
+                        let mut b = [0u8; 8 * SPILL_WIDTH];
+                        file.read_exact(&mut b).map_err(|e| Error::Damaged {
+                            path: path.clone(),
+                            problem: format!("fewer rows than its record says: {e}"),
+                        })?;
+                        *left -= 1;
+                        let mut out = [0.0; SPILL_WIDTH];
+                        for (v, x) in out.iter_mut().zip(b.chunks_exact(8)) {
+                            *v = f64::from_le_bytes(x.try_into().unwrap_or([0; 8]));
+                        }
+                        return Ok(Some(out));
+                    }
+                }
+                match files.next() {
+                    Some((path, kept)) => {
+                        let f = std::fs::File::open(&path).map_err(|e| Error::Damaged {
+                            path: path.clone(),
+                            problem: e.to_string(),
+                        })?;
+                        *current = Some((path, BufReader::with_capacity(1 << 16, f), kept));
+                    }
+                    None => return Ok(None),
+                }
+            },
+        }
+    }
+}
