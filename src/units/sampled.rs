@@ -86,7 +86,7 @@ impl Stage for SampledStage {
         )?;
         let need = plan.params.min_points.value.max(1);
         let mut reached = Reached::default();
-        let mut rows: Vec<f64> = Vec::new();
+        let mut rows: Vec<f64> = Vec::with_capacity((to - from).div_ceil(step) as usize * WIDTH);
         let mut range = RankRange::open(ctx, pair, from, to)?;
         let mut rank = from;
         while let Some(k) = range.next_result()? {

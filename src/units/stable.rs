@@ -71,9 +71,9 @@ impl Stage for StableStage {
     };
     type Meta = StableMeta;
 
-    /// One per pair, over the pair's M3C2 units (and, with the user's stable areas, by
-    /// content, the units holding its surveys' tiles: their points inside the areas are
-    /// sampled).
+    /// One per pair, over the pair's M3C2 units — or its `sampled` ranges, which made the pass
+    /// over them — (and, with the user's stable areas, by content, the units holding its
+    /// surveys' tiles: their points inside the areas are sampled).
     fn plan(p: &mut Planner) -> Result<()> {
         let samples = format!("{SAMPLES}|areas at every point 1");
         let areas = areas_key(p.plan);

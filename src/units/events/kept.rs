@@ -114,10 +114,17 @@ impl Stage for KeptStage {
         )?;
         let mut range = RankRange::open(ctx, pair, from, to)?;
         let mut kept = 0u64;
-        super::super::write_streamed(out, FILE, |w| {
+        // A result that does not read (a damaged chunk) is that error, not one of this file: the
+        // executor computes the damaged unit again.
+        let mut failed = None;
+        let written = super::super::write_streamed(out, FILE, |w| {
             let mut bytes = Vec::with_capacity(1 << 16);
-            let to_io = |e: Error| std::io::Error::other(e.to_string());
-            while let Some(k) = range.next_result().map_err(to_io)? {
+            let mut to_io = |e: Error| {
+                let io = std::io::Error::other(e.to_string());
+                failed = Some(e);
+                io
+            };
+            while let Some(k) = range.next_result().map_err(&mut to_io)? {
                 if let Some(r) = row(&k, tau, reg) {
                     kept += 1;
                     bytes.extend(r.iter().flat_map(|v| v.to_le_bytes()));
@@ -128,7 +135,11 @@ impl Stage for KeptStage {
                 }
             }
             w.write_all(&bytes)
-        })?;
+        });
+        if let Some(e) = failed {
+            return Err(e);
+        }
+        written?;
         Ok(KeptMeta { from, to, kept })
     }
 }
@@ -178,7 +189,17 @@ impl KeptRows {
                 )));
             }
             at = m.to;
-            files.push((ctx.input(u, FILE)?, m.kept));
+            let path = ctx.input(u, FILE)?;
+            let len = std::fs::metadata(&path)
+                .map(|m| m.len())
+                .unwrap_or(u64::MAX);
+            if len != m.kept * 8 * SPILL_WIDTH as u64 {
+                return Err(Error::Damaged {
+                    path,
+                    problem: format!("{len} bytes for the {} kept rows its record says", m.kept),
+                });
+            }
+            files.push((path, m.kept));
         }
         if at != total {
             return Err(Error::Internal(format!(

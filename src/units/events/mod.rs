@@ -120,7 +120,8 @@ impl Stage for EventsStage {
     };
     type Meta = EventsMeta;
 
-    /// One per pair (none with `--m3c2-only`), over its stable ground and M3C2 units; its key
+    /// One per pair (none with `--m3c2-only`), over its stable ground and M3C2 units (or its
+    /// `kept` ranges, which made the filter's pass over them); its key
     /// has the parameters the user gave (a measured one comes from the stable unit's key).
     fn plan(p: &mut Planner) -> Result<()> {
         if p.plan.m3c2_only {

@@ -861,8 +861,9 @@ fn summarize(
         let name = registry().get(plan.units[u].kind())?.line().name;
         let secs = ctx.timing(u)?.seconds;
         let e = stages.entry(name).or_insert((0, 0.0));
-        // A survey tiled in parts counts as one unit, a pair's m3c2.laz written in segments as
-        // its points unit alone (their seconds add up): the table is the same whatever
+        // A survey tiled in parts counts as one unit; a pair's units in ranges (m3c2.laz's
+        // segments, the stable ground's and the events' passes) count not at all beside the
+        // pair's unit of their line (their seconds add up): the table is the same whatever
         // `--tiling-part` and the executor chose.
         let spec = &plan.units[u].spec;
         if spec.part.is_none_or(|k| k == 0 && spec.pair.is_none()) {
