@@ -12,7 +12,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::m3c2::seek::{ranks, RankRange};
+use super::m3c2::seek::{ranks_of, RankRange};
 use super::stable::{Reached, StableStage, SAMPLES};
 use super::stage::{Planner, Scope, Stage};
 use super::Ctx;
@@ -76,9 +76,7 @@ impl Stage for SampledStage {
     fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<SampledMeta> {
         let plan = ctx.plan;
         let pair = ctx.pair(unit)?;
-        let k = ctx.part(unit)?;
-        let total = super::m3c2::pair_count(ctx, pair)?;
-        let (from, to) = ranks(total, 1, k, count(plan, pair));
+        let (total, from, to) = ranks_of(ctx, unit, count(plan, pair), |_| 1)?;
         let step = step(total);
         let _held = ctx.reserve(
             super::merged::pair_merge_need(plan) + (to - from).div_ceil(step) * 8 * WIDTH as u64,

@@ -164,22 +164,13 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<StableMeta> {
         }
     }
     // The pass made in ranges: their samples one after the other, their counts added up.
-    for u in ranges {
-        let m = ctx.meta::<super::sampled::SampledStage>(u)?;
-        if m.from != n {
-            return Err(Error::Internal(format!(
-                "the stable ground's range {} starts at rank {}, not {n}",
-                plan.units[u].name, m.from
-            )));
-        }
+    let ranged = super::m3c2::seek::ranges_of::<super::sampled::SampledStage>(ctx, pair, |m| {
+        (m.from, m.to)
+    })?;
+    for (u, m) in ranged {
         super::sampled::read(ctx, u, &mut samples)?;
         reached.merge(&m.reached);
         n = m.to;
-    }
-    if n != total {
-        return Err(Error::Internal(format!(
-            "the stable ground's pass read {n} of the pair's {total} core points"
-        )));
     }
     if reached.distances == 0 {
         return Err(Error::Epochs(reached.why_none(plan, pair, n)));

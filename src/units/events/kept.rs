@@ -19,7 +19,7 @@ use crate::events;
 use crate::m3c2::tile::KeyedResult;
 use crate::plan::Spec;
 use crate::store::UnitWriter;
-use crate::units::m3c2::seek::{ranks, RankRange};
+use crate::units::m3c2::seek::{ranges_of, ranks_of, RankRange};
 use crate::units::m3c2::Merged;
 use crate::units::stable::StableStage;
 use crate::units::stage::{Planner, Scope, Stage};
@@ -105,9 +105,7 @@ impl Stage for KeptStage {
         let plan = ctx.plan;
         let pair = ctx.pair(unit)?;
         let (tau, reg) = tau_reg(ctx, pair)?;
-        let total = crate::units::m3c2::pair_count(ctx, pair)?;
-        let n = crate::units::sampled::count(plan, pair);
-        let (from, to) = ranks(total, 1, ctx.part(unit)?, n);
+        let (_, from, to) = ranks_of(ctx, unit, crate::units::sampled::count(plan, pair), |_| 1)?;
         let _held = ctx.reserve(
             crate::units::merged::pair_merge_need(plan),
             "a range of the events' filter (and the merge of the pair's tiles)",
@@ -177,18 +175,8 @@ impl KeptRows {
                 },
             });
         }
-        let total = crate::units::m3c2::pair_count(ctx, pair)?;
-        let mut at = 0;
         let mut files = Vec::with_capacity(ranges.len());
-        for u in ranges {
-            let m = ctx.meta::<KeptStage>(u)?;
-            if m.from != at {
-                return Err(Error::Internal(format!(
-                    "the events' filter range {} starts at rank {}, not {at}",
-                    plan.units[u].name, m.from
-                )));
-            }
-            at = m.to;
+        for (u, m) in ranges_of::<KeptStage>(ctx, pair, |m| (m.from, m.to))? {
             let path = ctx.input(u, FILE)?;
             let len = std::fs::metadata(&path)
                 .map(|m| m.len())
@@ -200,11 +188,6 @@ impl KeptRows {
                 });
             }
             files.push((path, m.kept));
-        }
-        if at != total {
-            return Err(Error::Internal(format!(
-                "the events' filter ranges read {at} of the pair's {total} core points"
-            )));
         }
         Ok(KeptRows {
             source: Source::Ranges {

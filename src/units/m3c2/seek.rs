@@ -218,6 +218,51 @@ pub(crate) fn ranks(total: u64, unit: u64, k: usize, n: usize) -> (u64, u64) {
     (cut(k), cut(k + 1))
 }
 
+/// The ranks of range unit `unit`, the `k`-th of `n` of its pair's results cut on multiples of
+/// `unit_of(total)` ([`ranks`]): the pair's core points, and `from..to`.
+pub(crate) fn ranks_of(
+    ctx: &super::Ctx,
+    unit: usize,
+    n: usize,
+    unit_of: impl Fn(u64) -> u64,
+) -> Result<(u64, u64, u64)> {
+    let total = super::pair_count(ctx, ctx.pair(unit)?)?;
+    let (from, to) = ranks(total, unit_of(total), ctx.part(unit)?, n);
+    Ok((total, from, to))
+}
+
+/// The metas of pair `pair`'s units of stage `S`, made in ranges (`span`: a meta's ranks
+/// `from..to`), in order, checked to cover the pair's core points once.
+pub(crate) fn ranges_of<S: crate::units::stage::Stage>(
+    ctx: &super::Ctx,
+    pair: usize,
+    span: impl Fn(&S::Meta) -> (u64, u64),
+) -> Result<Vec<(usize, S::Meta)>> {
+    let mut out = Vec::new();
+    let mut at = 0;
+    for u in ctx.plan.of_pair(S::KIND, pair) {
+        let m = ctx.meta::<S>(u)?;
+        let (from, to) = span(&m);
+        if from != at || to < from {
+            return Err(Error::Internal(format!(
+                "{} holds core points {from}..{to}, after {at}",
+                ctx.plan.units[u].name
+            )));
+        }
+        at = to;
+        out.push((u, m));
+    }
+    let total = super::pair_count(ctx, pair)?;
+    if !out.is_empty() && at != total {
+        return Err(Error::Internal(format!(
+            "pair {}'s {} units hold {at} of its {total} core points",
+            ctx.plan.pairs[pair].label,
+            S::KIND
+        )));
+    }
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -192,26 +192,18 @@ fn join(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<PointsMeta> {
     let _held = ctx.reserve(JOIN_NEED, "joining m3c2.laz and the terrain sample")?;
     let mut written = Written::none();
     let (mut files, mut pieces) = (Vec::new(), Vec::new());
-    // The segments cover the pair's core points once, in order.
-    let total = crate::units::m3c2::pair_count(ctx, pair)?;
-    let mut at = 0;
-    for u in plan.of_pair(SegmentsStage::KIND, pair) {
-        let m = ctx.meta::<SegmentsStage>(u)?;
-        if m.from != at || m.to < m.from || m.written.core_points != m.to - m.from {
+    let segments =
+        crate::units::m3c2::seek::ranges_of::<SegmentsStage>(ctx, pair, |m| (m.from, m.to))?;
+    for (u, m) in segments {
+        if m.written.core_points != m.to - m.from {
             return Err(Error::Internal(format!(
-                "segment {} holds core points {}..{} ({} written) after {at}",
+                "segment {} holds core points {}..{} but wrote {}",
                 plan.units[u].name, m.from, m.to, m.written.core_points
             )));
         }
-        at = m.to;
         written.add(&m.written);
         files.push(ctx.input(u, "m3c2.laz")?);
         pieces.push(ctx.input(u, super::view::PIECE)?);
-    }
-    if at != total {
-        return Err(Error::Internal(format!(
-            "the segments hold {at} of the pair's {total} core points"
-        )));
     }
     crate::io::laz_join::join_laz(&files, &out.path("m3c2.laz")?)?;
     out.add_file("m3c2.laz")?;

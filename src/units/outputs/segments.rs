@@ -22,7 +22,7 @@ use crate::error::Result;
 use crate::io::las_out::laz_chunk_size;
 use crate::store::UnitWriter;
 use crate::units::events::{KeptByKey, KeptFrames};
-use crate::units::m3c2::seek::{ranks, RankRange};
+use crate::units::m3c2::seek::{ranks_of, RankRange};
 use crate::units::stage::{Planner, Scope, Stage};
 use crate::units::Ctx;
 
@@ -86,7 +86,6 @@ impl Stage for SegmentsStage {
     fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<SegmentMeta> {
         let plan = ctx.plan;
         let pair = ctx.pair(unit)?;
-        let k = ctx.part(unit)?;
         let n = count(plan, pair);
         let ground = crate::units::stable::read(ctx, pair)?;
         let params = ground.params(plan);
@@ -94,8 +93,7 @@ impl Stage for SegmentsStage {
             points::need(crate::units::merged::merge_inputs(plan)),
             "writing a segment of m3c2.laz (and the merge of the pair's tiles)",
         )?;
-        let total = crate::units::m3c2::pair_count(ctx, pair)?;
-        let (from, to) = ranks(total, u64::from(laz_chunk_size(Some(total))), k, n);
+        let (total, from, to) = ranks_of(ctx, unit, n, |t| u64::from(laz_chunk_size(Some(t))))?;
         let kept = match plan.m3c2_only {
             true => None,
             false => Some(KeptFrames::open(ctx, pair)?),
