@@ -12,7 +12,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::m3c2::seek::{ranks_of, RankRange};
+use super::m3c2::seek::{ranges, ranks_of, RankRange};
 use super::stable::{Reached, StableStage, SAMPLES};
 use super::stage::{Planner, Scope, Stage};
 use super::Ctx;
@@ -41,15 +41,6 @@ pub(crate) struct SampledMeta {
     pub(crate) reached: Reached,
 }
 
-/// How many ranges pair `pair`'s stable-ground pass is made in: as many as its before survey's
-/// tiling has parts; 0 (the stable unit makes it) for a survey tiled whole.
-pub(crate) fn count(plan: &crate::plan::Plan, pair: usize) -> usize {
-    match super::tiling::parts(plan, plan.pairs[pair].before).len() {
-        n if n > 1 => n,
-        _ => 0,
-    }
-}
-
 /// Every `step`-th core point is sampled, of `total`.
 pub(crate) fn step(total: u64) -> u64 {
     total.div_ceil(SAMPLES).max(1)
@@ -66,7 +57,7 @@ impl Stage for SampledStage {
 
     fn plan(p: &mut Planner) -> Result<()> {
         for pair in 0..p.plan.pairs.len() {
-            let n = count(p.plan, pair);
+            let n = ranges(p.plan, pair);
             let deps = p.pair_results(pair);
             p.add_pair_ranges(Self::KIND, pair, n, &SAMPLES.to_string(), &deps);
         }
@@ -76,7 +67,7 @@ impl Stage for SampledStage {
     fn run(ctx: &Ctx, unit: usize, out: &mut UnitWriter) -> Result<SampledMeta> {
         let plan = ctx.plan;
         let pair = ctx.pair(unit)?;
-        let (total, from, to) = ranks_of(ctx, unit, count(plan, pair), |_| 1)?;
+        let (total, from, to) = ranks_of(ctx, unit, ranges(plan, pair), |_| 1)?;
         let step = step(total);
         let _held = ctx.reserve(
             super::merged::pair_merge_need(plan) + (to - from).div_ceil(step) * 8 * WIDTH as u64,

@@ -4,7 +4,7 @@
 //!
 //! Whether a core point is kept follows from its own result and the stable ground's threshold
 //! and registration error, so a range of ranks filters its own: as many ranges as the pair's
-//! before survey has tiling parts (`units::sampled::count`), each from the key of its first rank
+//! before survey has tiling parts (`m3c2::seek::ranges`), each from the key of its first rank
 //! (`m3c2::seek::RankRange`), writing its kept core points as the events unit's scratch rows
 //! ([`row`]). The events unit reads the ranges' rows one after the other ([`KeptRows`]): the rows
 //! one pass keeps, in the same order.
@@ -90,7 +90,7 @@ impl Stage for KeptStage {
         }
         let key = super::key(p.plan);
         for pair in 0..p.plan.pairs.len() {
-            let n = crate::units::sampled::count(p.plan, pair);
+            let n = crate::units::m3c2::seek::ranges(p.plan, pair);
             if n == 0 {
                 continue;
             }
@@ -105,7 +105,12 @@ impl Stage for KeptStage {
         let plan = ctx.plan;
         let pair = ctx.pair(unit)?;
         let (tau, reg) = tau_reg(ctx, pair)?;
-        let (_, from, to) = ranks_of(ctx, unit, crate::units::sampled::count(plan, pair), |_| 1)?;
+        let (_, from, to) = ranks_of(
+            ctx,
+            unit,
+            crate::units::m3c2::seek::ranges(plan, pair),
+            |_| 1,
+        )?;
         let _held = ctx.reserve(
             crate::units::merged::pair_merge_need(plan),
             "a range of the events' filter (and the merge of the pair's tiles)",

@@ -218,6 +218,16 @@ pub(crate) fn ranks(total: u64, unit: u64, k: usize, n: usize) -> (u64, u64) {
     (cut(k), cut(k + 1))
 }
 
+/// How many ranges a pair's passes over its results are made in (the stable ground's sample,
+/// the events' filter, m3c2.laz's segments): as many as its before survey's tiling has parts
+/// (`units::tiling::parts`); 0 — one unit makes the pass — for a survey tiled whole.
+pub(crate) fn ranges(plan: &crate::plan::Plan, pair: usize) -> usize {
+    match crate::units::tiling::parts(plan, plan.pairs[pair].before).len() {
+        n if n > 1 => n,
+        _ => 0,
+    }
+}
+
 /// The ranks of range unit `unit`, the `k`-th of `n` of its pair's results cut on multiples of
 /// `unit_of(total)` ([`ranks`]): the pair's core points, and `from..to`.
 pub(crate) fn ranks_of(

@@ -45,7 +45,7 @@ pub(crate) struct SegmentMeta {
 pub(crate) fn count(plan: &crate::plan::Plan, pair: usize) -> usize {
     match plan.lean_pairs {
         true => 0,
-        false => crate::units::sampled::count(plan, pair),
+        false => crate::units::m3c2::seek::ranges(plan, pair),
     }
 }
 
