@@ -78,7 +78,7 @@ pub(crate) struct MergedMeta {
 impl Stage for MergedStage {
     const KIND: &'static str = "merged";
     const SCOPE: Scope = Scope::Pair;
-    const VERSION: u32 = 3;
+    const VERSION: u32 = 4;
     const INTERMEDIATE: bool = true;
     const LINE: Line = Line {
         name: "merging tiles",

@@ -79,6 +79,7 @@ fn main() {
                 let opts = WriteOptions {
                     level,
                     shuffle_f64: shuffle,
+                    shuffle_f32: shuffle,
                     shuffle_int: shuffle,
                     quantise,
                 };

@@ -69,7 +69,7 @@ pub(crate) struct M3c2Meta {
 impl Stage for M3c2Stage {
     const KIND: &'static str = "m3c2";
     const SCOPE: Scope = Scope::Tile;
-    const VERSION: u32 = 3;
+    const VERSION: u32 = 4;
     const INTERMEDIATE: bool = true;
     const LINE: Line = Line {
         name: "pass 2: normals and M3C2",
@@ -346,10 +346,12 @@ pub(crate) fn encode_chunks<C: AsRef<[KeyedResult]> + Sync>(
         .collect()
 }
 
-fn f64col(name: &str, v: Vec<f64>) -> Column {
+/// A measured quantity stored as f32: a distance, its uncertainty, a spread or a normal's
+/// component (see [`to_columns`]).
+fn f32col(name: &str, v: Vec<f32>) -> Column {
     Column {
         name: name.into(),
-        data: ColumnData::F64(v),
+        data: ColumnData::F32(v),
     }
 }
 
@@ -360,8 +362,15 @@ fn u32col(name: &str, v: Vec<u32>) -> Column {
     }
 }
 
+/// A chunk's columns. The measured quantities (distance, uncertainty, the two spreads, the
+/// normal) are stored as f32: 7 significant digits, 0.06 µm at a 1 m distance, far below what
+/// any survey resolves (m3c2.laz has always stored distances so), where f64 noise in the low
+/// bytes compresses to nothing and made the results 57 bytes a core point, most of a run's peak
+/// disk (issue 46). Every reader of the results sees the stored values, so a run's outputs are
+/// the same however its units were scheduled.
 fn to_columns(rs: &[KeyedResult]) -> TileColumns {
     let col = |f: &dyn Fn(&KeyedResult) -> f64| rs.iter().map(f).collect::<Vec<f64>>();
+    let narrow = |f: &dyn Fn(&KeyedResult) -> f64| rs.iter().map(|r| f(r) as f32).collect();
     TileColumns {
         x: col(&|r| r.xyz[0]),
         y: col(&|r| r.xyz[1]),
@@ -369,19 +378,19 @@ fn to_columns(rs: &[KeyedResult]) -> TileColumns {
         extra: vec![
             u32col("key_hi", rs.iter().map(|r| (r.key >> 32) as u32).collect()),
             u32col("key_lo", rs.iter().map(|r| r.key as u32).collect()),
-            f64col("distance", col(&|r| r.r.distance)),
-            f64col("uncertainty", col(&|r| r.r.uncertainty)),
+            f32col("distance", narrow(&|r| r.r.distance)),
+            f32col("uncertainty", narrow(&|r| r.r.uncertainty)),
             Column {
                 name: "significant".into(),
                 data: ColumnData::U8(rs.iter().map(|r| r.r.significant as u8).collect()),
             },
-            f64col("std_dev1", col(&|r| r.r.std_dev1)),
-            f64col("std_dev2", col(&|r| r.r.std_dev2)),
+            f32col("std_dev1", narrow(&|r| r.r.std_dev1)),
+            f32col("std_dev2", narrow(&|r| r.r.std_dev2)),
             u32col("count1", rs.iter().map(|r| r.r.count1).collect()),
             u32col("count2", rs.iter().map(|r| r.r.count2).collect()),
-            f64col("normal_x", col(&|r| r.r.normal[0])),
-            f64col("normal_y", col(&|r| r.r.normal[1])),
-            f64col("normal_z", col(&|r| r.r.normal[2])),
+            f32col("normal_x", narrow(&|r| r.r.normal[0])),
+            f32col("normal_y", narrow(&|r| r.r.normal[1])),
+            f32col("normal_z", narrow(&|r| r.r.normal[2])),
             Column {
                 name: "reach".into(),
                 data: ColumnData::U8(rs.iter().map(|r| r.r.reach as u8).collect()),
@@ -401,9 +410,9 @@ pub(crate) fn read_chunk(path: &std::path::Path) -> Result<Vec<KeyedResult>> {
         path: path.to_path_buf(),
         problem: format!("no column {name}"),
     };
-    let f = |name: &str| -> Result<&Vec<f64>> {
+    let f = |name: &str| -> Result<&Vec<f32>> {
         match c.column(name) {
-            Some(ColumnData::F64(v)) => Ok(v),
+            Some(ColumnData::F32(v)) => Ok(v),
             _ => Err(missing(name)),
         }
     };
@@ -435,14 +444,14 @@ pub(crate) fn read_chunk(path: &std::path::Path) -> Result<Vec<KeyedResult>> {
                 key: (hi[i] as u64) << 32 | lo[i] as u64,
                 xyz: [c.x[i], c.y[i], c.z[i]],
                 r: CoreResult {
-                    distance: d[i],
-                    uncertainty: unc[i],
+                    distance: d[i].into(),
+                    uncertainty: unc[i].into(),
                     significant: sig[i] == 1,
-                    std_dev1: s1[i],
-                    std_dev2: s2[i],
+                    std_dev1: s1[i].into(),
+                    std_dev2: s2[i].into(),
                     count1: n1[i],
                     count2: n2[i],
-                    normal: [nx[i], ny[i], nz[i]],
+                    normal: [nx[i].into(), ny[i].into(), nz[i].into()],
                     reach: Reach::from_code(reach[i]).ok_or_else(|| Error::Damaged {
                         path: path.to_path_buf(),
                         problem: format!("reach code {} at row {i}", reach[i]),

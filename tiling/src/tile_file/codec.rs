@@ -3,7 +3,8 @@
 //! columns when the encoding is one frame of a framed tile.
 
 use super::format::{
-    parse_header, Header, FLAG_SHUFFLE, KIND_F64, KIND_QUANT, KIND_U32, KIND_U8, MAGIC, VERSION,
+    parse_header, Header, FLAG_SHUFFLE, KIND_F32, KIND_F64, KIND_QUANT, KIND_U32, KIND_U8, MAGIC,
+    VERSION,
 };
 use super::{range, Bounds, Column, ColumnData, TileColumns, WriteOptions};
 
@@ -24,10 +25,10 @@ pub(crate) fn encode_with_bounds(
     // (name, kind, flags, quantisation (scale, offset, base), prepared bytes)
     type Spec = (String, u8, u8, Option<(f64, f64, i64)>, Vec<u8>);
     let flags = |kind: u8| {
-        let on = if kind == KIND_F64 {
-            opts.shuffle_f64
-        } else {
-            opts.shuffle_int
+        let on = match kind {
+            KIND_F64 => opts.shuffle_f64,
+            KIND_F32 => opts.shuffle_f32,
+            _ => opts.shuffle_int,
         };
         if on && kind != KIND_U8 {
             FLAG_SHUFFLE
@@ -73,6 +74,10 @@ pub(crate) fn encode_with_bounds(
             ColumnData::F64(v) => {
                 let f = flags(KIND_F64) != 0;
                 (KIND_F64, le_bytes(v.iter().map(|d| d.to_le_bytes()), f))
+            }
+            ColumnData::F32(v) => {
+                let f = flags(KIND_F32) != 0;
+                (KIND_F32, le_bytes(v.iter().map(|d| d.to_le_bytes()), f))
             }
             ColumnData::U32(v) => {
                 let f = flags(KIND_U32) != 0;
@@ -237,12 +242,11 @@ fn u32_values_into<T>(raw: &[u8], n: usize, shuffled: bool, out: &mut [T], f: im
     }
 }
 
-/// The type of a kind's values: 8 for f64 (stored raw or quantised), 4 for u32, 1 for u8.
-fn value_width(kind: u8) -> usize {
+/// The type of a kind's values: f64 for f64 stored raw or quantised, else the kind's own.
+fn value_type(kind: u8) -> u8 {
     match kind {
-        KIND_F64 | KIND_QUANT => 8,
-        KIND_U32 => 4,
-        _ => 1,
+        KIND_QUANT => KIND_F64,
+        k => k,
     }
 }
 
@@ -250,7 +254,7 @@ fn kind_width(kind: u8) -> usize {
     match kind {
         KIND_F64 => 8,
         KIND_U8 => 1,
-        _ => 4, // u32 and quantised deltas
+        _ => 4, // u32, f32 and quantised deltas
     }
 }
 
@@ -342,7 +346,7 @@ impl<'a> Frame<'a> {
         let (a, b) = (&self.h.columns, &other.h.columns);
         a.len() == b.len()
             && (a.iter().zip(b))
-                .all(|(a, b)| a.name == b.name && value_width(a.kind) == value_width(b.kind))
+                .all(|(a, b)| a.name == b.name && value_type(a.kind) == value_type(b.kind))
     }
 
     /// The values of u32 column `name`, the other columns left compressed (a reader after
@@ -389,9 +393,10 @@ impl<'a> Frame<'a> {
             extra: Vec::new(),
         };
         for spec in &self.h.columns[3..] {
-            let data = match value_width(spec.kind) {
-                8 => ColumnData::F64(vec![0.0; n]),
-                4 => ColumnData::U32(vec![0; n]),
+            let data = match value_type(spec.kind) {
+                KIND_F64 => ColumnData::F64(vec![0.0; n]),
+                KIND_F32 => ColumnData::F32(vec![0.0; n]),
+                KIND_U32 => ColumnData::U32(vec![0; n]),
                 _ => ColumnData::U8(vec![0; n]),
             };
             out.extra.push(Column {
@@ -446,6 +451,11 @@ impl<'a> Frame<'a> {
                         *v = f64::from_le_bytes(value_bytes(&raw, n, k, shuffled));
                     }
                 }
+                (KIND_F32, _, SliceMut::F32(d)) => {
+                    for (k, v) in d.iter_mut().enumerate() {
+                        *v = f32::from_le_bytes(value_bytes(&raw, n, k, shuffled));
+                    }
+                }
                 (KIND_U32, _, SliceMut::U32(d)) => u32_values_into(&raw, n, shuffled, d, |q| q),
                 (KIND_U8, _, SliceMut::U8(d)) => d.copy_from_slice(&raw),
                 _ => {
@@ -498,6 +508,7 @@ impl<'a> ColumnSlices<'a> {
 /// One extra column's values, mutable.
 pub(crate) enum SliceMut<'a> {
     F64(&'a mut [f64]),
+    F32(&'a mut [f32]),
     U32(&'a mut [u32]),
     U8(&'a mut [u8]),
 }
@@ -506,6 +517,7 @@ impl<'a> SliceMut<'a> {
     fn reborrow(&mut self) -> SliceMut<'_> {
         match self {
             SliceMut::F64(v) => SliceMut::F64(v),
+            SliceMut::F32(v) => SliceMut::F32(v),
             SliceMut::U32(v) => SliceMut::U32(v),
             SliceMut::U8(v) => SliceMut::U8(v),
         }
@@ -516,6 +528,10 @@ impl<'a> SliceMut<'a> {
             SliceMut::F64(v) => {
                 let (a, b) = v.split_at_mut(n);
                 (SliceMut::F64(a), SliceMut::F64(b))
+            }
+            SliceMut::F32(v) => {
+                let (a, b) = v.split_at_mut(n);
+                (SliceMut::F32(a), SliceMut::F32(b))
             }
             SliceMut::U32(v) => {
                 let (a, b) = v.split_at_mut(n);
@@ -539,6 +555,7 @@ impl TileColumns {
             extra: (self.extra.iter_mut())
                 .map(|c| match &mut c.data {
                     ColumnData::F64(v) => SliceMut::F64(v),
+                    ColumnData::F32(v) => SliceMut::F32(v),
                     ColumnData::U32(v) => SliceMut::U32(v),
                     ColumnData::U8(v) => SliceMut::U8(v),
                 })

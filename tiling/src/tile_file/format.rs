@@ -13,6 +13,7 @@ pub(super) const KIND_F64: u8 = 0;
 pub(super) const KIND_U32: u8 = 1;
 pub(super) const KIND_U8: u8 = 2;
 pub(super) const KIND_QUANT: u8 = 3;
+pub(super) const KIND_F32: u8 = 4;
 /// Flag bit 0: the column's bytes are shuffled.
 pub(super) const FLAG_SHUFFLE: u8 = 1;
 
@@ -125,7 +126,7 @@ pub(super) fn parse_header(bytes: &[u8]) -> Result<Header, String> {
         let name = String::from_utf8(c.take(name_len)?.to_vec())
             .map_err(|_| "column name is not UTF-8".to_string())?;
         let kind = c.u8()?;
-        if kind > KIND_QUANT {
+        if kind > KIND_F32 {
             return Err(format!("unknown column kind {kind}"));
         }
         let flags = c.u8()?;

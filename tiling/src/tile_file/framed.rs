@@ -252,6 +252,7 @@ mod tests {
         for (c, f) in cols.extra.iter_mut().zip(frame.extra) {
             match (&mut c.data, f.data) {
                 (ColumnData::F64(a), ColumnData::F64(b)) => a.extend_from_slice(&b),
+                (ColumnData::F32(a), ColumnData::F32(b)) => a.extend_from_slice(&b),
                 (ColumnData::U32(a), ColumnData::U32(b)) => a.extend_from_slice(&b),
                 (ColumnData::U8(a), ColumnData::U8(b)) => a.extend_from_slice(&b),
                 _ => return Err(format!("column {:?} changes kind", c.name)),

@@ -17,7 +17,9 @@
 //! payload      the columns' stored bytes, concatenated in header order
 //! ```
 //!
-//! Column kinds: 0 = f64, 1 = u32, 2 = u8, 3 = f64 stored quantised (see [`Quantisation`]).
+//! Column kinds: 0 = f64, 1 = u32, 2 = u8, 3 = f64 stored quantised (see [`Quantisation`]),
+//! 4 = f32 (added within version 1: a file without it is byte for byte what it was, and a reader
+//! that predates it refuses the kind by name rather than misreading it).
 //! A column is stored as its little-endian bytes, byte-shuffled when flag bit 0 is set (byte `b`
 //! of every value together, as in Blosc's shuffle filter, which lets zstd see the slowly varying
 //! high bytes of integers as long runs), then zstd-compressed as one frame.
@@ -60,6 +62,7 @@ use {
 #[derive(Clone, Debug, PartialEq)]
 pub enum ColumnData {
     F64(Vec<f64>),
+    F32(Vec<f32>),
     U32(Vec<u32>),
     U8(Vec<u8>),
 }
@@ -69,6 +72,7 @@ impl ColumnData {
     pub fn len(&self) -> usize {
         match self {
             ColumnData::F64(v) => v.len(),
+            ColumnData::F32(v) => v.len(),
             ColumnData::U32(v) => v.len(),
             ColumnData::U8(v) => v.len(),
         }
@@ -195,6 +199,10 @@ pub struct WriteOptions {
     /// 9.9 B/point measured), because the decimal lattice repeats multi-byte patterns that zstd
     /// matches only when the bytes of a value stay together.
     pub shuffle_f64: bool,
+    /// Byte-shuffle f32 columns. On by default: f32 columns hold measured quantities (M3C2
+    /// distances, spreads, normals), not lattice values, and their sign and exponent bytes
+    /// vary slowly from value to value.
+    pub shuffle_f32: bool,
     /// Byte-shuffle u32 and quantised columns. On by default: 3.7 instead of 6.6 B/point on the
     /// same sample (the high bytes of neighbouring integers are equal).
     pub shuffle_int: bool,
@@ -207,6 +215,7 @@ impl Default for WriteOptions {
         WriteOptions {
             level: 1,
             shuffle_f64: false,
+            shuffle_f32: true,
             shuffle_int: true,
             quantise: None,
         }

@@ -13,6 +13,10 @@ fn assert_bit_exact(a: &TileColumns, b: &TileColumns) {
         assert_eq!(ca.name, cb.name);
         match (&ca.data, &cb.data) {
             (ColumnData::F64(u), ColumnData::F64(v)) => assert_eq!(bits(u), bits(v)),
+            (ColumnData::F32(u), ColumnData::F32(v)) => {
+                let b = |w: &[f32]| w.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(b(u), b(v))
+            }
             (u, v) => assert_eq!(u, v),
         }
     }
@@ -69,6 +73,16 @@ fn sample(n: usize) -> TileColumns {
                 name: "intensity_f".into(),
                 data: ColumnData::F64(awkward(n, 4)),
             },
+            Column {
+                // f32 (kind 4): awkward f64s' high bits (NaN payloads, infinities, subnormals).
+                name: "distance_f32".into(),
+                data: ColumnData::F32(
+                    awkward(n, 5)
+                        .iter()
+                        .map(|x| f32::from_bits((x.to_bits() >> 32) as u32))
+                        .collect(),
+                ),
+            },
         ],
     }
 }
@@ -85,6 +99,7 @@ fn all_options() -> Vec<WriteOptions> {
                 v.push(WriteOptions {
                     level,
                     shuffle_f64,
+                    shuffle_f32: shuffle_int,
                     shuffle_int,
                     quantise,
                 });
@@ -106,7 +121,18 @@ fn round_trip_is_bit_exact() {
             assert_bit_exact(&cols, &back);
             let h = read_tile_header(&path).unwrap();
             assert_eq!(h.point_count, n as u64);
-            assert_eq!(h.columns, ["x", "y", "z", "owned", "index", "intensity_f"]);
+            assert_eq!(
+                h.columns,
+                [
+                    "x",
+                    "y",
+                    "z",
+                    "owned",
+                    "index",
+                    "intensity_f",
+                    "distance_f32"
+                ]
+            );
         }
     }
     // The temporary sibling is gone after a successful write.
@@ -187,7 +213,7 @@ fn header_layout_matches_the_documentation() {
     assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 1);
     let header_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
     assert_eq!(u64::from_le_bytes(bytes[16..24].try_into().unwrap()), 10);
-    assert_eq!(u32::from_le_bytes(bytes[24..28].try_into().unwrap()), 6);
+    assert_eq!(u32::from_le_bytes(bytes[24..28].try_into().unwrap()), 7);
     let crc = u32::from_le_bytes(bytes[header_len - 4..header_len].try_into().unwrap());
     assert_eq!(crc, crc32fast::hash(&bytes[..header_len - 4]));
     let payload_crc = u32::from_le_bytes(bytes[header_len - 8..header_len - 4].try_into().unwrap());
