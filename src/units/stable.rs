@@ -136,16 +136,24 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<StableMeta> {
     let step = super::sampled::step(total);
     // At most SAMPLES: the multiples of `step` below `total` are no more.
     let most = total.div_ceil(step);
-    let _held = ctx.reserve(
-        need(most, super::merged::merge_inputs(plan)),
-        "the stable-ground sample and the merge of the pair's tiles",
-    )?;
-    let mut samples = Vec::with_capacity(most as usize);
-    let mut n = 0u64;
-    let mut reached = Reached::default();
     let ranges: Vec<usize> = plan
         .of_pair(super::sampled::SampledStage::KIND, pair)
         .collect();
+    // The merge of the pair's tiles where this unit makes the pass; the ranges' samples are
+    // read one file after the other (a buffer each, within the headroom).
+    let _held = match ranges.is_empty() {
+        true => ctx.reserve(
+            need(most, super::merged::merge_inputs(plan)),
+            "the stable-ground sample and the merge of the pair's tiles",
+        )?,
+        false => ctx.reserve(
+            most * BYTES_PER_SAMPLE + crate::memory::IO_HEADROOM,
+            "the stable-ground sample",
+        )?,
+    };
+    let mut samples = Vec::with_capacity(most as usize);
+    let mut n = 0u64;
+    let mut reached = Reached::default();
     if ranges.is_empty() {
         let mut merged = Merged::new(ctx, pair)?;
         let need = plan.params.min_points.value.max(1);

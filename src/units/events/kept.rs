@@ -88,7 +88,7 @@ impl Stage for KeptStage {
         if p.plan.m3c2_only {
             return Ok(());
         }
-        let key = super::key(p.plan);
+        let key = super::filter_key(p.plan);
         for pair in 0..p.plan.pairs.len() {
             let n = crate::units::m3c2::seek::ranges(p.plan, pair);
             if n == 0 {

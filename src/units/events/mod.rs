@@ -147,17 +147,34 @@ impl Stage for EventsStage {
     }
 }
 
-/// The key part of a pair's events (and of the ranges of its filter): the parameters the user
-/// gave (a measured one comes from the stable unit's key).
+/// A parameter's key part: its value where the user gave it, else `measured` (the stable
+/// unit, a dependency, measures it).
+fn user(r: &crate::params::Resolved<f64>) -> String {
+    if r.is_user() {
+        r.value.to_string()
+    } else {
+        "measured".into()
+    }
+}
+
+/// The key part of the ranges of a pair's filter (`kept`): what a kept row follows from beside
+/// the stable unit's measurement — the registration error and threshold the user gave, and the
+/// spacing a threshold falls back to without stable ground (`Params::with_stable`). Not the
+/// smoothing's or clustering's parameters: changing those does not filter again.
+fn filter_key(plan: &crate::plan::Plan) -> String {
+    let params = &plan.params;
+    format!(
+        "{}|{}|spacing {}",
+        user(&params.reg_error),
+        user(&params.threshold),
+        params.point_spacing.value
+    )
+}
+
+/// The key part of a pair's events: the parameters the user gave (a measured one comes from the
+/// stable unit's key).
 fn key(plan: &crate::plan::Plan) -> String {
     let params = &plan.params;
-    let user = |r: &crate::params::Resolved<f64>| {
-        if r.is_user() {
-            r.value.to_string()
-        } else {
-            "measured".into()
-        }
-    };
     // The three after `near` size the volumes' search boxes, by which the drafts are filed by
     // tile (`write_near`); `blocks 1`: smoothing takes the k nearest within its reach
     // (`events::blocks`).
@@ -220,10 +237,12 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<EventsMeta> {
     let mut held = Some((Vec::new(), Vec::<Point3>::new(), Vec::new()));
     let mut columns: Option<(events::pieces::Columns, Counts)> = None;
     let mut spill = super::scratch::RowsWriter::create(out, SPILL, SPILL_WIDTH)?;
-    let merging = ctx.reserve(
-        super::merged::pair_merge_need(ctx.plan),
-        "the merge of the pair's tiles",
-    )?;
+    // The merge of the pair's tiles where this unit makes the filter's pass (no `kept` ranges).
+    let merge = match ctx.plan.of_pair(kept::KeptStage::KIND, pair).next() {
+        None => super::merged::pair_merge_need(ctx.plan),
+        Some(_) => 0,
+    };
+    let merging = ctx.reserve(merge, "the merge of the pair's tiles")?;
     let mut rows = kept::KeptRows::open(ctx, pair, tau, reg)?;
     let mut n = 0u64;
     while let Some(row) = rows.next_row()? {
