@@ -59,10 +59,11 @@ fn plan_only_writes_the_scripts_and_submits_nothing() {
         .collect();
     assert_eq!(
         stages,
-        [
-            "tiling", "align", "aligned", "field", "orient", "m3c2", "stable", "events", "volumes",
-            "points", "outputs", "publish"
-        ],
+        // The stages of one unit a task computed at the end of the arrays holding what they
+        // read (issue 47): the alignment and the aligned survey at the tiling's, the orientation
+        // at the field's, the stable ground, the events and m3c2.laz at M3C2's, the outputs at
+        // the volumes'.
+        ["tiling", "field", "m3c2", "volumes", "publish"],
         "{stdout}"
     );
     assert!(
@@ -104,7 +105,7 @@ fn plan_only_writes_the_scripts_and_submits_nothing() {
     .unwrap();
     assert_eq!(field["tasks"].as_array().unwrap().len(), tiles.div_ceil(2));
 
-    let script = std::fs::read_to_string(sub.join("06-m3c2.sh")).unwrap();
+    let script = std::fs::read_to_string(sub.join("03-m3c2.sh")).unwrap();
     for line in [
         "#!/bin/bash",
         &format!("#SBATCH --array=0-{}", tiles.div_ceil(2) - 1),
@@ -116,18 +117,16 @@ fn plan_only_writes_the_scripts_and_submits_nothing() {
         assert!(script.contains(line), "no {line:?} in\n{script}");
     }
     // Each array waits for the arrays holding what its units read (issue 47): the orientation
-    // field for the tiling alone, beside the alignment; M3C2 for the tiles, the aligned survey
-    // and the field; m3c2.laz not for the volumes; the publishing job for every array.
+    // field for the tiling alone, beside the alignment; M3C2 for the tiles (and the aligned
+    // survey, at the tiling's end) and the field (the orientation, at its end); the volumes for
+    // the tiles and M3C2 (the events, at its end); the publishing job for every array.
     let submit = std::fs::read_to_string(sub.join("submit.sh")).unwrap();
     for (script, after) in [
         ("01-tiling.sh", ""),
-        ("04-field.sh", "$j1"),
-        ("06-m3c2.sh", "$j1:$j3:$j5"),
-        ("10-points.sh", "$j6:$j7:$j8"),
-        (
-            "12-publish.sh",
-            "$j1:$j2:$j3:$j4:$j5:$j6:$j7:$j8:$j9:$j10:$j11",
-        ),
+        ("02-field.sh", "$j1"),
+        ("03-m3c2.sh", "$j1:$j2"),
+        ("04-volumes.sh", "$j1:$j3"),
+        ("05-publish.sh", "$j1:$j2:$j3:$j4"),
     ] {
         let dependency = match after {
             "" => String::new(),
@@ -136,6 +135,36 @@ fn plan_only_writes_the_scripts_and_submits_nothing() {
         let line = format!("sbatch --parsable {dependency}-p long '--comment=a b' {script}");
         assert!(submit.contains(&line), "no {line:?} in\n{submit}");
     }
+
+    // Each array's tails, which its tasks compute when they end where their inputs are all
+    // done; the publishing job computes any they left before it publishes.
+    let submission = json(&sub.join("submission.json"));
+    let units = json(&out.join(".talus/plan.json"))["units"].clone();
+    let kind_of = |name: &serde_json::Value| -> String {
+        let u = units
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|u| u["name"] == *name);
+        u.unwrap()["spec"]["kind"].as_str().unwrap().to_string()
+    };
+    let stage = |kind: &str| m3c2_of(&submission, "stages", &|s| s["kind"] == kind).pop();
+    let kinds = |v: &serde_json::Value| -> Vec<String> {
+        v.as_array()
+            .map_or(vec![], |t| t.iter().map(kind_of).collect())
+    };
+    for (array, tails) in [
+        ("tiling", &["align", "aligned"][..]),
+        ("field", &["orient"]),
+        ("m3c2", &["stable", "events", "points"]),
+        ("volumes", &["outputs"]),
+    ] {
+        assert_eq!(kinds(&stage(array).unwrap()["tails"]), tails, "{array}");
+    }
+    assert_eq!(
+        kinds(&stage("publish").unwrap()["tasks"][0]),
+        ["align", "aligned", "orient", "stable", "events", "points", "outputs"]
+    );
 
     let o = common::run(&["status", out.to_str().unwrap()]);
     let text = String::from_utf8_lossy(&o.stdout);

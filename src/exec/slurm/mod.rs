@@ -73,13 +73,40 @@ impl Default for Options {
     }
 }
 
-/// One stage of a submission: the units (plan indices) of each array task, and the arrays
-/// (indices among the submission's stages) holding units they depend on.
+/// One stage of a submission: the units (plan indices) of each array task, the arrays (indices
+/// among the submission's stages) holding units they depend on, and the units of later
+/// one-unit-a-task stages its tasks compute when they end ([`Tail`]).
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct StagePlan {
     pub kind: &'static str,
     pub tasks: Vec<Vec<usize>>,
     pub after: Vec<usize>,
+    pub tails: Vec<usize>,
+}
+
+/// A stage of one unit a task (not per tile, not in parts: a comparison's alignment, stable
+/// ground, events, m3c2.laz's join; a campaign's, one a pair) computed at the end of the arrays
+/// holding what its units read instead of by an array of its own: every task of those arrays,
+/// once its own units are done, computes each tail unit whose inputs are all done — the last
+/// task to end computes it at once, where an array of its own would wait a scheduling pass
+/// (issue 47: 12 arrays in a row on the 120M-point pair's critical path, ≈ 1 s of scheduling
+/// each on the test cluster, more on a busy one); no task waits on another's claim. A tail the
+/// arrays leave (their last task did not see its inputs done) is computed by the first task that
+/// reads it (`exec::run_units` computes a task's missing dependencies) or the publishing job.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Tail {
+    pub kind: &'static str,
+    pub units: Vec<usize>,
+    /// The arrays (indices in [`Arrays::stages`]) whose tasks compute them when they end: those
+    /// holding what they read that no other of them waits for.
+    pub hosts: Vec<usize>,
+}
+
+/// A submission's job arrays and the stages computed at their ends.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Arrays {
+    pub stages: Vec<StagePlan>,
+    pub tails: Vec<Tail>,
 }
 
 /// The stages in pipeline order (the registry's), each one job array.
@@ -87,15 +114,16 @@ pub(crate) fn stage_order() -> impl Iterator<Item = &'static dyn Registered> {
     registry().stages().iter().copied()
 }
 
-/// The stages of `plan` whose units are not all done (`done[i]`): for each, its units not done
-/// in tasks of `tiles_per_task` (tile stages) or one (the others), at most [`MAX_TASKS`] tasks
-/// (more units per task when there are more). An error if a unit depends on a unit of its own or
-/// a later stage (the stages would not be a valid order).
-pub(crate) fn stages(plan: &Plan, done: &[bool], tiles_per_task: usize) -> Result<Vec<StagePlan>> {
+/// The arrays of `plan`'s units not done (`done[i]`): a stage's units in tasks of
+/// `tiles_per_task` (tile stages) or one (the others), at most [`MAX_TASKS`] tasks (more units
+/// per task when there are more); a stage of one unit a task that reads units in arrays is a
+/// [`Tail`] of them instead. An error if a unit depends on a unit of its own or a later stage.
+pub(crate) fn stages(plan: &Plan, done: &[bool], tiles_per_task: usize) -> Result<Arrays> {
     // The arrays' order relies on it: checked here as when the plan was made (a plan read from
     // a submission's folder), giving each unit's stage.
     let ranks = crate::units::stage::check_plan(plan)?;
-    let mut out = Vec::new();
+    let mut cands: Vec<StagePlan> = Vec::new();
+    let mut per_tile: Vec<bool> = Vec::new();
     for (r, stage) in stage_order().enumerate() {
         let todo: Vec<usize> = (0..plan.units.len())
             .filter(|&i| ranks[i] == r && !done[i])
@@ -111,37 +139,127 @@ pub(crate) fn stages(plan: &Plan, done: &[bool], tiles_per_task: usize) -> Resul
             1
         };
         per = per.max(todo.len().div_ceil(MAX_TASKS));
-        out.push(StagePlan {
+        per_tile.push(stage.scope().per_tile());
+        cands.push(StagePlan {
             kind,
             tasks: todo.chunks(per).map(|c| c.to_vec()).collect(),
             after: Vec::new(),
+            tails: Vec::new(),
         });
     }
-    // Each array waits for the arrays holding what its units read, not for every array before
-    // it: the first survey's orientation field runs beside the alignment, the segments of
-    // m3c2.laz beside the volumes (the units' own dependencies, which the store checks when a
-    // unit reads).
+    let n = cands.len();
+    // What each array waits for, transitively, were every stage an array.
+    let pre = waits(plan, &cands, &vec![false; n]);
+    let mut reach = vec![vec![false; n]; n];
+    for k in 0..n {
+        // Arrays wait only for earlier ones: their closure is known.
+        for &a in &pre[k] {
+            let below = reach[a].clone();
+            for (r, b) in reach[k].iter_mut().zip(below) {
+                *r |= b;
+            }
+            reach[k][a] = true;
+        }
+    }
+    // Decided in pipeline order: a tail's units pass the wait on to the arrays of what they
+    // read (as units done already do), so a later tail reading one is hosted by those.
+    let mut tailed = vec![false; n];
+    let mut hosts: Vec<Vec<usize>> = vec![Vec::new(); n];
+    for j in 0..n {
+        let units: Vec<usize> = cands[j].tasks.iter().flatten().copied().collect();
+        let one_each = cands[j].tasks.iter().all(|t| t.len() == 1);
+        if per_tile[j] || !one_each || units.iter().any(|&u| plan.units[u].spec.part.is_some()) {
+            continue;
+        }
+        let d = arrays_read(plan, &cands, &tailed, &units);
+        if d.is_empty() {
+            continue;
+        }
+        // The arrays among them that no other of them waits for: the last to end.
+        let last: Vec<usize> = (d.iter().copied())
+            .filter(|&a| !d.iter().any(|&b| b != a && reach[b][a]))
+            .collect();
+        tailed[j] = true;
+        hosts[j] = last;
+    }
+    let mut index = vec![None; n];
+    let mut out: Vec<StagePlan> = Vec::new();
+    for k in (0..n).filter(|&k| !tailed[k]) {
+        index[k] = Some(out.len());
+        out.push(cands[k].clone());
+    }
+    let after = waits(plan, &cands, &tailed);
+    for k in (0..n).filter(|&k| !tailed[k]) {
+        let i = index[k].expect("an array left");
+        out[i].after = after[k].iter().filter_map(|&a| index[a]).collect();
+    }
+    let mut tails = Vec::new();
+    for j in (0..n).filter(|&j| tailed[j]) {
+        let units: Vec<usize> = cands[j].tasks.iter().flatten().copied().collect();
+        let hs: Vec<usize> = hosts[j].iter().filter_map(|&h| index[h]).collect();
+        for &h in &hs {
+            out[h].tails.extend(&units);
+        }
+        tails.push(Tail {
+            kind: cands[j].kind,
+            units,
+            hosts: hs,
+        });
+    }
+    Ok(Arrays { stages: out, tails })
+}
+
+/// The arrays among `cands` holding what `units` read, through the units of `tailed` stages
+/// (and units done already) to what those read.
+fn arrays_read(plan: &Plan, cands: &[StagePlan], tailed: &[bool], units: &[usize]) -> Vec<usize> {
+    let array_of = arrays_of_units(plan, cands, tailed);
+    let mut through = vec![None::<Vec<usize>>; plan.units.len()];
+    let mut out = Vec::new();
+    for &u in units {
+        for &d in &plan.units[u].deps {
+            out.extend(arrays_of(plan, &array_of, &mut through, d));
+        }
+    }
+    out.sort_unstable();
+    out.dedup();
+    out
+}
+
+/// The array of each unit in one (`None`: done already, or a tail's).
+fn arrays_of_units(plan: &Plan, cands: &[StagePlan], tailed: &[bool]) -> Vec<Option<usize>> {
     let mut array_of = vec![None; plan.units.len()];
-    for (k, s) in out.iter().enumerate() {
+    for (k, s) in cands.iter().enumerate() {
+        if tailed.get(k).copied().unwrap_or(false) {
+            continue;
+        }
         for &u in s.tasks.iter().flatten() {
             array_of[u] = Some(k);
         }
     }
+    array_of
+}
+
+/// What each of `cands` waits for (indices among them): the arrays holding what its units
+/// read, through the units of `tailed` stages (and units done already) to what those read.
+fn waits(plan: &Plan, cands: &[StagePlan], tailed: &[bool]) -> Vec<Vec<usize>> {
+    let array_of = arrays_of_units(plan, cands, tailed);
     // A dependency done already that depends on units not done (a unit computed again: the
     // executor computes it before its readers) passes the wait on to those units' arrays.
     let mut through = vec![None::<Vec<usize>>; plan.units.len()];
-    for s in out.iter_mut() {
-        let mut after = Vec::new();
-        for &u in s.tasks.iter().flatten() {
-            for &d in &plan.units[u].deps {
-                after.extend(arrays_of(plan, &array_of, &mut through, d));
+    cands
+        .iter()
+        .map(|s| {
+            let mut after = Vec::new();
+            for &u in s.tasks.iter().flatten() {
+                for &d in &plan.units[u].deps {
+                    after.extend(arrays_of(plan, &array_of, &mut through, d));
+                }
             }
-        }
-        after.sort_unstable();
-        after.dedup();
-        s.after = after;
-    }
-    Ok(out)
+            after.sort_unstable();
+            after.dedup();
+            after
+        })
+        .collect()
 }
 
 /// The arrays unit `d` waits on: its own where it is in one, else (done already) those of its
@@ -307,8 +425,8 @@ pub(crate) fn run(
     let done: Vec<bool> = (0..plan.units.len())
         .map(|i| store.done(&unit_ref(plan, i)).is_some())
         .collect();
-    let stages = stages(plan, &done, opts.tiles_per_task)?;
-    if stages.is_empty() && !opts.plan_only {
+    let arrays = stages(plan, &done, opts.tiles_per_task)?;
+    if arrays.stages.is_empty() && !opts.plan_only {
         let marker = crate::exec::publish::publish_and_gc(store, plan, ours)?;
         drop(lock);
         eprintln!(
@@ -318,7 +436,7 @@ pub(crate) fn run(
     }
     let talus = std::env::current_exe()
         .map_err(|e| Error::Internal(format!("the path of this talus binary: {e}")))?;
-    let sub = record::create(store, plan, command, opts, &stages, &talus)?;
+    let sub = record::create(store, plan, command, opts, &arrays, &talus)?;
     let dir = record::dir(store, sub.number);
     if opts.plan_only {
         drop(lock);
@@ -446,7 +564,7 @@ mod tests {
     use crate::plan::Spec;
 
     /// Each array waits for the arrays holding its units' dependencies, and through a
-    /// dependency done already to the arrays of what that one depends on.
+    /// dependency done already (or a tail) to the arrays of what that one depends on.
     #[test]
     fn arrays_wait_for_what_their_units_read() {
         let mut plan = crate::plan::tests::empty_plan();
@@ -457,29 +575,68 @@ mod tests {
         let field = plan.push(Spec::survey_tile("field", 0, tile), "f", &[], vec![t0]);
         let orient = plan.push(Spec::survey("orient", 0), "o", &[], vec![field]);
         let m3c2 = plan.push(Spec::tile("m3c2", 0, tile), "m", &[], vec![t0, t1, orient]);
-        plan.push(Spec::pair("stable", 0), "s", &[], vec![m3c2]);
+        let stable = plan.push(Spec::pair("stable", 0), "s", &[], vec![m3c2]);
         let done = |d: &[usize]| {
             (0..plan.units.len())
                 .map(|i| d.contains(&i))
                 .collect::<Vec<_>>()
         };
         let arrays = stages(&plan, &done(&[]), 1).unwrap();
+        let kinds = |a: &super::Arrays| a.stages.iter().map(|s| s.kind).collect::<Vec<_>>();
         let after = |kind: &str| -> Vec<&str> {
-            let a = arrays.iter().find(|a| a.kind == kind).unwrap();
-            a.after.iter().map(|&k| arrays[k].kind).collect()
+            let a = arrays.stages.iter().find(|a| a.kind == kind).unwrap();
+            a.after.iter().map(|&k| arrays.stages[k].kind).collect()
         };
+        // The alignment at the end of the tiling, the orientation at the end of the field, the
+        // stable ground at the end of M3C2: no array of their own.
+        assert_eq!(kinds(&arrays), ["tiling", "field", "m3c2"]);
         assert_eq!(after("tiling"), Vec::<&str>::new());
-        assert_eq!(after("align"), ["tiling"]);
-        // Beside the alignment, not after it.
         assert_eq!(after("field"), ["tiling"]);
-        assert_eq!(after("m3c2"), ["tiling", "orient"]);
-        assert_eq!(after("stable"), ["m3c2"]);
-        // M3C2 done, the before survey's tiling to do again: stable waits for the tiling (which
-        // its task would otherwise compute itself, or wait on the claim of).
+        // Through the orientation to the field it reads.
+        assert_eq!(after("m3c2"), ["tiling", "field"]);
+        let tails: Vec<(&str, Vec<usize>, Vec<usize>)> = (arrays.tails.iter())
+            .map(|t| (t.kind, t.units.clone(), t.hosts.clone()))
+            .collect();
+        assert_eq!(
+            tails,
+            [
+                ("align", vec![align], vec![0]),
+                ("orient", vec![orient], vec![1]),
+                ("stable", vec![stable], vec![2])
+            ]
+        );
+        assert_eq!(arrays.stages[0].tails, [align]);
+        // M3C2 done, the before survey's tiling to do again: stable at its end (it reads the
+        // tiling through the M3C2 unit).
         let arrays = stages(&plan, &done(&[t1, align, field, orient, m3c2]), 1).unwrap();
-        let kinds: Vec<&str> = arrays.iter().map(|a| a.kind).collect();
-        assert_eq!(kinds, ["tiling", "stable"]);
-        assert_eq!(arrays[1].after, [0]);
+        assert_eq!(kinds(&arrays), ["tiling"]);
+        assert_eq!(arrays.stages[0].tails, [stable]);
+    }
+
+    /// A tail whose inputs are in two arrays neither waits for is computed at the end of both;
+    /// one whose inputs are in arrays one of which waits for the other, at the end of that one.
+    #[test]
+    fn a_tail_is_hosted_by_the_arrays_that_end_last() {
+        let mut plan = crate::plan::tests::empty_plan();
+        let t0 = plan.push(Spec::survey("tiling", 0), "t0", &[], vec![]);
+        let tile = crate::plan::tile_id([0, 0]);
+        let field = plan.push(Spec::survey_tile("field", 0, tile), "f", &[], vec![t0]);
+        let m3c2 = plan.push(Spec::tile("m3c2", 0, tile), "m", &[], vec![t0]);
+        let vol = plan.push(Spec::tile("volumes", 0, tile), "v", &[], vec![m3c2, t0]);
+        plan.push(Spec::pair("outputs", 0), "o", &[], vec![field, vol, t0]);
+        let arrays = stages(&plan, &vec![false; plan.units.len()], 1).unwrap();
+        let kinds: Vec<&str> = arrays.stages.iter().map(|s| s.kind).collect();
+        assert_eq!(kinds, ["tiling", "field", "m3c2", "volumes"]);
+        assert_eq!(arrays.tails[0].hosts, [1, 3]);
+        // A unit in parts is never a tail.
+        let mut plan = crate::plan::tests::empty_plan();
+        let t0 = plan.push(Spec::survey("tiling", 0), "t0", &[], vec![]);
+        let part = |k| Spec::survey_part("aligned", 0, k);
+        plan.push(part(0), "a", &[], vec![t0]);
+        plan.push(part(1), "a", &[], vec![t0]);
+        let arrays = stages(&plan, &vec![false; plan.units.len()], 1).unwrap();
+        assert_eq!(arrays.stages.len(), 2);
+        assert!(arrays.tails.is_empty());
     }
 
     #[test]

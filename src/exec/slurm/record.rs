@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::{Options, StagePlan, PUBLISH};
+use super::{Arrays, Options, PUBLISH};
 use crate::error::{Error, Result};
 use crate::plan::Plan;
 use crate::store::Store;
@@ -51,12 +51,17 @@ pub(crate) struct StageRecord {
     pub kind: String,
     /// Its sbatch script, in the submission's directory.
     pub script: String,
-    /// The unit names of each task (the publishing job: one task, no unit).
+    /// The unit names of each task (the publishing job: one task, the tails, which it computes
+    /// before it publishes where the arrays' tasks did not).
     pub tasks: Vec<Vec<String>>,
     /// The arrays (indices in [`Submission::stages`]) it waits for, `afterok` (a submission
     /// recorded before this field: empty).
     #[serde(default)]
     pub after: Vec<usize>,
+    /// The units of later stages each task computes when its own are done, where their inputs
+    /// all are (`super::Tail`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub tails: Vec<String>,
 }
 
 /// `jobs.json`: the job id of each array, in the order of [`Submission::stages`].
@@ -79,6 +84,9 @@ pub(crate) struct TaskReport {
     pub ended: Option<u64>,
     /// Units this task computed (the others of its slice were found done).
     pub computed: usize,
+    /// Tails (`super::Tail`) it computed when its own units were done.
+    #[serde(default)]
+    pub tails: usize,
     pub error: Option<String>,
 }
 
@@ -167,14 +175,15 @@ pub(crate) fn load(store: &Store, n: u32) -> Result<(Submission, Plan)> {
     Ok((sub, plan))
 }
 
-/// Create the next submission's directory with its records and scripts, for `stages` of `plan`
-/// and then the publishing job.
+/// Create the next submission's directory with its records and scripts, for the arrays of
+/// `plan` and then the publishing job (whose one task computes first the tails the arrays'
+/// tasks left, `super::Tail`).
 pub(crate) fn create(
     store: &Store,
     plan: &Plan,
     command: &str,
     opts: &Options,
-    stages: &[StagePlan],
+    arrays: &Arrays,
     talus: &Path,
 ) -> Result<Submission> {
     let abs = super::absolute(store.dir())?;
@@ -202,6 +211,7 @@ pub(crate) fn create(
     }
     plan.save(&d.join(crate::store::PLAN_FILE))?;
     let name = |i: usize| plan.units[i].name.clone();
+    let stages = &arrays.stages;
     let mut records: Vec<StageRecord> = stages
         .iter()
         .enumerate()
@@ -214,13 +224,18 @@ pub(crate) fn create(
                 .map(|t| t.iter().map(|&i| name(i)).collect())
                 .collect(),
             after: s.after.clone(),
+            tails: s.tails.iter().map(|&i| name(i)).collect(),
         })
         .collect();
+    // Every tail, in plan order: those the arrays' last tasks did not compute.
+    let mut tails: Vec<usize> = arrays.tails.iter().flat_map(|t| t.units.clone()).collect();
+    tails.sort_unstable();
     records.push(StageRecord {
         kind: PUBLISH.to_string(),
         script: format!("{:02}-{PUBLISH}.sh", stages.len() + 1),
-        tasks: vec![Vec::new()],
+        tasks: vec![tails.iter().map(|&i| name(i)).collect()],
         after: (0..stages.len()).collect(),
+        tails: Vec::new(),
     });
     let threads = &plan.params.threads;
     let sub = Submission {

@@ -23,20 +23,22 @@ use crate::units::unit_ref;
 /// cluster (scripts/slurm/README.md, (b)).
 pub(crate) const STAGE_LATENCY: f64 = 1.0;
 
-/// One stage's tasks (seconds each), the arrays it waits for (indices among the stages) and the
-/// highest peak resident memory of its units.
+/// One stage's tasks (seconds each), what it waits for (indices among the stages, each with the
+/// time from its end to this stage's release: [`STAGE_LATENCY`] from an array, none from a tail's
+/// host to the tail) and the highest peak resident memory of its units.
+#[derive(Clone)]
 struct StageWork {
     kind: &'static str,
     tasks: Vec<f64>,
-    after: Vec<usize>,
+    after: Vec<(usize, f64)>,
     peak: u64,
     scaled_peak: bool,
 }
 
 /// The wall time of `stages` on `slots` task slots, the publishing job's latency included: an
 /// event-driven list schedule. An array is released [`STAGE_LATENCY`] after the last of the
-/// arrays it waits for ends; a free slot takes a released task, of the earliest array first and
-/// the longest first within it.
+/// arrays it waits for ends (a tail, `super::Tail`: when its hosts end); a free slot takes a
+/// released task, of the earliest array first and the longest first within it.
 fn wall_time(stages: &[StageWork], slots: usize) -> f64 {
     let n = stages.len();
     let mut end: Vec<Option<f64>> = vec![None; n];
@@ -49,13 +51,14 @@ fn wall_time(stages: &[StageWork], slots: usize) -> f64 {
     let mut t = 0.0f64;
     loop {
         for k in 0..n {
-            if release[k].is_none() && stages[k].after.iter().all(|&j| end[j].is_some()) {
-                let r = stages[k]
-                    .after
-                    .iter()
-                    .filter_map(|&j| end[j])
-                    .fold(0.0, f64::max);
-                release[k] = Some(r + STAGE_LATENCY);
+            if release[k].is_none() && stages[k].after.iter().all(|&(j, _)| end[j].is_some()) {
+                let r = match stages[k].after.is_empty() {
+                    true => STAGE_LATENCY,
+                    false => (stages[k].after.iter())
+                        .filter_map(|&(j, l)| Some(end[j]? + l))
+                        .fold(0.0, f64::max),
+                };
+                release[k] = Some(r);
                 if left[k] == 0 {
                     end[k] = release[k];
                 }
@@ -153,16 +156,55 @@ pub(crate) fn report(
             scaled_peak: !tile && stage.scope() != Scope::Survey && scale > 1.0,
         });
     }
-    // The arrays each waits for, as a submission of the whole plan has them.
+    // The arrays each waits for, and the stages absorbed into arrays' tasks, as a submission of
+    // the whole plan has them.
     let arrays = super::stages(&plan, &vec![false; plan.units.len()], 1)?;
-    for (st, a) in stages.iter_mut().zip(&arrays) {
-        if st.kind != a.kind {
-            return Err(Error::Internal(format!(
-                "plan-stats: stage {} where the submission has {}",
-                st.kind, a.kind
-            )));
+    let kinds: Vec<&str> = stages.iter().map(|st| st.kind).collect();
+    let at = |kind: &str| {
+        kinds.iter().position(|&k| k == kind).ok_or_else(|| {
+            Error::Internal(format!(
+                "plan-stats: the submission's stage {kind} has no units"
+            ))
+        })
+    };
+    let of_array: Vec<usize> = (arrays.stages.iter())
+        .map(|a| at(a.kind))
+        .collect::<Result<_>>()?;
+    for (a, &k) in arrays.stages.iter().zip(&of_array) {
+        stages[k].after = a
+            .after
+            .iter()
+            .map(|&j| (of_array[j], STAGE_LATENCY))
+            .collect();
+    }
+    let mut tails = Vec::new();
+    for t in &arrays.tails {
+        let k = at(t.kind)?;
+        // Released when the last of its hosts ends: the task ending last computes it.
+        stages[k].after = t.hosts.iter().map(|&h| (of_array[h], 0.0)).collect();
+        let reads = |units: &[usize], of: &[usize]| {
+            (units.iter()).any(|u| of.iter().any(|v| plan.units[*u].deps.contains(v)))
+        };
+        // After the tails it reads, computed before it at the same ends.
+        for other in &arrays.tails {
+            if reads(&t.units, &other.units) {
+                stages[k].after.push((at(other.kind)?, 0.0));
+            }
         }
-        st.after = a.after.clone();
+        // The arrays reading it wait a scheduling pass after it (their afterok is on its
+        // hosts, whose last task it ends).
+        for (a, &r) in arrays.stages.iter().zip(&of_array) {
+            let units: Vec<usize> = a.tasks.iter().flatten().copied().collect();
+            if reads(&units, &t.units) {
+                stages[r].after.push((k, STAGE_LATENCY));
+            }
+        }
+        let hosts: Vec<&str> = t.hosts.iter().map(|&h| arrays.stages[h].kind).collect();
+        tails.push(format!(
+            "{} (at the end of {})",
+            t.kind,
+            hosts.join(" and ")
+        ));
     }
     // Critical path along the dependencies alone (no stage barriers), unscaled.
     let mut finish = vec![0.0f64; plan.units.len()];
@@ -239,6 +281,14 @@ pub(crate) fn report(
             format!("; along the units' dependencies alone: {dag:.1} s")
         }
     );
+    if !tails.is_empty() {
+        let _ = writeln!(
+            s,
+            "\nstages of one unit a task computed by the last task of the arrays holding what they read, \
+             not an array of their own: {}",
+            tails.join(", ")
+        );
+    }
     let _ = writeln!(s);
     let _ = writeln!(
         s,
@@ -263,7 +313,7 @@ mod tests {
         StageWork {
             kind: "x",
             tasks: tasks.to_vec(),
-            after: after.to_vec(),
+            after: after.iter().map(|&j| (j, STAGE_LATENCY)).collect(),
             peak: 0,
             scaled_peak: false,
         }
@@ -288,5 +338,19 @@ mod tests {
         assert_eq!(wall_time(&chain, 8), l + 4.0 + l + 1.0 + l);
         // One slot: the earlier array's tasks first (A, then B), C released after B.
         assert_eq!(wall_time(&dag, 1), l + 5.0 + l + 1.0 + l);
+    }
+
+    #[test]
+    fn a_tail_starts_when_its_host_ends() {
+        let l = STAGE_LATENCY;
+        // B (2 s) a tail of A: released when A ends; C, reading it, a pass after it.
+        let mut b = array(&[2.0], &[]);
+        b.after = vec![(0, 0.0)];
+        let mut c = array(&[1.0, 1.0], &[0]);
+        c.after.push((1, l));
+        assert_eq!(
+            wall_time(&[array(&[4.0], &[]), b, c], 8),
+            l + 4.0 + 2.0 + l + 1.0 + l
+        );
     }
 }

@@ -416,7 +416,24 @@ impl Report {
                 c(UnitState::Failed),
                 job,
                 if tasks.is_empty() {
-                    "(not in the submission)".to_string()
+                    // A tail (`super::Tail`): computed at the end of the arrays holding what it
+                    // reads.
+                    let names: Vec<&str> = idx
+                        .iter()
+                        .map(|&i| self.plan.units[i].name.as_str())
+                        .collect();
+                    let hosts: Vec<&str> = sub
+                        .map(|(sub, _, _)| {
+                            (sub.stages.iter())
+                                .filter(|a| a.tails.iter().any(|t| names.contains(&t.as_str())))
+                                .map(|a| a.kind.as_str())
+                                .collect()
+                        })
+                        .unwrap_or_default();
+                    match hosts.is_empty() {
+                        true => "(not in the submission)".to_string(),
+                        false => format!("(at the end of {}'s tasks)", hosts.join("'s and ")),
+                    }
                 } else {
                     outcomes.join(", ")
                 }

@@ -72,14 +72,23 @@ pub(crate) fn run(dir: &Path, number: u32, stage: &str, task: Option<usize>) -> 
         started: now(),
         ended: None,
         computed: 0,
+        tails: 0,
         error: None,
     };
     record::save_task_report(&report_path, &report)?;
     let started = Instant::now();
     let result = if stage == PUBLISH {
-        publish(&store, &plan).map(|_| 0)
+        // The tails no task computed (found done: nothing to do), then the outputs published.
+        let computed = match names.is_empty() {
+            true => Ok(0),
+            false => units(&store, &plan, names, &report.task_id),
+        };
+        computed.and_then(|n| publish(&store, &plan).map(|_| n))
     } else {
-        units(&store, &plan, names, &report.task_id)
+        units(&store, &plan, names, &report.task_id).and_then(|n| {
+            report.tails = tails(&store, &plan, &s.tails, &report.task_id)?;
+            Ok(n)
+        })
     };
     report.ended = Some(now());
     match &result {
@@ -95,8 +104,12 @@ pub(crate) fn run(dir: &Path, number: u32, stage: &str, task: Option<usize>) -> 
     }
     record::save_task_report(&report_path, &report)?;
     let n = result?;
+    let tails = match report.tails {
+        0 => String::new(),
+        t => format!(", and {t} tail(s) of later stages"),
+    };
     eprintln!(
-        "talus slurm-task: {stage} task {task} of submission {number}: {} unit(s) computed of {} in {:.1} s",
+        "talus slurm-task: {stage} task {task} of submission {number}: {} unit(s) computed of {}{tails} in {:.1} s",
         n,
         names.len(),
         started.elapsed().as_secs_f64()
@@ -139,6 +152,27 @@ fn units(store: &Store, plan: &Plan, names: &[String], task_id: &str) -> Result<
     let report =
         pool.install(|| crate::exec::run_units(store, plan, Some(&idx), 1, &label, Some(attempt)))?;
     Ok(report.computed)
+}
+
+/// Compute each of the tails `names` (`super::Tail`, in plan order) not done whose inputs are
+/// all done: the last task of the arrays it reads sees them so, at once. One whose inputs are not
+/// all done is left to a later task (or to a reader, or the publishing job); two tasks ending
+/// together both see it so, and the store's claim lets one compute it. How many it computed.
+fn tails(store: &Store, plan: &Plan, names: &[String], task_id: &str) -> Result<usize> {
+    let mut n = 0;
+    for name in names {
+        let Some(i) = plan.units.iter().position(|u| &u.name == name) else {
+            return Err(Error::Internal(format!(
+                "tail {name} is not in the submission's plan"
+            )));
+        };
+        let done = |u: usize| store.done(&crate::units::unit_ref(plan, u)).is_some();
+        if done(i) || !plan.units[i].deps.iter().all(|&d| done(d)) {
+            continue;
+        }
+        n += units(store, plan, std::slice::from_ref(name), task_id)?;
+    }
+    Ok(n)
 }
 
 /// Take DIR's lock (waiting while another process holds it), publish, drop old units.
