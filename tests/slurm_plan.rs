@@ -60,10 +60,11 @@ fn plan_only_writes_the_scripts_and_submits_nothing() {
     assert_eq!(
         stages,
         // The stages of one unit a task computed at the end of the arrays holding what they
-        // read (issue 47): the alignment and the aligned survey at the tiling's, the orientation
-        // at the field's, the stable ground, the events and m3c2.laz at M3C2's, the outputs at
-        // the volumes'.
-        ["tiling", "field", "m3c2", "volumes", "publish"],
+        // read (issue 47): the aligned survey at the alignment's, the orientation at the
+        // field's, the stable ground and the events at M3C2's, m3c2.laz and the outputs at the
+        // volumes'. Not the alignment: at the tiling's end it would hold back the field, which
+        // waits for the tiling and not for it.
+        ["tiling", "align", "field", "m3c2", "volumes", "publish"],
         "{stdout}"
     );
     assert!(
@@ -105,7 +106,7 @@ fn plan_only_writes_the_scripts_and_submits_nothing() {
     .unwrap();
     assert_eq!(field["tasks"].as_array().unwrap().len(), tiles.div_ceil(2));
 
-    let script = std::fs::read_to_string(sub.join("03-m3c2.sh")).unwrap();
+    let script = std::fs::read_to_string(sub.join("04-m3c2.sh")).unwrap();
     for line in [
         "#!/bin/bash",
         &format!("#SBATCH --array=0-{}", tiles.div_ceil(2) - 1),
@@ -117,16 +118,18 @@ fn plan_only_writes_the_scripts_and_submits_nothing() {
         assert!(script.contains(line), "no {line:?} in\n{script}");
     }
     // Each array waits for the arrays holding what its units read (issue 47): the orientation
-    // field for the tiling alone, beside the alignment; M3C2 for the tiles (and the aligned
-    // survey, at the tiling's end) and the field (the orientation, at its end); the volumes for
-    // the tiles and M3C2 (the events, at its end); the publishing job for every array.
+    // field for the tiling alone, beside the alignment; M3C2 for the tiles, the alignment (the
+    // aligned survey, at its end) and the field (the orientation, at its end); the volumes for
+    // the tiles, the alignment and M3C2 (the events, at its end); the publishing job for every
+    // array.
     let submit = std::fs::read_to_string(sub.join("submit.sh")).unwrap();
     for (script, after) in [
         ("01-tiling.sh", ""),
-        ("02-field.sh", "$j1"),
-        ("03-m3c2.sh", "$j1:$j2"),
-        ("04-volumes.sh", "$j1:$j3"),
-        ("05-publish.sh", "$j1:$j2:$j3:$j4"),
+        ("02-align.sh", "$j1"),
+        ("03-field.sh", "$j1"),
+        ("04-m3c2.sh", "$j1:$j2:$j3"),
+        ("05-volumes.sh", "$j1:$j2:$j4"),
+        ("06-publish.sh", "$j1:$j2:$j3:$j4:$j5"),
     ] {
         let dependency = match after {
             "" => String::new(),
@@ -154,16 +157,17 @@ fn plan_only_writes_the_scripts_and_submits_nothing() {
             .map_or(vec![], |t| t.iter().map(kind_of).collect())
     };
     for (array, tails) in [
-        ("tiling", &["align", "aligned"][..]),
+        ("tiling", &[][..]),
+        ("align", &["aligned"]),
         ("field", &["orient"]),
-        ("m3c2", &["stable", "events", "points"]),
-        ("volumes", &["outputs"]),
+        ("m3c2", &["stable", "events"]),
+        ("volumes", &["points", "outputs"]),
     ] {
         assert_eq!(kinds(&stage(array).unwrap()["tails"]), tails, "{array}");
     }
     assert_eq!(
         kinds(&stage("publish").unwrap()["tasks"][0]),
-        ["align", "aligned", "orient", "stable", "events", "points", "outputs"]
+        ["aligned", "orient", "stable", "events", "points", "outputs"]
     );
 
     let o = common::run(&["status", out.to_str().unwrap()]);

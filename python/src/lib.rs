@@ -5,7 +5,8 @@
 //!   with the parameters `talus compare` derives from the same points: the same numbers); else,
 //!   and for `auto` orientation (its field is a unit of the pipeline), through the pipeline of
 //!   `talus compare --m3c2-only` itself, with the arrays written as binary PLY (doubles: nothing
-//!   rounded) into a scratch folder.
+//!   rounded) into a scratch folder; its distances, spreads and normals are the in-memory ones
+//!   rounded to f32, as the pipeline's results store them.
 //! - [`compare`], [`campaign`]: the commands, on files.
 //! - Interruption and progress for the Python side, which runs these calls in a thread and keeps
 //!   the interpreter's main thread free for Ctrl-C.

@@ -179,6 +179,15 @@ pub(crate) fn stages(plan: &Plan, done: &[bool], tiles_per_task: usize) -> Resul
         let last: Vec<usize> = (d.iter().copied())
             .filter(|&a| !d.iter().any(|&b| b != a && reach[b][a]))
             .collect();
+        // An array waiting for a host waits for its tails too (afterok on the host's last
+        // task, which ends them): not where it would not have waited for this stage (the
+        // first survey's orientation field beside the alignment).
+        let delays = (0..n).any(|r| {
+            r != j && !tailed[r] && pre[r].iter().any(|h| last.contains(h)) && !reach[r][j]
+        });
+        if delays {
+            continue;
+        }
         tailed[j] = true;
         hosts[j] = last;
     }
@@ -209,14 +218,15 @@ pub(crate) fn stages(plan: &Plan, done: &[bool], tiles_per_task: usize) -> Resul
     Ok(Arrays { stages: out, tails })
 }
 
-/// The arrays among `cands` holding what `units` read, through the units of `tailed` stages
-/// (and units done already) to what those read.
+/// The arrays among `cands` holding what `units` read or run after (`Unit::after`: m3c2.laz
+/// once the volumes released the tiles, a tail at their end), through the units of `tailed`
+/// stages (and units done already) to what those read.
 fn arrays_read(plan: &Plan, cands: &[StagePlan], tailed: &[bool], units: &[usize]) -> Vec<usize> {
     let array_of = arrays_of_units(plan, cands, tailed);
     let mut through = vec![None::<Vec<usize>>; plan.units.len()];
     let mut out = Vec::new();
     for &u in units {
-        for &d in &plan.units[u].deps {
+        for &d in plan.units[u].deps.iter().chain(&plan.units[u].after) {
             out.extend(arrays_of(plan, &array_of, &mut through, d));
         }
     }
@@ -587,10 +597,12 @@ mod tests {
             let a = arrays.stages.iter().find(|a| a.kind == kind).unwrap();
             a.after.iter().map(|&k| arrays.stages[k].kind).collect()
         };
-        // The alignment at the end of the tiling, the orientation at the end of the field, the
-        // stable ground at the end of M3C2: no array of their own.
-        assert_eq!(kinds(&arrays), ["tiling", "field", "m3c2"]);
+        // The orientation at the end of the field, the stable ground at the end of M3C2: no
+        // array of their own. Not the alignment: at the tiling's end it would hold back the
+        // field, which waits for the tiling and not for it.
+        assert_eq!(kinds(&arrays), ["tiling", "align", "field", "m3c2"]);
         assert_eq!(after("tiling"), Vec::<&str>::new());
+        assert_eq!(after("align"), ["tiling"]);
         assert_eq!(after("field"), ["tiling"]);
         // Through the orientation to the field it reads.
         assert_eq!(after("m3c2"), ["tiling", "field"]);
@@ -600,12 +612,12 @@ mod tests {
         assert_eq!(
             tails,
             [
-                ("align", vec![align], vec![0]),
-                ("orient", vec![orient], vec![1]),
-                ("stable", vec![stable], vec![2])
+                ("orient", vec![orient], vec![2]),
+                ("stable", vec![stable], vec![3])
             ]
         );
-        assert_eq!(arrays.stages[0].tails, [align]);
+        assert!(arrays.stages[0].tails.is_empty());
+        let _ = align;
         // M3C2 done, the before survey's tiling to do again: stable at its end (it reads the
         // tiling through the M3C2 unit).
         let arrays = stages(&plan, &done(&[t1, align, field, orient, m3c2]), 1).unwrap();

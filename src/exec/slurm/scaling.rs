@@ -191,11 +191,10 @@ pub(crate) fn report(
                 stages[k].after.push((at(other.kind)?, 0.0));
             }
         }
-        // The arrays reading it wait a scheduling pass after it (their afterok is on its
-        // hosts, whose last task it ends).
+        // The arrays waiting for one of its hosts wait a scheduling pass after it too: their
+        // afterok is on the host, whose last task it ends (whether they read it or not).
         for (a, &r) in arrays.stages.iter().zip(&of_array) {
-            let units: Vec<usize> = a.tasks.iter().flatten().copied().collect();
-            if reads(&units, &t.units) {
+            if a.after.iter().any(|h| t.hosts.contains(h)) {
                 stages[r].after.push((k, STAGE_LATENCY));
             }
         }

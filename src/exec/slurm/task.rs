@@ -86,7 +86,7 @@ pub(crate) fn run(dir: &Path, number: u32, stage: &str, task: Option<usize>) -> 
         computed.and_then(|n| publish(&store, &plan).map(|_| n))
     } else {
         units(&store, &plan, names, &report.task_id).and_then(|n| {
-            report.tails = tails(&store, &plan, &s.tails, &report.task_id)?;
+            report.tails = tails(&store, &plan, &s.tails, task, &report.task_id)?;
             Ok(n)
         })
     };
@@ -154,25 +154,63 @@ fn units(store: &Store, plan: &Plan, names: &[String], task_id: &str) -> Result<
     Ok(report.computed)
 }
 
-/// Compute each of the tails `names` (`super::Tail`, in plan order) not done whose inputs are
-/// all done: the last task of the arrays it reads sees them so, at once. One whose inputs are not
-/// all done is left to a later task (or to a reader, or the publishing job); two tasks ending
-/// together both see it so, and the store's claim lets one compute it. How many it computed.
-fn tails(store: &Store, plan: &Plan, names: &[String], task_id: &str) -> Result<usize> {
+/// Compute each of the tails `names` (`super::Tail`) not done whose inputs (and what it runs
+/// after) are all done: the last task of the arrays it reads sees them so, at once. One whose
+/// inputs are not all done is left to a later task (or to a reader, or the publishing job); one
+/// another live process holds is left to it, so that tasks ending together share the tails
+/// instead of waiting on each other's claims — each starts at its own place in the list
+/// (task `task`), and comes back for what it passed while its inputs were still being made.
+/// How many it computed.
+fn tails(
+    store: &Store,
+    plan: &Plan,
+    names: &[String],
+    task: usize,
+    task_id: &str,
+) -> Result<usize> {
+    let idx: Vec<usize> = names
+        .iter()
+        .map(|name| {
+            plan.units
+                .iter()
+                .position(|u| &u.name == name)
+                .ok_or_else(|| {
+                    Error::Internal(format!("tail {name} is not in the submission's plan"))
+                })
+        })
+        .collect::<Result<_>>()?;
+    let done = |u: usize| store.done(&crate::units::unit_ref(plan, u)).is_some();
+    let ready = |i: usize| {
+        let u = &plan.units[i];
+        u.deps.iter().chain(&u.after).all(|&d| done(d))
+    };
+    let held = |i: usize| {
+        store
+            .claim_holder(&plan.run, &crate::units::unit_ref(plan, i))
+            .is_some_and(|c| !c.owner.gone(Some(crate::store::DEFAULT_LEASE)))
+    };
     let mut n = 0;
-    for name in names {
-        let Some(i) = plan.units.iter().position(|u| &u.name == name) else {
-            return Err(Error::Internal(format!(
-                "tail {name} is not in the submission's plan"
-            )));
-        };
-        let done = |u: usize| store.done(&crate::units::unit_ref(plan, u)).is_some();
-        if done(i) || !plan.units[i].deps.iter().all(|&d| done(d)) {
-            continue;
+    // Tails may read tails: passes until one computes nothing more.
+    loop {
+        let mut more = false;
+        for k in 0..idx.len() {
+            let i = idx[(k + task) % idx.len()];
+            if done(i) || !ready(i) || held(i) {
+                continue;
+            }
+            let computed = units(
+                store,
+                plan,
+                std::slice::from_ref(&plan.units[i].name),
+                task_id,
+            )?;
+            n += computed;
+            more |= computed > 0;
         }
-        n += units(store, plan, std::slice::from_ref(name), task_id)?;
+        if !more {
+            return Ok(n);
+        }
     }
-    Ok(n)
 }
 
 /// Take DIR's lock (waiting while another process holds it), publish, drop old units.

@@ -237,12 +237,13 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<EventsMeta> {
     let mut held = Some((Vec::new(), Vec::<Point3>::new(), Vec::new()));
     let mut columns: Option<(events::pieces::Columns, Counts)> = None;
     let mut spill = super::scratch::RowsWriter::create(out, SPILL, SPILL_WIDTH)?;
-    // The merge of the pair's tiles where this unit makes the filter's pass (no `kept` ranges).
-    let merge = match ctx.plan.of_pair(kept::KeptStage::KIND, pair).next() {
-        None => super::merged::pair_merge_need(ctx.plan),
-        Some(_) => 0,
-    };
-    let merging = ctx.reserve(merge, "the merge of the pair's tiles")?;
+    // The merge of the pair's tiles (with `kept` ranges there is none, but the same room covers
+    // the kept points' keys, positions and distances held while they stream in, until their
+    // count is known and reserved below).
+    let merging = ctx.reserve(
+        super::merged::pair_merge_need(ctx.plan),
+        "the merge of the pair's tiles",
+    )?;
     let mut rows = kept::KeptRows::open(ctx, pair, tau, reg)?;
     let mut n = 0u64;
     while let Some(row) = rows.next_row()? {

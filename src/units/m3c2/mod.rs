@@ -346,8 +346,15 @@ pub(crate) fn encode_chunks<C: AsRef<[KeyedResult]> + Sync>(
         .collect()
 }
 
-/// A measured quantity stored as f32: a distance, its uncertainty, a spread or a normal's
-/// component (see [`to_columns`]).
+fn f64col(name: &str, v: Vec<f64>) -> Column {
+    Column {
+        name: name.into(),
+        data: ColumnData::F64(v),
+    }
+}
+
+/// A measured quantity stored as f32: a distance, a spread or a normal's component (see
+/// [`to_columns`]).
 fn f32col(name: &str, v: Vec<f32>) -> Column {
     Column {
         name: name.into(),
@@ -362,12 +369,14 @@ fn u32col(name: &str, v: Vec<u32>) -> Column {
     }
 }
 
-/// A chunk's columns. The measured quantities (distance, uncertainty, the two spreads, the
-/// normal) are stored as f32: 7 significant digits, 0.06 µm at a 1 m distance, far below what
-/// any survey resolves (m3c2.laz has always stored distances so), where f64 noise in the low
-/// bytes compresses to nothing and made the results 57 bytes a core point, most of a run's peak
-/// disk (issue 46). Every reader of the results sees the stored values, so a run's outputs are
-/// the same however its units were scheduled.
+/// A chunk's columns. The measured quantities (distance, the two spreads, the normal) are
+/// stored as f32: 7 significant digits, 0.06 µm at a 1 m distance, far below what any survey
+/// resolves (m3c2.laz has always stored distances so), where f64 noise in the low bytes
+/// compresses to nothing and made the results 57 bytes a core point, most of a run's peak disk
+/// (issue 46). The uncertainty stays f64: the LoD adds the registration error to it later, and
+/// m3c2.laz's float32 LoD is that sum rounded once, as the in-memory route (Python) rounds it.
+/// Every reader of the results sees the stored values, so a run's outputs are the same however
+/// its units were scheduled.
 fn to_columns(rs: &[KeyedResult]) -> TileColumns {
     let col = |f: &dyn Fn(&KeyedResult) -> f64| rs.iter().map(f).collect::<Vec<f64>>();
     let narrow = |f: &dyn Fn(&KeyedResult) -> f64| rs.iter().map(|r| f(r) as f32).collect();
@@ -379,7 +388,7 @@ fn to_columns(rs: &[KeyedResult]) -> TileColumns {
             u32col("key_hi", rs.iter().map(|r| (r.key >> 32) as u32).collect()),
             u32col("key_lo", rs.iter().map(|r| r.key as u32).collect()),
             f32col("distance", narrow(&|r| r.r.distance)),
-            f32col("uncertainty", narrow(&|r| r.r.uncertainty)),
+            f64col("uncertainty", col(&|r| r.r.uncertainty)),
             Column {
                 name: "significant".into(),
                 data: ColumnData::U8(rs.iter().map(|r| r.r.significant as u8).collect()),
@@ -430,12 +439,11 @@ pub(crate) fn read_chunk(path: &std::path::Path) -> Result<Vec<KeyedResult>> {
     };
     let (sig, reach, known) = (bytes("significant")?, bytes("reach")?, bytes("sign_known")?);
     let (hi, lo) = (u("key_hi")?, u("key_lo")?);
-    let (d, unc, s1, s2) = (
-        f("distance")?,
-        f("uncertainty")?,
-        f("std_dev1")?,
-        f("std_dev2")?,
-    );
+    let unc = match c.column("uncertainty") {
+        Some(ColumnData::F64(v)) => v,
+        _ => return Err(missing("uncertainty")),
+    };
+    let (d, s1, s2) = (f("distance")?, f("std_dev1")?, f("std_dev2")?);
     let (n1, n2) = (u("count1")?, u("count2")?);
     let (nx, ny, nz) = (f("normal_x")?, f("normal_y")?, f("normal_z")?);
     (0..c.len())
@@ -445,7 +453,7 @@ pub(crate) fn read_chunk(path: &std::path::Path) -> Result<Vec<KeyedResult>> {
                 xyz: [c.x[i], c.y[i], c.z[i]],
                 r: CoreResult {
                     distance: d[i].into(),
-                    uncertainty: unc[i].into(),
+                    uncertainty: unc[i],
                     significant: sig[i] == 1,
                     std_dev1: s1[i].into(),
                     std_dev2: s2[i].into(),
