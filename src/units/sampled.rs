@@ -41,6 +41,12 @@ pub(crate) struct SampledMeta {
     pub(crate) reached: Reached,
 }
 
+impl crate::units::m3c2::seek::InRange for SampledMeta {
+    fn span(&self) -> (u64, u64) {
+        (self.from, self.to)
+    }
+}
+
 /// Every `step`-th core point is sampled, of `total`.
 pub(crate) fn step(total: u64) -> u64 {
     total.div_ceil(SAMPLES).max(1)
@@ -112,27 +118,18 @@ impl Stage for SampledStage {
     }
 }
 
-/// The samples of sampled unit `u` (a dependency of the caller), appended to `into`.
-pub(crate) fn read(ctx: &Ctx, u: usize, into: &mut Vec<Sample>) -> Result<()> {
-    let path = ctx.input(u, FILE)?;
-    let bytes = std::fs::read(&path).map_err(|e| Error::Damaged {
-        path: path.clone(),
-        problem: e.to_string(),
-    })?;
-    if bytes.len() % (8 * WIDTH) != 0 {
-        return Err(Error::Damaged {
-            path,
-            problem: format!("{} bytes, not rows of {WIDTH} f64", bytes.len()),
-        });
-    }
-    for row in bytes.chunks_exact(8 * WIDTH) {
-        let v = |i: usize| f64::from_le_bytes(row[8 * i..8 * i + 8].try_into().unwrap_or([0; 8]));
+/// The samples of sampled unit `u` (a dependency of the caller; `m`, its record), appended to
+/// `into`.
+pub(crate) fn read(ctx: &Ctx, u: usize, m: &SampledMeta, into: &mut Vec<Sample>) -> Result<()> {
+    let mut rows = super::scratch::RowsReader::input(ctx.input(u, FILE)?, WIDTH)?;
+    for _ in 0..m.samples {
+        let v = rows.next_row()?;
         into.push(Sample {
-            xyz: [v(0), v(1), v(2)],
-            normal: [v(3), v(4), v(5)],
-            distance: v(6),
-            std_dev: [v(7), v(8)],
-            lod: v(9),
+            xyz: [v[0], v[1], v[2]],
+            normal: [v[3], v[4], v[5]],
+            distance: v[6],
+            std_dev: [v[7], v[8]],
+            lod: v[9],
         });
     }
     Ok(())

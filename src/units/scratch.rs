@@ -79,6 +79,7 @@ impl Rows {
             path: self.path.clone(),
             file: BufReader::with_capacity(BUFFER, file),
             row: vec![0.0; self.width],
+            input: false,
         })
     }
 
@@ -93,17 +94,45 @@ pub(crate) struct RowsReader {
     path: PathBuf,
     file: BufReader<File>,
     row: Vec<f64>,
+    /// Another unit's file (`RowsReader::input`): a short read is that unit's damage.
+    input: bool,
 }
 
 impl RowsReader {
+    /// Rows of `width` values that another unit wrote in the same layout (the kept ranges' rows),
+    /// read from the first; failures are [`Error::Damaged`], so the executor computes that unit
+    /// again.
+    pub(crate) fn input(path: PathBuf, width: usize) -> Result<RowsReader> {
+        let file = File::open(&path).map_err(|e| Error::Damaged {
+            path: path.clone(),
+            problem: e.to_string(),
+        })?;
+        Ok(RowsReader {
+            path,
+            file: BufReader::with_capacity(BUFFER, file),
+            row: vec![0.0; width],
+            input: true,
+        })
+    }
+
+    fn error(&self, e: std::io::Error) -> Error {
+        match self.input {
+            true => Error::Damaged {
+                path: self.path.clone(),
+                problem: format!("fewer rows than its record says: {e}"),
+            },
+            false => Error::output(&self.path, e),
+        }
+    }
+
     /// The next row (the caller knows how many there are).
     pub(crate) fn next_row(&mut self) -> Result<&[f64]> {
         let mut b = [0u8; 8];
-        for v in &mut self.row {
-            self.file
-                .read_exact(&mut b)
-                .map_err(|e| Error::output(&self.path, e))?;
-            *v = f64::from_le_bytes(b);
+        for k in 0..self.row.len() {
+            if let Err(e) = self.file.read_exact(&mut b) {
+                return Err(self.error(e));
+            }
+            self.row[k] = f64::from_le_bytes(b);
         }
         Ok(&self.row)
     }
@@ -113,9 +142,9 @@ impl RowsReader {
         let mut bytes = [0u8; 8 * 512];
         for part in out.chunks_mut(512) {
             let b = &mut bytes[..8 * part.len()];
-            self.file
-                .read_exact(b)
-                .map_err(|e| Error::output(&self.path, e))?;
+            if let Err(e) = self.file.read_exact(b) {
+                return Err(self.error(e));
+            }
             for (v, x) in part.iter_mut().zip(b.chunks_exact(8)) {
                 *v = f64::from_le_bytes(x.try_into().expect("8 bytes"));
             }

@@ -109,7 +109,12 @@ impl Stage for StableStage {
 /// inputs (`merged::merge_inputs`). Fixed: at most SAMPLES and FAN_IN runs, which the smallest
 /// budget holds (`memory::MIN_BUDGET`'s test), so no budget talus accepts refuses it.
 pub(crate) fn need(most: u64, inputs: usize) -> u64 {
-    most * BYTES_PER_SAMPLE + crate::memory::IO_HEADROOM + super::m3c2::merge_need(inputs)
+    sample_need(most) + super::m3c2::merge_need(inputs)
+}
+
+/// Resident bytes of a stable unit's sample of `most` core points alone (read from its ranges).
+fn sample_need(most: u64) -> u64 {
+    most * BYTES_PER_SAMPLE + crate::memory::IO_HEADROOM
 }
 
 /// The key part of the user's stable areas: their file's content key, or `auto`.
@@ -146,10 +151,7 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<StableMeta> {
             need(most, super::merged::merge_inputs(plan)),
             "the stable-ground sample and the merge of the pair's tiles",
         )?,
-        false => ctx.reserve(
-            most * BYTES_PER_SAMPLE + crate::memory::IO_HEADROOM,
-            "the stable-ground sample",
-        )?,
+        false => ctx.reserve(sample_need(most), "the stable-ground sample")?,
     };
     let mut samples = Vec::with_capacity(most as usize);
     let mut n = 0u64;
@@ -172,11 +174,9 @@ fn run(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<StableMeta> {
         }
     }
     // The pass made in ranges: their samples one after the other, their counts added up.
-    let ranged = super::m3c2::seek::ranges_of::<super::sampled::SampledStage>(ctx, pair, |m| {
-        (m.from, m.to)
-    })?;
+    let ranged = super::m3c2::seek::ranges_of::<super::sampled::SampledStage>(ctx, pair)?;
     for (u, m) in ranged {
-        super::sampled::read(ctx, u, &mut samples)?;
+        super::sampled::read(ctx, u, &m, &mut samples)?;
         reached.merge(&m.reached);
         n = m.to;
     }

@@ -73,15 +73,13 @@ impl Default for Options {
     }
 }
 
-/// One stage of a submission: the units (plan indices) of each array task, the arrays (indices
-/// among the submission's stages) holding units they depend on, and the units of later
-/// one-unit-a-task stages its tasks compute when they end ([`Tail`]).
+/// One stage of a submission: the units (plan indices) of each array task, and the arrays
+/// (indices among the submission's stages) holding units they depend on.
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct StagePlan {
     pub kind: &'static str,
     pub tasks: Vec<Vec<usize>>,
     pub after: Vec<usize>,
-    pub tails: Vec<usize>,
 }
 
 /// A stage of one unit a task (not per tile, not in parts: a comparison's alignment, stable
@@ -107,6 +105,16 @@ pub(crate) struct Tail {
 pub(crate) struct Arrays {
     pub stages: Vec<StagePlan>,
     pub tails: Vec<Tail>,
+}
+
+impl Arrays {
+    /// The tail units array `k`'s tasks compute when they end, in pipeline order.
+    pub(crate) fn tails_of(&self, k: usize) -> Vec<usize> {
+        (self.tails.iter())
+            .filter(|t| t.hosts.contains(&k))
+            .flat_map(|t| t.units.iter().copied())
+            .collect()
+    }
 }
 
 /// The stages in pipeline order (the registry's), each one job array.
@@ -144,7 +152,6 @@ pub(crate) fn stages(plan: &Plan, done: &[bool], tiles_per_task: usize) -> Resul
             kind,
             tasks: todo.chunks(per).map(|c| c.to_vec()).collect(),
             after: Vec::new(),
-            tails: Vec::new(),
         });
     }
     let n = cands.len();
@@ -206,9 +213,6 @@ pub(crate) fn stages(plan: &Plan, done: &[bool], tiles_per_task: usize) -> Resul
     for j in (0..n).filter(|&j| tailed[j]) {
         let units: Vec<usize> = cands[j].tasks.iter().flatten().copied().collect();
         let hs: Vec<usize> = hosts[j].iter().filter_map(|&h| index[h]).collect();
-        for &h in &hs {
-            out[h].tails.extend(&units);
-        }
         tails.push(Tail {
             kind: cands[j].kind,
             units,
@@ -616,13 +620,13 @@ mod tests {
                 ("stable", vec![stable], vec![3])
             ]
         );
-        assert!(arrays.stages[0].tails.is_empty());
+        assert!(arrays.tails_of(0).is_empty());
         let _ = align;
         // M3C2 done, the before survey's tiling to do again: stable at its end (it reads the
         // tiling through the M3C2 unit).
         let arrays = stages(&plan, &done(&[t1, align, field, orient, m3c2]), 1).unwrap();
         assert_eq!(kinds(&arrays), ["tiling"]);
-        assert_eq!(arrays.stages[0].tails, [stable]);
+        assert_eq!(arrays.tails_of(0), [stable]);
     }
 
     /// A tail whose inputs are in two arrays neither waits for is computed at the end of both;

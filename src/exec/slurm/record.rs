@@ -224,7 +224,7 @@ pub(crate) fn create(
                 .map(|t| t.iter().map(|&i| name(i)).collect())
                 .collect(),
             after: s.after.clone(),
-            tails: s.tails.iter().map(|&i| name(i)).collect(),
+            tails: arrays.tails_of(k).into_iter().map(name).collect(),
         })
         .collect();
     // Every tail, in plan order: those the arrays' last tasks did not compute.

@@ -86,7 +86,7 @@ pub(crate) fn run(dir: &Path, number: u32, stage: &str, task: Option<usize>) -> 
         computed.and_then(|n| publish(&store, &plan).map(|_| n))
     } else {
         units(&store, &plan, names, &report.task_id).and_then(|n| {
-            report.tails = tails(&store, &plan, &s.tails, task, &report.task_id)?;
+            report.tails = tails(&store, &plan, &s.tails, &report.task_id)?;
             Ok(n)
         })
     };
@@ -128,17 +128,26 @@ pub(crate) fn array_job_of(label: &str) -> Option<&str> {
     label.strip_prefix("slurm ")?.split('_').next()
 }
 
-/// Execute the units `names` of `plan`; how many this task computed.
-fn units(store: &Store, plan: &Plan, names: &[String], task_id: &str) -> Result<usize> {
-    let idx: Vec<usize> = names
-        .iter()
+/// The plan indices of the units `names` of the submission.
+fn indices(plan: &Plan, names: &[String]) -> Result<Vec<usize>> {
+    (names.iter())
         .map(|n| {
             plan.units
                 .iter()
                 .position(|u| &u.name == n)
                 .ok_or_else(|| Error::Internal(format!("unit {n} is not in the submission's plan")))
         })
-        .collect::<Result<_>>()?;
+        .collect()
+}
+
+/// Execute the units `names` of `plan`; how many this task computed.
+fn units(store: &Store, plan: &Plan, names: &[String], task_id: &str) -> Result<usize> {
+    execute(store, plan, &indices(plan, names)?, task_id)
+}
+
+/// Execute the units `idx` of `plan` (and whichever of their dependencies are not done); how
+/// many this task computed.
+fn execute(store: &Store, plan: &Plan, idx: &[usize], task_id: &str) -> Result<usize> {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads())
         .build()
@@ -150,39 +159,27 @@ fn units(store: &Store, plan: &Plan, names: &[String], task_id: &str) -> Result<
         .and_then(|v| v.trim().parse().ok())
         .unwrap_or(0);
     let report =
-        pool.install(|| crate::exec::run_units(store, plan, Some(&idx), 1, &label, Some(attempt)))?;
+        pool.install(|| crate::exec::run_units(store, plan, Some(idx), 1, &label, Some(attempt)))?;
     Ok(report.computed)
 }
 
 /// Compute each of the tails `names` (`super::Tail`) not done whose inputs (and what it runs
 /// after) are all done: the last task of the arrays it reads sees them so, at once. One whose
 /// inputs are not all done is left to a later task (or to a reader, or the publishing job); one
-/// another live process holds is left to it, so that tasks ending together share the tails
-/// instead of waiting on each other's claims — each starts at its own place in the list
-/// (task `task`), and comes back for what it passed while its inputs were still being made.
-/// How many it computed.
-fn tails(
-    store: &Store,
-    plan: &Plan,
-    names: &[String],
-    task: usize,
-    task_id: &str,
-) -> Result<usize> {
-    let idx: Vec<usize> = names
-        .iter()
-        .map(|name| {
-            plan.units
-                .iter()
-                .position(|u| &u.name == name)
-                .ok_or_else(|| {
-                    Error::Internal(format!("tail {name} is not in the submission's plan"))
-                })
-        })
-        .collect::<Result<_>>()?;
-    let done = |u: usize| store.done(&crate::units::unit_ref(plan, u)).is_some();
-    let ready = |i: usize| {
-        let u = &plan.units[i];
-        u.deps.iter().chain(&u.after).all(|&d| done(d))
+/// another live process holds is left to it. The ready ones go to the executor together (one
+/// look at the store's records per pass, not per tail), in passes until a pass computes none
+/// (tails may read tails); two tasks ending together with the same ready tails share them
+/// through the claims (the executor takes first what nobody holds), the one done first then
+/// waiting for the other's. A unit found done stays done: each is looked up once. How many it
+/// computed.
+fn tails(store: &Store, plan: &Plan, names: &[String], task_id: &str) -> Result<usize> {
+    let idx = indices(plan, names)?;
+    let mut known_done = vec![false; plan.units.len()];
+    let mut done = |u: usize| {
+        if !known_done[u] {
+            known_done[u] = store.done(&crate::units::unit_ref(plan, u)).is_some();
+        }
+        known_done[u]
     };
     let held = |i: usize| {
         store
@@ -190,26 +187,22 @@ fn tails(
             .is_some_and(|c| !c.owner.gone(Some(crate::store::DEFAULT_LEASE)))
     };
     let mut n = 0;
-    // Tails may read tails: passes until one computes nothing more.
     loop {
-        let mut more = false;
-        for k in 0..idx.len() {
-            let i = idx[(k + task) % idx.len()];
-            if done(i) || !ready(i) || held(i) {
-                continue;
+        let mut ready = Vec::new();
+        for &i in &idx {
+            let u = &plan.units[i];
+            if !done(i) && u.deps.iter().chain(&u.after).all(|&d| done(d)) && !held(i) {
+                ready.push(i);
             }
-            let computed = units(
-                store,
-                plan,
-                std::slice::from_ref(&plan.units[i].name),
-                task_id,
-            )?;
-            n += computed;
-            more |= computed > 0;
         }
-        if !more {
+        if ready.is_empty() {
             return Ok(n);
         }
+        let computed = execute(store, plan, &ready, task_id)?;
+        if computed == 0 {
+            return Ok(n);
+        }
+        n += computed;
     }
 }
 

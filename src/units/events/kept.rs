@@ -9,8 +9,6 @@
 //! ([`row`]). The events unit reads the ranges' rows one after the other ([`KeptRows`]): the rows
 //! one pass keeps, in the same order.
 
-use std::io::{BufReader, Read};
-
 use serde::{Deserialize, Serialize};
 
 use super::{EventsStage, SPILL_WIDTH};
@@ -21,6 +19,7 @@ use crate::plan::Spec;
 use crate::store::UnitWriter;
 use crate::units::m3c2::seek::{ranges_of, ranks_of, RankRange};
 use crate::units::m3c2::Merged;
+use crate::units::scratch::RowsReader;
 use crate::units::stable::StableStage;
 use crate::units::stage::{Planner, Scope, Stage};
 use crate::units::Ctx;
@@ -39,6 +38,12 @@ pub(crate) struct KeptMeta {
     pub(crate) to: u64,
     /// Rows in its file: its core points kept.
     pub(crate) kept: u64,
+}
+
+impl crate::units::m3c2::seek::InRange for KeptMeta {
+    fn span(&self) -> (u64, u64) {
+        (self.from, self.to)
+    }
 }
 
 /// The scratch row of result `k` (registration error `reg`, threshold `tau`) when it is kept:
@@ -161,7 +166,7 @@ enum Source {
     },
     Ranges {
         files: std::vec::IntoIter<(std::path::PathBuf, u64)>,
-        current: Option<(std::path::PathBuf, BufReader<std::fs::File>, u64)>,
+        current: Option<(RowsReader, u64)>,
     },
 }
 
@@ -181,7 +186,7 @@ impl KeptRows {
             });
         }
         let mut files = Vec::with_capacity(ranges.len());
-        for (u, m) in ranges_of::<KeptStage>(ctx, pair, |m| (m.from, m.to))? {
+        for (u, m) in ranges_of::<KeptStage>(ctx, pair)? {
             let path = ctx.input(u, FILE)?;
             let len = std::fs::metadata(&path)
                 .map(|m| m.len())
@@ -214,28 +219,15 @@ impl KeptRows {
                 Ok(None)
             }
             Source::Ranges { files, current } => loop {
-                if let Some((path, file, left)) = current.as_mut() {
+                if let Some((rows, left)) = current.as_mut() {
                     if *left > 0 {
-                        let mut b = [0u8; 8 * SPILL_WIDTH];
-                        file.read_exact(&mut b).map_err(|e| Error::Damaged {
-                            path: path.clone(),
-                            problem: format!("fewer rows than its record says: {e}"),
-                        })?;
                         *left -= 1;
-                        let mut out = [0.0; SPILL_WIDTH];
-                        for (v, x) in out.iter_mut().zip(b.chunks_exact(8)) {
-                            *v = f64::from_le_bytes(x.try_into().unwrap_or([0; 8]));
-                        }
-                        return Ok(Some(out));
+                        return Ok(Some(rows.next_row()?.try_into().expect("a row's width")));
                     }
                 }
                 match files.next() {
                     Some((path, kept)) => {
-                        let f = std::fs::File::open(&path).map_err(|e| Error::Damaged {
-                            path: path.clone(),
-                            problem: e.to_string(),
-                        })?;
-                        *current = Some((path, BufReader::with_capacity(1 << 16, f), kept));
+                        *current = Some((RowsReader::input(path, SPILL_WIDTH)?, kept));
                     }
                     None => return Ok(None),
                 }

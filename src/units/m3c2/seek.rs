@@ -241,18 +241,26 @@ pub(crate) fn ranks_of(
     Ok((total, from, to))
 }
 
-/// The metas of pair `pair`'s units of stage `S`, made in ranges (`span`: a meta's ranks
-/// `from..to`), in order, checked to cover the pair's core points once.
+/// The record of a unit made over a range of its pair's ranks (sampled, kept, segments).
+pub(crate) trait InRange {
+    /// Its ranks, `from..to`.
+    fn span(&self) -> (u64, u64);
+}
+
+/// The metas of pair `pair`'s units of stage `S`, made in ranges, in order, checked to cover the
+/// pair's core points once.
 pub(crate) fn ranges_of<S: crate::units::stage::Stage>(
     ctx: &super::Ctx,
     pair: usize,
-    span: impl Fn(&S::Meta) -> (u64, u64),
-) -> Result<Vec<(usize, S::Meta)>> {
+) -> Result<Vec<(usize, S::Meta)>>
+where
+    S::Meta: InRange,
+{
     let mut out = Vec::new();
     let mut at = 0;
     for u in ctx.plan.of_pair(S::KIND, pair) {
         let m = ctx.meta::<S>(u)?;
-        let (from, to) = span(&m);
+        let (from, to) = m.span();
         if from != at || to < from {
             return Err(Error::Internal(format!(
                 "{} holds core points {from}..{to}, after {at}",

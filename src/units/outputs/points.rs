@@ -192,8 +192,7 @@ fn join(ctx: &Ctx, pair: usize, out: &mut UnitWriter) -> Result<PointsMeta> {
     let _held = ctx.reserve(JOIN_NEED, "joining m3c2.laz and the terrain sample")?;
     let mut written = Written::none();
     let (mut files, mut pieces) = (Vec::new(), Vec::new());
-    let segments =
-        crate::units::m3c2::seek::ranges_of::<SegmentsStage>(ctx, pair, |m| (m.from, m.to))?;
+    let segments = crate::units::m3c2::seek::ranges_of::<SegmentsStage>(ctx, pair)?;
     for (u, m) in segments {
         if m.written.core_points != m.to - m.from {
             return Err(Error::Internal(format!(

@@ -39,6 +39,12 @@ pub(crate) struct SegmentMeta {
     pub(crate) to: u64,
 }
 
+impl crate::units::m3c2::seek::InRange for SegmentMeta {
+    fn span(&self) -> (u64, u64) {
+        (self.from, self.to)
+    }
+}
+
 /// How many segments pair `pair`'s m3c2.laz is written in: as many as its before survey's
 /// tiling has parts; 0 — the points unit writes it whole — for a survey tiled whole, and for a
 /// lean campaign's pair, which has no m3c2.laz (`Plan::lean_pairs`).
